@@ -1,0 +1,114 @@
+"""Shared helpers of the rclpy stand-ins for the ros2 CLI (echo, call, play_bag).
+
+Message types by name, messages to and from plain dicts (no rosidl_runtime_py
+in the PyPI wheels), and a clear message when the environment is not set up.
+"""
+
+import importlib
+import re
+import sys
+
+SETUP_HINT = (
+    "set up with: scripts/setup_venv.sh && scripts/build_msgs.sh && . build/msgs/env.sh\n"
+    "and on a machine without a ROS network run under scripts/netns.sh"
+)
+
+
+def require_rclpy():
+    """Imports rclpy, or exits with how to set the environment up."""
+    try:
+        import rclpy  # noqa: F401
+    except ImportError as e:
+        sys.exit(f"error: cannot import rclpy ({e});\n{SETUP_HINT}")
+    return sys.modules["rclpy"]
+
+
+def import_type(name):
+    """'pkg/msg/Type', 'pkg/srv/Type' or 'pkg/Type' (msg) to the Python class."""
+    parts = name.strip("/").split("/")
+    if len(parts) == 2:
+        parts = [parts[0], "msg", parts[1]]
+    if len(parts) != 3 or parts[1] not in ("msg", "srv", "action"):
+        sys.exit(f"error: {name!r} is not a type name like pkg/msg/Type or pkg/srv/Type")
+    try:
+        module = importlib.import_module(f"{parts[0]}.{parts[1]}")
+        return getattr(module, parts[2])
+    except (ImportError, AttributeError) as e:
+        sys.exit(f"error: cannot load type {name!r} ({e});\n{SETUP_HINT}")
+
+
+_SEQ = re.compile(r"^sequence<([^,>]+)(?:,\s*\d+)?>$|^([^\[]+)\[\d*\]$")
+
+
+def _element_class(type_str):
+    """The message class of a nested field type string, or None for primitives."""
+    if "/" not in type_str:
+        return None
+    pkg, typ = type_str.split("/", 1)
+    return getattr(importlib.import_module(f"{pkg}.msg"), typ.split("/")[-1])
+
+
+def fill(msg, data, path=""):
+    """Sets the fields of `msg` from a dict (nested dicts and lists allowed)."""
+    if data is None:
+        return msg
+    if not isinstance(data, dict):
+        raise ValueError(f"{path or 'message'}: expected a mapping, got {data!r}")
+    types = msg.get_fields_and_field_types()
+    for key, value in data.items():
+        if key not in types:
+            raise ValueError(
+                f"{path}{key}: no such field in {type(msg).__name__} (fields: {', '.join(types)})"
+            )
+        ftype = types[key]
+        m = _SEQ.match(ftype)
+        if m:
+            elem = _element_class(m.group(1) or m.group(2))
+            if not isinstance(value, list):
+                raise ValueError(f"{path}{key}: expected a list")
+            if elem is not None:
+                value = [fill(elem(), v, f"{path}{key}[{i}].") for i, v in enumerate(value)]
+            setattr(msg, key, value)
+        elif _element_class(ftype) is not None:
+            fill(getattr(msg, key), value, f"{path}{key}.")
+        else:
+            try:
+                setattr(msg, key, value)
+            except (AssertionError, TypeError, ValueError) as e:
+                raise ValueError(f"{path}{key}: {value!r} does not fit {ftype} ({e})") from e
+    return msg
+
+
+def to_plain(msg):
+    """A message as nested dicts/lists of Python scalars (for YAML or JSON)."""
+    if hasattr(msg, "get_fields_and_field_types"):
+        return {k: to_plain(getattr(msg, k)) for k in msg.get_fields_and_field_types()}
+    if isinstance(msg, (list, tuple)) or type(msg).__name__ in ("array", "ndarray"):
+        return [to_plain(x) for x in msg]
+    if hasattr(msg, "item"):  # numpy scalar
+        return msg.item()
+    return msg
+
+
+def qos_profile(reliable=True, depth=10, transient_local=False):
+    """A QoS profile for our topics (the node's default: reliable, volatile)."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if transient_local else DurabilityPolicy.VOLATILE,
+    )
+
+
+def spin_until(rclpy, node, predicate, timeout, step=0.05):
+    """Spins `node` until `predicate()` is true or `timeout` seconds pass."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() >= deadline:
+            return False
+        rclpy.spin_once(node, timeout_sec=step)
+    return True

@@ -1,0 +1,34 @@
+//! `mcgnode bench`.
+
+use anyhow::Result;
+
+/// Options of `bench`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Args {
+    /// Fewer repeats and steps (seconds instead of a minute).
+    #[arg(long)]
+    pub quick: bool,
+    /// Print one JSON document on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `bench`.
+pub fn run(a: Args) -> Result<()> {
+    let figs = crate::bench::run_all(a.quick)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&figs)?);
+        return Ok(());
+    }
+    println!("{:<50} {:>14}  {:<8} {:>12}", "measure (median)", "mcgnode", "unit", "JAX (same machine)");
+    for f in figs {
+        println!(
+            "{:<50} {:>14.4}  {:<8} {:>12}",
+            f.name,
+            f.value,
+            f.unit,
+            f.jax.unwrap_or_else(|| "-".into())
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,65 @@
+//! `mcgnode evaluate`.
+
+use crate::data::bag::read_trajectories;
+use crate::evaluate::{evaluate, table, EvalOptions};
+use crate::model::TrainedModel;
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+
+/// Options of `evaluate`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Args {
+    /// Trained model file.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Test bag: each trajectory's first state is the rollout's start, the rest the truth.
+    #[arg(long)]
+    pub bag: PathBuf,
+    /// Print one JSON document on stdout instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// Write a PNG of RE, EE and ME against time (geometric mean, 95% band).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Integration step (default: the bag's simulator step).
+    #[arg(long)]
+    pub dt: Option<f64>,
+    /// Evaluate at most this many trajectories.
+    #[arg(long)]
+    pub trajectories: Option<usize>,
+    /// Rows of the printed table.
+    #[arg(long, default_value_t = 11)]
+    pub rows: usize,
+    /// Evaluate even if test trajectories start where training ones did.
+    #[arg(long)]
+    pub allow_overlap: bool,
+}
+
+/// Runs `evaluate`.
+pub fn run(a: Args) -> Result<()> {
+    let model = TrainedModel::load(&a.model)?;
+    let bag = read_trajectories(&a.bag).with_context(|| format!("reading {}", a.bag.display()))?;
+    let opts = EvalOptions {
+        dt: a.dt,
+        field: None,
+        max_trajectories: a.trajectories,
+        allow_overlap: a.allow_overlap,
+    };
+    let e = evaluate(&model, &bag, &opts)?;
+    if let Some(p) = &a.plot {
+        let title = format!("{}-particle {}", e.particles, e.system);
+        crate::plot::plot_summaries(
+            p,
+            &[(title, vec![(model.file.hyper.variant.to_string(), e.summary.clone())])],
+        )?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&e)?);
+    } else {
+        print!("{}", table(&e, a.rows.max(2)));
+        if let Some(p) = &a.plot {
+            println!("plot: {}", p.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,67 @@
+//! The `mcgnode` command line: one subcommand per step of the pipeline.
+
+mod bench;
+mod demo;
+mod evaluate;
+mod rollout;
+mod simulate;
+mod train;
+
+use clap::{Parser, Subcommand};
+
+/// mcgnode: learn the dynamics of particle systems from trajectories (GNODE,
+/// CGNODE, CDGNODE, MCGNODE; Bishnoi et al.) and serve them to robots over ROS 2.
+#[derive(Parser)]
+#[command(version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Simulate ground-truth trajectories into an MCAP bag of ParticleState messages.
+    Simulate(simulate::Args),
+    /// Train a model on trajectory bags and write a model file.
+    Train(train::Args),
+    /// Roll a trained model out from an initial state and write the trajectory as a bag.
+    Rollout(rollout::Args),
+    /// Score a model on a test bag: RE, EE and ME over time (table, JSON, PNG).
+    Evaluate(evaluate::Args),
+    /// The embedded default: simulate, train GNODE and MCGNODE, evaluate on 5/20/50 springs.
+    Demo(demo::Args),
+    /// Measure training-step and rollout speed.
+    Bench(bench::Args),
+    /// Run the ROS 2 node.
+    Serve(crate::ros::ServeArgs),
+}
+
+/// Parses the command line and runs the subcommand.
+pub fn run() -> anyhow::Result<()> {
+    // One thread: deterministic, and the models are too small to gain from more.
+    if std::env::var_os("RAYON_NUM_THREADS").is_none() {
+        std::env::set_var("RAYON_NUM_THREADS", "1");
+    }
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Simulate(a) => simulate::run(a),
+        Command::Train(a) => train::run(a),
+        Command::Rollout(a) => rollout::run(a),
+        Command::Evaluate(a) => evaluate::run(a),
+        Command::Demo(a) => demo::run(a),
+        Command::Bench(a) => bench::run(a),
+        Command::Serve(a) => crate::ros::run_serve(a),
+    }
+}
+
+/// Parses "x,y[,z]".
+pub(crate) fn parse_vector(s: &str) -> Result<Vec<f64>, String> {
+    s.split(',')
+        .map(|x| {
+            x.trim()
+                .parse::<f64>()
+                .map_err(|_| format!("{x:?} is not a number"))
+                .and_then(|v| if v.is_finite() { Ok(v) } else { Err("not finite".into()) })
+        })
+        .collect()
+}

@@ -1,0 +1,135 @@
+//! `mcgnode train`.
+
+use crate::model::Variant;
+use crate::train::{train_from_bags, BodyForce, EpochReport, ModelOptions, TrainConfig};
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+/// Options of `train`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Args {
+    /// Model: node, gnode, cgnode, cdgnode or mcgnode.
+    #[arg(long)]
+    pub model: Variant,
+    /// Training bag(s) of ParticleState messages (repeat or comma-separate).
+    #[arg(long, required = true, value_delimiter = ',')]
+    pub data: Vec<PathBuf>,
+    /// Maximum epochs (paper: 10000).
+    #[arg(long, default_value_t = 10_000)]
+    pub epochs: usize,
+    /// Output model file (JSON).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Seed for initialisation, the 75:25 split and shuffling.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Adam learning rate.
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Batch size.
+    #[arg(long, default_value_t = 100)]
+    pub batch: usize,
+    /// Stop when the validation loss has not improved for this many epochs.
+    #[arg(long, default_value_t = 1000)]
+    pub patience: usize,
+    /// Hidden units of the graph MLPs (paper: 5).
+    #[arg(long, default_value_t = 5)]
+    pub hidden: usize,
+    /// Node/edge embedding width (paper: 5).
+    #[arg(long, default_value_t = 5)]
+    pub embed: usize,
+    /// Message-passing rounds (paper: 1).
+    #[arg(long, default_value_t = 1)]
+    pub rounds: usize,
+    /// MCGNODE body-force branch: auto (off for closed systems), on, off.
+    #[arg(long, value_enum, default_value_t = BodyForce::Auto)]
+    pub body_force: BodyForce,
+    /// Print nothing but errors.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Progress: a bar on a terminal, plain lines otherwise.
+pub fn progress(epochs: usize, quiet: bool) -> impl FnMut(&EpochReport) -> bool {
+    let bar = if !quiet && std::io::stderr().is_terminal() {
+        let b = ProgressBar::new(epochs as u64);
+        b.set_style(
+            ProgressStyle::with_template("{bar:30} {pos}/{len} epochs  {msg}  ETA {eta}")
+                .expect("valid template"),
+        );
+        Some(b)
+    } else {
+        None
+    };
+    let every = (epochs / 20).max(1);
+    move |r: &EpochReport| {
+        let msg = format!(
+            "train {:.3e}  val {:.3e}  best {:.3e}",
+            r.train_loss, r.validation_loss, r.best
+        );
+        match &bar {
+            Some(b) => {
+                b.set_position(r.epoch as u64);
+                b.set_message(msg);
+                if r.epoch == r.epochs {
+                    b.finish();
+                }
+            }
+            None if !quiet && (r.epoch % every == 0 || r.epoch == 1) => {
+                eprintln!("epoch {}/{}  {msg}  ({:.1} s)", r.epoch, r.epochs, r.elapsed)
+            }
+            None => {}
+        }
+        true
+    }
+}
+
+/// Runs `train`.
+pub fn run(a: Args) -> Result<()> {
+    let cfg = TrainConfig {
+        epochs: a.epochs,
+        lr: a.lr,
+        batch: a.batch,
+        patience: a.patience,
+        seed: a.seed,
+        ..TrainConfig::default()
+    };
+    let opts = ModelOptions {
+        hidden: a.hidden,
+        embed: a.embed,
+        rounds: a.rounds,
+        body_force: a.body_force,
+        types: None,
+    };
+    let quiet = a.quiet;
+    let file = train_from_bags(
+        a.model,
+        &a.data,
+        &opts,
+        &cfg,
+        |m| {
+            if !quiet {
+                eprintln!("{m}")
+            }
+        },
+        progress(a.epochs, a.quiet),
+    )?;
+    file.save(&a.out)
+        .with_context(|| format!("saving {}", a.out.display()))?;
+    let t = &file.training;
+    if !a.quiet {
+        eprintln!(
+            "wrote {}: {} epochs{} in {:.1} s, best epoch {}, train MSE {:.3e}, validation MSE {:.3e}",
+            a.out.display(),
+            t.epochs_run,
+            if t.stopped_early { " (early stop)" } else { "" },
+            t.seconds,
+            t.best_epoch,
+            t.train_loss,
+            t.validation_loss
+        );
+    }
+    Ok(())
+}

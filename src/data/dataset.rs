@@ -1,0 +1,173 @@
+//! Trajectories to training samples (state → acceleration), and bag digests.
+
+use std::io::Read;
+use std::path::Path;
+
+use sha2::{Digest, Sha256};
+
+use super::DataError;
+use crate::system::{Graph, State, Trajectory};
+
+/// Relative tolerance on the spread of time steps within a trajectory for finite
+/// differences (stamps are stored at 1 ns, so Δ = 1 ms already jitters by 1e-6).
+pub const DT_REL_TOL: f64 = 1e-4;
+
+/// Where a dataset's accelerations come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AccSource {
+    /// Recorded in every sample (exact, from the simulator).
+    Recorded,
+    /// Verlet finite difference of consecutive positions (interior states only).
+    FiniteDifference,
+}
+
+/// Training pairs: states and the accelerations to learn, all on one graph.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Dataset {
+    /// The graph shared by every state.
+    pub graph: Graph,
+    /// Inputs.
+    pub states: Vec<State>,
+    /// Targets, `graph.ndof()` each, one per state.
+    pub acc: Vec<Vec<f64>>,
+    /// Where `acc` comes from.
+    pub source: AccSource,
+}
+
+impl Dataset {
+    /// Number of training pairs.
+    pub fn len(&self) -> usize {
+        self.states.len()
+    }
+
+    /// True when there are no pairs.
+    pub fn is_empty(&self) -> bool {
+        self.states.is_empty()
+    }
+
+    /// Builds the training set. Uses the recorded accelerations when every sample of
+    /// every trajectory has them; otherwise the Verlet finite difference
+    /// q̈(t) = (q(t+Δ) + q(t−Δ) − 2 q(t)) / Δ² over interior states, which needs at
+    /// least 3 samples per trajectory and a uniform Δ (within [`DT_REL_TOL`]).
+    /// All trajectories must share one graph.
+    pub fn from_trajectories(trajectories: &[Trajectory]) -> Result<Dataset, DataError> {
+        let err = |m: String| Err(DataError::Trajectory(m));
+        let Some(first) = trajectories.first() else {
+            return err("no trajectories to build a dataset from".into());
+        };
+        let graph = first.graph.clone();
+        if let Err(e) = graph.validate() {
+            return err(format!("trajectory {}: {e}", first.id));
+        }
+        for tr in trajectories {
+            if tr.graph != graph {
+                return err(format!(
+                    "trajectory {} has a different graph from trajectory {} (one dataset needs one system)",
+                    tr.id, first.id
+                ));
+            }
+            if tr.samples.is_empty() {
+                return err(format!("trajectory {} has no samples", tr.id));
+            }
+            for (k, s) in tr.samples.iter().enumerate() {
+                if let Err(e) = s.state.validate(&graph) {
+                    return err(format!("trajectory {} sample {k}: {e}", tr.id));
+                }
+            }
+        }
+        let recorded = trajectories
+            .iter()
+            .all(|tr| tr.samples.iter().all(|s| s.acc.is_some()));
+        let (mut states, mut acc) = (Vec::new(), Vec::new());
+        if recorded {
+            for tr in trajectories {
+                for (k, s) in tr.samples.iter().enumerate() {
+                    let a = s.acc.clone().unwrap_or_default();
+                    if a.len() != graph.ndof() || a.iter().any(|x| !x.is_finite()) {
+                        return err(format!(
+                            "trajectory {} sample {k}: accelerations are not {} finite numbers",
+                            tr.id,
+                            graph.ndof()
+                        ));
+                    }
+                    states.push(s.state.clone());
+                    acc.push(a);
+                }
+            }
+        } else {
+            for tr in trajectories {
+                let a = finite_difference(tr)?;
+                for (k, a) in a.into_iter().enumerate() {
+                    states.push(tr.samples[k + 1].state.clone());
+                    acc.push(a);
+                }
+            }
+        }
+        Ok(Dataset {
+            graph,
+            states,
+            acc,
+            source: if recorded {
+                AccSource::Recorded
+            } else {
+                AccSource::FiniteDifference
+            },
+        })
+    }
+}
+
+/// Verlet accelerations of a trajectory's interior samples 1..m−1, with Δ the
+/// mean step, after checking the steps are uniform.
+pub fn finite_difference(tr: &Trajectory) -> Result<Vec<Vec<f64>>, DataError> {
+    let err = |m: String| Err(DataError::Trajectory(format!("trajectory {}: {m}", tr.id)));
+    let s = &tr.samples;
+    let m = s.len();
+    if m < 3 {
+        return err(format!(
+            "{m} samples without recorded accelerations; finite differences need at least 3"
+        ));
+    }
+    let dt = (s[m - 1].t - s[0].t) / (m - 1) as f64;
+    if !(dt.is_finite() && dt > 0.0) {
+        return err(format!("time step {dt} is not positive"));
+    }
+    for k in 1..m {
+        let d = s[k].t - s[k - 1].t;
+        if !d.is_finite() || (d - dt).abs() > DT_REL_TOL * dt {
+            return err(format!(
+                "time step between samples {} and {k} is {d}, but the mean step is {dt}: finite differences need a uniform step",
+                k - 1
+            ));
+        }
+    }
+    Ok((1..m - 1)
+        .map(|k| {
+            let (qp, q, qn) = (&s[k - 1].state.q, &s[k].state.q, &s[k + 1].state.q);
+            (0..q.len())
+                .map(|i| (qn[i] + qp[i] - 2.0 * q[i]) / (dt * dt))
+                .collect()
+        })
+        .collect())
+}
+
+/// SHA-256 of a file's bytes, lower-case hex (identifies the bag a model was trained on).
+pub fn digest(path: impl AsRef<Path>) -> Result<String, DataError> {
+    let path = path.as_ref();
+    let mut file = std::fs::File::open(path).map_err(|e| DataError::io(path, "opening", e))?;
+    let mut hasher = Sha256::new();
+    let mut buf = vec![0u8; 1 << 16];
+    loop {
+        let n = match file.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(DataError::io(path, "reading", e)),
+        };
+        hasher.update(&buf[..n]);
+    }
+    Ok(hasher
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect())
+}

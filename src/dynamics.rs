@@ -1,0 +1,77 @@
+//! The one interface between "something that knows the dynamics" (a trained
+//! model, or the ground-truth physics) and whoever uses it (rollouts, metrics,
+//! the ROS node).
+
+use crate::system::{Graph, State};
+
+/// Forces a model attributes to a state.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Forces {
+    /// Total force per particle, `n * dim`.
+    pub total: Vec<f64>,
+    /// Pairwise forces f_ab on particle `a` due to particle `b` (so f_ba = −f_ab),
+    /// one entry per particle edge, when the model has them (MCGNODE).
+    pub edges: Vec<EdgeForce>,
+}
+
+/// The force on particle `a` due to particle `b`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EdgeForce {
+    /// Particle receiving the force.
+    pub a: usize,
+    /// Particle exerting it.
+    pub b: usize,
+    /// The force, `dim` components.
+    pub force: Vec<f64>,
+}
+
+/// Something that predicts accelerations of a particle system.
+pub trait Dynamics: Send + Sync {
+    /// A short human-readable description ("mcgnode trained on 5-spring", ...).
+    fn describe(&self) -> String;
+
+    /// Whether this graph can be handled (particle types known, dimension, ...).
+    fn supports(&self, graph: &Graph) -> Result<(), String>;
+
+    /// Accelerations at a state, written to `out` (`n * dim`).
+    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String>;
+
+    /// Forces at a state.
+    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String>;
+
+    /// Velocity-Verlet rollout: `steps + 1` states including `start`.
+    ///
+    /// The velocity-dependent acceleration at the new position is evaluated at
+    /// the half-step velocity, which keeps the scheme explicit.
+    fn rollout(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+    ) -> Result<Vec<State>, String> {
+        self.supports(graph)?;
+        start.validate(graph)?;
+        let d = graph.ndof();
+        let mut out = Vec::with_capacity(steps + 1);
+        let mut s = start.clone();
+        let mut a = vec![0.0; d];
+        self.acceleration(graph, &s, &mut a)?;
+        out.push(s.clone());
+        for _ in 0..steps {
+            for i in 0..d {
+                s.q[i] += s.v[i] * dt + 0.5 * a[i] * dt * dt;
+                s.v[i] += 0.5 * a[i] * dt;
+            }
+            self.acceleration(graph, &s, &mut a)?;
+            for i in 0..d {
+                s.v[i] += 0.5 * a[i] * dt;
+            }
+            if s.q.iter().chain(&s.v).any(|x| !x.is_finite()) {
+                return Err(format!("rollout diverged (non-finite state) after {} steps", out.len()));
+            }
+            out.push(s.clone());
+        }
+        Ok(out)
+    }
+}

@@ -1,0 +1,182 @@
+//! Evaluation: roll a model out from each test trajectory's first state and
+//! compare with what was recorded (RE, EE, ME over time, paper's metrics).
+
+use crate::data::bag::Bag;
+use crate::metrics::{error_curves, summarize, ErrorCurves, Summary};
+use crate::model::TrainedModel;
+use crate::physics::{Field, SystemConfig};
+use crate::system::State;
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+use std::time::Instant;
+
+/// Bag metadata key holding the simulator's [`SystemConfig`] as JSON.
+pub const META_SYSTEM: &str = "system_config";
+
+/// A fingerprint of a state (SHA-256 of its numbers, rounded to 1e-9), used to
+/// detect test trajectories that start where training ones did.
+pub fn fingerprint(s: &State) -> String {
+    let mut h = Sha256::new();
+    for x in s.q.iter().chain(&s.v) {
+        h.update(((x * 1e9).round() as i64).to_le_bytes());
+    }
+    h.finalize().iter().take(12).map(|b| format!("{b:02x}")).collect()
+}
+
+/// The simulator configuration a bag was made with, if it says.
+pub fn bag_system(bag: &Bag) -> Result<Option<SystemConfig>> {
+    match bag.metadata.get(META_SYSTEM) {
+        Some(s) => Ok(Some(
+            serde_json::from_str(s).context("bag metadata system_config is not valid")?,
+        )),
+        None => Ok(None),
+    }
+}
+
+/// Evaluation settings.
+#[derive(Clone, Debug, Default)]
+pub struct EvalOptions {
+    /// Integration step; default: the bag's simulator step.
+    pub dt: Option<f64>,
+    /// Field for the Hamiltonian; default: the bag's.
+    pub field: Option<Field>,
+    /// Evaluate at most this many trajectories.
+    pub max_trajectories: Option<usize>,
+    /// Evaluate even if test starts coincide with training starts.
+    pub allow_overlap: bool,
+}
+
+/// Result of an evaluation.
+#[derive(Clone, Debug, Serialize)]
+pub struct Evaluation {
+    /// Model description.
+    pub model: String,
+    /// System name.
+    pub system: String,
+    /// Particles in the test graph.
+    pub particles: usize,
+    /// Trajectories evaluated.
+    pub trajectories: usize,
+    /// Integration step used.
+    pub dt: f64,
+    /// Integration steps per trajectory.
+    pub steps: usize,
+    /// Wall time of all rollouts, seconds.
+    pub rollout_seconds: f64,
+    /// Geometric means and 95% bands over trajectories.
+    pub summary: Summary,
+    /// Per-trajectory curves.
+    #[serde(skip)]
+    pub curves: Vec<ErrorCurves>,
+}
+
+/// Rolls `model` out from each trajectory's first state and scores it.
+pub fn evaluate(model: &TrainedModel, bag: &Bag, opts: &EvalOptions) -> Result<Evaluation> {
+    let sys = bag_system(bag)?;
+    let dt = match (opts.dt, &sys) {
+        (Some(dt), _) => dt,
+        (None, Some(s)) => s.dt,
+        (None, None) => bail!("the bag does not say its integration step; pass --dt"),
+    };
+    if !(dt.is_finite() && dt > 0.0) {
+        bail!("time step must be positive, got {dt}");
+    }
+    let field = match (&opts.field, &sys) {
+        (Some(f), _) => f.clone(),
+        (None, Some(s)) => s.field.clone(),
+        (None, None) => Field::default(),
+    };
+    let trajs: Vec<_> = bag
+        .trajectories
+        .iter()
+        .take(opts.max_trajectories.unwrap_or(usize::MAX))
+        .collect();
+    if trajs.is_empty() {
+        bail!("the bag has no trajectories");
+    }
+    if !opts.allow_overlap {
+        let train: std::collections::HashSet<&String> =
+            model.file.trained_on.start_fingerprints.iter().collect();
+        let overlap = trajs
+            .iter()
+            .filter(|t| train.contains(&fingerprint(&t.samples[0].state)))
+            .count();
+        if overlap > 0 {
+            bail!(
+                "{overlap} of {} test trajectories start where training trajectories did; \
+                 evaluate on a bag simulated with another seed (or pass --allow-overlap)",
+                trajs.len()
+            );
+        }
+    }
+    let mut curves = vec![];
+    let mut steps_total = 0;
+    let start = Instant::now();
+    for tr in &trajs {
+        let g = &tr.graph;
+        let mut ws = model
+            .kernel
+            .workspace(g)
+            .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", tr.id))?;
+        let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
+        let interval = if times.len() > 1 { times[1] - times[0] } else { dt };
+        let every = ((interval / dt).round() as usize).max(1);
+        if ((every as f64 * dt - interval) / interval).abs() > 1e-6 {
+            bail!(
+                "trajectory {}: saved interval {interval} s is not a multiple of dt {dt}",
+                tr.id
+            );
+        }
+        let steps = every * (times.len() - 1);
+        let mut pred = Vec::with_capacity(times.len());
+        model
+            .rollout_with(&mut ws, &tr.samples[0].state, dt, steps, every, |_, q, v| {
+                pred.push(State {
+                    q: q.to_vec(),
+                    v: v.to_vec(),
+                })
+            })
+            .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", tr.id))?;
+        steps_total = steps;
+        let truth: Vec<State> = tr.samples.iter().map(|s| s.state.clone()).collect();
+        curves.push(error_curves(g, &field, &truth, &pred, &times).map_err(anyhow::Error::msg)?);
+    }
+    let rollout_seconds = start.elapsed().as_secs_f64();
+    let summary = summarize(&curves).map_err(anyhow::Error::msg)?;
+    Ok(Evaluation {
+        model: crate::dynamics::Dynamics::describe(model),
+        system: trajs[0].system.clone(),
+        particles: trajs[0].graph.n(),
+        trajectories: trajs.len(),
+        dt,
+        steps: steps_total,
+        rollout_seconds,
+        summary,
+        curves,
+    })
+}
+
+/// A plain-text table of a summary at a few times.
+pub fn table(e: &Evaluation, rows: usize) -> String {
+    let s = &e.summary;
+    let mut out = format!(
+        "{} on {}-particle {} ({} trajectories, dt {}):\n{:>8}  {:>10}  {:>10}  {:>10}\n",
+        e.model, e.particles, e.system, e.trajectories, e.dt, "t [s]", "RE", "EE", "ME"
+    );
+    let n = s.t.len();
+    let picks: Vec<usize> = if n <= rows {
+        (0..n).collect()
+    } else {
+        (0..rows).map(|k| k * (n - 1) / (rows - 1)).collect()
+    };
+    for i in picks {
+        out += &format!(
+            "{:>8.3}  {:>10.3e}  {:>10.3e}  {:>10.3e}\n",
+            s.t[i], s.re.gmean[i], s.ee.gmean[i], s.me.gmean[i]
+        );
+    }
+    let (re, ee, me) = s.time_average();
+    out += &format!("{:>8}  {re:>10.3e}  {ee:>10.3e}  {me:>10.3e}\n", "mean");
+    out
+}

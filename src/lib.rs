@@ -1,0 +1,21 @@
+//! mcgnode: learned particle dynamics (GNODE, CGNODE, CDGNODE, MCGNODE and the
+//! NODE baseline of Bishnoi et al.), trained from trajectories stored as MCAP bags
+//! of ROS 2 `ParticleState` messages, rolled out on a hand-written kernel, and
+//! served as a ROS 2 node.
+//!
+//! Data flows one way: [`physics`] → [`data`] (bags) → `model` + `train` →
+//! model file → `kernel` + `rollout` → [`data`] → `metrics`.
+
+pub mod data;
+pub mod dynamics;
+pub mod kernel;
+pub mod model;
+pub mod physics;
+pub mod ros;
+pub mod system;
+pub mod train;
+pub mod evaluate;
+pub mod bench;
+pub mod cli;
+pub mod metrics;
+pub mod plot;

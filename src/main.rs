@@ -1,0 +1,11 @@
+//! The `mcgnode` binary: a thin shell over the library's command line.
+
+fn main() -> std::process::ExitCode {
+    match mcgnode::cli::run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,264 @@
+//! The paper's error metrics ("Evaluation Metric", Bishnoi et al.) and their
+//! summary over many trajectories.
+//!
+//! Per time step, hats denoting the prediction:
+//! * RE(t) = ‖q̂ − q‖₂ / (‖q̂‖₂ + ‖q‖₂), positions of all particles stacked;
+//! * EE(t) = |Ĥ − H| / (|Ĥ| + |H|), H the system's known Hamiltonian
+//!   ([`crate::physics::hamiltonian`]) evaluated on the predicted and the true
+//!   state;
+//! * ME(t) = ‖P̂ − P‖₂ / (‖P̂‖₂ + ‖P‖₂), P the total linear momentum.
+//!
+//! A ratio 0/0 (both quantities exactly zero) is defined as 0: the prediction
+//! matches. Caveat for ME: when the true momentum is zero (the spring starts)
+//! both momenta sit at round-off level and ME is close to 1 for any prediction
+//! that is not bit-identical; [`ErrorCurves::me_scaled`] divides by the
+//! momentum scale Σ m|v̂| + Σ m|v| instead, which stays meaningful there.
+
+use serde::{Deserialize, Serialize};
+
+use crate::physics::{hamiltonian, Field};
+use crate::system::{Graph, State};
+
+/// Values are clamped to this before taking logs (a zero error would
+/// otherwise have log −∞), so an exact zero shows up as 1e-300.
+pub const LOG_FLOOR: f64 = 1e-300;
+
+/// z-value of a two-sided 95% normal band.
+const Z95: f64 = 1.96;
+
+/// Error curves of one predicted trajectory against the truth.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ErrorCurves {
+    /// Times of the states.
+    pub t: Vec<f64>,
+    /// Rollout (position) error RE(t).
+    pub re: Vec<f64>,
+    /// Energy violation error EE(t).
+    pub ee: Vec<f64>,
+    /// Momentum error ME(t) as in the paper.
+    pub me: Vec<f64>,
+    /// ‖P̂ − P‖ / (Σ m|v̂| + Σ m|v|): momentum error relative to the scale of
+    /// the motion, in [0, 1]; meaningful also when P ≈ 0.
+    pub me_scaled: Vec<f64>,
+}
+
+/// a / b with 0/0 = 0.
+fn ratio(a: f64, b: f64) -> f64 {
+    if a == 0.0 && b == 0.0 {
+        0.0
+    } else {
+        a / b
+    }
+}
+
+fn norm(x: impl Iterator<Item = f64>) -> f64 {
+    x.map(|a| a * a).sum::<f64>().sqrt()
+}
+
+/// Σ m_i |v_i|.
+fn momentum_scale(graph: &Graph, s: &State) -> f64 {
+    let d = graph.dim;
+    graph
+        .masses
+        .iter()
+        .enumerate()
+        .map(|(i, m)| m * norm(s.v[i * d..(i + 1) * d].iter().copied()))
+        .sum()
+}
+
+/// RE, EE and ME at every time of `truth` and `pred` (same length as `times`).
+///
+/// Errors if the lengths differ, there are no states, or a state does not
+/// fit the graph or is not finite (a diverged prediction).
+pub fn error_curves(
+    graph: &Graph,
+    field: &Field,
+    truth: &[State],
+    pred: &[State],
+    times: &[f64],
+) -> Result<ErrorCurves, String> {
+    if truth.len() != pred.len() || truth.len() != times.len() {
+        return Err(format!(
+            "{} true states, {} predicted states and {} times: they must match",
+            truth.len(),
+            pred.len(),
+            times.len()
+        ));
+    }
+    if truth.is_empty() {
+        return Err("no states to compare".into());
+    }
+    graph.validate()?;
+    field.validate(graph.dim)?;
+    let mut c = ErrorCurves {
+        t: times.to_vec(),
+        re: Vec::with_capacity(times.len()),
+        ee: Vec::with_capacity(times.len()),
+        me: Vec::with_capacity(times.len()),
+        me_scaled: Vec::with_capacity(times.len()),
+    };
+    for (k, (s, p)) in truth.iter().zip(pred).enumerate() {
+        s.validate(graph)
+            .map_err(|e| format!("true state {k}: {e}"))?;
+        p.validate(graph)
+            .map_err(|e| format!("predicted state {k}: {e}"))?;
+        let dq = norm(p.q.iter().zip(&s.q).map(|(a, b)| a - b));
+        c.re.push(ratio(
+            dq,
+            norm(p.q.iter().copied()) + norm(s.q.iter().copied()),
+        ));
+        let (h, hp) = (hamiltonian(graph, field, s), hamiltonian(graph, field, p));
+        c.ee.push(ratio((hp - h).abs(), hp.abs() + h.abs()));
+        let (m, mp) = (s.momentum(graph), p.momentum(graph));
+        let dm = norm(mp.iter().zip(&m).map(|(a, b)| a - b));
+        c.me.push(ratio(
+            dm,
+            norm(mp.iter().copied()) + norm(m.iter().copied()),
+        ));
+        c.me_scaled.push(ratio(
+            dm,
+            momentum_scale(graph, p) + momentum_scale(graph, s),
+        ));
+    }
+    Ok(c)
+}
+
+/// Geometric mean and 95% band of one metric over trajectories, per time.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Band {
+    /// exp(mean(log x)) over trajectories.
+    pub gmean: Vec<f64>,
+    /// exp(mean(log x) − 1.96·sd(log x)).
+    pub lo: Vec<f64>,
+    /// exp(mean(log x) + 1.96·sd(log x)).
+    pub hi: Vec<f64>,
+}
+
+/// Summary of many trajectories' error curves.
+///
+/// Per time, each metric is summarised on log scale: the geometric mean
+/// exp(mean(log x)) and the band exp(mean ± 1.96·sd) of the log-values, sd
+/// the sample standard deviation (n − 1; 0 for a single trajectory). This is
+/// the spread of the trajectories (where 95% of them lie if the log-errors
+/// are normal), not a confidence interval of the mean. Values are clamped to
+/// [`LOG_FLOOR`] before the log.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Times.
+    pub t: Vec<f64>,
+    /// Number of trajectories summarised.
+    pub n: usize,
+    /// Rollout error.
+    pub re: Band,
+    /// Energy violation error.
+    pub ee: Band,
+    /// Momentum error (paper definition).
+    pub me: Band,
+    /// Momentum error relative to the momentum scale.
+    pub me_scaled: Band,
+}
+
+fn band(curves: &[ErrorCurves], pick: impl Fn(&ErrorCurves) -> &Vec<f64>) -> Band {
+    let len = curves[0].t.len();
+    let n = curves.len() as f64;
+    let mut b = Band {
+        gmean: Vec::with_capacity(len),
+        lo: Vec::with_capacity(len),
+        hi: Vec::with_capacity(len),
+    };
+    for k in 0..len {
+        let logs = curves.iter().map(|c| pick(c)[k].max(LOG_FLOOR).ln());
+        let mean = logs.clone().sum::<f64>() / n;
+        let var = if curves.len() > 1 {
+            logs.map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
+        } else {
+            0.0
+        };
+        let half = Z95 * var.sqrt();
+        b.gmean.push(mean.exp());
+        b.lo.push((mean - half).exp());
+        b.hi.push((mean + half).exp());
+    }
+    b
+}
+
+/// Summarises curves that share their times (within 1e-9 relative).
+///
+/// Errors on no curves, differing times or lengths, or non-finite / negative
+/// values.
+pub fn summarize(curves: &[ErrorCurves]) -> Result<Summary, String> {
+    let first = curves.first().ok_or("no error curves to summarise")?;
+    let len = first.t.len();
+    for (i, c) in curves.iter().enumerate() {
+        if [
+            c.t.len(),
+            c.re.len(),
+            c.ee.len(),
+            c.me.len(),
+            c.me_scaled.len(),
+        ]
+        .iter()
+        .any(|l| *l != len)
+        {
+            return Err(format!(
+                "curve {i} has a different length than curve 0 ({len})"
+            ));
+        }
+        for (k, (a, b)) in c.t.iter().zip(&first.t).enumerate() {
+            if (a - b).abs() > 1e-9 * a.abs().max(b.abs()).max(1.0) {
+                return Err(format!(
+                    "curve {i} has time {a} at index {k}, curve 0 has {b}"
+                ));
+            }
+        }
+        let mut vals = c.re.iter().chain(&c.ee).chain(&c.me).chain(&c.me_scaled);
+        if let Some(x) = vals.find(|x| !(x.is_finite() && **x >= 0.0)) {
+            return Err(format!("curve {i} has an invalid error value {x}"));
+        }
+    }
+    Ok(Summary {
+        t: first.t.clone(),
+        n: curves.len(),
+        re: band(curves, |c| &c.re),
+        ee: band(curves, |c| &c.ee),
+        me: band(curves, |c| &c.me),
+        me_scaled: band(curves, |c| &c.me_scaled),
+    })
+}
+
+/// Geometric mean of a curve's values (floored at [`LOG_FLOOR`]).
+fn gmean(x: &[f64]) -> f64 {
+    if x.is_empty() {
+        return f64::NAN;
+    }
+    (x.iter().map(|v| v.max(LOG_FLOOR).ln()).sum::<f64>() / x.len() as f64).exp()
+}
+
+impl Summary {
+    /// (RE, EE, ME) averaged over time: the geometric mean over times of the
+    /// per-time geometric means, i.e. the geometric mean over all
+    /// trajectories and times (errors span decades, so an arithmetic mean
+    /// would only see the largest). NaN for a summary without times.
+    pub fn time_average(&self) -> (f64, f64, f64) {
+        (
+            gmean(&self.re.gmean),
+            gmean(&self.ee.gmean),
+            gmean(&self.me.gmean),
+        )
+    }
+
+    /// (RE, EE, ME) geometric means at the stored time nearest to `t`; NaN
+    /// for a summary without times.
+    pub fn at(&self, t: f64) -> (f64, f64, f64) {
+        let k = self
+            .t
+            .iter()
+            .enumerate()
+            .min_by(|a, b| (a.1 - t).abs().total_cmp(&(b.1 - t).abs()))
+            .map(|(k, _)| k);
+        match k {
+            Some(k) => (self.re.gmean[k], self.ee.gmean[k], self.me.gmean[k]),
+            None => (f64::NAN, f64::NAN, f64::NAN),
+        }
+    }
+}

@@ -1,0 +1,117 @@
+//! The model file: human-readable metadata plus weights, JSON, written atomically.
+
+use super::params::Weights;
+use super::variant::Hyper;
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Format tag written in every model file.
+pub const FORMAT: &str = "mcgnode-model/1";
+
+/// What the model was trained on.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrainedOn {
+    /// System name from the bag ("spring", "pendulum", or "").
+    pub system: String,
+    /// Particle count of the training graph.
+    pub particles: usize,
+    /// Spatial dimension.
+    pub dim: usize,
+    /// Bag path as given.
+    pub bag: String,
+    /// SHA-256 of the training bag.
+    pub bag_sha256: String,
+    /// Where the target accelerations came from ("recorded" or "finite-difference").
+    pub accelerations: String,
+    /// Trajectories and states used.
+    pub trajectories: usize,
+    /// States used (train + validation).
+    pub states: usize,
+    /// Fingerprints of each training trajectory's first state, so that an
+    /// evaluation can refuse a test set that starts where training did.
+    pub start_fingerprints: Vec<String>,
+    /// The bag's system metadata (JSON), if it had any.
+    pub system_config: Option<serde_json::Value>,
+}
+
+/// How training went.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrainingReport {
+    /// RNG seed (initialisation, split, shuffling).
+    pub seed: u64,
+    /// Epochs asked for.
+    pub epochs_requested: usize,
+    /// Epochs run.
+    pub epochs_run: usize,
+    /// Epoch whose weights were kept (lowest validation loss).
+    pub best_epoch: usize,
+    /// Training loss (MSE on accelerations) at the best epoch.
+    pub train_loss: f64,
+    /// Validation loss at the best epoch.
+    pub validation_loss: f64,
+    /// Whether early stopping ended training.
+    pub stopped_early: bool,
+    /// Wall time, seconds.
+    pub seconds: f64,
+    /// Batch size.
+    pub batch: usize,
+    /// Adam learning rate.
+    pub lr: f64,
+    /// Early-stopping patience, epochs.
+    pub patience: usize,
+}
+
+/// A trained model on disk.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelFile {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Version of mcgnode that wrote it.
+    pub crate_version: String,
+    /// Architecture.
+    pub hyper: Hyper,
+    /// Training data.
+    pub trained_on: TrainedOn,
+    /// Training outcome.
+    pub training: TrainingReport,
+    /// Parameters.
+    pub weights: Weights,
+}
+
+impl ModelFile {
+    /// Writes the file atomically (temporary file in the same folder, then rename).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let mut tmp = tempfile::NamedTempFile::new_in(dir)
+            .with_context(|| format!("creating a temporary file in {}", dir.display()))?;
+        serde_json::to_writer_pretty(&mut tmp, self)?;
+        use std::io::Write;
+        tmp.write_all(b"\n")?;
+        tmp.as_file().sync_all()?;
+        tmp.persist(path)
+            .with_context(|| format!("writing model file {}", path.display()))?;
+        Ok(())
+    }
+
+    /// Reads and checks a model file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read model file {}", path.display()))?;
+        let m: ModelFile = serde_json::from_str(&text).with_context(|| {
+            format!("{} is not a valid mcgnode model file", path.display())
+        })?;
+        if m.format != FORMAT {
+            bail!(
+                "{}: unsupported model format {:?} (expected {FORMAT})",
+                path.display(),
+                m.format
+            );
+        }
+        Ok(m)
+    }
+}

@@ -1,0 +1,62 @@
+//! Multilayer perceptrons with squareplus activations, on candle tensors.
+
+use super::params::ParamStore;
+use anyhow::Result;
+use candle_core::Tensor;
+use rand::Rng;
+
+/// squareplus(x) = (x + √(x² + 4)) / 2: a smooth ReLU (Barron 2021, b = 4 as in jax).
+pub fn squareplus(x: &Tensor) -> candle_core::Result<Tensor> {
+    (x + (x.sqr()? + 4.0)?.sqrt()?)? * 0.5
+}
+
+/// Scalar squareplus, for the kernel.
+#[inline]
+pub fn squareplus_f64(x: f64) -> f64 {
+    0.5 * (x + (x * x + 4.0).sqrt())
+}
+
+/// An MLP: linear layers named `{name}.l{i}`, squareplus between them, linear output.
+#[derive(Clone, Debug)]
+pub struct Mlp {
+    /// Parameter-name prefix.
+    pub name: String,
+    /// Layer sizes, input first, output last.
+    pub sizes: Vec<usize>,
+}
+
+impl Mlp {
+    /// Declares the MLP's parameters in the store.
+    pub fn new(store: &mut ParamStore, name: &str, sizes: &[usize], rng: &mut impl Rng) -> Result<Self> {
+        for (i, w) in sizes.windows(2).enumerate() {
+            store.linear(&format!("{name}.l{i}"), w[0], w[1], rng)?;
+        }
+        Ok(Self {
+            name: name.to_string(),
+            sizes: sizes.to_vec(),
+        })
+    }
+
+    /// Parameter names of layer `i`: (weight, bias).
+    pub fn layer_names(&self, i: usize) -> (String, String) {
+        (format!("{}.l{i}.w", self.name), format!("{}.l{i}.b", self.name))
+    }
+
+    /// Number of linear layers.
+    pub fn layers(&self) -> usize {
+        self.sizes.len() - 1
+    }
+
+    /// Forward pass on rows of `x` (`(N, sizes[0])` → `(N, sizes.last())`).
+    pub fn forward(&self, store: &ParamStore, x: &Tensor) -> Result<Tensor> {
+        let mut h = x.clone();
+        for i in 0..self.layers() {
+            let (wn, bn) = self.layer_names(i);
+            h = h.matmul(store.get(&wn)?.as_tensor())?.broadcast_add(store.get(&bn)?.as_tensor())?;
+            if i + 1 < self.layers() {
+                h = squareplus(&h)?;
+            }
+        }
+        Ok(h)
+    }
+}

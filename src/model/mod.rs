@@ -1,0 +1,18 @@
+//! Learned dynamics: the GNODE family and NODE in candle (training), and the
+//! model file that hands trained weights to the inference kernel.
+
+pub mod batch;
+pub mod mlp;
+pub mod net;
+pub mod params;
+pub mod plan;
+pub mod solve;
+pub mod variant;
+
+pub use net::Net;
+pub use variant::{Hyper, Variant};
+pub mod file;
+pub mod trained;
+
+pub use file::ModelFile;
+pub use trained::TrainedModel;

@@ -1,0 +1,108 @@
+//! A graph prepared for learned models: directed message-passing edges and the
+//! rigid-bar constraint rows A(q), Ȧq̇. Shared by the candle model and the kernel
+//! so both read the graph the same way.
+
+use crate::system::{EdgeKind, Endpoint, Graph};
+
+/// One rigid bar: particle `a` to particle `b`, or to a fixed point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Bar {
+    /// First particle.
+    pub a: usize,
+    /// Second end: a particle, or an anchor point (`dim` coordinates).
+    pub b: BarEnd,
+}
+
+/// The far end of a bar.
+#[derive(Clone, Debug, PartialEq)]
+pub enum BarEnd {
+    /// Another particle.
+    Particle(usize),
+    /// A fixed point.
+    Fixed(Vec<f64>),
+}
+
+/// The graph as the models see it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GraphPlan {
+    /// Particles.
+    pub n: usize,
+    /// Spatial dimension.
+    pub dim: usize,
+    /// Particle types.
+    pub types: Vec<usize>,
+    /// Directed edges: receiver of edge `e`. Edges `0..E` go a←b, `E..2E` b←a
+    /// (the same undirected edge reversed), so `e` and `e + E` are partners.
+    pub recv: Vec<usize>,
+    /// Directed edges: sender of edge `e`.
+    pub send: Vec<usize>,
+    /// Rigid bars (rows of A).
+    pub bars: Vec<Bar>,
+}
+
+impl GraphPlan {
+    /// Prepares a (validated) graph.
+    pub fn new(graph: &Graph) -> Self {
+        let pairs: Vec<(usize, usize)> = graph.particle_edges().map(|(a, b, _)| (a, b)).collect();
+        let mut recv: Vec<usize> = pairs.iter().map(|p| p.0).collect();
+        let mut send: Vec<usize> = pairs.iter().map(|p| p.1).collect();
+        recv.extend(pairs.iter().map(|p| p.1));
+        send.extend(pairs.iter().map(|p| p.0));
+        let bars = graph
+            .edges
+            .iter()
+            .filter(|e| e.kind == EdgeKind::Bar)
+            .map(|e| Bar {
+                a: e.a,
+                b: match e.b {
+                    Endpoint::Particle(b) => BarEnd::Particle(b),
+                    Endpoint::Anchor(k) => BarEnd::Fixed(graph.anchors[k].clone()),
+                },
+            })
+            .collect();
+        Self {
+            n: graph.n(),
+            dim: graph.dim,
+            types: graph.types.iter().map(|&t| t as usize).collect(),
+            recv,
+            send,
+            bars,
+        }
+    }
+
+    /// Number of undirected particle edges E.
+    pub fn n_edges(&self) -> usize {
+        self.recv.len() / 2
+    }
+
+    /// Number of generalised coordinates.
+    pub fn ndof(&self) -> usize {
+        self.n * self.dim
+    }
+
+    /// Fills the dense constraint rows for one state: `a` is `k × ndof` (A(q),
+    /// row r = ∂φ_r/∂q with φ_r = ½(|q_a − q_b|² − l²)) and `adq` is `k` (Ȧq̇ =
+    /// |q̇_a − q̇_b|²), so that A q̈ + Ȧ q̇ = 0 along the motion.
+    pub fn constraint_rows(&self, q: &[f64], v: &[f64], a: &mut [f64], adq: &mut [f64]) {
+        let d = self.dim;
+        let nd = self.ndof();
+        a.iter_mut().for_each(|x| *x = 0.0);
+        for (r, bar) in self.bars.iter().enumerate() {
+            let mut s = 0.0;
+            for c in 0..d {
+                let (qb, vb) = match &bar.b {
+                    BarEnd::Particle(b) => (q[b * d + c], v[b * d + c]),
+                    BarEnd::Fixed(p) => (p[c], 0.0),
+                };
+                let dq = q[bar.a * d + c] - qb;
+                let dv = v[bar.a * d + c] - vb;
+                a[r * nd + bar.a * d + c] = dq;
+                if let BarEnd::Particle(b) = bar.b {
+                    a[r * nd + b * d + c] = -dq;
+                }
+                s += dv * dv;
+            }
+            adq[r] = s;
+        }
+    }
+}

@@ -1,0 +1,140 @@
+//! A trained model, loaded from its file, running on the inference kernel.
+
+use super::file::ModelFile;
+use crate::dynamics::{Dynamics, EdgeForce, Forces};
+use crate::kernel::{Kernel, Workspace};
+use crate::system::{Graph, State};
+use anyhow::Result;
+use std::path::Path;
+
+/// A trained model ready for rollouts and serving.
+#[derive(Clone, Debug)]
+pub struct TrainedModel {
+    /// The file it came from (metadata and weights).
+    pub file: ModelFile,
+    /// The forward kernel built from its weights.
+    pub kernel: Kernel,
+}
+
+impl TrainedModel {
+    /// Loads a model file and builds its kernel.
+    pub fn load(path: &Path) -> Result<Self> {
+        Self::from_file(ModelFile::load(path)?)
+    }
+
+    /// Builds the kernel of an in-memory model file.
+    pub fn from_file(file: ModelFile) -> Result<Self> {
+        let kernel = Kernel::new(&file.hyper, &file.weights)?;
+        Ok(Self { file, kernel })
+    }
+
+    /// Velocity-Verlet rollout on the kernel, calling `visit(step, q, v)` for the
+    /// start and every `every`-th step. Nothing is allocated inside the loop.
+    pub fn rollout_with(
+        &self,
+        ws: &mut Workspace,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+        mut visit: impl FnMut(usize, &[f64], &[f64]),
+    ) -> Result<(), String> {
+        let d = start.q.len();
+        let mut q = start.q.clone();
+        let mut v = start.v.clone();
+        let mut a = vec![0.0; d];
+        self.kernel.acceleration(ws, &q, &v, &mut a);
+        visit(0, &q, &v);
+        let every = every.max(1);
+        for step in 1..=steps {
+            for i in 0..d {
+                q[i] += v[i] * dt + 0.5 * a[i] * dt * dt;
+                v[i] += 0.5 * a[i] * dt;
+            }
+            self.kernel.acceleration(ws, &q, &v, &mut a);
+            let mut finite = true;
+            for i in 0..d {
+                v[i] += 0.5 * a[i] * dt;
+                finite &= q[i].is_finite() && v[i].is_finite();
+            }
+            if !finite {
+                return Err(format!("rollout diverged (non-finite state) at step {step}"));
+            }
+            if step % every == 0 {
+                visit(step, &q, &v);
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Dynamics for TrainedModel {
+    fn describe(&self) -> String {
+        let t = &self.file.trained_on;
+        format!(
+            "{} trained on {}-particle {} ({} epochs, validation MSE {:.3e})",
+            self.file.hyper.variant,
+            t.particles,
+            if t.system.is_empty() { "system" } else { &t.system },
+            self.file.training.epochs_run,
+            self.file.training.validation_loss
+        )
+    }
+
+    fn supports(&self, graph: &Graph) -> Result<(), String> {
+        self.kernel.supports(graph)
+    }
+
+    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
+        let mut ws = self.kernel.workspace(graph)?;
+        state.validate(graph)?;
+        if out.len() != graph.ndof() {
+            return Err("output buffer has the wrong size".into());
+        }
+        self.kernel.acceleration(&mut ws, &state.q, &state.v, out);
+        Ok(())
+    }
+
+    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String> {
+        let mut ws = self.kernel.workspace(graph)?;
+        state.validate(graph)?;
+        let mut acc = vec![0.0; graph.ndof()];
+        self.kernel.acceleration(&mut ws, &state.q, &state.v, &mut acc);
+        let b = self.file.hyper.variant.biases();
+        let total = if b.constrained {
+            ws.force.clone()
+        } else {
+            // Acceleration-predicting models: force = m q̈ with the true masses.
+            acc.iter()
+                .enumerate()
+                .map(|(i, a)| a * graph.masses[i / graph.dim])
+                .collect()
+        };
+        let d = graph.dim;
+        let edges = if b.pairwise {
+            (0..ws.plan.n_edges())
+                .map(|e| EdgeForce {
+                    a: ws.plan.recv[e],
+                    b: ws.plan.send[e],
+                    force: ws.edge_force[e * d..(e + 1) * d].to_vec(),
+                })
+                .collect()
+        } else {
+            vec![]
+        };
+        Ok(Forces { total, edges })
+    }
+
+    fn rollout(&self, graph: &Graph, start: &State, dt: f64, steps: usize) -> Result<Vec<State>, String> {
+        let mut ws = self.kernel.workspace(graph)?;
+        start.validate(graph)?;
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(format!("time step must be positive and finite, got {dt}"));
+        }
+        let mut out = Vec::with_capacity(steps + 1);
+        self.rollout_with(&mut ws, start, dt, steps, 1, |_, q, v| {
+            out.push(State { q: q.to_vec(), v: v.to_vec() })
+        })?;
+        Ok(out)
+    }
+}

@@ -1,0 +1,397 @@
+//! The paper's systems (spring rings and n-pendulums): their graphs, random
+//! initial states and ground-truth trajectories.
+
+use std::f64::consts::PI;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use super::constraints::acceleration;
+use super::integrator::Integrator;
+use super::{Field, SystemKind};
+use crate::system::{Edge, EdgeKind, Endpoint, Graph, Sample, State, Trajectory};
+
+/// Everything needed to generate trajectories of one system.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SystemConfig {
+    /// Spring ring or pendulum chain.
+    pub kind: SystemKind,
+    /// Number of particles (balls or bobs).
+    pub particles: usize,
+    /// Spatial dimension, 2 or 3.
+    pub dim: usize,
+    /// Spring stiffness k.
+    pub stiffness: f64,
+    /// Spring rest length r0.
+    pub rest_length: f64,
+    /// Pendulum bar length l.
+    pub bar_length: f64,
+    /// Mass of every particle.
+    pub mass: f64,
+    /// Gravity, drag and external force.
+    pub field: Field,
+    /// Integration time step.
+    pub dt: f64,
+    /// Integration steps between saved states.
+    pub save_every: usize,
+    /// Saved states per trajectory (including the initial one).
+    pub states: usize,
+}
+
+impl SystemConfig {
+    /// The paper's setup: unit k, r0, l and m; pendulum g = 10, dt = 1e-5,
+    /// saved every 1000 steps; spring g = 0, dt = 1e-3, saved every 100 steps;
+    /// 100 saved states; no drag or external force; 2D.
+    pub fn new(kind: SystemKind, particles: usize) -> Self {
+        let (gravity, dt, save_every) = match kind {
+            SystemKind::Spring => (0.0, 1e-3, 100),
+            SystemKind::Pendulum => (10.0, 1e-5, 1000),
+        };
+        SystemConfig {
+            kind,
+            particles,
+            dim: 2,
+            stiffness: 1.0,
+            rest_length: 1.0,
+            bar_length: 1.0,
+            mass: 1.0,
+            field: Field {
+                gravity,
+                drag: 0.0,
+                force: vec![],
+            },
+            dt,
+            save_every,
+            states: 100,
+        }
+    }
+
+    /// Checks every parameter; the error names the offending one.
+    pub fn validate(&self) -> Result<(), String> {
+        let min = match self.kind {
+            SystemKind::Spring => 2,
+            SystemKind::Pendulum => 1,
+        };
+        if self.particles < min {
+            return Err(format!(
+                "a {} system needs at least {min} particles, got {}",
+                self.kind, self.particles
+            ));
+        }
+        if self.dim != 2 && self.dim != 3 {
+            return Err(format!("dimension must be 2 or 3, got {}", self.dim));
+        }
+        let positive = [
+            ("stiffness", self.stiffness),
+            ("rest_length", self.rest_length),
+            ("bar_length", self.bar_length),
+            ("mass", self.mass),
+            ("dt", self.dt),
+        ];
+        for (name, x) in positive {
+            if !(x.is_finite() && x > 0.0) {
+                return Err(format!("{name} must be a positive finite number, got {x}"));
+            }
+        }
+        if self.save_every == 0 {
+            return Err("save_every must be at least 1".into());
+        }
+        if self.states == 0 {
+            return Err("states must be at least 1".into());
+        }
+        self.field.validate(self.dim)
+    }
+
+    /// The system's graph. Spring: a ring of springs i–(i+1 mod n) (a single
+    /// spring for n = 2). Pendulum: particle 0 barred to anchor 0 at the
+    /// origin, then bars (i−1)–i. All particle types are 0.
+    pub fn graph(&self) -> Graph {
+        let n = self.particles;
+        let mut edges = vec![];
+        let mut anchors = vec![];
+        match self.kind {
+            SystemKind::Spring => {
+                let ring = if n >= 3 { n } else { n.saturating_sub(1) };
+                for i in 0..ring {
+                    edges.push(Edge {
+                        a: i,
+                        b: Endpoint::Particle((i + 1) % n),
+                        kind: EdgeKind::Spring,
+                        rest_length: self.rest_length,
+                        stiffness: self.stiffness,
+                    });
+                }
+            }
+            SystemKind::Pendulum => {
+                anchors.push(vec![0.0; self.dim]);
+                for i in 0..n {
+                    edges.push(Edge {
+                        a: i,
+                        b: if i == 0 {
+                            Endpoint::Anchor(0)
+                        } else {
+                            Endpoint::Particle(i - 1)
+                        },
+                        kind: EdgeKind::Bar,
+                        rest_length: self.bar_length,
+                        stiffness: 0.0,
+                    });
+                }
+            }
+        }
+        Graph {
+            dim: self.dim,
+            types: vec![0; n],
+            masses: vec![self.mass; n],
+            edges,
+            anchors,
+        }
+    }
+
+    /// A random initial state for `graph` (normally `self.graph()`).
+    ///
+    /// Spring: a regular polygon of side r0 (two particles: a segment of length
+    /// r0) centred at the origin and randomly rotated in the xy-plane; every
+    /// position coordinate (z too, in 3D) perturbed by U(−0.2, 0.2)·r0; every
+    /// velocity component U(−0.5, 0.5)·r0·√(k/m), then the mean velocity is
+    /// removed so the total momentum is zero.
+    ///
+    /// Pendulum: each bar, walked out from the anchor, points at an angle
+    /// θ ~ U(−π/2, π/2) from straight down (3D: polar angle from −y
+    /// U(0, π/2), azimuth U(0, 2π)) and turns relative to its parent at
+    /// ω ~ U(−0.5, 0.5)·√(g/l) (1 rad/s scale when g = 0); in 3D the relative
+    /// velocity is a random vector of that scale projected perpendicular to the
+    /// bar. Velocities are thus consistent with the bars (A q̇ = 0). Works for
+    /// tree-shaped bar graphs; particles not reached from an anchor stay at
+    /// the origin at rest.
+    pub fn initial_state(&self, graph: &Graph, rng: &mut impl Rng) -> State {
+        match self.kind {
+            SystemKind::Spring => self.spring_start(graph, rng),
+            SystemKind::Pendulum => self.pendulum_start(graph, rng),
+        }
+    }
+
+    fn spring_start(&self, graph: &Graph, rng: &mut impl Rng) -> State {
+        let (n, d) = (graph.n(), graph.dim);
+        let r0 = self.rest_length;
+        let radius = match n {
+            0 | 1 => 0.0,
+            2 => r0 / 2.0,
+            _ => r0 / (2.0 * (PI / n as f64).sin()),
+        };
+        let phase = rng.random_range(0.0..2.0 * PI);
+        let vscale = 0.5 * r0 * (self.stiffness / self.mass).sqrt();
+        let mut q = vec![0.0; n * d];
+        let mut v = vec![0.0; n * d];
+        for i in 0..n {
+            let ang = phase + 2.0 * PI * i as f64 / n as f64;
+            q[i * d] = radius * ang.cos();
+            q[i * d + 1] = radius * ang.sin();
+            for c in 0..d {
+                q[i * d + c] += rng.random_range(-0.2..0.2) * r0;
+                v[i * d + c] = rng.random_range(-1.0..1.0) * vscale;
+            }
+        }
+        let mtot: f64 = graph.masses.iter().sum();
+        for c in 0..d {
+            let mean = (0..n).map(|i| graph.masses[i] * v[i * d + c]).sum::<f64>() / mtot;
+            for i in 0..n {
+                v[i * d + c] -= mean;
+            }
+        }
+        State { q, v }
+    }
+
+    fn pendulum_start(&self, graph: &Graph, rng: &mut impl Rng) -> State {
+        let (n, d) = (graph.n(), graph.dim);
+        let mut q = vec![0.0; n * d];
+        let mut v = vec![0.0; n * d];
+        let mut placed = vec![false; n];
+        let g = self.field.gravity.abs();
+        let bars: Vec<&Edge> = graph.bars().collect();
+        // Repeated sweeps place every particle whose parent is known; a chain
+        // listed in order takes one sweep.
+        loop {
+            let mut progress = false;
+            for e in &bars {
+                let (child, parent) = match e.b {
+                    Endpoint::Anchor(j) if !placed[e.a] => (e.a, Err(j)),
+                    Endpoint::Particle(p) if placed[p] && !placed[e.a] => (e.a, Ok(p)),
+                    Endpoint::Particle(p) if placed[e.a] && !placed[p] => (p, Ok(e.a)),
+                    _ => continue,
+                };
+                let (pq, pv) = match parent {
+                    Err(j) => (graph.anchors[j].clone(), vec![0.0; d]),
+                    Ok(p) => (
+                        q[p * d..(p + 1) * d].to_vec(),
+                        v[p * d..(p + 1) * d].to_vec(),
+                    ),
+                };
+                let l = e.rest_length;
+                let wscale = if g > 0.0 { 0.5 * (g / l).sqrt() } else { 0.5 };
+                let (u, w) = if d == 2 {
+                    let th = rng.random_range(-PI / 2.0..PI / 2.0);
+                    let om = rng.random_range(-1.0..1.0) * wscale;
+                    (
+                        [th.sin(), -th.cos(), 0.0],
+                        [l * om * th.cos(), l * om * th.sin(), 0.0],
+                    )
+                } else {
+                    let th = rng.random_range(0.0..PI / 2.0);
+                    let ph = rng.random_range(0.0..2.0 * PI);
+                    let u = [th.sin() * ph.cos(), -th.cos(), th.sin() * ph.sin()];
+                    let mut w = [0.0; 3];
+                    for x in w.iter_mut() {
+                        *x = rng.random_range(-1.0..1.0) * wscale * l;
+                    }
+                    let dot: f64 = (0..3).map(|c| u[c] * w[c]).sum();
+                    for c in 0..3 {
+                        w[c] -= dot * u[c];
+                    }
+                    (u, w)
+                };
+                for c in 0..d {
+                    q[child * d + c] = pq[c] + l * u[c];
+                    v[child * d + c] = pv[c] + w[c];
+                }
+                placed[child] = true;
+                progress = true;
+            }
+            if !progress {
+                break;
+            }
+        }
+        State { q, v }
+    }
+
+    /// The seed of trajectory `index` of a data set generated with `seed`:
+    /// the first 8 bytes of SHA-256("mcgnode-trajectory", seed, index).
+    ///
+    /// Every (seed, index) pair gets its own ChaCha stream, so a test set
+    /// (seed 2) shares no start with a training set (seed 1): distinct seeds
+    /// collide with probability ~2⁻⁶⁴, and distinct streams draw independent
+    /// continuous positions.
+    pub fn trajectory_seed(seed: u64, index: usize) -> u64 {
+        let mut h = Sha256::new();
+        h.update(b"mcgnode-trajectory");
+        h.update(seed.to_le_bytes());
+        h.update((index as u64).to_le_bytes());
+        let out = h.finalize();
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&out[..8]);
+        u64::from_le_bytes(b)
+    }
+
+    /// The initial state of trajectory `index` of the set generated with `seed`.
+    pub fn start_for(&self, graph: &Graph, seed: u64, index: usize) -> State {
+        let mut rng = ChaCha8Rng::seed_from_u64(Self::trajectory_seed(seed, index));
+        self.initial_state(graph, &mut rng)
+    }
+
+    /// One trajectory from `start`: `states` samples, `save_every` steps of
+    /// `dt` apart (t = k·save_every·dt), each with its exact constrained
+    /// acceleration.
+    ///
+    /// # Panics
+    /// If the configuration, graph or start is invalid; use
+    /// [`SystemConfig::try_simulate_one`] for a `Result`.
+    pub fn simulate_one(&self, graph: &Graph, start: State, id: u32) -> Trajectory {
+        self.try_simulate_one(graph, start, id)
+            .unwrap_or_else(|e| panic!("simulate_one: {e}"))
+    }
+
+    /// [`SystemConfig::simulate_one`], returning invalid input as an error.
+    pub fn try_simulate_one(
+        &self,
+        graph: &Graph,
+        start: State,
+        id: u32,
+    ) -> Result<Trajectory, String> {
+        self.validate()?;
+        let mut it = Integrator::new(graph, &self.field, self.dt, start)?;
+        let mut samples = Vec::with_capacity(self.states);
+        for k in 0..self.states {
+            if k > 0 {
+                it.advance(self.save_every);
+            }
+            let state = it.state().clone();
+            samples.push(Sample {
+                t: (k * self.save_every) as f64 * self.dt,
+                acc: Some(acceleration(graph, &self.field, &state)),
+                state,
+            });
+        }
+        if let Some(bad) = samples
+            .iter()
+            .position(|s| s.state.validate(graph).is_err())
+        {
+            return Err(format!(
+                "trajectory {id} diverged (non-finite state) at sample {bad}; try a smaller dt"
+            ));
+        }
+        Ok(Trajectory {
+            id,
+            system: self.kind.name().to_string(),
+            graph: graph.clone(),
+            samples,
+        })
+    }
+
+    /// `trajectories` trajectories with ids 0.., trajectory i starting from
+    /// [`SystemConfig::start_for`]`(graph, seed, i)`. Runs on all cores; the
+    /// result does not depend on how many.
+    ///
+    /// # Panics
+    /// If the configuration is invalid; use [`SystemConfig::try_simulate`].
+    pub fn simulate(&self, trajectories: usize, seed: u64) -> Vec<Trajectory> {
+        self.try_simulate(trajectories, seed)
+            .unwrap_or_else(|e| panic!("simulate: {e}"))
+    }
+
+    /// [`SystemConfig::simulate`], returning invalid input as an error.
+    pub fn try_simulate(&self, trajectories: usize, seed: u64) -> Result<Vec<Trajectory>, String> {
+        self.validate()?;
+        if trajectories > u32::MAX as usize {
+            return Err(format!("too many trajectories: {trajectories}"));
+        }
+        let graph = self.graph();
+        let threads = std::thread::available_parallelism()
+            .map_or(1, |n| n.get())
+            .min(trajectories.max(1));
+        let run = |i: usize| {
+            let start = self.start_for(&graph, seed, i);
+            self.try_simulate_one(&graph, start, i as u32)
+        };
+        let mut out: Vec<Option<Result<Trajectory, String>>> = vec![None; trajectories];
+        std::thread::scope(|s| {
+            // Strided split: trajectory i goes to thread i % threads.
+            let handles: Vec<_> = (0..threads)
+                .map(|t| {
+                    let run = &run;
+                    s.spawn(move || {
+                        (t..trajectories)
+                            .step_by(threads)
+                            .map(|i| (i, run(i)))
+                            .collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            for h in handles {
+                // A panicked worker is reported below as missing trajectories.
+                if let Ok(v) = h.join() {
+                    for (i, r) in v {
+                        out[i] = Some(r);
+                    }
+                }
+            }
+        });
+        out.into_iter()
+            .enumerate()
+            .map(|(i, r)| {
+                r.unwrap_or_else(|| Err(format!("trajectory {i}: worker thread panicked")))
+            })
+            .collect()
+    }
+}

@@ -1,0 +1,117 @@
+//! Ground-truth physics: one simulator for any [`Graph`] of springs and bars in
+//! a field (gravity along −y, linear drag, a constant force).
+//!
+//! * [`forces`]: applied forces and the Hamiltonian;
+//! * [`constraints`]: bars, the exact constrained acceleration, residuals;
+//! * [`integrator`]: velocity Verlet + SHAKE/RATTLE;
+//! * [`config`]: the paper's spring and pendulum systems, initial states,
+//!   trajectory generation;
+//! * [`truth`]: the physics behind the [`crate::dynamics::Dynamics`] trait.
+
+pub mod config;
+pub mod constraints;
+pub mod forces;
+pub mod integrator;
+mod linalg;
+pub mod truth;
+
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+
+pub use config::SystemConfig;
+pub use constraints::{acceleration, bar_jacobian, constraint_residual};
+pub use forces::{applied_forces, hamiltonian, kinetic_energy, potential_energy};
+pub use integrator::Integrator;
+pub use truth::Truth;
+
+#[cfg(doc)]
+use crate::system::Graph;
+
+/// The two system families of the paper.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SystemKind {
+    /// A ring of particles joined by springs.
+    Spring,
+    /// A chain of particles joined by rigid bars, hanging from the origin.
+    Pendulum,
+}
+
+impl SystemKind {
+    /// Every kind, in the order they are listed to users.
+    pub const ALL: [SystemKind; 2] = [SystemKind::Spring, SystemKind::Pendulum];
+
+    /// The name used on the command line and in trajectories.
+    pub fn name(self) -> &'static str {
+        match self {
+            SystemKind::Spring => "spring",
+            SystemKind::Pendulum => "pendulum",
+        }
+    }
+}
+
+impl fmt::Display for SystemKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for SystemKind {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let t = s.trim().to_ascii_lowercase();
+        SystemKind::ALL
+            .into_iter()
+            .find(|k| k.name() == t)
+            .ok_or_else(|| {
+                let valid: Vec<&str> = SystemKind::ALL.iter().map(|k| k.name()).collect();
+                format!(
+                    "unknown system kind {s:?}; valid kinds are: {}",
+                    valid.join(", ")
+                )
+            })
+    }
+}
+
+/// The field every particle sits in.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Field {
+    /// Gravitational acceleration g; the force m·g points along −y.
+    pub gravity: f64,
+    /// Linear drag coefficient c; the force is −c·q̇ (not scaled by mass).
+    pub drag: f64,
+    /// Constant force on every particle, `dim` entries; empty means zero.
+    #[serde(default)]
+    pub force: Vec<f64>,
+}
+
+impl Field {
+    /// Checks finiteness, a non-negative drag and the force's length.
+    pub fn validate(&self, dim: usize) -> Result<(), String> {
+        if !self.gravity.is_finite() {
+            return Err(format!("gravity {} is not finite", self.gravity));
+        }
+        if !(self.drag.is_finite() && self.drag >= 0.0) {
+            return Err(format!("drag {} must be a finite number ≥ 0", self.drag));
+        }
+        if !self.force.is_empty() && self.force.len() != dim {
+            return Err(format!(
+                "external force has {} components, the system is {dim}-dimensional",
+                self.force.len()
+            ));
+        }
+        if self.force.iter().any(|x| !x.is_finite()) {
+            return Err("external force is not finite".into());
+        }
+        Ok(())
+    }
+
+    /// True when nothing but internal forces act: no gravity, drag or force,
+    /// so total momentum is conserved (for graphs without anchors).
+    pub fn is_free(&self) -> bool {
+        self.gravity == 0.0 && self.drag == 0.0 && self.force.iter().all(|x| *x == 0.0)
+    }
+}

@@ -1,0 +1,108 @@
+//! The ROS 2 node (`mcgnode serve`): subscribes to `ParticleState`, publishes a
+//! predicted trajectory and the forces for each state, serves Rollout, and
+//! publishes diagnostics. Built on ros2-client (pure Rust DDS), interoperable
+//! with rclpy; see scripts/ros/ for rclpy stand-ins of the ros2 CLI.
+//!
+//! - [`params`] (+ [`yaml`]): the ROS 2 parameter file and `--set` overrides;
+//! - [`msgs`]: wire structs of our interfaces;
+//! - [`predict`]: input checks and building the outputs (no ROS);
+//! - [`truth`]: the ground-truth physics as a servable model;
+//! - [`node`]: the DDS entities and the event loop.
+
+pub mod msgs;
+pub mod node;
+pub mod params;
+pub mod predict;
+pub mod truth;
+pub mod yaml;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::Context as _;
+use clap::Args;
+
+use crate::dynamics::Dynamics;
+pub use params::NodeParams;
+
+/// Loads a trained model file (supplied by the model code; see [`run_serve_with`]).
+pub type DynamicsLoader = fn(&Path) -> anyhow::Result<Arc<dyn Dynamics>>;
+
+/// Options of `mcgnode serve`.
+#[derive(Args, Debug, Clone)]
+pub struct ServeArgs {
+    /// Parameter file in the ROS 2 format (`mcgnode: ros__parameters: ...`);
+    /// see launch_params/.
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// Model to serve (overrides the `model` parameter): a trained model file,
+    /// or `truth:spring` / `truth:pendulum` for the ground-truth physics.
+    #[arg(long)]
+    pub model: Option<String>,
+    /// Override one parameter, `key=value` (repeatable; applied after --params).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Print the effective parameters as a parameter file and exit.
+    #[arg(long)]
+    pub print_params: bool,
+}
+
+/// Runs the node until SIGINT/SIGTERM, with no trained-model loader: only
+/// `truth:*` models can be served through this entry point.
+pub fn run_serve(args: ServeArgs) -> anyhow::Result<()> {
+    run_serve_with(args, no_trained_models)
+}
+
+/// Runs the node until SIGINT/SIGTERM, loading model files with `loader`.
+pub fn run_serve_with(args: ServeArgs, loader: DynamicsLoader) -> anyhow::Result<()> {
+    let params = effective_params(&args).map_err(anyhow::Error::msg)?;
+    if args.print_params {
+        print!("{}", params.to_yaml());
+        return Ok(());
+    }
+    let model = load_model(&params.model, loader)?;
+    let domain_id = domain_id_from_env().map_err(anyhow::Error::msg)?;
+    node::serve(params, model, domain_id)
+}
+
+/// Parameters from the file, `--set` overrides and `--model`, in that order.
+pub fn effective_params(args: &ServeArgs) -> Result<NodeParams, String> {
+    let mut p = NodeParams::load(args.params.as_deref(), &args.set)?;
+    if let Some(m) = &args.model {
+        p.model.clone_from(m);
+    }
+    if p.model.is_empty() {
+        return Err("no model: set the `model` parameter or pass --model".into());
+    }
+    Ok(p)
+}
+
+/// `truth:<system>` or a model file through `loader`.
+pub fn load_model(model: &str, loader: DynamicsLoader) -> anyhow::Result<Arc<dyn Dynamics>> {
+    if truth::is_truth(model) {
+        return truth::load_truth(model).map_err(anyhow::Error::msg);
+    }
+    loader(Path::new(model)).with_context(|| format!("loading model {model}"))
+}
+
+fn no_trained_models(path: &Path) -> anyhow::Result<Arc<dyn Dynamics>> {
+    anyhow::bail!(
+        "cannot load {}: this build serves only truth:spring and truth:pendulum",
+        path.display()
+    )
+}
+
+/// The DDS domain from `ROS_DOMAIN_ID` (0 when unset), which ros2-client does
+/// not read by itself.
+pub fn domain_id_from_env() -> Result<u16, String> {
+    match std::env::var("ROS_DOMAIN_ID") {
+        Err(_) => Ok(0),
+        Ok(s) if s.trim().is_empty() => Ok(0),
+        Ok(s) => s
+            .trim()
+            .parse::<u16>()
+            .ok()
+            .filter(|d| *d <= 232)
+            .ok_or_else(|| format!("ROS_DOMAIN_ID={s:?} is not a domain id in 0..=232")),
+    }
+}

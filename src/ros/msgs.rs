@@ -1,0 +1,195 @@
+//! Wire structs of the node's own interfaces (msg/*.msg, msg/*.srv other than
+//! ParticleState, which lives in [`crate::data::msg`]): plain serde structs with
+//! the fields in .msg order, which is what CDR needs.
+
+use ros2_client::Message;
+use serde::{Deserialize, Serialize};
+
+use crate::data::msg::{Header, ParticleState, Vector3};
+
+/// ROS package of our interfaces.
+pub const PACKAGE: &str = "mcgnode_msgs";
+
+/// `mcgnode_msgs/msg/PredictedTrajectory`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PredictedTrajectory {
+    /// Copied from the input state.
+    pub header: Header,
+    /// The state the prediction starts from, as received.
+    pub initial: ParticleState,
+    /// Time step between states, seconds.
+    pub dt: f64,
+    /// `states[k]` is the prediction `k + 1` steps after `initial`.
+    pub states: Vec<ParticleState>,
+}
+
+/// `mcgnode_msgs/msg/ParticleForces`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ParticleForces {
+    /// Copied from the input state.
+    pub header: Header,
+    /// Total force per particle.
+    pub total: Vec<Vector3>,
+    /// Receiving particle of each pairwise force.
+    pub edge_a: Vec<u32>,
+    /// Exerting particle of each pairwise force.
+    pub edge_b: Vec<u32>,
+    /// f_ab, when the model has pairwise forces.
+    pub edge_force: Vec<Vector3>,
+}
+
+/// `mcgnode_msgs/msg/NodeDiagnostics`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct NodeDiagnostics {
+    /// Stamped with the node's clock.
+    pub header: Header,
+    /// States received on the input topic.
+    pub received: u64,
+    /// Of those, rejected.
+    pub rejected: u64,
+    /// Predictions published.
+    pub predicted: u64,
+    /// Latest rejection or failure reason.
+    pub last_error: String,
+    /// Description of the served model.
+    pub model: String,
+}
+
+/// `mcgnode_msgs/msg/ModelSwap`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ModelSwap {
+    /// When the swap happened.
+    pub header: Header,
+    /// Description of the model replaced.
+    pub old_model: String,
+    /// Description of the new model.
+    pub new_model: String,
+    /// Why.
+    pub reason: String,
+}
+
+/// Request of `mcgnode_msgs/srv/Rollout`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RolloutRequest {
+    /// Where to start.
+    pub initial: ParticleState,
+    /// Steps to predict.
+    pub steps: u32,
+    /// Time step; 0 = the node's `dt` parameter.
+    pub dt: f64,
+}
+impl Message for RolloutRequest {}
+
+/// Response of `mcgnode_msgs/srv/Rollout`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RolloutResponse {
+    /// Whether `trajectory` holds a prediction.
+    pub success: bool,
+    /// Why it failed, when it did.
+    pub message: String,
+    /// The prediction.
+    pub trajectory: PredictedTrajectory,
+}
+impl Message for RolloutResponse {}
+
+/// Request of `mcgnode_msgs/srv/Train`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TrainRequest {
+    /// Bags to train on; empty = what the node recorded.
+    pub bags: Vec<String>,
+    /// Model variant.
+    pub variant: String,
+    /// Training epochs.
+    pub epochs: u32,
+    /// Random seed.
+    pub seed: u64,
+}
+impl Message for TrainRequest {}
+
+/// Response of `mcgnode_msgs/srv/Train`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TrainResponse {
+    /// Whether training finished.
+    pub success: bool,
+    /// Details or the failure reason.
+    pub message: String,
+    /// Where the model was written.
+    pub model_path: String,
+    /// Final training loss.
+    pub train_loss: f64,
+    /// Final validation loss.
+    pub validation_loss: f64,
+}
+impl Message for TrainResponse {}
+
+/// Request of `mcgnode_msgs/srv/LoadModel`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LoadModelRequest {
+    /// Model file to load.
+    pub path: String,
+}
+impl Message for LoadModelRequest {}
+
+/// Response of `mcgnode_msgs/srv/LoadModel`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LoadModelResponse {
+    /// Whether the model was swapped in.
+    pub success: bool,
+    /// Details or the failure reason.
+    pub message: String,
+}
+impl Message for LoadModelResponse {}
+
+/// Request of `mcgnode_msgs/srv/Replay`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ReplayRequest {
+    /// Bag to replay.
+    pub bag: String,
+}
+impl Message for ReplayRequest {}
+
+/// Response of `mcgnode_msgs/srv/Replay`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ReplayResponse {
+    /// Whether the replay ran.
+    pub success: bool,
+    /// Details or the failure reason.
+    pub message: String,
+    /// The error report as JSON.
+    pub report_json: String,
+}
+impl Message for ReplayResponse {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::msg::{decode_cdr, encode_cdr};
+
+    /// Field order is what CDR depends on: a round trip through bytes with
+    /// nested arrays of structs must give back the same message.
+    #[test]
+    fn nested_messages_round_trip_through_cdr() {
+        let state = ParticleState {
+            dimension: 2,
+            types: vec![0, 1],
+            masses: vec![1.0, 2.0],
+            system: "spring".into(),
+            ..ParticleState::default()
+        };
+        let resp = RolloutResponse {
+            success: true,
+            message: "ok".into(),
+            trajectory: PredictedTrajectory {
+                header: Header {
+                    frame_id: "world".into(),
+                    ..Header::default()
+                },
+                initial: state.clone(),
+                dt: 0.5,
+                states: vec![state.clone(), state],
+            },
+        };
+        let back: RolloutResponse = decode_cdr(&encode_cdr(&resp).unwrap()).unwrap();
+        assert_eq!(back, resp);
+    }
+}

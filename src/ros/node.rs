@@ -1,0 +1,547 @@
+//! The node proper: DDS entities from the parameters, and the event loop that
+//! answers incoming states and Rollout calls until SIGINT/SIGTERM.
+//!
+//! Model work runs on tokio's blocking pool so DDS discovery and the other
+//! tasks keep going while a long rollout computes. Every failure is logged and
+//! counted; nothing in the loop panics on bad input.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError, RwLock};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use anyhow::{anyhow, Context as _};
+use ros2_client::log::LogLevel;
+use ros2_client::qos::{Durability, History, WhenFull};
+use ros2_client::rosout::{NodeLoggingHandle, RosoutRaw};
+use ros2_client::{
+    Context, ContextOptions, MessageTypeName, Name, NodeName, NodeOptions, ParameterValue,
+    Publisher, QosProfile, Server, ServiceMapping, ServiceTypeName, Subscription,
+};
+
+use crate::data::msg::{Header, ParticleState, Time, PARTICLE_STATE_TYPE};
+use crate::dynamics::Dynamics;
+
+use super::msgs::{
+    NodeDiagnostics, ParticleForces, PredictedTrajectory, RolloutRequest, RolloutResponse,
+    PACKAGE,
+};
+use super::params::{NodeParams, NODE_NAME};
+use super::predict;
+
+/// Counters reported in `NodeDiagnostics`.
+#[derive(Debug, Default)]
+pub struct Stats {
+    /// States received.
+    pub received: AtomicU64,
+    /// States rejected (malformed, unsupported, or the model failed).
+    pub rejected: AtomicU64,
+    /// Predictions published.
+    pub predicted: AtomicU64,
+    /// Latest failure reason.
+    pub last_error: Mutex<String>,
+}
+
+/// At most one warning per period; the next one says how many were held back.
+#[derive(Debug)]
+pub struct RateLimiter {
+    period: Duration,
+    last: Option<Instant>,
+    suppressed: u64,
+}
+
+impl RateLimiter {
+    /// A limiter letting one event through per `period`.
+    pub fn new(period: Duration) -> Self {
+        RateLimiter {
+            period,
+            last: None,
+            suppressed: 0,
+        }
+    }
+
+    /// `Some(n)` if an event at `now` may be reported, `n` being how many were
+    /// suppressed since the last report; `None` if it must be suppressed.
+    pub fn allow(&mut self, now: Instant) -> Option<u64> {
+        match self.last {
+            Some(t) if now.saturating_duration_since(t) < self.period => {
+                self.suppressed += 1;
+                None
+            }
+            _ => {
+                self.last = Some(now);
+                Some(std::mem::take(&mut self.suppressed))
+            }
+        }
+    }
+}
+
+/// Logs to stderr and to /rosout.
+pub struct Logger {
+    rosout: NodeLoggingHandle,
+}
+
+impl Logger {
+    /// Logs `msg` at `level`.
+    pub fn log(&self, level: LogLevel, msg: &str) {
+        let tag = match level {
+            LogLevel::Fatal => "FATAL",
+            LogLevel::Error => "ERROR",
+            LogLevel::Warn => "WARN",
+            LogLevel::Info => "INFO",
+            LogLevel::Debug => "DEBUG",
+        };
+        eprintln!("[{tag}] [{:.6}] [{NODE_NAME}]: {msg}", wall_secs());
+        self.rosout.rosout_raw(
+            ros2_client::builtin_interfaces::Time::now(),
+            level,
+            NODE_NAME,
+            msg,
+            file!(),
+            "",
+            line!(),
+        );
+    }
+}
+
+/// What the tasks share.
+struct Shared {
+    params: NodeParams,
+    /// Behind a lock so a model swap (Train, LoadModel) can replace it.
+    model: RwLock<Arc<dyn Dynamics>>,
+    stats: Stats,
+    /// Limits warnings about bad input states.
+    warn_input: Mutex<RateLimiter>,
+    /// Limits warnings about failed service calls (the caller gets the reason).
+    warn_service: Mutex<RateLimiter>,
+    log: Logger,
+}
+
+impl Shared {
+    fn model(&self) -> Arc<dyn Dynamics> {
+        self.model
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
+    /// Counts a rejected input and warns, rate-limited.
+    fn reject(&self, why: &str) {
+        self.stats.rejected.fetch_add(1, Ordering::Relaxed);
+        self.failed(why, &self.warn_input);
+    }
+
+    /// Records a failure as the last error and warns, rate-limited by `limiter`.
+    fn failed(&self, why: &str, limiter: &Mutex<RateLimiter>) {
+        why.clone_into(
+            &mut self
+                .stats
+                .last_error
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner),
+        );
+        let allowed = limiter
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .allow(Instant::now());
+        if let Some(suppressed) = allowed {
+            let more = if suppressed > 0 {
+                format!(" ({suppressed} similar warnings suppressed)")
+            } else {
+                String::new()
+            };
+            self.log
+                .log(LogLevel::Warn, &format!("{why}{more}"));
+        }
+    }
+
+    fn diagnostics(&self) -> NodeDiagnostics {
+        NodeDiagnostics {
+            header: now_header(),
+            received: self.stats.received.load(Ordering::Relaxed),
+            rejected: self.stats.rejected.load(Ordering::Relaxed),
+            predicted: self.stats.predicted.load(Ordering::Relaxed),
+            last_error: self
+                .stats
+                .last_error
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .clone(),
+            model: self.model().describe(),
+        }
+    }
+}
+
+/// Seconds since the Unix epoch (0 if the clock is before it).
+fn wall_secs() -> f64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0)
+}
+
+fn now_header() -> Header {
+    let ns = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
+        .unwrap_or(0);
+    Header {
+        stamp: Time::from_nanos(ns),
+        frame_id: String::new(),
+    }
+}
+
+/// Topic QoS from the parameters: volatile, keep-last `qos_depth`.
+fn topic_qos(p: &NodeParams) -> QosProfile {
+    let q = QosProfile::publisher_default()
+        .durability(Durability::Volatile)
+        .history(History::KeepLast {
+            depth: p.qos_depth as usize,
+        });
+    if p.qos_reliable {
+        q.reliability_reliable(WhenFull::DEFAULT)
+    } else {
+        q.reliability_best_effort()
+    }
+}
+
+/// Service QoS that rclpy clients match: reliable, volatile, keep-last 10.
+fn service_qos() -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability_reliable(WhenFull::DEFAULT)
+        .durability(Durability::Volatile)
+        .history(History::KeepLast { depth: 10 })
+}
+
+fn ros_name(s: &str) -> anyhow::Result<Name> {
+    Name::parse(s).map_err(|e| anyhow!("invalid ROS name {s:?}: {e:?}"))
+}
+
+/// The parameters as read-only ROS parameters, so rclpy can list and get them.
+fn declare_parameters(p: &NodeParams) -> NodeOptions {
+    let s = |x: &str| ParameterValue::String(x.to_string());
+    let i = |x: u32| ParameterValue::Integer(i64::from(x));
+    let values = [
+        ("model", s(&p.model)),
+        ("input_topic", s(&p.input_topic)),
+        ("trajectory_topic", s(&p.trajectory_topic)),
+        ("forces_topic", s(&p.forces_topic)),
+        ("diagnostics_topic", s(&p.diagnostics_topic)),
+        ("rollout_service", s(&p.rollout_service)),
+        ("horizon", i(p.horizon)),
+        ("dt", ParameterValue::Double(p.dt)),
+        ("qos_reliable", ParameterValue::Boolean(p.qos_reliable)),
+        ("qos_depth", i(p.qos_depth)),
+        ("diagnostics_period", ParameterValue::Double(p.diagnostics_period)),
+        ("warn_period", ParameterValue::Double(p.warn_period)),
+        ("max_rollout_steps", i(p.max_rollout_steps)),
+        ("record_dir", s(&p.record_dir)),
+        ("record_split_mb", i(p.record_split_mb)),
+        ("record_split_seconds", ParameterValue::Double(p.record_split_seconds)),
+    ];
+    let initial: Vec<(&'static str, ParameterValue)> = values.to_vec();
+    values
+        .into_iter()
+        .fold(NodeOptions::new().enable_rosout(true), |o, (k, v)| {
+            o.declare_parameter(k, v)
+        })
+        // Declaring goes through the validator too: accept only the values the
+        // node started with.
+        .parameter_validator(Box::new(move |name, value| {
+            if initial.iter().any(|(k, v)| *k == name && v == value) {
+                Ok(())
+            } else {
+                Err(format!(
+                    "parameter {name} is read-only at run time; restart the node with --set"
+                ))
+            }
+        }))
+}
+
+/// The node's DDS endpoints.
+struct Endpoints {
+    input: Subscription<ParticleState>,
+    trajectory: Publisher<PredictedTrajectory>,
+    forces: Publisher<ParticleForces>,
+    diagnostics: Publisher<NodeDiagnostics>,
+    rollout: Server<RolloutRequest, RolloutResponse>,
+}
+
+/// Runs the node in `domain_id` until SIGINT or SIGTERM.
+pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> anyhow::Result<()> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
+        .map_err(|e| anyhow!("creating the DDS participant in domain {domain_id}: {e:?}"))?;
+    let mut node = context
+        .new_node(
+            NodeName::new("/", NODE_NAME).map_err(|e| anyhow!("node name: {e:?}"))?,
+            declare_parameters(&params),
+        )
+        .map_err(|e| anyhow!("creating the node: {e:?}"))?;
+
+    let qos = topic_qos(&params);
+    let topic = |name: &str, pkg: &str, ty: &str| {
+        node.create_topic(&ros_name(name)?, MessageTypeName::new(pkg, ty), &qos)
+            .map_err(|e| anyhow!("creating topic {name}: {e:?}"))
+    };
+    let state_type = PARTICLE_STATE_TYPE.rsplit('/').next().unwrap_or("ParticleState");
+    let input_topic = topic(&params.input_topic, PACKAGE, state_type)?;
+    let traj_topic = topic(&params.trajectory_topic, PACKAGE, "PredictedTrajectory")?;
+    let forces_topic = topic(&params.forces_topic, PACKAGE, "ParticleForces")?;
+    let diag_topic = topic(&params.diagnostics_topic, PACKAGE, "NodeDiagnostics")?;
+    let e = |what: &'static str| move |err| anyhow!("creating {what}: {err:?}");
+    let endpoints = Endpoints {
+        input: node
+            .create_subscription(&input_topic, Some(qos.clone()))
+            .map_err(e("the input subscription"))?,
+        trajectory: node
+            .create_publisher(&traj_topic, Some(qos.clone()))
+            .map_err(e("the trajectory publisher"))?,
+        forces: node
+            .create_publisher(&forces_topic, Some(qos.clone()))
+            .map_err(e("the forces publisher"))?,
+        diagnostics: node
+            .create_publisher(&diag_topic, Some(qos.clone()))
+            .map_err(e("the diagnostics publisher"))?,
+        rollout: node
+            .create_server(
+                ServiceMapping::Enhanced,
+                &ros_name(&params.rollout_service)?,
+                &ServiceTypeName::new(PACKAGE, "Rollout"),
+                service_qos(),
+                service_qos(),
+            )
+            .map_err(e("the Rollout service"))?,
+    };
+    let spinner = node.spinner().map_err(e("the node spinner"))?;
+    let shared = Arc::new(Shared {
+        warn_input: Mutex::new(RateLimiter::new(Duration::from_secs_f64(params.warn_period))),
+        warn_service: Mutex::new(RateLimiter::new(Duration::from_secs_f64(params.warn_period))),
+        model: RwLock::new(model),
+        stats: Stats::default(),
+        log: Logger {
+            rosout: node.logging_handle(),
+        },
+        params,
+    });
+    let p = &shared.params;
+    shared.log.log(
+        LogLevel::Info,
+        &format!(
+            "serving {} in domain {domain_id}: {} -> {} + {} (horizon {}, dt {}), service {}",
+            shared.model().describe(),
+            p.input_topic,
+            p.trajectory_topic,
+            p.forces_topic,
+            p.horizon,
+            p.dt,
+            p.rollout_service
+        ),
+    );
+
+    let result = runtime.block_on(async {
+        tokio::spawn(async move {
+            if let Err(e) = spinner.spin().await {
+                eprintln!("[ERROR] [{NODE_NAME}]: node spinner stopped: {e:?}");
+            }
+        });
+        let Endpoints {
+            input,
+            trajectory,
+            forces,
+            diagnostics,
+            rollout,
+        } = endpoints;
+        tokio::spawn(input_loop(shared.clone(), input, trajectory, forces));
+        tokio::spawn(rollout_loop(shared.clone(), rollout));
+        tokio::spawn(diagnostics_loop(shared.clone(), diagnostics));
+        wait_for_shutdown().await
+    });
+    shared
+        .log
+        .log(LogLevel::Info, "shutting down (signal received)");
+    node.stop_spinner();
+    // Cancel the tasks (and drop their DDS entities) before the participant.
+    runtime.shutdown_timeout(Duration::from_secs(2));
+    drop(node);
+    drop(context);
+    result
+}
+
+/// Resolves on the first SIGINT or SIGTERM.
+async fn wait_for_shutdown() -> anyhow::Result<()> {
+    use tokio::signal::unix::{signal, SignalKind};
+    let mut term = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
+    let mut int = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;
+    tokio::select! {
+        _ = term.recv() => {}
+        _ = int.recv() => {}
+    }
+    Ok(())
+}
+
+/// For each incoming state: predict, publish trajectory and forces.
+async fn input_loop(
+    shared: Arc<Shared>,
+    input: Subscription<ParticleState>,
+    trajectory: Publisher<PredictedTrajectory>,
+    forces: Publisher<ParticleForces>,
+) {
+    loop {
+        let msg = match input.async_take().await {
+            Ok((msg, _info)) => msg,
+            Err(e) => {
+                // A sample that does not decode as a ParticleState.
+                shared.stats.received.fetch_add(1, Ordering::Relaxed);
+                shared.reject(&format!("undecodable ParticleState: {e:?}"));
+                continue;
+            }
+        };
+        shared.stats.received.fetch_add(1, Ordering::Relaxed);
+        let model = shared.model();
+        let (dt, horizon) = (shared.params.dt, shared.params.horizon);
+        let job =
+            tokio::task::spawn_blocking(move || predict::predict(model.as_ref(), &msg, dt, horizon));
+        let prediction = match job.await {
+            Ok(Ok(p)) => p,
+            Ok(Err(why)) => {
+                shared.reject(&format!("rejected input: {why}"));
+                continue;
+            }
+            Err(join) => {
+                shared.reject(&format!("prediction task failed: {join}"));
+                continue;
+            }
+        };
+        let sent_traj = trajectory.async_publish(prediction.trajectory).await;
+        let sent_forces = forces.async_publish(prediction.forces).await;
+        match (sent_traj, sent_forces) {
+            (Ok(()), Ok(())) => {
+                shared.stats.predicted.fetch_add(1, Ordering::Relaxed);
+            }
+            (Err(e), _) => shared.failed(
+                &format!("publishing the trajectory failed: {e:?}"),
+                &shared.warn_input,
+            ),
+            (_, Err(e)) => shared.failed(
+                &format!("publishing the forces failed: {e:?}"),
+                &shared.warn_input,
+            ),
+        }
+    }
+}
+
+/// Answers Rollout calls; failures go back in the response.
+async fn rollout_loop(shared: Arc<Shared>, server: Server<RolloutRequest, RolloutResponse>) {
+    loop {
+        let (id, req) = match server.async_receive_request().await {
+            Ok(r) => r,
+            Err(e) => {
+                shared.log.log(
+                    LogLevel::Warn,
+                    &format!("undecodable Rollout request: {e:?}"),
+                );
+                continue;
+            }
+        };
+        let model = shared.model();
+        let (default_dt, max_steps) = (shared.params.dt, shared.params.max_rollout_steps);
+        let job = tokio::task::spawn_blocking(move || {
+            rollout_response(model.as_ref(), &req, default_dt, max_steps)
+        });
+        let resp = job.await.unwrap_or_else(|join| RolloutResponse {
+            success: false,
+            message: format!("rollout task failed: {join}"),
+            ..RolloutResponse::default()
+        });
+        if !resp.success {
+            shared.failed(
+                &format!("Rollout call failed: {}", resp.message),
+                &shared.warn_service,
+            );
+        }
+        if let Err(e) = server.async_send_response(id, resp).await {
+            shared.log.log(
+                LogLevel::Warn,
+                &format!("sending a Rollout response failed: {e:?}"),
+            );
+        }
+    }
+}
+
+/// The Rollout service's work: checks the request, then predicts.
+pub fn rollout_response(
+    model: &dyn Dynamics,
+    req: &RolloutRequest,
+    default_dt: f64,
+    max_steps: u32,
+) -> RolloutResponse {
+    let fail = |message: String| RolloutResponse {
+        success: false,
+        message,
+        ..RolloutResponse::default()
+    };
+    if req.steps > max_steps {
+        return fail(format!(
+            "steps = {} exceeds max_rollout_steps = {max_steps}",
+            req.steps
+        ));
+    }
+    let dt = if req.dt == 0.0 { default_dt } else { req.dt };
+    let (graph, start) = match predict::accept(model, &req.initial) {
+        Ok(x) => x,
+        Err(e) => return fail(e),
+    };
+    match predict::trajectory(model, &req.initial, &graph, &start, dt, req.steps) {
+        Ok(trajectory) => RolloutResponse {
+            success: true,
+            message: format!("{} states, dt = {dt}", trajectory.states.len()),
+            trajectory,
+        },
+        Err(e) => fail(e),
+    }
+}
+
+/// Publishes `NodeDiagnostics` every `diagnostics_period`.
+async fn diagnostics_loop(shared: Arc<Shared>, publisher: Publisher<NodeDiagnostics>) {
+    let mut tick = tokio::time::interval(Duration::from_secs_f64(shared.params.diagnostics_period));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tick.tick().await;
+        if let Err(e) = publisher.async_publish(shared.diagnostics()).await {
+            eprintln!("[WARN] [{NODE_NAME}]: publishing diagnostics failed: {e:?}");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rate_limiter_lets_one_through_per_period_and_counts_the_rest() {
+        let mut r = RateLimiter::new(Duration::from_secs(5));
+        let t0 = Instant::now();
+        assert_eq!(r.allow(t0), Some(0));
+        assert_eq!(r.allow(t0 + Duration::from_secs(1)), None);
+        assert_eq!(r.allow(t0 + Duration::from_secs(4)), None);
+        assert_eq!(r.allow(t0 + Duration::from_secs(6)), Some(2));
+        assert_eq!(r.allow(t0 + Duration::from_secs(7)), None);
+    }
+
+    #[test]
+    fn rollout_service_checks_its_request() {
+        let model = crate::ros::truth::load_truth("truth:spring").unwrap();
+        let req = RolloutRequest {
+            steps: 50,
+            ..RolloutRequest::default()
+        };
+        let r = rollout_response(model.as_ref(), &req, 0.01, 10);
+        assert!(!r.success && r.message.contains("max_rollout_steps"), "{}", r.message);
+        let r = rollout_response(model.as_ref(), &req, 0.01, 100);
+        assert!(!r.success && r.message.contains("malformed"), "{}", r.message);
+    }
+}

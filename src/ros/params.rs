@@ -1,0 +1,409 @@
+//! The node's parameters: defaults, a ROS 2 parameter file
+//! (`mcgnode: ros__parameters: {...}`), then `--set key=value` overrides.
+//! Unknown keys and ill-typed or out-of-range values are rejected before the
+//! node starts, with a message naming the key, what was given and what is expected.
+
+use std::path::Path;
+
+use super::yaml::{self, Scalar, Value};
+
+/// The node's name, which is also the key of its section in parameter files.
+pub const NODE_NAME: &str = "mcgnode";
+
+/// Everything the node can be configured with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeParams {
+    /// Model to serve: `truth:spring`, `truth:pendulum`, or a trained model file.
+    pub model: String,
+    /// Topic the node reads `ParticleState` from.
+    pub input_topic: String,
+    /// Topic of the predicted trajectories.
+    pub trajectory_topic: String,
+    /// Topic of the predicted forces.
+    pub forces_topic: String,
+    /// Topic of the periodic `NodeDiagnostics`.
+    pub diagnostics_topic: String,
+    /// Name of the Rollout service.
+    pub rollout_service: String,
+    /// Steps predicted for each incoming state.
+    pub horizon: u32,
+    /// Time step of predictions, seconds.
+    pub dt: f64,
+    /// Reliable (true) or best-effort (false) QoS on the topics.
+    pub qos_reliable: bool,
+    /// Keep-last history depth of the topics.
+    pub qos_depth: u32,
+    /// Seconds between diagnostics messages.
+    pub diagnostics_period: f64,
+    /// Minimum seconds between two warnings about malformed input.
+    pub warn_period: f64,
+    /// Largest `steps` the Rollout service accepts.
+    pub max_rollout_steps: u32,
+    /// Folder to record MCAP bags into; empty disables recording.
+    pub record_dir: String,
+    /// Start a new bag after this many megabytes (0 = no size limit).
+    pub record_split_mb: u32,
+    /// Start a new bag after this many seconds (0 = no duration limit).
+    pub record_split_seconds: f64,
+}
+
+impl Default for NodeParams {
+    fn default() -> Self {
+        NodeParams {
+            model: "truth:spring".into(),
+            input_topic: "/particle_state".into(),
+            trajectory_topic: "/mcgnode/predicted_trajectory".into(),
+            forces_topic: "/mcgnode/predicted_forces".into(),
+            diagnostics_topic: "/mcgnode/diagnostics".into(),
+            rollout_service: "/mcgnode/rollout".into(),
+            horizon: 100,
+            dt: 0.001,
+            qos_reliable: true,
+            qos_depth: 10,
+            diagnostics_period: 1.0,
+            warn_period: 5.0,
+            max_rollout_steps: 100_000,
+            record_dir: String::new(),
+            record_split_mb: 0,
+            record_split_seconds: 0.0,
+        }
+    }
+}
+
+/// What a parameter holds, for type checking and messages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Str,
+    Topic,
+    Bool,
+    /// An integer in `lo..=hi`.
+    Int(u32, u32),
+    /// A finite double, strictly positive when `true`, else ≥ 0.
+    Double(bool),
+}
+
+/// Name, kind and documentation of every parameter, in file order.
+const SPECS: &[(&str, Kind, &str)] = &[
+    ("model", Kind::Str, "model to serve: truth:spring, truth:pendulum or a model file"),
+    ("input_topic", Kind::Topic, "topic of incoming ParticleState messages"),
+    ("trajectory_topic", Kind::Topic, "topic of PredictedTrajectory messages"),
+    ("forces_topic", Kind::Topic, "topic of ParticleForces messages"),
+    ("diagnostics_topic", Kind::Topic, "topic of NodeDiagnostics messages"),
+    ("rollout_service", Kind::Topic, "name of the Rollout service"),
+    ("horizon", Kind::Int(1, 1_000_000), "steps predicted per incoming state"),
+    ("dt", Kind::Double(true), "time step of predictions, seconds"),
+    ("qos_reliable", Kind::Bool, "reliable (true) or best-effort (false) topics"),
+    ("qos_depth", Kind::Int(1, 10_000), "keep-last history depth"),
+    ("diagnostics_period", Kind::Double(true), "seconds between diagnostics messages"),
+    ("warn_period", Kind::Double(false), "seconds between malformed-input warnings"),
+    ("max_rollout_steps", Kind::Int(1, 100_000_000), "largest steps of a Rollout call"),
+    ("record_dir", Kind::Str, "folder for MCAP recordings; empty = no recording"),
+    ("record_split_mb", Kind::Int(0, 1_000_000), "split bags after this many MB (0 = never)"),
+    ("record_split_seconds", Kind::Double(false), "split bags after this many seconds (0 = never)"),
+];
+
+/// Keys of the node's section that are accepted as node names.
+fn is_our_section(key: &str) -> bool {
+    matches!(key, "/**" | "**") || key.trim_start_matches('/') == NODE_NAME
+}
+
+impl NodeParams {
+    /// Defaults, then the file (if any), then each `key=value` override in order.
+    pub fn load(file: Option<&Path>, overrides: &[String]) -> Result<NodeParams, String> {
+        let mut p = NodeParams::default();
+        if let Some(path) = file {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| format!("cannot read parameter file {}: {e}", path.display()))?;
+            p.apply_file_text(&text)
+                .map_err(|e| format!("parameter file {}: {e}", path.display()))?;
+        }
+        for o in overrides {
+            p.apply_override(o)?;
+        }
+        Ok(p)
+    }
+
+    /// Applies the contents of a ROS 2 parameter file.
+    pub fn apply_file_text(&mut self, text: &str) -> Result<(), String> {
+        let Value::Map(top) = yaml::parse(text)? else {
+            return Err("expected a mapping at the top level".into());
+        };
+        if top.is_empty() {
+            return Err(format!("no `{NODE_NAME}: ros__parameters:` section"));
+        }
+        for (node, section) in &top {
+            if !is_our_section(node) {
+                return Err(format!(
+                    "section {node:?} is for another node; this node is {NODE_NAME:?} \
+                     (use `{NODE_NAME}:` or `/**:`)"
+                ));
+            }
+            let Value::Map(entries) = section else {
+                return Err(format!("{node}: expected `ros__parameters:` under it"));
+            };
+            for (k, v) in entries {
+                if k != "ros__parameters" {
+                    return Err(format!("{node}: unexpected key {k:?} (only ros__parameters)"));
+                }
+                let mut flat = Vec::new();
+                flatten("", v, &mut flat);
+                for (key, value) in flat {
+                    self.set(&key, &value, false)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Applies one `key=value` command-line override.
+    pub fn apply_override(&mut self, kv: &str) -> Result<(), String> {
+        let (k, v) = kv
+            .split_once('=')
+            .ok_or_else(|| format!("--set {kv:?}: expected key=value"))?;
+        self.set(k.trim(), &Scalar::parse_plain(v), true)
+            .map_err(|e| format!("--set {kv:?}: {e}"))
+    }
+
+    /// Sets one parameter, checking its name, type and range. Command-line
+    /// values for string parameters are taken as text whatever they look like.
+    pub fn set(&mut self, key: &str, value: &Scalar, from_cli: bool) -> Result<(), String> {
+        let Some(&(_, kind, _)) = SPECS.iter().find(|(k, _, _)| *k == key) else {
+            let known: Vec<&str> = SPECS.iter().map(|(k, _, _)| *k).collect();
+            return Err(format!(
+                "unknown parameter {key:?}; known parameters: {}",
+                known.join(", ")
+            ));
+        };
+        let ill = |want: &str| {
+            format!(
+                "parameter {key:?} must be {want}, got {} {value}",
+                value.type_name()
+            )
+        };
+        match kind {
+            Kind::Str | Kind::Topic => {
+                let s = match value {
+                    Scalar::Str(s) => s.clone(),
+                    Scalar::Null if kind == Kind::Str => String::new(),
+                    Scalar::Bool(_) | Scalar::Int(_) | Scalar::Float(_) if from_cli => {
+                        value.to_string()
+                    }
+                    _ => return Err(ill("a string")),
+                };
+                if kind == Kind::Topic {
+                    check_topic(&s).map_err(|e| format!("parameter {key:?}: {e}"))?;
+                }
+                self.set_str(key, s);
+            }
+            Kind::Bool => match value {
+                Scalar::Bool(b) => self.qos_reliable = *b,
+                _ => return Err(ill("true or false")),
+            },
+            Kind::Int(lo, hi) => {
+                let Scalar::Int(i) = value else {
+                    return Err(ill(&format!("an integer in {lo}..={hi}")));
+                };
+                let v = u32::try_from(*i)
+                    .ok()
+                    .filter(|v| (lo..=hi).contains(v))
+                    .ok_or_else(|| format!("parameter {key:?} = {i} is outside {lo}..={hi}"))?;
+                self.set_int(key, v);
+            }
+            Kind::Double(positive) => {
+                let x = match value {
+                    Scalar::Float(x) => *x,
+                    Scalar::Int(i) => *i as f64,
+                    _ => return Err(ill("a number")),
+                };
+                let ok = x.is_finite() && if positive { x > 0.0 } else { x >= 0.0 };
+                if !ok {
+                    let want = if positive { "> 0" } else { ">= 0" };
+                    return Err(format!("parameter {key:?} = {x} must be finite and {want}"));
+                }
+                self.set_double(key, x);
+            }
+        }
+        Ok(())
+    }
+
+    fn set_str(&mut self, key: &str, s: String) {
+        match key {
+            "model" => self.model = s,
+            "input_topic" => self.input_topic = s,
+            "trajectory_topic" => self.trajectory_topic = s,
+            "forces_topic" => self.forces_topic = s,
+            "diagnostics_topic" => self.diagnostics_topic = s,
+            "rollout_service" => self.rollout_service = s,
+            "record_dir" => self.record_dir = s,
+            _ => unreachable_key(key),
+        }
+    }
+
+    fn set_int(&mut self, key: &str, v: u32) {
+        match key {
+            "horizon" => self.horizon = v,
+            "qos_depth" => self.qos_depth = v,
+            "max_rollout_steps" => self.max_rollout_steps = v,
+            "record_split_mb" => self.record_split_mb = v,
+            _ => unreachable_key(key),
+        }
+    }
+
+    fn set_double(&mut self, key: &str, x: f64) {
+        match key {
+            "dt" => self.dt = x,
+            "diagnostics_period" => self.diagnostics_period = x,
+            "warn_period" => self.warn_period = x,
+            "record_split_seconds" => self.record_split_seconds = x,
+            _ => unreachable_key(key),
+        }
+    }
+
+    /// The parameters as a ROS 2 parameter file (what `--help-params` prints).
+    pub fn to_yaml(&self) -> String {
+        let mut s = format!("{NODE_NAME}:\n  ros__parameters:\n");
+        for (key, _, doc) in SPECS {
+            s.push_str(&format!("    # {doc}\n    {key}: {}\n", self.value_text(key)));
+        }
+        s
+    }
+
+    fn value_text(&self, key: &str) -> String {
+        let q = |s: &str| format!("{s:?}");
+        match key {
+            "model" => q(&self.model),
+            "input_topic" => q(&self.input_topic),
+            "trajectory_topic" => q(&self.trajectory_topic),
+            "forces_topic" => q(&self.forces_topic),
+            "diagnostics_topic" => q(&self.diagnostics_topic),
+            "rollout_service" => q(&self.rollout_service),
+            "record_dir" => q(&self.record_dir),
+            "horizon" => self.horizon.to_string(),
+            "qos_depth" => self.qos_depth.to_string(),
+            "max_rollout_steps" => self.max_rollout_steps.to_string(),
+            "record_split_mb" => self.record_split_mb.to_string(),
+            "qos_reliable" => self.qos_reliable.to_string(),
+            "dt" => format!("{:?}", self.dt),
+            "diagnostics_period" => format!("{:?}", self.diagnostics_period),
+            "warn_period" => format!("{:?}", self.warn_period),
+            "record_split_seconds" => format!("{:?}", self.record_split_seconds),
+            _ => String::new(),
+        }
+    }
+}
+
+/// The SPECS table and the setters list the same keys; a mismatch is a bug
+/// caught by the tests, and must not panic a running node.
+fn unreachable_key(key: &str) {
+    debug_assert!(false, "parameter {key} is in SPECS but has no setter");
+}
+
+/// Nested mappings under `ros__parameters` become dotted names, as in ROS 2.
+fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Scalar)>) {
+    match v {
+        Value::Scalar(s) => out.push((prefix.to_string(), s.clone())),
+        Value::Map(m) => {
+            for (k, v) in m {
+                let key = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                flatten(&key, v, out);
+            }
+        }
+    }
+}
+
+/// An absolute ROS 2 name: `/` then tokens of `[A-Za-z0-9_]` not starting
+/// with a digit, separated by single slashes.
+fn check_topic(s: &str) -> Result<(), String> {
+    let bad = || {
+        format!("{s:?} is not an absolute ROS 2 name like /particle_state (letters, digits, _)")
+    };
+    let rest = s.strip_prefix('/').ok_or_else(bad)?;
+    let ok = !rest.is_empty()
+        && rest.split('/').all(|t| {
+            !t.is_empty()
+                && !t.starts_with(|c: char| c.is_ascii_digit())
+                && !t.contains("__")
+                && t.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+        });
+    if ok {
+        Ok(())
+    } else {
+        Err(bad())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn file_then_overrides() {
+        let mut p = NodeParams::default();
+        p.apply_file_text(
+            "mcgnode:\n  ros__parameters:\n    model: truth:pendulum\n    horizon: 20\n    \
+             dt: 1\n    qos_reliable: false\n    input_topic: /robot/state\n",
+        )
+        .unwrap();
+        assert_eq!(p.model, "truth:pendulum");
+        assert_eq!(p.horizon, 20);
+        assert_eq!(p.dt, 1.0);
+        assert!(!p.qos_reliable);
+        assert_eq!(p.input_topic, "/robot/state");
+        p.apply_override("horizon=7").unwrap();
+        p.apply_override("record_dir=123").unwrap();
+        assert_eq!(p.horizon, 7);
+        assert_eq!(p.record_dir, "123");
+    }
+
+    #[test]
+    fn every_spec_round_trips_through_to_yaml() {
+        let mut p = NodeParams {
+            horizon: 3,
+            dt: 0.25,
+            record_dir: "/tmp/x".into(),
+            ..NodeParams::default()
+        };
+        p.qos_reliable = false;
+        let mut q = NodeParams::default();
+        q.apply_file_text(&p.to_yaml()).unwrap();
+        assert_eq!(p, q);
+    }
+
+    #[test]
+    fn rejects_unknown_ill_typed_and_out_of_range() {
+        for (text, want) in [
+            ("mcgnode:\n  ros__parameters:\n    horizn: 5\n", "unknown parameter \"horizn\""),
+            ("mcgnode:\n  ros__parameters:\n    horizon: 2.5\n", "must be an integer"),
+            ("mcgnode:\n  ros__parameters:\n    horizon: 0\n", "outside 1..="),
+            ("mcgnode:\n  ros__parameters:\n    dt: fast\n", "must be a number"),
+            ("mcgnode:\n  ros__parameters:\n    dt: -1\n", "must be finite and > 0"),
+            ("mcgnode:\n  ros__parameters:\n    qos_reliable: 1\n", "true or false"),
+            ("mcgnode:\n  ros__parameters:\n    model: 5\n", "must be a string"),
+            ("mcgnode:\n  ros__parameters:\n    input_topic: x y\n", "absolute ROS 2 name"),
+            ("other:\n  ros__parameters:\n    dt: 1.0\n", "another node"),
+            ("mcgnode:\n  params:\n    dt: 1.0\n", "only ros__parameters"),
+            ("mcgnode:\n  ros__parameters:\n    a:\n      b: 1\n", "unknown parameter \"a.b\""),
+        ] {
+            let e = NodeParams::default().apply_file_text(text).unwrap_err();
+            assert!(e.contains(want), "{text:?}: {e}");
+        }
+        let e = NodeParams::default().apply_override("horizon").unwrap_err();
+        assert!(e.contains("key=value"), "{e}");
+        let e = NodeParams::default().apply_override("nope=1").unwrap_err();
+        assert!(e.contains("unknown parameter"), "{e}");
+    }
+
+    #[test]
+    fn wildcard_and_slashed_sections_are_ours() {
+        for head in ["/**", "/mcgnode", "mcgnode"] {
+            let mut p = NodeParams::default();
+            p.apply_file_text(&format!("{head}:\n  ros__parameters:\n    horizon: 9\n"))
+                .unwrap();
+            assert_eq!(p.horizon, 9, "{head}");
+        }
+    }
+}

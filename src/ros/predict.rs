@@ -1,0 +1,218 @@
+//! From an incoming `ParticleState` to the node's outputs: checks the message,
+//! asks the model for a rollout and forces, and builds the reply messages.
+//! Pure functions, no ROS: the node and the Rollout service both call these.
+
+use crate::data::msg::{Header, ParticleState, Time, Vector3};
+use crate::dynamics::{Dynamics, Forces};
+use crate::system::{Graph, Sample, State};
+
+use super::msgs::{ParticleForces, PredictedTrajectory};
+
+/// A prediction for one state.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Prediction {
+    /// `horizon` states after the input.
+    pub trajectory: PredictedTrajectory,
+    /// Forces at the input state.
+    pub forces: ParticleForces,
+}
+
+/// Checks an input message and converts it for the model; the error says
+/// what is wrong with the message or why the model cannot take it.
+pub fn accept(model: &dyn Dynamics, input: &ParticleState) -> Result<(Graph, State), String> {
+    let (graph, sample) = input.to_parts().map_err(|e| format!("malformed input: {e}"))?;
+    model
+        .supports(&graph)
+        .map_err(|e| format!("unsupported system: {e}"))?;
+    Ok((graph, sample.state))
+}
+
+/// Rolls the model out `steps` steps of `dt` from `input` (already accepted
+/// as `graph` + `start`); the states are stamped `k·dt` after the input.
+pub fn trajectory(
+    model: &dyn Dynamics,
+    input: &ParticleState,
+    graph: &Graph,
+    start: &State,
+    dt: f64,
+    steps: u32,
+) -> Result<PredictedTrajectory, String> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(format!("dt = {dt} must be finite and > 0"));
+    }
+    let states = model
+        .rollout(graph, start, dt, steps as usize)
+        .map_err(|e| format!("rollout failed: {e}"))?;
+    let t0 = input.header.stamp.as_nanos();
+    let states = states
+        .into_iter()
+        .skip(1)
+        .zip(1u32..)
+        .map(|(state, k)| {
+            let sample = Sample {
+                t: 0.0,
+                state,
+                acc: None,
+            };
+            let mut msg = ParticleState::from_sample(
+                input.trajectory_id,
+                input.step.saturating_add(k),
+                &input.system,
+                graph,
+                &sample,
+            );
+            // Stamp in integer nanoseconds: f64 seconds since the epoch would
+            // lose sub-microsecond steps.
+            let offset = (f64::from(k) * dt * 1e9).round() as i64;
+            msg.header = Header {
+                stamp: Time::from_nanos(t0.saturating_add(offset)),
+                frame_id: input.header.frame_id.clone(),
+            };
+            msg
+        })
+        .collect();
+    Ok(PredictedTrajectory {
+        header: input.header.clone(),
+        initial: input.clone(),
+        dt,
+        states,
+    })
+}
+
+/// Forces at the input state, as a message stamped with the input's header.
+pub fn forces(
+    model: &dyn Dynamics,
+    header: &Header,
+    graph: &Graph,
+    state: &State,
+) -> Result<ParticleForces, String> {
+    let f = model
+        .forces(graph, state)
+        .map_err(|e| format!("forces failed: {e}"))?;
+    forces_msg(header, graph.dim, &f)
+}
+
+/// Converts [`Forces`] to the wire message (2D forces get z = 0).
+pub fn forces_msg(header: &Header, dim: usize, f: &Forces) -> Result<ParticleForces, String> {
+    let vec3 = |c: &[f64]| -> Result<Vector3, String> {
+        if c.len() != dim {
+            return Err(format!("model gave a {}-component force in {dim}D", c.len()));
+        }
+        Ok(Vector3 {
+            x: c[0],
+            y: c[1],
+            z: c.get(2).copied().unwrap_or(0.0),
+        })
+    };
+    if f.total.len() % dim != 0 {
+        return Err(format!("model gave {} total-force numbers in {dim}D", f.total.len()));
+    }
+    let idx = |i: usize| u32::try_from(i).map_err(|_| format!("particle index {i} too large"));
+    Ok(ParticleForces {
+        header: header.clone(),
+        total: f.total.chunks(dim).map(vec3).collect::<Result<_, _>>()?,
+        edge_a: f.edges.iter().map(|e| idx(e.a)).collect::<Result<_, _>>()?,
+        edge_b: f.edges.iter().map(|e| idx(e.b)).collect::<Result<_, _>>()?,
+        edge_force: f
+            .edges
+            .iter()
+            .map(|e| vec3(&e.force))
+            .collect::<Result<_, _>>()?,
+    })
+}
+
+/// Everything the node publishes for one incoming state.
+pub fn predict(
+    model: &dyn Dynamics,
+    input: &ParticleState,
+    dt: f64,
+    horizon: u32,
+) -> Result<Prediction, String> {
+    let (graph, start) = accept(model, input)?;
+    let trajectory = trajectory(model, input, &graph, &start, dt, horizon)?;
+    let forces = forces(model, &input.header, &graph, &start)?;
+    Ok(Prediction { trajectory, forces })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::{SystemConfig, SystemKind};
+    use crate::ros::truth::load_truth;
+
+    fn spring_state() -> ParticleState {
+        let cfg = SystemConfig::new(SystemKind::Spring, 5);
+        let graph = cfg.graph();
+        let state = cfg.start_for(&graph, 3, 0);
+        let mut msg = ParticleState::from_sample(
+            4,
+            10,
+            "spring",
+            &graph,
+            &Sample {
+                t: 0.0,
+                state,
+                acc: None,
+            },
+        );
+        msg.header = Header {
+            stamp: Time {
+                sec: 1_700_000_000,
+                nanosec: 999_999_000,
+            },
+            frame_id: "lab".into(),
+        };
+        msg
+    }
+
+    #[test]
+    fn prediction_is_stamped_from_the_input() {
+        let model = load_truth("truth:spring").unwrap();
+        let input = spring_state();
+        let p = predict(model.as_ref(), &input, 0.001, 7).unwrap();
+        assert_eq!(p.trajectory.header, input.header);
+        assert_eq!(p.forces.header, input.header);
+        assert_eq!(p.trajectory.initial, input);
+        assert_eq!(p.trajectory.states.len(), 7);
+        let s3 = &p.trajectory.states[2];
+        assert_eq!(s3.step, 13);
+        assert_eq!(s3.trajectory_id, 4);
+        assert_eq!(s3.header.frame_id, "lab");
+        assert_eq!(
+            s3.header.stamp.as_nanos() - input.header.stamp.as_nanos(),
+            3_000_000
+        );
+        // The states moved, and the forces of a 5-ring: 5 totals, 5 pairs.
+        assert_ne!(s3.positions, input.positions);
+        assert_eq!(p.forces.total.len(), 5);
+        assert_eq!(p.forces.edge_a.len(), 5);
+        assert_eq!(p.forces.edge_force.len(), 5);
+        // Newton's third law: internal spring forces sum to zero.
+        let sx: f64 = p.forces.total.iter().map(|v| v.x).sum();
+        assert!(sx.abs() < 1e-9, "{sx}");
+    }
+
+    #[test]
+    fn malformed_input_is_an_error_not_a_panic() {
+        let model = load_truth("truth:spring").unwrap();
+        let mut nan = spring_state();
+        nan.positions[1].x = f64::NAN;
+        let mut short = spring_state();
+        short.masses.pop();
+        let mut edge = spring_state();
+        edge.edge_a[0] = 99;
+        let mut dim = spring_state();
+        dim.dimension = 7;
+        for (bad, want) in [
+            (nan, "not finite"),
+            (short, "masses has 4 entries"),
+            (edge, "out of range"),
+            (dim, "dimension"),
+        ] {
+            let e = predict(model.as_ref(), &bad, 0.001, 3).unwrap_err();
+            assert!(e.contains("malformed") && e.contains(want), "{e}");
+        }
+        let e = predict(model.as_ref(), &spring_state(), f64::NAN, 3).unwrap_err();
+        assert!(e.contains("dt"), "{e}");
+    }
+}

@@ -1,0 +1,199 @@
+//! The particle system as a graph: what every other module speaks.
+//!
+//! A system is a set of particles (nodes) with a type, a mass, a position and a
+//! velocity, joined by edges that are either springs or rigid bars. Fixed anchor
+//! points (a pendulum's pivot) can be the far end of an edge. Positions and
+//! velocities are stored flat, `dim` numbers per particle (2 or 3).
+
+use serde::{Deserialize, Serialize};
+
+/// What an edge is physically.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum EdgeKind {
+    /// Elastic: potential ½ k (|q_a − q_b| − rest)².
+    Spring,
+    /// Rigid: holonomic constraint |q_a − q_b| = rest.
+    Bar,
+}
+
+/// One end of an edge: a particle, or a fixed anchor point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Endpoint {
+    /// Index of a particle.
+    Particle(usize),
+    /// Index into [`Graph::anchors`].
+    Anchor(usize),
+}
+
+/// An undirected edge. `a` is always a particle; `b` may be an anchor.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Edge {
+    /// First end, a particle.
+    pub a: usize,
+    /// Second end.
+    pub b: Endpoint,
+    /// Spring or bar.
+    pub kind: EdgeKind,
+    /// Rest length of a spring, or the length of a bar.
+    pub rest_length: f64,
+    /// Spring stiffness k (unused for bars).
+    pub stiffness: f64,
+}
+
+/// The static description of a system: everything but the state.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Graph {
+    /// Spatial dimension, 2 or 3. 2D systems are stored with z = 0 on the wire.
+    pub dim: usize,
+    /// Particle type ids (index into the model's one-hot encoding).
+    pub types: Vec<u32>,
+    /// Particle masses.
+    pub masses: Vec<f64>,
+    /// Edges; each undirected edge appears once.
+    pub edges: Vec<Edge>,
+    /// Fixed points, `dim` coordinates each.
+    pub anchors: Vec<Vec<f64>>,
+}
+
+impl Graph {
+    /// Number of particles.
+    pub fn n(&self) -> usize {
+        self.types.len()
+    }
+
+    /// Number of generalised coordinates, `n * dim`.
+    pub fn ndof(&self) -> usize {
+        self.n() * self.dim
+    }
+
+    /// Edges between two particles (the ones a GNN passes messages over).
+    pub fn particle_edges(&self) -> impl Iterator<Item = (usize, usize, &Edge)> {
+        self.edges.iter().filter_map(|e| match e.b {
+            Endpoint::Particle(b) => Some((e.a, b, e)),
+            Endpoint::Anchor(_) => None,
+        })
+    }
+
+    /// Rigid bars (constraints), including bars to anchors.
+    pub fn bars(&self) -> impl Iterator<Item = &Edge> {
+        self.edges.iter().filter(|e| e.kind == EdgeKind::Bar)
+    }
+
+    /// Number of rigid bars, i.e. rows of the constraint matrix A(q).
+    pub fn n_bars(&self) -> usize {
+        self.bars().count()
+    }
+
+    /// Checks indices, lengths and finiteness; the error says what is wrong.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.dim != 2 && self.dim != 3 {
+            return Err(format!("dimension must be 2 or 3, got {}", self.dim));
+        }
+        let n = self.n();
+        if n == 0 {
+            return Err("system has no particles".into());
+        }
+        if self.masses.len() != n {
+            return Err(format!("{} masses for {} particles", self.masses.len(), n));
+        }
+        if let Some(m) = self.masses.iter().find(|m| !(m.is_finite() && **m > 0.0)) {
+            return Err(format!("mass {m} is not a positive finite number"));
+        }
+        for (i, a) in self.anchors.iter().enumerate() {
+            if a.len() != self.dim || a.iter().any(|x| !x.is_finite()) {
+                return Err(format!("anchor {i} is not a finite {}-vector", self.dim));
+            }
+        }
+        for (k, e) in self.edges.iter().enumerate() {
+            if e.a >= n {
+                return Err(format!(
+                    "edge {k}: particle index {} out of range (n = {n})",
+                    e.a
+                ));
+            }
+            match e.b {
+                Endpoint::Particle(b) if b >= n => {
+                    return Err(format!(
+                        "edge {k}: particle index {b} out of range (n = {n})"
+                    ))
+                }
+                Endpoint::Particle(b) if b == e.a => {
+                    return Err(format!("edge {k}: joins particle {b} to itself"))
+                }
+                Endpoint::Anchor(b) if b >= self.anchors.len() => {
+                    return Err(format!(
+                        "edge {k}: anchor index {b} out of range ({} anchors)",
+                        self.anchors.len()
+                    ))
+                }
+                _ => {}
+            }
+            if !(e.rest_length.is_finite() && e.rest_length >= 0.0) || !e.stiffness.is_finite() {
+                return Err(format!("edge {k}: rest length or stiffness is not finite"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Positions and velocities of all particles, flat (`n * dim` each).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct State {
+    /// Positions.
+    pub q: Vec<f64>,
+    /// Velocities.
+    pub v: Vec<f64>,
+}
+
+impl State {
+    /// Checks lengths against a graph and that every number is finite.
+    pub fn validate(&self, graph: &Graph) -> Result<(), String> {
+        let d = graph.ndof();
+        if self.q.len() != d || self.v.len() != d {
+            return Err(format!(
+                "state has {} positions and {} velocities, the graph needs {d} each",
+                self.q.len(),
+                self.v.len()
+            ));
+        }
+        if self.q.iter().chain(&self.v).any(|x| !x.is_finite()) {
+            return Err("state contains NaN or infinite values".into());
+        }
+        Ok(())
+    }
+
+    /// Total linear momentum, `dim` components.
+    pub fn momentum(&self, graph: &Graph) -> Vec<f64> {
+        let mut p = vec![0.0; graph.dim];
+        for (i, m) in graph.masses.iter().enumerate() {
+            for (c, pc) in p.iter_mut().enumerate() {
+                *pc += m * self.v[i * graph.dim + c];
+            }
+        }
+        p
+    }
+}
+
+/// A state at a time, with accelerations when they are known.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Sample {
+    /// Time since the start of the trajectory, seconds.
+    pub t: f64,
+    /// The state.
+    pub state: State,
+    /// Accelerations, `n * dim`, when known.
+    pub acc: Option<Vec<f64>>,
+}
+
+/// A trajectory: one graph, a sequence of samples.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Trajectory {
+    /// Trajectory id (unique within a bag).
+    pub id: u32,
+    /// Name of the system that produced it ("spring", "pendulum", or "" when unknown).
+    pub system: String,
+    /// The graph, shared by all samples.
+    pub graph: Graph,
+    /// The samples, in time order.
+    pub samples: Vec<Sample>,
+}

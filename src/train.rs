@@ -1,0 +1,363 @@
+//! Training: MSE on accelerations, Adam, batches of 100, a seeded 75:25 split,
+//! early stopping on the validation loss (the best weights are kept).
+
+use crate::model::batch::Batch;
+use crate::model::file::TrainingReport;
+use crate::model::params::Weights;
+use crate::model::plan::GraphPlan;
+use crate::model::{Hyper, Net};
+use crate::system::{Graph, State};
+use anyhow::{bail, Result};
+use candle_core::Tensor;
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use std::time::Instant;
+
+/// Training settings.
+#[derive(Clone, Debug)]
+pub struct TrainConfig {
+    /// Maximum epochs (paper: 10,000).
+    pub epochs: usize,
+    /// Adam learning rate (paper: 1e-3).
+    pub lr: f64,
+    /// Batch size (paper: 100).
+    pub batch: usize,
+    /// Fraction of states held out for validation (paper: 0.25).
+    pub validation: f64,
+    /// Stop when the validation loss has not improved for this many epochs.
+    pub patience: usize,
+    /// Seed for initialisation, split and shuffling.
+    pub seed: u64,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            epochs: 10_000,
+            lr: 1e-3,
+            batch: 100,
+            validation: 0.25,
+            patience: 1_000,
+            seed: 0,
+        }
+    }
+}
+
+/// One epoch's figures, handed to the progress callback.
+#[derive(Clone, Debug)]
+pub struct EpochReport {
+    /// Epoch number, from 1.
+    pub epoch: usize,
+    /// Epochs asked for.
+    pub epochs: usize,
+    /// Mean training loss over the epoch's batches.
+    pub train_loss: f64,
+    /// Validation loss after the epoch.
+    pub validation_loss: f64,
+    /// Best validation loss so far.
+    pub best: f64,
+    /// Seconds since training started.
+    pub elapsed: f64,
+}
+
+/// The result of training.
+pub struct Trained {
+    /// The model with the best weights.
+    pub net: Net,
+    /// Figures for the model file.
+    pub report: TrainingReport,
+}
+
+/// Adam (Kingma & Ba) on flat parameter vectors: cheaper than one candle op per
+/// moment update for models with a few hundred parameters.
+struct Adam {
+    lr: f64,
+    m: Vec<Vec<f64>>,
+    v: Vec<Vec<f64>>,
+    t: i32,
+}
+
+impl Adam {
+    fn new(lr: f64, sizes: &[usize]) -> Self {
+        Self {
+            lr,
+            m: sizes.iter().map(|&n| vec![0.0; n]).collect(),
+            v: sizes.iter().map(|&n| vec![0.0; n]).collect(),
+            t: 0,
+        }
+    }
+
+    fn step(&mut self, net: &Net, grads: &candle_core::backprop::GradStore) -> Result<()> {
+        const B1: f64 = 0.9;
+        const B2: f64 = 0.999;
+        const EPS: f64 = 1e-8;
+        self.t += 1;
+        let c1 = 1.0 - B1.powi(self.t);
+        let c2 = 1.0 - B2.powi(self.t);
+        for (k, var) in net.store.vars().iter().enumerate() {
+            let Some(g) = grads.get(var) else { continue };
+            let g = g.flatten_all()?.to_vec1::<f64>()?;
+            let mut p = var.as_tensor().flatten_all()?.to_vec1::<f64>()?;
+            let (m, v) = (&mut self.m[k], &mut self.v[k]);
+            for i in 0..p.len() {
+                m[i] = B1 * m[i] + (1.0 - B1) * g[i];
+                v[i] = B2 * v[i] + (1.0 - B2) * g[i] * g[i];
+                p[i] -= self.lr * (m[i] / c1) / ((v[i] / c2).sqrt() + EPS);
+            }
+            var.set(&Tensor::from_vec(p, var.shape(), var.device())?)?;
+        }
+        Ok(())
+    }
+}
+
+/// Mean loss over a set of states, in chunks.
+fn mean_loss(net: &Net, plan: &GraphPlan, states: &[&State], acc: &[&[f64]]) -> Result<f64> {
+    let mut total = 0.0;
+    for (s, a) in states.chunks(1000).zip(acc.chunks(1000)) {
+        let b = Batch::new(plan, s, Some(a), net.hyper.types)?;
+        total += net.loss(&b)?.to_scalar::<f64>()? * s.len() as f64;
+    }
+    Ok(total / states.len().max(1) as f64)
+}
+
+/// Trains a fresh model of `hyper` on states of one graph with their
+/// accelerations. `on_epoch` sees every epoch and returns false to cancel.
+pub fn train(
+    hyper: Hyper,
+    graph: &Graph,
+    states: &[State],
+    acc: &[Vec<f64>],
+    cfg: &TrainConfig,
+    mut on_epoch: impl FnMut(&EpochReport) -> bool,
+) -> Result<Trained> {
+    if states.len() != acc.len() {
+        bail!("{} states but {} accelerations", states.len(), acc.len());
+    }
+    if states.len() < 2 {
+        bail!("need at least 2 states to train (got {})", states.len());
+    }
+    if !(cfg.validation > 0.0 && cfg.validation < 1.0) {
+        bail!("validation fraction must be in (0, 1)");
+    }
+    if cfg.batch == 0 || cfg.epochs == 0 {
+        bail!("batch size and epochs must be positive");
+    }
+    graph.validate().map_err(anyhow::Error::msg)?;
+    for (i, (s, a)) in states.iter().zip(acc).enumerate() {
+        s.validate(graph).map_err(|e| anyhow::anyhow!("state {i}: {e}"))?;
+        if a.len() != graph.ndof() || a.iter().any(|x| !x.is_finite()) {
+            bail!("accelerations of state {i} have the wrong size or are not finite");
+        }
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+    let net = Net::new(hyper, &mut rng)?;
+    let plan = GraphPlan::new(graph);
+
+    let mut order: Vec<usize> = (0..states.len()).collect();
+    order.shuffle(&mut rng);
+    let n_val = ((states.len() as f64 * cfg.validation).round() as usize).clamp(1, states.len() - 1);
+    let (val_idx, train_idx) = order.split_at(n_val);
+    let mut train_idx = train_idx.to_vec();
+    let val_s: Vec<&State> = val_idx.iter().map(|&i| &states[i]).collect();
+    let val_a: Vec<&[f64]> = val_idx.iter().map(|&i| acc[i].as_slice()).collect();
+
+    let sizes: Vec<usize> = net.store.vars().iter().map(|v| v.elem_count()).collect();
+    let mut adam = Adam::new(cfg.lr, &sizes);
+    let start = Instant::now();
+    let mut best = f64::INFINITY;
+    let mut best_weights: Weights = net.store.weights()?;
+    let (mut best_epoch, mut best_train) = (0, f64::NAN);
+    let mut epochs_run = 0;
+    let mut stopped_early = false;
+    for epoch in 1..=cfg.epochs {
+        train_idx.shuffle(&mut rng);
+        let mut sum = 0.0;
+        let mut count = 0usize;
+        for chunk in train_idx.chunks(cfg.batch) {
+            let s: Vec<&State> = chunk.iter().map(|&i| &states[i]).collect();
+            let a: Vec<&[f64]> = chunk.iter().map(|&i| acc[i].as_slice()).collect();
+            let b = Batch::new(&plan, &s, Some(&a), net.hyper.types)?;
+            let loss = net.loss(&b)?;
+            let l = loss.to_scalar::<f64>()?;
+            if !l.is_finite() {
+                bail!("training diverged at epoch {epoch} (loss {l})");
+            }
+            let grads = loss.backward()?;
+            adam.step(&net, &grads)?;
+            sum += l * chunk.len() as f64;
+            count += chunk.len();
+        }
+        let train_loss = sum / count as f64;
+        let val = mean_loss(&net, &plan, &val_s, &val_a)?;
+        epochs_run = epoch;
+        if !val.is_finite() {
+            bail!("validation loss is not finite at epoch {epoch}");
+        }
+        if val < best {
+            best = val;
+            best_epoch = epoch;
+            best_train = train_loss;
+            best_weights = net.store.weights()?;
+        }
+        let report = EpochReport {
+            epoch,
+            epochs: cfg.epochs,
+            train_loss,
+            validation_loss: val,
+            best,
+            elapsed: start.elapsed().as_secs_f64(),
+        };
+        if !on_epoch(&report) {
+            bail!("training cancelled at epoch {epoch}");
+        }
+        if epoch - best_epoch >= cfg.patience {
+            stopped_early = true;
+            break;
+        }
+    }
+    let mut net = net;
+    net.store.load(&best_weights)?;
+    Ok(Trained {
+        net,
+        report: TrainingReport {
+            seed: cfg.seed,
+            epochs_requested: cfg.epochs,
+            epochs_run,
+            best_epoch,
+            train_loss: best_train,
+            validation_loss: best,
+            stopped_early,
+            seconds: start.elapsed().as_secs_f64(),
+            batch: cfg.batch,
+            lr: cfg.lr,
+            patience: cfg.patience,
+        },
+    })
+}
+
+/// Whether MCGNODE learns a body-force branch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BodyForce {
+    /// On unless the bag says the system is closed (no field, no anchors).
+    Auto,
+    /// Always learn body forces.
+    On,
+    /// Never: internal forces only, momentum conserved exactly.
+    Off,
+}
+
+/// Architecture choices on top of a variant's paper defaults.
+#[derive(Clone, Debug)]
+pub struct ModelOptions {
+    /// Hidden units of the graph MLPs.
+    pub hidden: usize,
+    /// Embedding width.
+    pub embed: usize,
+    /// Message-passing rounds.
+    pub rounds: usize,
+    /// Body-force branch (MCGNODE).
+    pub body_force: BodyForce,
+    /// One-hot width; default: largest type in the data + 1.
+    pub types: Option<usize>,
+}
+
+impl Default for ModelOptions {
+    fn default() -> Self {
+        Self {
+            hidden: 5,
+            embed: 5,
+            rounds: 1,
+            body_force: BodyForce::Auto,
+            types: None,
+        }
+    }
+}
+
+/// Trains a model from trajectory bags and returns the model file (not yet saved).
+pub fn train_from_bags(
+    variant: crate::model::Variant,
+    bags: &[std::path::PathBuf],
+    opts: &ModelOptions,
+    cfg: &TrainConfig,
+    log: impl FnMut(&str),
+    on_epoch: impl FnMut(&EpochReport) -> bool,
+) -> Result<crate::model::ModelFile> {
+    use crate::data::bag::read_trajectories;
+    use crate::data::dataset::{digest, AccSource, Dataset};
+    use crate::evaluate::{bag_system, fingerprint};
+    let mut log = log;
+    if bags.is_empty() {
+        bail!("no training bags given");
+    }
+    let mut trajectories = vec![];
+    let mut digests = vec![];
+    let mut system_config = None;
+    for p in bags {
+        let bag = read_trajectories(p)?;
+        if system_config.is_none() {
+            system_config = bag_system(&bag)?;
+        }
+        digests.push(digest(p)?);
+        trajectories.extend(bag.trajectories);
+    }
+    let ds = Dataset::from_trajectories(&trajectories)?;
+    let source = match ds.source {
+        AccSource::Recorded => "recorded",
+        AccSource::FiniteDifference => "finite-difference",
+    };
+    log(&format!(
+        "training {variant} on {} states of {} trajectories ({}-particle {}D graph); accelerations: {source}",
+        ds.len(),
+        trajectories.len(),
+        ds.graph.n(),
+        ds.graph.dim
+    ));
+    let types = opts
+        .types
+        .unwrap_or(ds.graph.types.iter().map(|&t| t as usize + 1).max().unwrap_or(1));
+    let mut hyper = Hyper::new(variant, ds.graph.dim, types, ds.graph.n());
+    hyper.hidden = opts.hidden;
+    hyper.embed = opts.embed;
+    hyper.rounds = opts.rounds;
+    hyper.body_force = match opts.body_force {
+        BodyForce::On => true,
+        BodyForce::Off => false,
+        BodyForce::Auto => {
+            let closed = ds.graph.anchors.is_empty()
+                && system_config.as_ref().is_some_and(|s| s.field.is_free());
+            !closed
+        }
+    };
+    if variant == crate::model::Variant::Mcgnode {
+        log(&format!(
+            "body-force branch: {}",
+            if hyper.body_force { "on" } else { "off (closed system: momentum is conserved exactly)" }
+        ));
+    }
+    let trained = train(hyper, &ds.graph, &ds.states, &ds.acc, cfg, on_epoch)?;
+    let first = trajectories.first().expect("dataset is not empty");
+    Ok(crate::model::ModelFile {
+        format: crate::model::file::FORMAT.to_string(),
+        crate_version: env!("CARGO_PKG_VERSION").to_string(),
+        hyper: trained.net.hyper.clone(),
+        trained_on: crate::model::file::TrainedOn {
+            system: first.system.clone(),
+            particles: ds.graph.n(),
+            dim: ds.graph.dim,
+            bag: bags.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(","),
+            bag_sha256: digests.join(","),
+            accelerations: source.to_string(),
+            trajectories: trajectories.len(),
+            states: ds.len(),
+            start_fingerprints: trajectories
+                .iter()
+                .filter_map(|t| t.samples.first())
+                .map(|s| fingerprint(&s.state))
+                .collect(),
+            system_config: system_config.map(|s| serde_json::to_value(s)).transpose()?,
+        },
+        training: trained.report,
+        weights: trained.net.store.weights()?,
+    })
+}

@@ -1,0 +1,231 @@
+//! Error metrics, their summary, and the plot. Run with
+//! `cargo test --release --test metrics`.
+
+use mcgnode::metrics::{error_curves, summarize, ErrorCurves, Summary};
+use mcgnode::physics::{Field, SystemConfig, SystemKind};
+use mcgnode::plot::plot_summaries;
+use mcgnode::system::{Edge, EdgeKind, Endpoint, Graph, State};
+
+fn close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol * b.abs().max(1e-300)
+}
+
+#[test]
+fn identical_trajectories_have_zero_error() {
+    let mut cfg = SystemConfig::new(SystemKind::Spring, 5);
+    cfg.states = 20;
+    let t = &cfg.simulate(1, 3)[0];
+    let states: Vec<State> = t.samples.iter().map(|s| s.state.clone()).collect();
+    let times: Vec<f64> = t.samples.iter().map(|s| s.t).collect();
+    let c = error_curves(&t.graph, &cfg.field, &states, &states, &times).unwrap();
+    assert_eq!(c.t, times);
+    for v in [&c.re, &c.ee, &c.me, &c.me_scaled] {
+        assert_eq!(v.len(), 20);
+        assert!(v.iter().all(|x| *x == 0.0), "{v:?}");
+    }
+}
+
+/// Two particles joined by a spring (k = 2, r0 = 1), gravity 3 along −y.
+fn two_body() -> (Graph, Field) {
+    let g = Graph {
+        dim: 2,
+        types: vec![0, 0],
+        masses: vec![1.0, 2.0],
+        edges: vec![Edge {
+            a: 0,
+            b: Endpoint::Particle(1),
+            kind: EdgeKind::Spring,
+            rest_length: 1.0,
+            stiffness: 2.0,
+        }],
+        anchors: vec![],
+    };
+    (
+        g,
+        Field {
+            gravity: 3.0,
+            drag: 0.0,
+            force: vec![],
+        },
+    )
+}
+
+#[test]
+fn hand_computed_case() {
+    let (g, f) = two_body();
+    // Truth: particle 0 at (1, 0) moving (1, 0); particle 1 at rest at the origin.
+    let truth = State {
+        q: vec![1.0, 0.0, 0.0, 0.0],
+        v: vec![1.0, 0.0, 0.0, 0.0],
+    };
+    // Prediction: particle 0 at (1, 1) moving (2, 0).
+    let pred = State {
+        q: vec![1.0, 1.0, 0.0, 0.0],
+        v: vec![2.0, 0.0, 0.0, 0.0],
+    };
+    let c = error_curves(&g, &f, &[truth], &[pred], &[0.5]).unwrap();
+    // RE = |(0, 1)| / (√2 + 1).
+    assert!(
+        close(c.re[0], 1.0 / (2f64.sqrt() + 1.0), 1e-14),
+        "RE {}",
+        c.re[0]
+    );
+    // H = ½·1·1 + 0 (spring at rest length) + 0 (y = 0) = 0.5.
+    // Ĥ = ½·1·4 + ½·2·(√2 − 1)² + 1·3·1 = 2 + (√2 − 1)² + 3.
+    let h = 0.5;
+    let hp = 5.0 + (2f64.sqrt() - 1.0).powi(2);
+    assert!(close(c.ee[0], (hp - h) / (hp + h), 1e-14), "EE {}", c.ee[0]);
+    // P = (1, 0), P̂ = (2, 0): ME = 1 / 3; momentum scale 1 + 2 as well.
+    assert!(close(c.me[0], 1.0 / 3.0, 1e-14), "ME {}", c.me[0]);
+    assert!(close(c.me_scaled[0], 1.0 / 3.0, 1e-14));
+
+    // Both momenta zero, positions differ: ME is 0/0, defined as 0.
+    let a = State {
+        q: vec![1.0, 0.0, 0.0, 0.0],
+        v: vec![0.0; 4],
+    };
+    let b = State {
+        q: vec![2.0, 0.0, 0.0, 0.0],
+        v: vec![0.0; 4],
+    };
+    let c = error_curves(&g, &f, &[a], &[b], &[0.0]).unwrap();
+    assert_eq!(c.me[0], 0.0);
+    assert_eq!(c.me_scaled[0], 0.0);
+    assert!(close(c.re[0], 1.0 / 3.0, 1e-14));
+}
+
+#[test]
+fn bad_input_is_rejected() {
+    let (g, f) = two_body();
+    let s = State {
+        q: vec![0.0; 4],
+        v: vec![0.0; 4],
+    };
+    let err = error_curves(
+        &g,
+        &f,
+        std::slice::from_ref(&s),
+        &[s.clone(), s.clone()],
+        &[0.0],
+    )
+    .unwrap_err();
+    assert!(err.contains("must match"), "{err}");
+    let nan = State {
+        q: vec![f64::NAN, 0.0, 0.0, 0.0],
+        v: vec![0.0; 4],
+    };
+    let err = error_curves(&g, &f, std::slice::from_ref(&s), &[nan], &[0.0]).unwrap_err();
+    assert!(err.contains("predicted state 0"), "{err}");
+    assert!(error_curves(&g, &f, &[], &[], &[]).is_err());
+    assert!(summarize(&[]).is_err());
+}
+
+fn constant(t: &[f64], re: f64, ee: f64, me: f64) -> ErrorCurves {
+    ErrorCurves {
+        t: t.to_vec(),
+        re: vec![re; t.len()],
+        ee: vec![ee; t.len()],
+        me: vec![me; t.len()],
+        me_scaled: vec![me; t.len()],
+    }
+}
+
+#[test]
+fn summary_of_constant_curves_is_the_constant() {
+    let t = [0.0, 0.1, 0.2, 0.3];
+    let curves = vec![constant(&t, 0.1, 2e-5, 0.3); 3];
+    let s = summarize(&curves).unwrap();
+    assert_eq!(s.n, 3);
+    for (band, want) in [(&s.re, 0.1), (&s.ee, 2e-5), (&s.me, 0.3)] {
+        for v in band.gmean.iter().chain(&band.lo).chain(&band.hi) {
+            assert!(close(*v, want, 1e-12), "{v} vs {want}");
+        }
+    }
+    let (re, ee, me) = s.time_average();
+    assert!(close(re, 0.1, 1e-12) && close(ee, 2e-5, 1e-12) && close(me, 0.3, 1e-12));
+}
+
+#[test]
+fn summary_band_by_hand() {
+    let t = [0.0, 1.0];
+    let mut a = constant(&t, 1e-2, 1.0, 0.0);
+    a.re[1] = 1.0;
+    let b = constant(&t, 1e-4, 1.0, 0.0);
+    let s = summarize(&[a, b]).unwrap();
+    // Logs ln 1e-2 and ln 1e-4: mean ln 1e-3, sample sd √2·ln 10.
+    assert!(close(s.re.gmean[0], 1e-3, 1e-12));
+    let w = 10f64.powf(1.96 * 2f64.sqrt());
+    assert!(close(s.re.hi[0], 1e-3 * w, 1e-12));
+    assert!(close(s.re.lo[0], 1e-3 / w, 1e-12));
+    // At t = 1: values 1 and 1e-4, geometric mean 1e-2.
+    assert!(close(s.at(0.9).0, 1e-2, 1e-12));
+    assert!(close(s.at(-5.0).0, 1e-3, 1e-12));
+    // Zeros are floored, not NaN.
+    assert!(s.me.gmean.iter().all(|x| *x > 0.0 && *x < 1e-290));
+    // Time average: geometric mean of 1e-3 and 1e-2.
+    assert!(close(s.time_average().0, 10f64.powf(-2.5), 1e-12));
+    // Curves on different times are refused.
+    let c = constant(&[0.0, 2.0], 1.0, 1.0, 1.0);
+    let err = summarize(&[constant(&t, 1.0, 1.0, 1.0), c]).unwrap_err();
+    assert!(err.contains("time"), "{err}");
+}
+
+/// A summary whose errors grow like a·e^{t} with a log-normal spread.
+fn growing(t: &[f64], a: f64) -> Summary {
+    let curves: Vec<ErrorCurves> = (0..10)
+        .map(|i| {
+            let f = 1.0 + 0.3 * i as f64;
+            ErrorCurves {
+                t: t.to_vec(),
+                re: t.iter().map(|x| f * a * x.exp()).collect(),
+                ee: t.iter().map(|x| f * a * 0.1 * (1.0 + x)).collect(),
+                me: t.iter().map(|x| f * a * 1e-3 * (2.0 + x.sin())).collect(),
+                me_scaled: t.iter().map(|_| 0.0).collect(),
+            }
+        })
+        .collect();
+    summarize(&curves).unwrap()
+}
+
+#[test]
+fn plot_is_written_as_png() {
+    let t: Vec<f64> = (0..100).map(|k| k as f64 * 0.1).collect();
+    let panels = vec![
+        (
+            "5-spring".to_string(),
+            vec![
+                ("gnode".to_string(), growing(&t, 1e-3)),
+                ("mcgnode".to_string(), growing(&t, 1e-6)),
+            ],
+        ),
+        (
+            "5-pendulum".to_string(),
+            vec![
+                ("gnode".to_string(), growing(&t, 1e-2)),
+                ("mcgnode".to_string(), growing(&t, 1e-5)),
+            ],
+        ),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("errors.png");
+    plot_summaries(&path, &panels).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "not a PNG");
+    assert_eq!(&bytes[12..16], b"IHDR");
+    let w = u32::from_be_bytes(bytes[16..20].try_into().unwrap());
+    let h = u32::from_be_bytes(bytes[20..24].try_into().unwrap());
+    assert_eq!((w, h), (2 * 460, 3 * 300));
+    assert!(
+        bytes.len() > 10_000,
+        "suspiciously small PNG ({} bytes)",
+        bytes.len()
+    );
+    if let Ok(keep) = std::env::var("MCGNODE_KEEP_PLOT") {
+        std::fs::copy(&path, keep).unwrap();
+    }
+
+    assert!(plot_summaries(&path, &[]).is_err());
+    assert!(plot_summaries(&path, &[("empty".into(), vec![])]).is_err());
+    let missing = dir.path().join("no/such/dir/x.png");
+    assert!(plot_summaries(&missing, &panels).is_err());
+}
