@@ -99,4 +99,10 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except BrokenPipeError:
+        sys.exit(1)
+    except Exception as err:  # one clear line instead of a traceback
+        print(f"decode_bag.py: {' '.join(sys.argv[1:])}: {type(err).__name__}: {err}", file=sys.stderr)
+        sys.exit(1)

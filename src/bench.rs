@@ -73,13 +73,21 @@ pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, 
 }
 
 /// Median time of one training step (forward, backward, Adam-free) at batch `b`.
-pub fn train_step_seconds(system: SystemKind, variant: Variant, b: usize, repeats: usize) -> Result<f64> {
+pub fn train_step_seconds(
+    system: SystemKind,
+    variant: Variant,
+    b: usize,
+    repeats: usize,
+) -> Result<f64> {
     let cfg = SystemConfig::new(system, 5);
     let g = cfg.graph();
     let (net, _) = random_model(variant, &g, 0)?;
     let plan = GraphPlan::new(&g);
     let states: Vec<State> = (0..b).map(|i| cfg.start_for(&g, 99, i)).collect();
-    let acc: Vec<Vec<f64>> = states.iter().map(|s| crate::physics::acceleration(&g, &cfg.field, s)).collect();
+    let acc: Vec<Vec<f64>> = states
+        .iter()
+        .map(|s| crate::physics::acceleration(&g, &cfg.field, s))
+        .collect();
     let sr: Vec<&State> = states.iter().collect();
     let ar: Vec<&[f64]> = acc.iter().map(|a| a.as_slice()).collect();
     let mut times = vec![];
@@ -100,7 +108,13 @@ pub fn train_step_seconds(system: SystemKind, variant: Variant, b: usize, repeat
 }
 
 /// Median time of a kernel rollout of `steps` steps.
-pub fn rollout_seconds(system: SystemKind, n: usize, variant: Variant, steps: usize, repeats: usize) -> Result<f64> {
+pub fn rollout_seconds(
+    system: SystemKind,
+    n: usize,
+    variant: Variant,
+    steps: usize,
+    repeats: usize,
+) -> Result<f64> {
     let cfg = SystemConfig::new(system, n);
     let g = cfg.graph();
     let (_, m) = random_model(variant, &g, 0)?;
@@ -121,17 +135,47 @@ pub fn run_all(quick: bool) -> Result<Vec<Figure>> {
     let r = if quick { 5 } else { 21 };
     let mut out = vec![];
     let step_s = train_step_seconds(SystemKind::Spring, Variant::Mcgnode, 100, r * 5)?;
-    out.push(Figure { name: "5-spring MCGNODE training step, batch 100".into(), value: step_s * 1e3, unit: "ms".into(), jax: Some("0.65-1.44".into()), repeats: r * 5 });
+    out.push(Figure {
+        name: "5-spring MCGNODE training step, batch 100".into(),
+        value: step_s * 1e3,
+        unit: "ms".into(),
+        jax: Some("0.65-1.44".into()),
+        repeats: r * 5,
+    });
     let step_p = train_step_seconds(SystemKind::Pendulum, Variant::Mcgnode, 100, r * 5)?;
-    out.push(Figure { name: "5-pendulum MCGNODE training step, batch 100".into(), value: step_p * 1e3, unit: "ms".into(), jax: Some("3.2".into()), repeats: r * 5 });
+    out.push(Figure {
+        name: "5-pendulum MCGNODE training step, batch 100".into(),
+        value: step_p * 1e3,
+        unit: "ms".into(),
+        jax: Some("3.2".into()),
+        repeats: r * 5,
+    });
     let rs = rollout_seconds(SystemKind::Spring, 5, Variant::Mcgnode, 20_000, r)?;
-    out.push(Figure { name: "5-spring MCGNODE rollout, 20 s (20,000 steps)".into(), value: rs, unit: "s".into(), jax: Some("0.25".into()), repeats: r });
+    out.push(Figure {
+        name: "5-spring MCGNODE rollout, 20 s (20,000 steps)".into(),
+        value: rs,
+        unit: "s".into(),
+        jax: Some("0.25".into()),
+        repeats: r,
+    });
     let rp = rollout_seconds(SystemKind::Pendulum, 5, Variant::Mcgnode, 100_000, r.min(7))?;
-    out.push(Figure { name: "5-pendulum MCGNODE rollout, 1 s (100,000 steps)".into(), value: rp, unit: "s".into(), jax: Some("2.75".into()), repeats: r.min(7) });
+    out.push(Figure {
+        name: "5-pendulum MCGNODE rollout, 1 s (100,000 steps)".into(),
+        value: rp,
+        unit: "s".into(),
+        jax: Some("2.75".into()),
+        repeats: r.min(7),
+    });
     for n in [5usize, 50, 500] {
         let steps = 2_000_000 / n.max(1) / if quick { 10 } else { 1 };
         let s = rollout_seconds(SystemKind::Spring, n, Variant::Mcgnode, steps, r.min(5))?;
-        out.push(Figure { name: format!("{n}-spring MCGNODE rollout speed"), value: steps as f64 / s, unit: "steps/s".into(), jax: None, repeats: r.min(5) });
+        out.push(Figure {
+            name: format!("{n}-spring MCGNODE rollout speed"),
+            value: steps as f64 / s,
+            unit: "steps/s".into(),
+            jax: None,
+            repeats: r.min(5),
+        });
     }
     Ok(out)
 }

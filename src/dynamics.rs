@@ -68,7 +68,10 @@ pub trait Dynamics: Send + Sync {
                 s.v[i] += 0.5 * a[i] * dt;
             }
             if s.q.iter().chain(&s.v).any(|x| !x.is_finite()) {
-                return Err(format!("rollout diverged (non-finite state) after {} steps", out.len()));
+                return Err(format!(
+                    "rollout diverged (non-finite state) after {} steps",
+                    out.len()
+                ));
             }
             out.push(s.clone());
         }

@@ -21,7 +21,11 @@ pub fn fingerprint(s: &State) -> String {
     for x in s.q.iter().chain(&s.v) {
         h.update(((x * 1e9).round() as i64).to_le_bytes());
     }
-    h.finalize().iter().take(12).map(|b| format!("{b:02x}")).collect()
+    h.finalize()
+        .iter()
+        .take(12)
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }
 
 /// The simulator configuration a bag was made with, if it says.
@@ -66,6 +70,8 @@ pub struct Evaluation {
     pub rollout_seconds: f64,
     /// Geometric means and 95% bands over trajectories.
     pub summary: Summary,
+    /// Time averages of the geometric-mean curves (t > 0).
+    pub averages: crate::metrics::Averages,
     /// Per-trajectory curves.
     #[serde(skip)]
     pub curves: Vec<ErrorCurves>,
@@ -120,7 +126,11 @@ pub fn evaluate(model: &TrainedModel, bag: &Bag, opts: &EvalOptions) -> Result<E
             .workspace(g)
             .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", tr.id))?;
         let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
-        let interval = if times.len() > 1 { times[1] - times[0] } else { dt };
+        let interval = if times.len() > 1 {
+            times[1] - times[0]
+        } else {
+            dt
+        };
         let every = ((interval / dt).round() as usize).max(1);
         if ((every as f64 * dt - interval) / interval).abs() > 1e-6 {
             bail!(
@@ -131,12 +141,19 @@ pub fn evaluate(model: &TrainedModel, bag: &Bag, opts: &EvalOptions) -> Result<E
         let steps = every * (times.len() - 1);
         let mut pred = Vec::with_capacity(times.len());
         model
-            .rollout_with(&mut ws, &tr.samples[0].state, dt, steps, every, |_, q, v| {
-                pred.push(State {
-                    q: q.to_vec(),
-                    v: v.to_vec(),
-                })
-            })
+            .rollout_with(
+                &mut ws,
+                &tr.samples[0].state,
+                dt,
+                steps,
+                every,
+                |_, q, v| {
+                    pred.push(State {
+                        q: q.to_vec(),
+                        v: v.to_vec(),
+                    })
+                },
+            )
             .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", tr.id))?;
         steps_total = steps;
         let truth: Vec<State> = tr.samples.iter().map(|s| s.state.clone()).collect();
@@ -145,6 +162,7 @@ pub fn evaluate(model: &TrainedModel, bag: &Bag, opts: &EvalOptions) -> Result<E
     let rollout_seconds = start.elapsed().as_secs_f64();
     let summary = summarize(&curves).map_err(anyhow::Error::msg)?;
     Ok(Evaluation {
+        averages: summary.time_average(),
         model: crate::dynamics::Dynamics::describe(model),
         system: trajs[0].system.clone(),
         particles: trajs[0].graph.n(),
@@ -160,9 +178,10 @@ pub fn evaluate(model: &TrainedModel, bag: &Bag, opts: &EvalOptions) -> Result<E
 /// A plain-text table of a summary at a few times.
 pub fn table(e: &Evaluation, rows: usize) -> String {
     let s = &e.summary;
-    let mut out = format!(
-        "{} on {}-particle {} ({} trajectories, dt {}):\n{:>8}  {:>10}  {:>10}  {:>10}\n",
-        e.model, e.particles, e.system, e.trajectories, e.dt, "t [s]", "RE", "EE", "ME"
+    let mut out =
+        format!(
+        "{} on {}-particle {} ({} trajectories, dt {}):\n{:>8}  {:>10}  {:>10}  {:>10}  {:>10}\n",
+        e.model, e.particles, e.system, e.trajectories, e.dt, "t [s]", "RE", "EE", "ME", "ME scaled"
     );
     let n = s.t.len();
     let picks: Vec<usize> = if n <= rows {
@@ -172,11 +191,14 @@ pub fn table(e: &Evaluation, rows: usize) -> String {
     };
     for i in picks {
         out += &format!(
-            "{:>8.3}  {:>10.3e}  {:>10.3e}  {:>10.3e}\n",
-            s.t[i], s.re.gmean[i], s.ee.gmean[i], s.me.gmean[i]
+            "{:>8.3}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}\n",
+            s.t[i], s.re.gmean[i], s.ee.gmean[i], s.me.gmean[i], s.me_scaled.gmean[i]
         );
     }
-    let (re, ee, me) = s.time_average();
-    out += &format!("{:>8}  {re:>10.3e}  {ee:>10.3e}  {me:>10.3e}\n", "mean");
+    let a = s.time_average();
+    out += &format!(
+        "{:>8}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}\n",
+        "mean", a.re, a.ee, a.me, a.me_scaled
+    );
     out
 }

@@ -6,16 +6,16 @@
 //! Data flows one way: [`physics`] → [`data`] (bags) → `model` + `train` →
 //! model file → `kernel` + `rollout` → [`data`] → `metrics`.
 
+pub mod bench;
+pub mod cli;
 pub mod data;
 pub mod dynamics;
+pub mod evaluate;
 pub mod kernel;
+pub mod metrics;
 pub mod model;
 pub mod physics;
+pub mod plot;
 pub mod ros;
 pub mod system;
 pub mod train;
-pub mod evaluate;
-pub mod bench;
-pub mod cli;
-pub mod metrics;
-pub mod plot;

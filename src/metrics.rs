@@ -226,25 +226,38 @@ pub fn summarize(curves: &[ErrorCurves]) -> Result<Summary, String> {
     })
 }
 
-/// Geometric mean of a curve's values (floored at [`LOG_FLOOR`]).
-fn gmean(x: &[f64]) -> f64 {
-    if x.is_empty() {
-        return f64::NAN;
-    }
-    (x.iter().map(|v| v.max(LOG_FLOOR).ln()).sum::<f64>() / x.len() as f64).exp()
+/// Time-averaged errors of a [`Summary`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Averages {
+    /// RE.
+    pub re: f64,
+    /// EE.
+    pub ee: f64,
+    /// ME as in the paper.
+    pub me: f64,
+    /// ME relative to the momentum scale.
+    pub me_scaled: f64,
 }
 
 impl Summary {
-    /// (RE, EE, ME) averaged over time: the geometric mean over times of the
-    /// per-time geometric means, i.e. the geometric mean over all
-    /// trajectories and times (errors span decades, so an arithmetic mean
-    /// would only see the largest). NaN for a summary without times.
-    pub fn time_average(&self) -> (f64, f64, f64) {
-        (
-            gmean(&self.re.gmean),
-            gmean(&self.ee.gmean),
-            gmean(&self.me.gmean),
-        )
+    /// Time averages of the geometric-mean curves: the arithmetic mean over
+    /// the times after the first (at t = 0 prediction and truth coincide, so
+    /// errors there are exactly 0 and say nothing). NaN without such times.
+    pub fn time_average(&self) -> Averages {
+        let avg = |b: &Band| {
+            let x = &b.gmean[1.min(b.gmean.len())..];
+            if x.is_empty() {
+                f64::NAN
+            } else {
+                x.iter().sum::<f64>() / x.len() as f64
+            }
+        };
+        Averages {
+            re: avg(&self.re),
+            ee: avg(&self.ee),
+            me: avg(&self.me),
+            me_scaled: avg(&self.me_scaled),
+        }
     }
 
     /// (RE, EE, ME) geometric means at the stored time nearest to `t`; NaN

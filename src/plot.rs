@@ -46,10 +46,11 @@ const COLORS: [RGBColor; 8] = [
 type Pick = fn(&Summary) -> &Band;
 
 /// The rows of the figure: label and the band it plots.
-const ROWS: [(&str, Pick); 3] = [
+const ROWS: [(&str, Pick); 4] = [
     ("RE(t)", |s| &s.re),
     ("EE(t)", |s| &s.ee),
     ("ME(t)", |s| &s.me),
+    ("ME scaled", |s| &s.me_scaled),
 ];
 
 /// Smallest and largest positive (non-floored) value of a row, padded to
@@ -81,7 +82,7 @@ fn y_range(models: &[(String, Summary)], pick: Pick) -> (f64, f64) {
     }
 }
 
-/// Writes one PNG: rows RE/EE/ME (log y), a column per panel (e.g. "5-spring"),
+/// Writes one PNG: rows RE/EE/ME/ME-scaled (log y), a column per panel (e.g. "5-spring"),
 /// each model a line (geometric mean) with a shaded 95% band and a legend.
 ///
 /// Errors on empty input, summaries whose bands do not match their times, or

@@ -145,7 +145,8 @@ pub fn train(
     }
     graph.validate().map_err(anyhow::Error::msg)?;
     for (i, (s, a)) in states.iter().zip(acc).enumerate() {
-        s.validate(graph).map_err(|e| anyhow::anyhow!("state {i}: {e}"))?;
+        s.validate(graph)
+            .map_err(|e| anyhow::anyhow!("state {i}: {e}"))?;
         if a.len() != graph.ndof() || a.iter().any(|x| !x.is_finite()) {
             bail!("accelerations of state {i} have the wrong size or are not finite");
         }
@@ -156,7 +157,8 @@ pub fn train(
 
     let mut order: Vec<usize> = (0..states.len()).collect();
     order.shuffle(&mut rng);
-    let n_val = ((states.len() as f64 * cfg.validation).round() as usize).clamp(1, states.len() - 1);
+    let n_val =
+        ((states.len() as f64 * cfg.validation).round() as usize).clamp(1, states.len() - 1);
     let (val_idx, train_idx) = order.split_at(n_val);
     let mut train_idx = train_idx.to_vec();
     let val_s: Vec<&State> = val_idx.iter().map(|&i| &states[i]).collect();
@@ -313,9 +315,14 @@ pub fn train_from_bags(
         ds.graph.n(),
         ds.graph.dim
     ));
-    let types = opts
-        .types
-        .unwrap_or(ds.graph.types.iter().map(|&t| t as usize + 1).max().unwrap_or(1));
+    let types = opts.types.unwrap_or(
+        ds.graph
+            .types
+            .iter()
+            .map(|&t| t as usize + 1)
+            .max()
+            .unwrap_or(1),
+    );
     let mut hyper = Hyper::new(variant, ds.graph.dim, types, ds.graph.n());
     hyper.hidden = opts.hidden;
     hyper.embed = opts.embed;
@@ -332,7 +339,11 @@ pub fn train_from_bags(
     if variant == crate::model::Variant::Mcgnode {
         log(&format!(
             "body-force branch: {}",
-            if hyper.body_force { "on" } else { "off (closed system: momentum is conserved exactly)" }
+            if hyper.body_force {
+                "on"
+            } else {
+                "off (closed system: momentum is conserved exactly)"
+            }
         ));
     }
     let trained = train(hyper, &ds.graph, &ds.states, &ds.acc, cfg, on_epoch)?;
@@ -345,7 +356,11 @@ pub fn train_from_bags(
             system: first.system.clone(),
             particles: ds.graph.n(),
             dim: ds.graph.dim,
-            bag: bags.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(","),
+            bag: bags
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(","),
             bag_sha256: digests.join(","),
             accelerations: source.to_string(),
             trajectories: trajectories.len(),

@@ -137,7 +137,12 @@ fn model_gradients_match_finite_differences() {
         let grads = net.loss(&batch).unwrap().backward().unwrap();
         for name in net.store.names().to_vec() {
             let var = net.store.get(&name).unwrap().clone();
-            let base = var.as_tensor().flatten_all().unwrap().to_vec1::<f64>().unwrap();
+            let base = var
+                .as_tensor()
+                .flatten_all()
+                .unwrap()
+                .to_vec1::<f64>()
+                .unwrap();
             // A parameter the loss does not depend on (the last edge update when
             // only node outputs are decoded) has no gradient: zero.
             let g_an = grads

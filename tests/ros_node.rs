@@ -82,7 +82,7 @@ fn ros_env() -> PathBuf {
     if !*built {
         let dir = tempfile::tempdir().expect("tempdir");
         let o = run_bounded(
-            &mut Command::new("bash").arg("scripts/build_msgs.sh"),
+            Command::new("bash").arg("scripts/build_msgs.sh"),
             Duration::from_secs(300),
             dir.path(),
         );
@@ -154,7 +154,10 @@ fn node_serves_rclpy_clients() {
         "--- stdout\n{}\n--- stderr\n{}\n--- node log\n{node_log}",
         o.stdout, o.stderr
     );
-    assert!(o.status.success(), "the rclpy driver or the node failed\n{report}");
+    assert!(
+        o.status.success(),
+        "the rclpy driver or the node failed\n{report}"
+    );
     let summary = o
         .stdout
         .lines()
@@ -216,10 +219,16 @@ fn bad_parameters_are_rejected_at_start() {
     let good_arg = good.to_string_lossy().into_owned();
     let cases: [(Vec<&str>, &str); 5] = [
         (vec!["--params", &bad_arg], "unknown parameter \"horizn\""),
-        (vec!["--params", &good_arg, "--set", "horizon=abc"], "must be an integer"),
+        (
+            vec!["--params", &good_arg, "--set", "horizon=abc"],
+            "must be an integer",
+        ),
         (vec!["--set", "dt=0"], "must be finite and > 0"),
         (vec!["--model", "truth:rope"], "unknown system kind"),
-        (vec!["--params", "/nonexistent/p.yaml"], "cannot read parameter file"),
+        (
+            vec!["--params", "/nonexistent/p.yaml"],
+            "cannot read parameter file",
+        ),
     ];
     for (args, want) in cases {
         // Through netns.sh all the same: a parameter check that wrongly passed
@@ -228,7 +237,11 @@ fn bad_parameters_are_rejected_at_start() {
         c.arg("scripts/netns.sh").arg(BIN).arg("serve").args(&args);
         let o = run_bounded(&mut c, Duration::from_secs(20), dir.path());
         assert!(!o.status.success(), "{args:?} was accepted");
-        assert!(o.stderr.contains(want), "{args:?}: want {want:?} in:\n{}", o.stderr);
+        assert!(
+            o.stderr.contains(want),
+            "{args:?}: want {want:?} in:\n{}",
+            o.stderr
+        );
     }
 }
 
@@ -246,18 +259,28 @@ fn shipped_launch_params_are_valid() {
         .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
         .collect();
     for want in ["spring5.yaml", "pendulum5.yaml"] {
-        assert!(names.iter().any(|n| n == want), "launch_params/{want} missing: {names:?}");
+        assert!(
+            names.iter().any(|n| n == want),
+            "launch_params/{want} missing: {names:?}"
+        );
     }
     for f in &files {
         // --print-params exits before any DDS entity exists.
         let o = run_bounded(
-            Command::new(BIN).arg("serve").arg("--params").arg(f).arg("--print-params"),
+            Command::new(BIN)
+                .arg("serve")
+                .arg("--params")
+                .arg(f)
+                .arg("--print-params"),
             Duration::from_secs(20),
             dir.path(),
         );
         assert!(o.status.success(), "{}: {}", f.display(), o.stderr);
         assert!(o.stdout.contains("ros__parameters:"), "{}", o.stdout);
-        let name = f.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let name = f
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
         let system = name.trim_end_matches(char::is_numeric);
         assert!(
             o.stdout.contains(&format!("truth:{system}")) || !o.stdout.contains("truth:"),

@@ -20,7 +20,10 @@ pub fn run(a: Args) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&figs)?);
         return Ok(());
     }
-    println!("{:<50} {:>14}  {:<8} {:>12}", "measure (median)", "mcgnode", "unit", "JAX (same machine)");
+    println!(
+        "{:<50} {:>14}  {:<8} {:>12}",
+        "measure (median)", "mcgnode", "unit", "JAX (same machine)"
+    );
     for f in figs {
         println!(
             "{:<50} {:>14.4}  {:<8} {:>12}",

@@ -32,12 +32,20 @@ pub struct Args {
 pub fn run(a: Args) -> Result<()> {
     let t0 = std::time::Instant::now();
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    let (n_train, n_test, epochs) = if a.quick { (20, 10, 60) } else { (100, 100, 1500) };
+    let (n_train, n_test, epochs) = if a.quick {
+        (20, 10, 60)
+    } else {
+        (100, 100, 1500)
+    };
     let epochs = a.epochs.unwrap_or(epochs);
     let train_bag = a.out.join("train-5-spring.mcap");
     let cfg = SystemConfig::new(SystemKind::Spring, 5);
     simulate_to(&cfg, n_train, a.seed, &train_bag)?;
-    eprintln!("[{:5.1} s] simulated {n_train} training trajectories: {}", t0.elapsed().as_secs_f64(), train_bag.display());
+    eprintln!(
+        "[{:5.1} s] simulated {n_train} training trajectories: {}",
+        t0.elapsed().as_secs_f64(),
+        train_bag.display()
+    );
     let sizes = [5usize, 20, 50];
     let mut tests = vec![];
     for &n in &sizes {
@@ -47,7 +55,10 @@ pub fn run(a: Args) -> Result<()> {
         simulate_to(&c, n_test, a.seed + 1000, &p)?;
         tests.push((n, p));
     }
-    eprintln!("[{:5.1} s] simulated {n_test} test trajectories of 5, 20 and 50 springs (20 s each)", t0.elapsed().as_secs_f64());
+    eprintln!(
+        "[{:5.1} s] simulated {n_test} test trajectories of 5, 20 and 50 springs (20 s each)",
+        t0.elapsed().as_secs_f64()
+    );
     let cfg = TrainConfig {
         epochs,
         patience: epochs,
@@ -62,26 +73,42 @@ pub fn run(a: Args) -> Result<()> {
                 let (cfg, train_bag, out) = (cfg.clone(), train_bag.clone(), a.out.clone());
                 s.spawn(move || -> Result<PathBuf> {
                     let every = (cfg.epochs / 5).max(1);
-                    let f = train_from_bags(v, &[train_bag], &ModelOptions::default(), &cfg, |m| eprintln!("[{v}] {m}"), |r| {
-                        if r.epoch % every == 0 {
-                            eprintln!("[{v}] epoch {}/{}  train {:.3e}  val {:.3e}  ({:.0} s)", r.epoch, r.epochs, r.train_loss, r.validation_loss, r.elapsed);
-                        }
-                        true
-                    })?;
+                    let f = train_from_bags(
+                        v,
+                        &[train_bag],
+                        &ModelOptions::default(),
+                        &cfg,
+                        |m| eprintln!("[{v}] {m}"),
+                        |r| {
+                            if r.epoch % every == 0 {
+                                eprintln!(
+                                    "[{v}] epoch {}/{}  train {:.3e}  val {:.3e}  ({:.0} s)",
+                                    r.epoch, r.epochs, r.train_loss, r.validation_loss, r.elapsed
+                                );
+                            }
+                            true
+                        },
+                    )?;
                     let p = out.join(format!("{v}-5-spring.json"));
                     f.save(&p)?;
                     Ok(p)
                 })
             })
             .collect();
-        handles.into_iter().map(|h| h.join().expect("training thread panicked")).collect()
+        handles
+            .into_iter()
+            .map(|h| h.join().expect("training thread panicked"))
+            .collect()
     });
     let mut models = vec![];
     for (v, r) in variants.iter().zip(results) {
         let p = r?;
         models.push((*v, TrainedModel::load(&p)?));
     }
-    eprintln!("[{:5.1} s] trained GNODE and MCGNODE ({epochs} epochs each)", t0.elapsed().as_secs_f64());
+    eprintln!(
+        "[{:5.1} s] trained GNODE and MCGNODE ({epochs} epochs each)",
+        t0.elapsed().as_secs_f64()
+    );
     let mut panels = vec![];
     let mut json = vec![];
     for (n, p) in &tests {
@@ -92,7 +119,7 @@ pub fn run(a: Args) -> Result<()> {
             println!("{}", table(&e, 6));
             json.push(serde_json::json!({
                 "model": v.name(), "particles": n,
-                "re_mean": e.summary.time_average().0, "ee_mean": e.summary.time_average().1, "me_mean": e.summary.time_average().2,
+                "averages": e.averages,
                 "rollout_seconds": e.rollout_seconds,
             }));
             curves.push((v.name().to_string(), e.summary));
@@ -101,7 +128,10 @@ pub fn run(a: Args) -> Result<()> {
     }
     let plot = a.out.join("demo.png");
     crate::plot::plot_summaries(&plot, &panels)?;
-    std::fs::write(a.out.join("demo.json"), serde_json::to_string_pretty(&json)?)?;
+    std::fs::write(
+        a.out.join("demo.json"),
+        serde_json::to_string_pretty(&json)?,
+    )?;
     println!(
         "demo done in {:.0} s: plot {}, summary {}",
         t0.elapsed().as_secs_f64(),

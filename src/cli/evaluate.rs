@@ -50,7 +50,10 @@ pub fn run(a: Args) -> Result<()> {
         let title = format!("{}-particle {}", e.particles, e.system);
         crate::plot::plot_summaries(
             p,
-            &[(title, vec![(model.file.hyper.variant.to_string(), e.summary.clone())])],
+            &[(
+                title,
+                vec![(model.file.hyper.variant.to_string(), e.summary.clone())],
+            )],
         )?;
     }
     if a.json {

@@ -61,7 +61,13 @@ pub(crate) fn parse_vector(s: &str) -> Result<Vec<f64>, String> {
             x.trim()
                 .parse::<f64>()
                 .map_err(|_| format!("{x:?} is not a number"))
-                .and_then(|v| if v.is_finite() { Ok(v) } else { Err("not finite".into()) })
+                .and_then(|v| {
+                    if v.is_finite() {
+                        Ok(v)
+                    } else {
+                        Err("not finite".into())
+                    }
+                })
         })
         .collect()
 }

@@ -68,7 +68,11 @@ pub fn run(a: Args) -> Result<()> {
         }
     };
     let dt = a.dt.or(cfg.as_ref().map(|c| c.dt)).context("pass --dt")?;
-    let every = a.save_every.or(cfg.as_ref().map(|c| c.save_every)).unwrap_or(1).max(1);
+    let every = a
+        .save_every
+        .or(cfg.as_ref().map(|c| c.save_every))
+        .unwrap_or(1)
+        .max(1);
     if !(a.duration.is_finite() && a.duration > 0.0 && dt > 0.0) {
         bail!("duration and dt must be positive");
     }
@@ -85,14 +89,22 @@ pub fn run(a: Args) -> Result<()> {
             kernel.acceleration(&mut ws2, q, v, &mut acc);
             samples.push(Sample {
                 t: step as f64 * dt,
-                state: State { q: q.to_vec(), v: v.to_vec() },
+                state: State {
+                    q: q.to_vec(),
+                    v: v.to_vec(),
+                },
                 acc: Some(acc.clone()),
             })
         })
         .map_err(anyhow::Error::msg)?;
     let secs = t0.elapsed().as_secs_f64();
     let n = samples.len();
-    let tr = Trajectory { id: 0, system, graph, samples };
+    let tr = Trajectory {
+        id: 0,
+        system,
+        graph,
+        samples,
+    };
     let mut meta = BTreeMap::new();
     if let Some(c) = cfg.as_mut() {
         c.dt = dt;
@@ -101,7 +113,10 @@ pub fn run(a: Args) -> Result<()> {
         c.particles = tr.graph.n();
         meta.insert(META_SYSTEM.to_string(), serde_json::to_string(c)?);
     }
-    meta.insert("generator".into(), format!("mcgnode rollout of {}", a.model.display()));
+    meta.insert(
+        "generator".into(),
+        format!("mcgnode rollout of {}", a.model.display()),
+    );
     write_trajectories(&a.out, &[tr], &meta)?;
     eprintln!(
         "{steps} steps ({:.3} s simulated) in {secs:.3} s; wrote {n} states to {}",

@@ -75,12 +75,22 @@ pub fn config(a: &Args) -> Result<SystemConfig> {
 }
 
 /// Simulates and writes a bag; returns the configuration used.
-pub fn simulate_to(cfg: &SystemConfig, trajectories: usize, seed: u64, out: &PathBuf) -> Result<()> {
-    let trajs = cfg.try_simulate(trajectories, seed).map_err(anyhow::Error::msg)?;
+pub fn simulate_to(
+    cfg: &SystemConfig,
+    trajectories: usize,
+    seed: u64,
+    out: &PathBuf,
+) -> Result<()> {
+    let trajs = cfg
+        .try_simulate(trajectories, seed)
+        .map_err(anyhow::Error::msg)?;
     let mut meta = BTreeMap::new();
     meta.insert(META_SYSTEM.to_string(), serde_json::to_string(cfg)?);
     meta.insert("seed".to_string(), seed.to_string());
-    meta.insert("generator".to_string(), format!("mcgnode {} simulate", env!("CARGO_PKG_VERSION")));
+    meta.insert(
+        "generator".to_string(),
+        format!("mcgnode {} simulate", env!("CARGO_PKG_VERSION")),
+    );
     write_trajectories(out, &trajs, &meta).with_context(|| format!("writing {}", out.display()))?;
     Ok(())
 }

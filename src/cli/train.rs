@@ -78,7 +78,10 @@ pub fn progress(epochs: usize, quiet: bool) -> impl FnMut(&EpochReport) -> bool 
                 }
             }
             None if !quiet && (r.epoch % every == 0 || r.epoch == 1) => {
-                eprintln!("epoch {}/{}  {msg}  ({:.1} s)", r.epoch, r.epochs, r.elapsed)
+                eprintln!(
+                    "epoch {}/{}  {msg}  ({:.1} s)",
+                    r.epoch, r.epochs, r.elapsed
+                )
             }
             None => {}
         }

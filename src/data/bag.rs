@@ -21,7 +21,9 @@ pub const PARTICLE_STATE_TOPIC: &str = "/particle_state";
 /// Name of the metadata record that holds the bag's key/value metadata.
 pub const METADATA_NAME: &str = "mcgnode";
 
-/// Largest record (or decompressed chunk) accepted from a file smaller than this.
+/// Floor of the reader's size limit for one record or decompressed chunk (the
+/// limit is the larger of this and the file size): roomy for any chunk we or
+/// rosbag2 write, small enough that a corrupt length cannot exhaust memory.
 const MIN_RECORD_LIMIT: u64 = 256 << 20;
 
 /// A channel of a [`BagWriter`].
@@ -30,8 +32,8 @@ pub struct ChannelId(pub u16);
 
 /// Streaming MCAP writer for ROS 2 messages already encoded as CDR.
 ///
-/// Drop without [`BagWriter::finish`] leaves a file without its summary (readers
-/// reject it), so always finish.
+/// Call [`BagWriter::finish`]: dropping also completes the file, but silently
+/// ignores any error.
 pub struct BagWriter<W: Write + Seek = BufWriter<File>> {
     inner: mcap::Writer<W>,
     path: PathBuf,
@@ -43,17 +45,18 @@ impl BagWriter<BufWriter<File>> {
     pub fn create(path: impl AsRef<Path>) -> Result<Self, DataError> {
         let path = path.as_ref();
         let file = File::create(path).map_err(|e| DataError::io(path, "creating", e))?;
-        Self::with_label(BufWriter::new(file), path.to_path_buf())
+        Self::with_path(BufWriter::new(file), path.to_path_buf())
     }
 }
 
 impl<W: Write + Seek> BagWriter<W> {
     /// Starts a bag on any seekable stream.
     pub fn new(w: W) -> Result<Self, DataError> {
-        Self::with_label(w, PathBuf::from("<stream>"))
+        Self::with_path(w, PathBuf::from("<stream>"))
     }
 
-    fn with_label(w: W, path: PathBuf) -> Result<Self, DataError> {
+    /// Starts a bag on any seekable stream; errors name `path` (the file it writes).
+    pub fn with_path(w: W, path: PathBuf) -> Result<Self, DataError> {
         let inner = mcap::WriteOptions::new()
             .profile("ros2")
             .library(format!("mcgnode {}", env!("CARGO_PKG_VERSION")))
@@ -246,7 +249,7 @@ pub fn write_trajectories(
     let mut tmp = builder
         .tempfile_in(dir)
         .map_err(|e| DataError::io(dir, "creating a temporary file in", e))?;
-    let mut w = BagWriter::with_label(BufWriter::new(tmp.as_file_mut()), path.to_path_buf())?;
+    let mut w = BagWriter::with_path(BufWriter::new(tmp.as_file_mut()), path.to_path_buf())?;
     w.add_metadata(METADATA_NAME, metadata)?;
     let ch = w.add_particle_state_channel(PARTICLE_STATE_TOPIC)?;
     for tr in trajectories {

@@ -32,7 +32,10 @@ impl KMlp {
         let mut layers = vec![];
         loop {
             let i = layers.len();
-            let (Some(wt), Some(bs)) = (w.get(&format!("{name}.l{i}.w")), w.get(&format!("{name}.l{i}.b"))) else {
+            let (Some(wt), Some(bs)) = (
+                w.get(&format!("{name}.l{i}.w")),
+                w.get(&format!("{name}.l{i}.b")),
+            ) else {
                 break;
             };
             if wt.shape.len() != 2 || bs.shape != [wt.shape[1]] {
@@ -61,7 +64,11 @@ impl KMlp {
     }
 
     fn width(&self) -> usize {
-        self.layers.iter().map(|l| l.out.max(l.inp)).max().unwrap_or(0)
+        self.layers
+            .iter()
+            .map(|l| l.out.max(l.inp))
+            .max()
+            .unwrap_or(0)
     }
 
     /// `y = mlp(x)`; `t1`, `t2` are scratch of at least `width()`.
@@ -70,10 +77,17 @@ impl KMlp {
         let nl = self.layers.len();
         t1[..x.len()].copy_from_slice(x);
         for (li, l) in self.layers.iter().enumerate() {
-            let dst: &mut [f64] = if li + 1 == nl { &mut y[..l.out] } else { &mut t2[..l.out] };
+            let dst: &mut [f64] = if li + 1 == nl {
+                &mut y[..l.out]
+            } else {
+                &mut t2[..l.out]
+            };
             dst.copy_from_slice(&l.b);
             for i in 0..l.inp {
                 let xi = t1[i];
+                if xi == 0.0 {
+                    continue; // one-hot inputs are mostly zero
+                }
                 let row = &l.w[i * l.out..(i + 1) * l.out];
                 for (d, w) in dst.iter_mut().zip(row) {
                     *d += xi * w;
@@ -124,6 +138,7 @@ pub struct Workspace {
     /// `plan.recv[e]` due to `plan.send[e]` (MCGNODE).
     pub edge_force: Vec<f64>,
     fpair: Vec<f64>,
+    type_em: Vec<f64>,
     incid: Vec<Vec<(usize, f64)>>,
     dq: Vec<f64>,
     kmat: Vec<f64>,
@@ -135,11 +150,18 @@ impl Kernel {
     pub fn new(hyper: &Hyper, w: &Weights) -> Result<Self> {
         // Names, shapes and finiteness are checked against the architecture that
         // `hyper` defines, so the loops below can trust every size.
-        let mut reference = crate::model::Net::new(hyper.clone(), &mut rand_chacha::ChaCha8Rng::seed_from_u64(0))?;
+        let mut reference = crate::model::Net::new(
+            hyper.clone(),
+            &mut rand_chacha::ChaCha8Rng::seed_from_u64(0),
+        )?;
         reference.store.load(w)?;
         let ld = |n: &str| KMlp::load(w, n);
         let mut rounds = vec![];
-        let graph_rounds = if hyper.variant.biases().graph { hyper.rounds } else { 0 };
+        let graph_rounds = if hyper.variant.biases().graph {
+            hyper.rounds
+        } else {
+            0
+        };
         for l in 0..graph_rounds {
             let v = ld(&format!("mp{l}.v"))?.with_context(|| format!("missing round {l}"))?;
             let e = ld(&format!("mp{l}.e"))?.with_context(|| format!("missing round {l}"))?;
@@ -190,7 +212,11 @@ impl Kernel {
                 self.hyper.dim, graph.dim
             ));
         }
-        if let Some(t) = graph.types.iter().find(|&&t| t as usize >= self.hyper.types) {
+        if let Some(t) = graph
+            .types
+            .iter()
+            .find(|&&t| t as usize >= self.hyper.types)
+        {
             return Err(format!(
                 "particle type {t} is unknown to the model (it knows {} types)",
                 self.hyper.types
@@ -221,12 +247,26 @@ impl Kernel {
             &self.edge_out,
             &self.body_out,
         ];
-        let mut width = mlps.iter().filter_map(|m| m.as_ref()).map(|m| m.width()).max().unwrap_or(0);
+        let mut width = mlps
+            .iter()
+            .filter_map(|m| m.as_ref())
+            .map(|m| m.width())
+            .max()
+            .unwrap_or(0);
         for (a, b) in &self.rounds {
             width = width.max(a.width()).max(b.width());
         }
-        let xin = self.node_em.as_ref().map(|m| m.inp()).unwrap_or(0).max(self.hyper.types + 2 * d);
-        let x_len = if self.node_mlp.is_some() { 2 * n * d } else { n * xin };
+        let xin = self
+            .node_em
+            .as_ref()
+            .map(|m| m.inp())
+            .unwrap_or(0)
+            .max(self.hyper.types + 2 * d);
+        let x_len = if self.node_mlp.is_some() {
+            2 * n * d
+        } else {
+            n * xin
+        };
         let width = width.max(2 * n * d).max(2 * em + 1);
         let mut incid = vec![vec![]; n];
         for (r, bar) in plan.bars.iter().enumerate() {
@@ -249,6 +289,7 @@ impl Kernel {
             force: vec![0.0; n * d],
             edge_force: vec![0.0; ne / 2 * d],
             fpair: vec![0.0; 2 * d],
+            type_em: vec![0.0; self.hyper.types * em],
             incid,
             dq: vec![0.0; k * d],
             kmat: vec![0.0; k * k],
@@ -257,14 +298,12 @@ impl Kernel {
         })
     }
 
-    fn node_features(&self, ws: &mut Workspace, q: &[f64], v: &[f64], i: usize, with_qv: bool) -> usize {
+    /// Writes (one-hot type, q_i, q̇_i) into `ws.cat`; returns its length.
+    fn node_features(&self, ws: &mut Workspace, q: &[f64], v: &[f64], i: usize) -> usize {
         let (d, t) = (ws.plan.dim, self.hyper.types);
         let c = &mut ws.cat;
         c[..t].iter_mut().for_each(|x| *x = 0.0);
         c[ws.plan.types[i]] = 1.0;
-        if !with_qv {
-            return t;
-        }
         c[t..t + d].copy_from_slice(&q[i * d..(i + 1) * d]);
         c[t + d..t + 2 * d].copy_from_slice(&v[i * d..(i + 1) * d]);
         t + 2 * d
@@ -282,13 +321,28 @@ impl Kernel {
             m.forward(&ws.x[..2 * nd], acc, &mut ws.t1, &mut ws.t2);
             return;
         }
-        // Node embeddings.
+        // Node embeddings. Decoupled variants embed the type alone: one per type.
         let node_em = self.node_em.as_ref().expect("checked in new");
-        for i in 0..n {
-            let len = self.node_features(ws, q, v, i, !bias.decoupled);
-            let (cat, h) = (&ws.cat[..len], &mut ws.h[i * em..(i + 1) * em]);
-            node_em.forward(cat, h, &mut ws.t1, &mut ws.t2);
-            h.iter_mut().for_each(|x| *x = squareplus_f64(*x));
+        if bias.decoupled {
+            let t = self.hyper.types;
+            for ty in 0..t {
+                ws.cat[..t].iter_mut().for_each(|x| *x = 0.0);
+                ws.cat[ty] = 1.0;
+                let h = &mut ws.type_em[ty * em..(ty + 1) * em];
+                node_em.forward(&ws.cat[..t], h, &mut ws.t1, &mut ws.t2);
+                h.iter_mut().for_each(|x| *x = squareplus_f64(*x));
+            }
+            for i in 0..n {
+                let ty = ws.plan.types[i];
+                ws.h[i * em..(i + 1) * em].copy_from_slice(&ws.type_em[ty * em..(ty + 1) * em]);
+            }
+        } else {
+            for i in 0..n {
+                let len = self.node_features(ws, q, v, i);
+                let (cat, h) = (&ws.cat[..len], &mut ws.h[i * em..(i + 1) * em]);
+                node_em.forward(cat, h, &mut ws.t1, &mut ws.t2);
+                h.iter_mut().for_each(|x| *x = squareplus_f64(*x));
+            }
         }
         // Edge embeddings of w_ij = q_i − q_j.
         let ne = ws.plan.recv.len();
@@ -302,43 +356,60 @@ impl Kernel {
             edge_em.forward(&ws.cat[..d], he, &mut ws.t1, &mut ws.t2);
             he.iter_mut().for_each(|x| *x = squareplus_f64(*x));
         }
-        // Message passing.
-        for (wv, we) in &self.rounds {
+        // Message passing. In the last round, skip what no decoder reads: node
+        // updates when forces come from edges, edge updates when they come from nodes.
+        let rounds = self.rounds.len();
+        for (l, (wv, we)) in self.rounds.iter().enumerate() {
+            let last = l + 1 == rounds;
+            let nodes_needed = !(last && bias.pairwise);
+            let edges_needed = !last || bias.pairwise;
             ws.agg.iter_mut().for_each(|x| *x = 0.0);
             for e in 0..ne {
                 let (r, s) = (ws.plan.recv[e], ws.plan.send[e]);
-                ws.cat[..em].copy_from_slice(&ws.h[s * em..(s + 1) * em]);
-                ws.cat[em..2 * em].copy_from_slice(&ws.he[e * em..(e + 1) * em]);
-                let (cat, rest) = ws.cat.split_at_mut(2 * em);
-                let msg = &mut rest[..em];
-                wv.forward(cat, msg, &mut ws.t1, &mut ws.t2);
-                for (a, m) in ws.agg[r * em..(r + 1) * em].iter_mut().zip(msg.iter()) {
-                    *a += m;
+                if nodes_needed {
+                    ws.cat[..em].copy_from_slice(&ws.h[s * em..(s + 1) * em]);
+                    ws.cat[em..2 * em].copy_from_slice(&ws.he[e * em..(e + 1) * em]);
+                    let (cat, rest) = ws.cat.split_at_mut(2 * em);
+                    let msg = &mut rest[..em];
+                    wv.forward(cat, msg, &mut ws.t1, &mut ws.t2);
+                    for (a, m) in ws.agg[r * em..(r + 1) * em].iter_mut().zip(msg.iter()) {
+                        *a += m;
+                    }
                 }
-                ws.cat[..em].copy_from_slice(&ws.h[r * em..(r + 1) * em]);
-                ws.cat[em..2 * em].copy_from_slice(&ws.h[s * em..(s + 1) * em]);
-                let hn = &mut ws.he_new[e * em..(e + 1) * em];
-                we.forward(&ws.cat[..2 * em], hn, &mut ws.t1, &mut ws.t2);
-                for (x, old) in hn.iter_mut().zip(&ws.he[e * em..(e + 1) * em]) {
-                    *x = squareplus_f64(*x + old);
+                if edges_needed {
+                    ws.cat[..em].copy_from_slice(&ws.h[r * em..(r + 1) * em]);
+                    ws.cat[em..2 * em].copy_from_slice(&ws.h[s * em..(s + 1) * em]);
+                    let hn = &mut ws.he_new[e * em..(e + 1) * em];
+                    we.forward(&ws.cat[..2 * em], hn, &mut ws.t1, &mut ws.t2);
+                    for (x, old) in hn.iter_mut().zip(&ws.he[e * em..(e + 1) * em]) {
+                        *x = squareplus_f64(*x + old);
+                    }
                 }
             }
-            for (h, a) in ws.h.iter_mut().zip(&ws.agg) {
-                *h = squareplus_f64(*h + a);
+            if nodes_needed {
+                for (h, a) in ws.h.iter_mut().zip(&ws.agg) {
+                    *h = squareplus_f64(*h + a);
+                }
             }
-            std::mem::swap(&mut ws.he, &mut ws.he_new);
+            if edges_needed {
+                std::mem::swap(&mut ws.he, &mut ws.he_new);
+            }
         }
         // Global (body) embedding.
         if let Some(g) = &self.glob_em {
             for i in 0..n {
-                let len = self.node_features(ws, q, v, i, true);
+                let len = self.node_features(ws, q, v, i);
                 let out = &mut ws.glob[i * em..(i + 1) * em];
                 g.forward(&ws.cat[..len], out, &mut ws.t1, &mut ws.t2);
                 out.iter_mut().for_each(|x| *x = squareplus_f64(*x));
             }
         }
         // Decoders.
-        let out: &mut [f64] = if bias.constrained { &mut ws.force } else { &mut acc[..] };
+        let out: &mut [f64] = if bias.constrained {
+            &mut ws.force
+        } else {
+            &mut acc[..]
+        };
         if let Some(eo) = &self.edge_out {
             // Newton's third law: F_ab = (f_ab − f_ba)/2 on a, −F_ab on b.
             out.iter_mut().for_each(|x| *x = 0.0);
@@ -375,7 +446,12 @@ impl Kernel {
                     ws.cat[..em].copy_from_slice(&ws.h[i * em..(i + 1) * em]);
                     em
                 };
-                no.forward(&ws.cat[..len], &mut out[i * d..(i + 1) * d], &mut ws.t1, &mut ws.t2);
+                no.forward(
+                    &ws.cat[..len],
+                    &mut out[i * d..(i + 1) * d],
+                    &mut ws.t1,
+                    &mut ws.t2,
+                );
             }
         }
         if bias.constrained {
@@ -387,7 +463,10 @@ impl Kernel {
     /// incidence: K_rs gathers only bars that share a particle.
     fn constrained_acc(&self, ws: &mut Workspace, q: &[f64], v: &[f64], acc: &mut [f64]) {
         let (n, d) = (ws.plan.n, ws.plan.dim);
-        let inv_m = self.inv_mass.as_ref().expect("constrained model has masses");
+        let inv_m = self
+            .inv_mass
+            .as_ref()
+            .expect("constrained model has masses");
         let k = ws.plan.bars.len();
         let mut ok = true;
         if k > 0 {

@@ -102,9 +102,8 @@ impl ModelFile {
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read model file {}", path.display()))?;
-        let m: ModelFile = serde_json::from_str(&text).with_context(|| {
-            format!("{} is not a valid mcgnode model file", path.display())
-        })?;
+        let m: ModelFile = serde_json::from_str(&text)
+            .with_context(|| format!("{} is not a valid mcgnode model file", path.display()))?;
         if m.format != FORMAT {
             bail!(
                 "{}: unsupported model format {:?} (expected {FORMAT})",

@@ -27,7 +27,12 @@ pub struct Mlp {
 
 impl Mlp {
     /// Declares the MLP's parameters in the store.
-    pub fn new(store: &mut ParamStore, name: &str, sizes: &[usize], rng: &mut impl Rng) -> Result<Self> {
+    pub fn new(
+        store: &mut ParamStore,
+        name: &str,
+        sizes: &[usize],
+        rng: &mut impl Rng,
+    ) -> Result<Self> {
         for (i, w) in sizes.windows(2).enumerate() {
             store.linear(&format!("{name}.l{i}"), w[0], w[1], rng)?;
         }
@@ -39,7 +44,10 @@ impl Mlp {
 
     /// Parameter names of layer `i`: (weight, bias).
     pub fn layer_names(&self, i: usize) -> (String, String) {
-        (format!("{}.l{i}.w", self.name), format!("{}.l{i}.b", self.name))
+        (
+            format!("{}.l{i}.w", self.name),
+            format!("{}.l{i}.b", self.name),
+        )
     }
 
     /// Number of linear layers.
@@ -52,7 +60,9 @@ impl Mlp {
         let mut h = x.clone();
         for i in 0..self.layers() {
             let (wn, bn) = self.layer_names(i);
-            h = h.matmul(store.get(&wn)?.as_tensor())?.broadcast_add(store.get(&bn)?.as_tensor())?;
+            h = h
+                .matmul(store.get(&wn)?.as_tensor())?
+                .broadcast_add(store.get(&bn)?.as_tensor())?;
             if i + 1 < self.layers() {
                 h = squareplus(&h)?;
             }

@@ -115,7 +115,11 @@ impl Net {
         }
         let mut store = ParamStore::new();
         let parts = Parts::build(&hyper, &mut store, rng)?;
-        Ok(Self { hyper, store, parts })
+        Ok(Self {
+            hyper,
+            store,
+            parts,
+        })
     }
 
     /// Forward pass on a batch.
@@ -138,7 +142,11 @@ impl Net {
         }
         let (node_em, edge_em) = (p.node_em.as_ref().unwrap(), p.edge_em.as_ref().unwrap());
         let full = Tensor::cat(&[&b.onehot, &b.q, &b.v], 1)?;
-        let node_in = if bias.decoupled { b.onehot.clone() } else { full.clone() };
+        let node_in = if bias.decoupled {
+            b.onehot.clone()
+        } else {
+            full.clone()
+        };
         let mut h = squareplus(&node_em.forward(s, &node_in)?)?;
         let nodes = b.b * b.n;
         let em = self.hyper.embed;
@@ -153,7 +161,8 @@ impl Net {
                 let hs = gather(&h, &b.send)?;
                 let hr = gather(&h, &b.recv)?;
                 let msg = wv.forward(s, &Tensor::cat(&[&hs, e], 1)?)?;
-                let agg = Tensor::zeros((nodes, em), DType::F64, &Device::Cpu)?.index_add(&b.recv, &msg, 0)?;
+                let agg = Tensor::zeros((nodes, em), DType::F64, &Device::Cpu)?
+                    .index_add(&b.recv, &msg, 0)?;
                 let e_new = squareplus(&(e + we.forward(s, &Tensor::cat(&[&hr, &hs], 1)?)?)?)?;
                 h = squareplus(&(h + agg)?)?;
                 he = Some(e_new);
@@ -187,10 +196,16 @@ impl Net {
             p.node_out.as_ref().unwrap().forward(s, &inp)?
         };
         if !bias.constrained {
-            return Ok(Output { acc: out, force: None });
+            return Ok(Output {
+                acc: out,
+                force: None,
+            });
         }
         let acc = self.constrained_acc(b, &out)?;
-        Ok(Output { acc, force: Some(out) })
+        Ok(Output {
+            acc,
+            force: Some(out),
+        })
     }
 
     /// q̈ = M⁻¹(N − Aᵀλ), λ = (A M⁻¹ Aᵀ)⁻¹(A M⁻¹ N + Ȧq̇) (paper eq. for q̈; Π = C = 0).

@@ -118,7 +118,11 @@ impl ParamStore {
             if a.data.iter().any(|x| !x.is_finite()) {
                 bail!("parameter {n} contains NaN or infinite values");
             }
-            var.set(&Tensor::from_vec(a.data.clone(), a.shape.as_slice(), &Device::Cpu)?)?;
+            var.set(&Tensor::from_vec(
+                a.data.clone(),
+                a.shape.as_slice(),
+                &Device::Cpu,
+            )?)?;
         }
         Ok(())
     }

@@ -20,7 +20,12 @@ fn f64_slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f64]> {
 
 /// Solves `k x = b` in place (b overwritten by x) by LU with partial pivoting.
 /// `k` is `n×n` row-major and is destroyed; `b` is `n×m`.
-pub fn lu_solve_in_place(k: &mut [f64], b: &mut [f64], n: usize, m: usize) -> std::result::Result<(), String> {
+pub fn lu_solve_in_place(
+    k: &mut [f64],
+    b: &mut [f64],
+    n: usize,
+    m: usize,
+) -> std::result::Result<(), String> {
     for c in 0..n {
         let mut p = c;
         for r in c + 1..n {

@@ -58,7 +58,9 @@ impl TrainedModel {
                 finite &= q[i].is_finite() && v[i].is_finite();
             }
             if !finite {
-                return Err(format!("rollout diverged (non-finite state) at step {step}"));
+                return Err(format!(
+                    "rollout diverged (non-finite state) at step {step}"
+                ));
             }
             if step % every == 0 {
                 visit(step, &q, &v);
@@ -75,7 +77,11 @@ impl Dynamics for TrainedModel {
             "{} trained on {}-particle {} ({} epochs, validation MSE {:.3e})",
             self.file.hyper.variant,
             t.particles,
-            if t.system.is_empty() { "system" } else { &t.system },
+            if t.system.is_empty() {
+                "system"
+            } else {
+                &t.system
+            },
             self.file.training.epochs_run,
             self.file.training.validation_loss
         )
@@ -99,7 +105,8 @@ impl Dynamics for TrainedModel {
         let mut ws = self.kernel.workspace(graph)?;
         state.validate(graph)?;
         let mut acc = vec![0.0; graph.ndof()];
-        self.kernel.acceleration(&mut ws, &state.q, &state.v, &mut acc);
+        self.kernel
+            .acceleration(&mut ws, &state.q, &state.v, &mut acc);
         let b = self.file.hyper.variant.biases();
         let total = if b.constrained {
             ws.force.clone()
@@ -125,7 +132,13 @@ impl Dynamics for TrainedModel {
         Ok(Forces { total, edges })
     }
 
-    fn rollout(&self, graph: &Graph, start: &State, dt: f64, steps: usize) -> Result<Vec<State>, String> {
+    fn rollout(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+    ) -> Result<Vec<State>, String> {
         let mut ws = self.kernel.workspace(graph)?;
         start.validate(graph)?;
         if !(dt.is_finite() && dt > 0.0) {
@@ -133,7 +146,10 @@ impl Dynamics for TrainedModel {
         }
         let mut out = Vec::with_capacity(steps + 1);
         self.rollout_with(&mut ws, start, dt, steps, 1, |_, q, v| {
-            out.push(State { q: q.to_vec(), v: v.to_vec() })
+            out.push(State {
+                q: q.to_vec(),
+                v: v.to_vec(),
+            })
         })?;
         Ok(out)
     }

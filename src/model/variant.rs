@@ -83,7 +83,9 @@ impl FromStr for Variant {
             .copied()
             .find(|v| v.name() == s.to_ascii_lowercase())
             .ok_or_else(|| {
-                format!("unknown model {s:?}; expected one of node, gnode, cgnode, cdgnode, mcgnode")
+                format!(
+                    "unknown model {s:?}; expected one of node, gnode, cgnode, cdgnode, mcgnode"
+                )
             })
     }
 }

@@ -76,15 +76,15 @@ impl FromStr for SystemKind {
     }
 }
 
-/// The field every particle sits in.
+/// The field every particle sits in. Missing JSON fields default to 0 / empty.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Field {
     /// Gravitational acceleration g; the force m·g points along −y.
     pub gravity: f64,
     /// Linear drag coefficient c; the force is −c·q̇ (not scaled by mass).
     pub drag: f64,
     /// Constant force on every particle, `dim` entries; empty means zero.
-    #[serde(default)]
     pub force: Vec<f64>,
 }
 

@@ -6,6 +6,7 @@
 //! - [`params`] (+ [`yaml`]): the ROS 2 parameter file and `--set` overrides;
 //! - [`msgs`]: wire structs of our interfaces;
 //! - [`predict`]: input checks and building the outputs (no ROS);
+//! - [`record`]: MCAP recording of states, predictions and forces;
 //! - [`truth`]: the ground-truth physics as a servable model;
 //! - [`node`]: the DDS entities and the event loop.
 
@@ -13,6 +14,7 @@ pub mod msgs;
 pub mod node;
 pub mod params;
 pub mod predict;
+pub mod record;
 pub mod truth;
 pub mod yaml;
 

@@ -22,11 +22,11 @@ use crate::data::msg::{Header, ParticleState, Time, PARTICLE_STATE_TYPE};
 use crate::dynamics::Dynamics;
 
 use super::msgs::{
-    NodeDiagnostics, ParticleForces, PredictedTrajectory, RolloutRequest, RolloutResponse,
-    PACKAGE,
+    NodeDiagnostics, ParticleForces, PredictedTrajectory, RolloutRequest, RolloutResponse, PACKAGE,
 };
 use super::params::{NodeParams, NODE_NAME};
-use super::predict;
+use super::predict::{self, Prediction};
+use super::record::{now_ns, Recorder};
 
 /// Counters reported in `NodeDiagnostics`.
 #[derive(Debug, Default)]
@@ -113,7 +113,11 @@ struct Shared {
     warn_input: Mutex<RateLimiter>,
     /// Limits warnings about failed service calls (the caller gets the reason).
     warn_service: Mutex<RateLimiter>,
+    /// Limits warnings about recording failures.
+    warn_record: Mutex<RateLimiter>,
     log: Logger,
+    /// MCAP recording, when `record_dir` is set.
+    recorder: Option<Mutex<Recorder>>,
 }
 
 impl Shared {
@@ -149,9 +153,27 @@ impl Shared {
             } else {
                 String::new()
             };
-            self.log
-                .log(LogLevel::Warn, &format!("{why}{more}"));
+            self.log.log(LogLevel::Warn, &format!("{why}{more}"));
         }
+    }
+
+    /// Records with the recorder, if any; failures are warned about.
+    fn record(&self, what: impl FnOnce(&mut Recorder) -> Result<(), String>) {
+        if let Some(r) = &self.recorder {
+            let result = what(&mut r.lock().unwrap_or_else(PoisonError::into_inner));
+            if let Err(e) = result {
+                self.failed(&e, &self.warn_record);
+            }
+        }
+    }
+
+    /// Checks, records and predicts one incoming state (blocking work).
+    fn handle_state(&self, msg: ParticleState, received_ns: u64) -> Result<Prediction, String> {
+        self.record(|r| r.state(received_ns, &msg));
+        let model = self.model();
+        let p = predict::predict(model.as_ref(), &msg, self.params.dt, self.params.horizon)?;
+        self.record(|r| r.prediction(now_ns(), &p.trajectory, &p.forces));
+        Ok(p)
     }
 
     fn diagnostics(&self) -> NodeDiagnostics {
@@ -231,12 +253,18 @@ fn declare_parameters(p: &NodeParams) -> NodeOptions {
         ("dt", ParameterValue::Double(p.dt)),
         ("qos_reliable", ParameterValue::Boolean(p.qos_reliable)),
         ("qos_depth", i(p.qos_depth)),
-        ("diagnostics_period", ParameterValue::Double(p.diagnostics_period)),
+        (
+            "diagnostics_period",
+            ParameterValue::Double(p.diagnostics_period),
+        ),
         ("warn_period", ParameterValue::Double(p.warn_period)),
         ("max_rollout_steps", i(p.max_rollout_steps)),
         ("record_dir", s(&p.record_dir)),
         ("record_split_mb", i(p.record_split_mb)),
-        ("record_split_seconds", ParameterValue::Double(p.record_split_seconds)),
+        (
+            "record_split_seconds",
+            ParameterValue::Double(p.record_split_seconds),
+        ),
     ];
     let initial: Vec<(&'static str, ParameterValue)> = values.to_vec();
     values
@@ -287,7 +315,10 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         node.create_topic(&ros_name(name)?, MessageTypeName::new(pkg, ty), &qos)
             .map_err(|e| anyhow!("creating topic {name}: {e:?}"))
     };
-    let state_type = PARTICLE_STATE_TYPE.rsplit('/').next().unwrap_or("ParticleState");
+    let state_type = PARTICLE_STATE_TYPE
+        .rsplit('/')
+        .next()
+        .unwrap_or("ParticleState");
     let input_topic = topic(&params.input_topic, PACKAGE, state_type)?;
     let traj_topic = topic(&params.trajectory_topic, PACKAGE, "PredictedTrajectory")?;
     let forces_topic = topic(&params.forces_topic, PACKAGE, "ParticleForces")?;
@@ -317,9 +348,23 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
             .map_err(e("the Rollout service"))?,
     };
     let spinner = node.spinner().map_err(e("the node spinner"))?;
+    let recorder = if params.record_dir.is_empty() {
+        None
+    } else {
+        Some(Mutex::new(
+            Recorder::new(&params, &model.describe()).map_err(anyhow::Error::msg)?,
+        ))
+    };
+    let limiter = || {
+        Mutex::new(RateLimiter::new(Duration::from_secs_f64(
+            params.warn_period,
+        )))
+    };
     let shared = Arc::new(Shared {
-        warn_input: Mutex::new(RateLimiter::new(Duration::from_secs_f64(params.warn_period))),
-        warn_service: Mutex::new(RateLimiter::new(Duration::from_secs_f64(params.warn_period))),
+        warn_input: limiter(),
+        warn_service: limiter(),
+        warn_record: limiter(),
+        recorder,
         model: RwLock::new(model),
         stats: Stats::default(),
         log: Logger {
@@ -366,6 +411,20 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
     node.stop_spinner();
     // Cancel the tasks (and drop their DDS entities) before the participant.
     runtime.shutdown_timeout(Duration::from_secs(2));
+    if let Some(r) = &shared.recorder {
+        let mut r = r.lock().unwrap_or_else(PoisonError::into_inner);
+        match r.finish() {
+            Ok(()) => shared.log.log(
+                LogLevel::Info,
+                &format!(
+                    "recorded {} bag(s) in {}",
+                    r.finished.len(),
+                    r.dir().display()
+                ),
+            ),
+            Err(e) => shared.log.log(LogLevel::Error, &e),
+        }
+    }
     drop(node);
     drop(context);
     result
@@ -401,10 +460,9 @@ async fn input_loop(
             }
         };
         shared.stats.received.fetch_add(1, Ordering::Relaxed);
-        let model = shared.model();
-        let (dt, horizon) = (shared.params.dt, shared.params.horizon);
-        let job =
-            tokio::task::spawn_blocking(move || predict::predict(model.as_ref(), &msg, dt, horizon));
+        let received_ns = now_ns();
+        let worker = shared.clone();
+        let job = tokio::task::spawn_blocking(move || worker.handle_state(msg, received_ns));
         let prediction = match job.await {
             Ok(Ok(p)) => p,
             Ok(Err(why)) => {
@@ -540,8 +598,16 @@ mod tests {
             ..RolloutRequest::default()
         };
         let r = rollout_response(model.as_ref(), &req, 0.01, 10);
-        assert!(!r.success && r.message.contains("max_rollout_steps"), "{}", r.message);
+        assert!(
+            !r.success && r.message.contains("max_rollout_steps"),
+            "{}",
+            r.message
+        );
         let r = rollout_response(model.as_ref(), &req, 0.01, 100);
-        assert!(!r.success && r.message.contains("malformed"), "{}", r.message);
+        assert!(
+            !r.success && r.message.contains("malformed"),
+            "{}",
+            r.message
+        );
     }
 }

@@ -84,22 +84,82 @@ enum Kind {
 
 /// Name, kind and documentation of every parameter, in file order.
 const SPECS: &[(&str, Kind, &str)] = &[
-    ("model", Kind::Str, "model to serve: truth:spring, truth:pendulum or a model file"),
-    ("input_topic", Kind::Topic, "topic of incoming ParticleState messages"),
-    ("trajectory_topic", Kind::Topic, "topic of PredictedTrajectory messages"),
-    ("forces_topic", Kind::Topic, "topic of ParticleForces messages"),
-    ("diagnostics_topic", Kind::Topic, "topic of NodeDiagnostics messages"),
-    ("rollout_service", Kind::Topic, "name of the Rollout service"),
-    ("horizon", Kind::Int(1, 1_000_000), "steps predicted per incoming state"),
-    ("dt", Kind::Double(true), "time step of predictions, seconds"),
-    ("qos_reliable", Kind::Bool, "reliable (true) or best-effort (false) topics"),
+    (
+        "model",
+        Kind::Str,
+        "model to serve: truth:spring, truth:pendulum or a model file",
+    ),
+    (
+        "input_topic",
+        Kind::Topic,
+        "topic of incoming ParticleState messages",
+    ),
+    (
+        "trajectory_topic",
+        Kind::Topic,
+        "topic of PredictedTrajectory messages",
+    ),
+    (
+        "forces_topic",
+        Kind::Topic,
+        "topic of ParticleForces messages",
+    ),
+    (
+        "diagnostics_topic",
+        Kind::Topic,
+        "topic of NodeDiagnostics messages",
+    ),
+    (
+        "rollout_service",
+        Kind::Topic,
+        "name of the Rollout service",
+    ),
+    (
+        "horizon",
+        Kind::Int(1, 1_000_000),
+        "steps predicted per incoming state",
+    ),
+    (
+        "dt",
+        Kind::Double(true),
+        "time step of predictions, seconds",
+    ),
+    (
+        "qos_reliable",
+        Kind::Bool,
+        "reliable (true) or best-effort (false) topics",
+    ),
     ("qos_depth", Kind::Int(1, 10_000), "keep-last history depth"),
-    ("diagnostics_period", Kind::Double(true), "seconds between diagnostics messages"),
-    ("warn_period", Kind::Double(false), "seconds between malformed-input warnings"),
-    ("max_rollout_steps", Kind::Int(1, 100_000_000), "largest steps of a Rollout call"),
-    ("record_dir", Kind::Str, "folder for MCAP recordings; empty = no recording"),
-    ("record_split_mb", Kind::Int(0, 1_000_000), "split bags after this many MB (0 = never)"),
-    ("record_split_seconds", Kind::Double(false), "split bags after this many seconds (0 = never)"),
+    (
+        "diagnostics_period",
+        Kind::Double(true),
+        "seconds between diagnostics messages",
+    ),
+    (
+        "warn_period",
+        Kind::Double(false),
+        "seconds between malformed-input warnings",
+    ),
+    (
+        "max_rollout_steps",
+        Kind::Int(1, 100_000_000),
+        "largest steps of a Rollout call",
+    ),
+    (
+        "record_dir",
+        Kind::Str,
+        "folder for MCAP recordings; empty = no recording",
+    ),
+    (
+        "record_split_mb",
+        Kind::Int(0, 1_000_000),
+        "split bags after this many MB (0 = never)",
+    ),
+    (
+        "record_split_seconds",
+        Kind::Double(false),
+        "split bags after this many seconds (0 = never)",
+    ),
 ];
 
 /// Keys of the node's section that are accepted as node names.
@@ -143,7 +203,9 @@ impl NodeParams {
             };
             for (k, v) in entries {
                 if k != "ros__parameters" {
-                    return Err(format!("{node}: unexpected key {k:?} (only ros__parameters)"));
+                    return Err(format!(
+                        "{node}: unexpected key {k:?} (only ros__parameters)"
+                    ));
                 }
                 let mut flat = Vec::new();
                 flatten("", v, &mut flat);
@@ -263,7 +325,10 @@ impl NodeParams {
     pub fn to_yaml(&self) -> String {
         let mut s = format!("{NODE_NAME}:\n  ros__parameters:\n");
         for (key, _, doc) in SPECS {
-            s.push_str(&format!("    # {doc}\n    {key}: {}\n", self.value_text(key)));
+            s.push_str(&format!(
+                "    # {doc}\n    {key}: {}\n",
+                self.value_text(key)
+            ));
         }
         s
     }
@@ -318,9 +383,8 @@ fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Scalar)>) {
 /// An absolute ROS 2 name: `/` then tokens of `[A-Za-z0-9_]` not starting
 /// with a digit, separated by single slashes.
 fn check_topic(s: &str) -> Result<(), String> {
-    let bad = || {
-        format!("{s:?} is not an absolute ROS 2 name like /particle_state (letters, digits, _)")
-    };
+    let bad =
+        || format!("{s:?} is not an absolute ROS 2 name like /particle_state (letters, digits, _)");
     let rest = s.strip_prefix('/').ok_or_else(bad)?;
     let ok = !rest.is_empty()
         && rest.split('/').all(|t| {
@@ -376,17 +440,44 @@ mod tests {
     #[test]
     fn rejects_unknown_ill_typed_and_out_of_range() {
         for (text, want) in [
-            ("mcgnode:\n  ros__parameters:\n    horizn: 5\n", "unknown parameter \"horizn\""),
-            ("mcgnode:\n  ros__parameters:\n    horizon: 2.5\n", "must be an integer"),
-            ("mcgnode:\n  ros__parameters:\n    horizon: 0\n", "outside 1..="),
-            ("mcgnode:\n  ros__parameters:\n    dt: fast\n", "must be a number"),
-            ("mcgnode:\n  ros__parameters:\n    dt: -1\n", "must be finite and > 0"),
-            ("mcgnode:\n  ros__parameters:\n    qos_reliable: 1\n", "true or false"),
-            ("mcgnode:\n  ros__parameters:\n    model: 5\n", "must be a string"),
-            ("mcgnode:\n  ros__parameters:\n    input_topic: x y\n", "absolute ROS 2 name"),
+            (
+                "mcgnode:\n  ros__parameters:\n    horizn: 5\n",
+                "unknown parameter \"horizn\"",
+            ),
+            (
+                "mcgnode:\n  ros__parameters:\n    horizon: 2.5\n",
+                "must be an integer",
+            ),
+            (
+                "mcgnode:\n  ros__parameters:\n    horizon: 0\n",
+                "outside 1..=",
+            ),
+            (
+                "mcgnode:\n  ros__parameters:\n    dt: fast\n",
+                "must be a number",
+            ),
+            (
+                "mcgnode:\n  ros__parameters:\n    dt: -1\n",
+                "must be finite and > 0",
+            ),
+            (
+                "mcgnode:\n  ros__parameters:\n    qos_reliable: 1\n",
+                "true or false",
+            ),
+            (
+                "mcgnode:\n  ros__parameters:\n    model: 5\n",
+                "must be a string",
+            ),
+            (
+                "mcgnode:\n  ros__parameters:\n    input_topic: x y\n",
+                "absolute ROS 2 name",
+            ),
             ("other:\n  ros__parameters:\n    dt: 1.0\n", "another node"),
             ("mcgnode:\n  params:\n    dt: 1.0\n", "only ros__parameters"),
-            ("mcgnode:\n  ros__parameters:\n    a:\n      b: 1\n", "unknown parameter \"a.b\""),
+            (
+                "mcgnode:\n  ros__parameters:\n    a:\n      b: 1\n",
+                "unknown parameter \"a.b\"",
+            ),
         ] {
             let e = NodeParams::default().apply_file_text(text).unwrap_err();
             assert!(e.contains(want), "{text:?}: {e}");

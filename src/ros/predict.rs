@@ -20,7 +20,9 @@ pub struct Prediction {
 /// Checks an input message and converts it for the model; the error says
 /// what is wrong with the message or why the model cannot take it.
 pub fn accept(model: &dyn Dynamics, input: &ParticleState) -> Result<(Graph, State), String> {
-    let (graph, sample) = input.to_parts().map_err(|e| format!("malformed input: {e}"))?;
+    let (graph, sample) = input
+        .to_parts()
+        .map_err(|e| format!("malformed input: {e}"))?;
     model
         .supports(&graph)
         .map_err(|e| format!("unsupported system: {e}"))?;
@@ -96,7 +98,10 @@ pub fn forces(
 pub fn forces_msg(header: &Header, dim: usize, f: &Forces) -> Result<ParticleForces, String> {
     let vec3 = |c: &[f64]| -> Result<Vector3, String> {
         if c.len() != dim {
-            return Err(format!("model gave a {}-component force in {dim}D", c.len()));
+            return Err(format!(
+                "model gave a {}-component force in {dim}D",
+                c.len()
+            ));
         }
         Ok(Vector3 {
             x: c[0],
@@ -105,7 +110,10 @@ pub fn forces_msg(header: &Header, dim: usize, f: &Forces) -> Result<ParticleFor
         })
     };
     if f.total.len() % dim != 0 {
-        return Err(format!("model gave {} total-force numbers in {dim}D", f.total.len()));
+        return Err(format!(
+            "model gave {} total-force numbers in {dim}D",
+            f.total.len()
+        ));
     }
     let idx = |i: usize| u32::try_from(i).map_err(|_| format!("particle index {i} too large"));
     Ok(ParticleForces {

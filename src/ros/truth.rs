@@ -81,7 +81,11 @@ mod tests {
         let spring = load_truth("truth:spring").unwrap();
         let pendulum = load_truth("truth:pendulum").unwrap();
         assert!(spring.describe().contains("g = 0"), "{}", spring.describe());
-        assert!(pendulum.describe().contains("g = 10"), "{}", pendulum.describe());
+        assert!(
+            pendulum.describe().contains("g = 10"),
+            "{}",
+            pendulum.describe()
+        );
         let e = load_truth("truth:rope").err().unwrap();
         assert!(e.contains("unknown system kind"), "{e}");
         assert!(load_truth("model.bin").is_err());

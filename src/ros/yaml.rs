@@ -115,11 +115,12 @@ pub fn parse(text: &str) -> Result<Value, String> {
         let indent = content.len() - content.trim_start().len();
         let body = content.trim();
         if body.starts_with("- ") || body == "-" {
-            return Err(format!("line {no}: lists are not supported in parameter files"));
+            return Err(format!(
+                "line {no}: lists are not supported in parameter files"
+            ));
         }
-        let (key, rest) = split_key(body).ok_or_else(|| {
-            format!("line {no}: expected `key: value`, found {:?}", body.trim())
-        })?;
+        let (key, rest) = split_key(body)
+            .ok_or_else(|| format!("line {no}: expected `key: value`, found {:?}", body.trim()))?;
         lines.push(Line {
             no,
             indent,

@@ -1,0 +1,290 @@
+//! The `mcgnode` binary end to end: simulate → train → rollout → evaluate, and
+//! clear errors (never a panic) on bad input.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn mcgnode(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mcgnode"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run mcgnode")
+}
+
+fn ok(o: &Output) -> String {
+    assert!(
+        o.status.success(),
+        "mcgnode failed:\nstdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Fails with exit code 1 (not a panic's 101) and says `want` on stderr.
+fn fails_with(o: &Output, want: &str) {
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success(),
+        "expected failure, got success; stderr {err}"
+    );
+    assert_ne!(o.status.code(), Some(101), "panicked: {err}");
+    assert!(!err.contains("panicked"), "panicked: {err}");
+    assert!(
+        err.to_lowercase().contains(&want.to_lowercase()),
+        "stderr should mention {want:?}: {err}"
+    );
+}
+
+#[test]
+fn pipeline_and_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(&mcgnode(
+        &[
+            "simulate",
+            "--system",
+            "spring",
+            "--particles",
+            "5",
+            "--trajectories",
+            "8",
+            "--seed",
+            "1",
+            "--out",
+            "train.mcap",
+        ],
+        d,
+    ));
+    ok(&mcgnode(
+        &[
+            "simulate",
+            "--system",
+            "spring",
+            "--particles",
+            "7",
+            "--trajectories",
+            "3",
+            "--seed",
+            "2",
+            "--states",
+            "21",
+            "--out",
+            "test.mcap",
+        ],
+        d,
+    ));
+    ok(&mcgnode(
+        &[
+            "train",
+            "--model",
+            "mcgnode",
+            "--data",
+            "train.mcap",
+            "--epochs",
+            "5",
+            "--out",
+            "m.json",
+        ],
+        d,
+    ));
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("m.json")).unwrap()).unwrap();
+    assert_eq!(m["hyper"]["variant"], "mcgnode");
+    assert_eq!(m["trained_on"]["particles"], 5);
+    assert_eq!(m["trained_on"]["accelerations"], "recorded");
+    assert_eq!(
+        m["trained_on"]["start_fingerprints"]
+            .as_array()
+            .unwrap()
+            .len(),
+        8
+    );
+    assert_eq!(m["training"]["epochs_run"], 5);
+
+    // Evaluate on 7 springs (inductive), JSON on stdout, PNG written.
+    let out = ok(&mcgnode(
+        &[
+            "evaluate",
+            "--model",
+            "m.json",
+            "--bag",
+            "test.mcap",
+            "--json",
+            "--plot",
+            "e.png",
+        ],
+        d,
+    ));
+    let e: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(e["particles"], 7);
+    assert_eq!(e["trajectories"], 3);
+    let re = e["summary"]["re"]["gmean"].as_array().unwrap();
+    assert_eq!(re.len(), 21);
+    assert!(re.iter().all(|x| x.as_f64().unwrap().is_finite()));
+    assert!(std::fs::read(d.join("e.png"))
+        .unwrap()
+        .starts_with(b"\x89PNG"));
+    // Evaluating on the training bag is refused: its starts are the training starts.
+    fails_with(
+        &mcgnode(&["evaluate", "--model", "m.json", "--bag", "train.mcap"], d),
+        "start where training",
+    );
+
+    // Rollout from a bag's first state and from a drawn state, both written as bags.
+    ok(&mcgnode(
+        &[
+            "rollout",
+            "--model",
+            "m.json",
+            "--initial",
+            "test.mcap",
+            "--duration",
+            "1",
+            "--out",
+            "r1.mcap",
+        ],
+        d,
+    ));
+    ok(&mcgnode(
+        &[
+            "rollout",
+            "--model",
+            "m.json",
+            "--system",
+            "spring",
+            "--particles",
+            "50",
+            "--duration",
+            "0.5",
+            "--out",
+            "r2.mcap",
+        ],
+        d,
+    ));
+    let r = mcgnode::data::bag::read_trajectories(d.join("r2.mcap")).unwrap();
+    assert_eq!(r.trajectories[0].graph.n(), 50);
+    assert_eq!(r.trajectories[0].samples.len(), 6); // 0.5 s saved every 0.1 s, plus the start
+
+    // Bad input: unknown system/model, missing or corrupt files.
+    fails_with(
+        &mcgnode(&["simulate", "--system", "galaxy", "--out", "x.mcap"], d),
+        "galaxy",
+    );
+    fails_with(
+        &mcgnode(
+            &[
+                "train",
+                "--model",
+                "transformer",
+                "--data",
+                "train.mcap",
+                "--out",
+                "x.json",
+            ],
+            d,
+        ),
+        "transformer",
+    );
+    fails_with(
+        &mcgnode(
+            &[
+                "train",
+                "--model",
+                "gnode",
+                "--data",
+                "nope.mcap",
+                "--out",
+                "x.json",
+            ],
+            d,
+        ),
+        "nope.mcap",
+    );
+    fails_with(
+        &mcgnode(
+            &["evaluate", "--model", "nope.json", "--bag", "test.mcap"],
+            d,
+        ),
+        "cannot read model file",
+    );
+    std::fs::write(d.join("bad.json"), "{\"format\": 3}").unwrap();
+    fails_with(
+        &mcgnode(
+            &["evaluate", "--model", "bad.json", "--bag", "test.mcap"],
+            d,
+        ),
+        "not a valid mcgnode model file",
+    );
+    let bytes = std::fs::read(d.join("test.mcap")).unwrap();
+    std::fs::write(d.join("cut.mcap"), &bytes[..bytes.len() / 3]).unwrap();
+    let o = mcgnode(&["evaluate", "--model", "m.json", "--bag", "cut.mcap"], d);
+    assert!(
+        !o.status.success() && o.status.code() != Some(101),
+        "corrupt bag must fail cleanly"
+    );
+    // A NODE model is not inductive: a clear error on another particle count.
+    ok(&mcgnode(
+        &[
+            "train",
+            "--model",
+            "node",
+            "--data",
+            "train.mcap",
+            "--epochs",
+            "2",
+            "--out",
+            "n.json",
+        ],
+        d,
+    ));
+    fails_with(
+        &mcgnode(&["evaluate", "--model", "n.json", "--bag", "test.mcap"], d),
+        "not inductive",
+    );
+    // Model and system of different dimension.
+    ok(&mcgnode(
+        &[
+            "simulate",
+            "--system",
+            "spring",
+            "--dim",
+            "3",
+            "--particles",
+            "4",
+            "--trajectories",
+            "2",
+            "--seed",
+            "9",
+            "--states",
+            "5",
+            "--out",
+            "s3.mcap",
+        ],
+        d,
+    ));
+    fails_with(
+        &mcgnode(&["evaluate", "--model", "m.json", "--bag", "s3.mcap"], d),
+        "2D",
+    );
+}
+
+#[test]
+fn help_documents_every_subcommand() {
+    let dir = tempfile::tempdir().unwrap();
+    let top = ok(&mcgnode(&["--help"], dir.path()));
+    for sub in [
+        "simulate", "train", "rollout", "evaluate", "demo", "bench", "serve",
+    ] {
+        assert!(top.contains(sub), "top-level help lacks {sub}");
+        let h = ok(&mcgnode(&[sub, "--help"], dir.path()));
+        assert!(
+            h.lines()
+                .filter(|l| l.trim_start().starts_with("--"))
+                .count()
+                >= 1,
+            "{sub} --help lists no options"
+        );
+    }
+}

@@ -1,0 +1,82 @@
+#!/usr/bin/env python3
+"""Checks the node's MCAP recording with two independent readers.
+
+Usage: check_recording.py DIR --horizon N --predictions N --received N
+
+Every *.mcap in DIR is decoded with mcap + mcap-ros2-support and with rosbags
+(types from the bags' own schemas). Both must see the same messages: `received`
+states on the input topic, `predictions` trajectories (each with `horizon`
+states, stamped like a recorded input) and as many force messages. Prints
+`RECORDING {json}`; exits 1 with "FAIL: ..." otherwise.
+"""
+
+import argparse
+import json
+import sys
+from collections import Counter
+from pathlib import Path
+
+STATE = "mcgnode_msgs/msg/ParticleState"
+TRAJ = "mcgnode_msgs/msg/PredictedTrajectory"
+FORCES = "mcgnode_msgs/msg/ParticleForces"
+
+
+def stamp(m):
+    return (int(m.header.stamp.sec), int(m.header.stamp.nanosec))
+
+
+def summarize(items, horizon):
+    """items: (schema name, message) pairs -> comparable summary."""
+    counts = Counter(name for name, _ in items)
+    inputs = {stamp(m) for name, m in items if name == STATE}
+    trajs = [m for name, m in items if name == TRAJ]
+    for t in trajs:
+        if len(t.states) != horizon:
+            raise SystemExit(f"FAIL: recorded trajectory has {len(t.states)} states, horizon {horizon}")
+        if stamp(t) not in inputs:
+            raise SystemExit(f"FAIL: recorded trajectory stamped {stamp(t)} matches no recorded input")
+    return {
+        "counts": dict(sorted(counts.items())),
+        "trajectory_stamps": sorted(stamp(t) for t in trajs),
+        "forces_stamps": sorted(stamp(m) for name, m in items if name == FORCES),
+    }
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("dir", type=Path)
+    ap.add_argument("--horizon", type=int, required=True)
+    ap.add_argument("--predictions", type=int, required=True)
+    ap.add_argument("--received", type=int, required=True)
+    args = ap.parse_args()
+    bags = sorted(args.dir.glob("*.mcap"))
+    if not bags:
+        raise SystemExit(f"FAIL: no .mcap files in {args.dir}")
+
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.highlevel import AnyReader
+
+    via_mcap, via_rosbags = [], []
+    for bag in bags:
+        with open(bag, "rb") as fh:
+            reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+            for schema, _ch, _msg, m in reader.iter_decoded_messages(log_time_order=True):
+                via_mcap.append((schema.name, m))
+        with AnyReader([bag]) as r:
+            for conn, _t, raw in r.messages():
+                via_rosbags.append((conn.msgtype, r.deserialize(raw, conn.msgtype)))
+
+    a, b = summarize(via_mcap, args.horizon), summarize(via_rosbags, args.horizon)
+    if a != b:
+        raise SystemExit(f"FAIL: the readers disagree:\nmcap: {a}\nrosbags: {b}")
+    want = {STATE: args.received, TRAJ: args.predictions, FORCES: args.predictions}
+    if a["counts"] != dict(sorted(want.items())):
+        raise SystemExit(f"FAIL: recorded {a['counts']}, expected {want}")
+    if a["trajectory_stamps"] != a["forces_stamps"]:
+        raise SystemExit("FAIL: trajectories and forces were recorded for different inputs")
+    print("RECORDING " + json.dumps({"bags": len(bags), "counts": a["counts"]}))
+
+
+if __name__ == "__main__":
+    main()
