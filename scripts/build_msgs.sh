@@ -29,6 +29,11 @@ fi
 
 mkdir -p "$OUT"
 export PATH="$VENV/bin:$PATH" AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV"
+# A build configured for another source tree (the repository moved) starts over.
+if [ -f "$OUT/build/CMakeCache.txt" ] &&
+    ! grep -qx "CMAKE_HOME_DIRECTORY:INTERNAL=$PKG" "$OUT/build/CMakeCache.txt"; then
+    rm -rf "$OUT/build" "$OUT/install"
+fi
 if [ ! -f "$OUT/build/CMakeCache.txt" ]; then
     cmake -S "$PKG" -B "$OUT/build" -G Ninja -DCMAKE_INSTALL_PREFIX="$OUT/install" \
         -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VENV/bin/python3" >"$OUT.configure.log" 2>&1 \

@@ -33,9 +33,12 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// An untrained model of a variant for a system (speed does not depend on training).
+/// An untrained model of a variant for a system (speed does not depend on
+/// training). As `train` would configure it: MCGNODE has a body-force branch
+/// only when the graph has anchors (springs are closed systems).
 pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, TrainedModel)> {
-    let hyper = Hyper::new(variant, graph.dim, 1, graph.n());
+    let mut hyper = Hyper::new(variant, graph.dim, 1, graph.n());
+    hyper.body_force = !graph.anchors.is_empty();
     let net = Net::new(hyper.clone(), &mut ChaCha8Rng::seed_from_u64(seed))?;
     let file = crate::model::ModelFile {
         format: crate::model::file::FORMAT.into(),

@@ -52,20 +52,19 @@ pub trait Dynamics: Send + Sync {
     ) -> Result<Vec<State>, String> {
         self.supports(graph)?;
         start.validate(graph)?;
-        let d = graph.ndof();
         let mut out = Vec::with_capacity(steps + 1);
         let mut s = start.clone();
-        let mut a = vec![0.0; d];
+        let mut a = vec![0.0; graph.ndof()];
         self.acceleration(graph, &s, &mut a)?;
         out.push(s.clone());
         for _ in 0..steps {
-            for i in 0..d {
-                s.q[i] += s.v[i] * dt + 0.5 * a[i] * dt * dt;
-                s.v[i] += 0.5 * a[i] * dt;
+            for ((q, v), a) in s.q.iter_mut().zip(s.v.iter_mut()).zip(&a) {
+                *q += *v * dt + 0.5 * a * dt * dt;
+                *v += 0.5 * a * dt;
             }
             self.acceleration(graph, &s, &mut a)?;
-            for i in 0..d {
-                s.v[i] += 0.5 * a[i] * dt;
+            for (v, a) in s.v.iter_mut().zip(&a) {
+                *v += 0.5 * a * dt;
             }
             if s.q.iter().chain(&s.v).any(|x| !x.is_finite()) {
                 return Err(format!(

@@ -128,8 +128,11 @@ impl Graph {
                 }
                 _ => {}
             }
-            if !(e.rest_length.is_finite() && e.rest_length >= 0.0) || !e.stiffness.is_finite() {
-                return Err(format!("edge {k}: rest length or stiffness is not finite"));
+            let rest_ok = e.rest_length.is_finite() && e.rest_length >= 0.0;
+            if !rest_ok || !e.stiffness.is_finite() {
+                return Err(format!(
+                    "edge {k}: rest length must be finite and ≥ 0, stiffness finite"
+                ));
             }
         }
         Ok(())

@@ -370,7 +370,7 @@ pub fn train_from_bags(
                 .filter_map(|t| t.samples.first())
                 .map(|s| fingerprint(&s.state))
                 .collect(),
-            system_config: system_config.map(|s| serde_json::to_value(s)).transpose()?,
+            system_config: system_config.map(serde_json::to_value).transpose()?,
         },
         training: trained.report,
         weights: trained.net.store.weights()?,

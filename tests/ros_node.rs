@@ -97,16 +97,36 @@ fn ros_env() -> PathBuf {
     root.join("build/msgs/env.sh")
 }
 
-/// A parameter file for the tests (short horizon, fast diagnostics).
-fn write_params(dir: &Path) -> PathBuf {
+/// A parameter file for the tests (short horizon, fast diagnostics);
+/// `record_dir` records with bags split every second.
+fn write_params(dir: &Path, record_dir: Option<&Path>) -> PathBuf {
     let p = dir.join("params.yaml");
-    fs::write(
-        &p,
+    let mut text = String::from(
         "mcgnode:\n  ros__parameters:\n    model: truth:spring\n    horizon: 25\n    dt: 0.001\n    \
          diagnostics_period: 0.25\n    warn_period: 1.0\n    max_rollout_steps: 1000\n",
-    )
-    .expect("writing params");
+    );
+    if let Some(r) = record_dir {
+        text += &format!(
+            "    record_dir: {:?}\n    record_split_seconds: 1.0\n",
+            r.display()
+        );
+    }
+    fs::write(&p, text).expect("writing params");
     p
+}
+
+/// A number from the driver's JSON summary (`"key": 12`).
+fn summary_number(summary: &str, key: &str) -> u64 {
+    let pat = format!("\"{key}\": ");
+    let at = summary
+        .find(&pat)
+        .unwrap_or_else(|| panic!("{key} missing from {summary}"));
+    summary[at + pat.len()..]
+        .chars()
+        .take_while(char::is_ascii_digit)
+        .collect::<String>()
+        .parse()
+        .unwrap_or_else(|_| panic!("{key} is not a number in {summary}"))
 }
 
 /// `scripts/netns.sh bash -c script` with BIN, ENV, PARAMS exported.
@@ -125,7 +145,8 @@ fn in_netns(script: &str, params: &Path, env_sh: &Path) -> Command {
 fn node_serves_rclpy_clients() {
     let env_sh = ros_env();
     let dir = tempfile::tempdir().expect("tempdir");
-    let params = write_params(dir.path());
+    let rec = dir.path().join("rec");
+    let params = write_params(dir.path(), Some(&rec));
     // The node logs to a file so its stderr can be checked separately; it is
     // stopped with SIGINT and must exit 0.
     let script = r#"
@@ -173,13 +194,41 @@ fn node_serves_rclpy_clients() {
         "expected 1 to 4 rate-limited warnings for 5 rejections, got {warnings}\n{report}"
     );
     assert!(node_log.contains("similar warnings suppressed"), "{report}");
+
+    // The recording, split by duration, read back by mcap-ros2-support and rosbags.
+    let predictions = summary_number(summary, "predictions");
+    // Undecodable samples cannot be recorded as ParticleState.
+    let received =
+        predictions + summary_number(summary, "rejected") - summary_number(summary, "undecodable");
+    let check = run_bounded(
+        Command::new(".venv/bin/python3")
+            .arg("tests/ros/check_recording.py")
+            .arg(&rec)
+            .args(["--horizon", "25"])
+            .args(["--predictions", &predictions.to_string()])
+            .args(["--received", &received.to_string()]),
+        Duration::from_secs(60),
+        dir.path(),
+    );
+    assert!(
+        check.status.success(),
+        "recording check failed:\n{}\n{}\n{report}",
+        check.stdout,
+        check.stderr
+    );
+    println!("{}", check.stdout.trim());
+    let bags = fs::read_dir(&rec).map(|d| d.count()).unwrap_or(0);
+    assert!(
+        bags >= 2,
+        "expected the 1 s split to give several bags, got {bags}"
+    );
 }
 
 #[test]
 fn node_exits_cleanly_on_sigterm() {
     let env_sh = ros_env();
     let dir = tempfile::tempdir().expect("tempdir");
-    let params = write_params(dir.path());
+    let params = write_params(dir.path(), None);
     // Wait (bounded) for the node to be up, then SIGTERM it.
     let script = r#"
         set -u
@@ -214,7 +263,7 @@ fn bad_parameters_are_rejected_at_start() {
     let dir = tempfile::tempdir().expect("tempdir");
     let bad = dir.path().join("bad.yaml");
     fs::write(&bad, "mcgnode:\n  ros__parameters:\n    horizn: 10\n").expect("writing");
-    let good = write_params(dir.path());
+    let good = write_params(dir.path(), None);
     let bad_arg = bad.to_string_lossy().into_owned();
     let good_arg = good.to_string_lossy().into_owned();
     let cases: [(Vec<&str>, &str); 5] = [
@@ -289,4 +338,90 @@ fn shipped_launch_params_are_valid() {
             o.stdout
         );
     }
+}
+
+/// The rclpy stand-ins for the ros2 CLI: play a bag onto the node's input,
+/// echo its predictions and diagnostics, call Rollout with a YAML request.
+#[test]
+fn stand_ins_play_echo_and_call() {
+    use mcgnode::physics::{SystemConfig, SystemKind};
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let params = write_params(dir.path(), None);
+    let mut cfg = SystemConfig::new(SystemKind::Spring, 5);
+    cfg.states = 12;
+    let trajectories = cfg.simulate(1, 7);
+    let bag = dir.path().join("spring.mcap");
+    mcgnode::data::write_trajectories(&bag, &trajectories, &Default::default())
+        .expect("writing the bag");
+    let request = dir.path().join("rollout.yaml");
+    // Two particles 1.5 apart on a spring of rest length 1: they attract.
+    fs::write(
+        &request,
+        "steps: 3\ndt: 0.1\ninitial:\n  dimension: 2\n  types: [0, 0]\n  masses: [1.0, 1.0]\n  \
+         positions: [{x: 0.0}, {x: 1.5}]\n  velocities: [{}, {}]\n  edge_a: [0]\n  edge_b: [1]\n  \
+         edge_kind: [0]\n  edge_rest_length: [1.0]\n  edge_stiffness: [1.0]\n",
+    )
+    .expect("writing the request");
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$PARAMS" 2>"$DIR/node.log" &
+        node=$!
+        python3 scripts/ros/echo.py /mcgnode/predicted_trajectory --json --field header.stamp \
+            --count 12 --timeout 60 >"$DIR/echo.out" 2>"$DIR/echo.err" &
+        echo_pid=$!
+        for _ in $(seq 400); do grep -q listening "$DIR/echo.err" && break; sleep 0.05; done
+        grep -q listening "$DIR/echo.err" || { echo "echo never matched"; cat "$DIR/echo.err"; exit 2; }
+        python3 scripts/ros/play_bag.py "$BAG" --rate 50 --timeout 30 || exit 3
+        wait $echo_pid || { echo "echo failed"; cat "$DIR/echo.err"; exit 4; }
+        python3 scripts/ros/echo.py /mcgnode/diagnostics --json --count 1 --timeout 30 \
+            >"$DIR/diag.out" || exit 5
+        python3 scripts/ros/call.py /mcgnode/rollout mcgnode_msgs/srv/Rollout --file "$REQ" \
+            --json --timeout 30 >"$DIR/call.out" || exit 6
+        kill -INT $node; wait $node
+    "#;
+    let o = run_bounded(
+        in_netns(script, &params, &env_sh)
+            .env("DIR", dir.path())
+            .env("BAG", &bag)
+            .env("REQ", &request),
+        Duration::from_secs(120),
+        dir.path(),
+    );
+    let read = |name: &str| fs::read_to_string(dir.path().join(name)).unwrap_or_default();
+    assert!(
+        o.status.success(),
+        "status {}\n{}\n{}\n--- node log\n{}",
+        o.status,
+        o.stdout,
+        o.stderr,
+        read("node.log")
+    );
+    // One prediction per played state, stamped with the state's sample time.
+    let stamps: Vec<serde_json::Value> = read("echo.out")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("echo --json line"))
+        .collect();
+    let want: Vec<serde_json::Value> = trajectories[0]
+        .samples
+        .iter()
+        .map(|s| {
+            let t = mcgnode::data::msg::Time::from_secs(s.t);
+            serde_json::json!({"sec": t.sec, "nanosec": t.nanosec})
+        })
+        .collect();
+    assert_eq!(stamps, want);
+    let diag: serde_json::Value = serde_json::from_str(read("diag.out").trim()).expect("diag");
+    assert_eq!(diag["received"], 12, "{diag}");
+    assert_eq!(diag["predicted"], 12, "{diag}");
+    let call: serde_json::Value = serde_json::from_str(read("call.out").trim()).expect("call");
+    assert_eq!(call["success"], true, "{call}");
+    let states = call["trajectory"]["states"].as_array().expect("states");
+    assert_eq!(states.len(), 3, "{call}");
+    let x1 = states[2]["positions"][1]["x"].as_f64().expect("x");
+    assert!(
+        x1 < 1.5,
+        "the stretched spring should pull particle 1 back: x = {x1}"
+    );
 }

@@ -6,7 +6,9 @@ Examples (on this machine, inside scripts/netns.sh with the node):
   python3 scripts/ros/echo.py /mcgnode/predicted_forces --json
   python3 scripts/ros/echo.py /particle_state --type mcgnode_msgs/msg/ParticleState --field positions
 
-The type is discovered from the ROS graph unless --type is given. Messages are
+The type is discovered from the ROS graph unless --type is given. Once a
+publisher has matched, "echo: listening on TOPIC [TYPE]" goes to stderr (with
+volatile QoS, messages published before that are not seen). Messages are
 printed as YAML documents separated by '---', or one JSON object per line.
 Exits 0 after --count messages, 1 if --timeout passes first.
 """
@@ -74,8 +76,10 @@ def main():
             print("---", flush=True)
         received.append(1)
 
-    node.create_subscription(cls, args.topic, on_msg, ru.qos_profile(not args.best_effort, args.depth))
+    sub = node.create_subscription(cls, args.topic, on_msg, ru.qos_profile(not args.best_effort, args.depth))
     try:
+        if ru.spin_until(rclpy, node, lambda: sub.get_publisher_count() >= 1, remaining()):
+            print(f"echo: listening on {args.topic} [{type_name}]", file=sys.stderr, flush=True)
         done = ru.spin_until(
             rclpy, node, lambda: args.count and len(received) >= args.count, remaining(), step=0.1
         )

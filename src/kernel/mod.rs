@@ -83,8 +83,7 @@ impl KMlp {
                 &mut t2[..l.out]
             };
             dst.copy_from_slice(&l.b);
-            for i in 0..l.inp {
-                let xi = t1[i];
+            for (i, &xi) in t1[..l.inp].iter().enumerate() {
                 if xi == 0.0 {
                     continue; // one-hot inputs are mostly zero
                 }
@@ -167,10 +166,9 @@ impl Kernel {
             let e = ld(&format!("mp{l}.e"))?.with_context(|| format!("missing round {l}"))?;
             rounds.push((v, e));
         }
-        let inv_mass = match w.get("log_mass") {
-            Some(a) => Some(a.data.iter().map(|x| (-x).exp()).collect()),
-            None => None,
-        };
+        let inv_mass = w
+            .get("log_mass")
+            .map(|a| a.data.iter().map(|x| (-x).exp()).collect());
         let k = Self {
             hyper: hyper.clone(),
             node_mlp: ld("node")?,

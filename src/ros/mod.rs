@@ -27,9 +27,6 @@ use clap::Args;
 use crate::dynamics::Dynamics;
 pub use params::NodeParams;
 
-/// Loads a trained model file (supplied by the model code; see [`run_serve_with`]).
-pub type DynamicsLoader = fn(&Path) -> anyhow::Result<Arc<dyn Dynamics>>;
-
 /// Options of `mcgnode serve`.
 #[derive(Args, Debug, Clone)]
 pub struct ServeArgs {
@@ -49,20 +46,14 @@ pub struct ServeArgs {
     pub print_params: bool,
 }
 
-/// Runs the node until SIGINT/SIGTERM, with no trained-model loader: only
-/// `truth:*` models can be served through this entry point.
+/// Runs the node until SIGINT/SIGTERM.
 pub fn run_serve(args: ServeArgs) -> anyhow::Result<()> {
-    run_serve_with(args, no_trained_models)
-}
-
-/// Runs the node until SIGINT/SIGTERM, loading model files with `loader`.
-pub fn run_serve_with(args: ServeArgs, loader: DynamicsLoader) -> anyhow::Result<()> {
     let params = effective_params(&args).map_err(anyhow::Error::msg)?;
     if args.print_params {
         print!("{}", params.to_yaml());
         return Ok(());
     }
-    let model = load_model(&params.model, loader)?;
+    let model = load_model(&params.model)?;
     let domain_id = domain_id_from_env().map_err(anyhow::Error::msg)?;
     node::serve(params, model, domain_id)
 }
@@ -79,19 +70,14 @@ pub fn effective_params(args: &ServeArgs) -> Result<NodeParams, String> {
     Ok(p)
 }
 
-/// `truth:<system>` or a model file through `loader`.
-pub fn load_model(model: &str, loader: DynamicsLoader) -> anyhow::Result<Arc<dyn Dynamics>> {
+/// `truth:<system>`, or a trained model file.
+pub fn load_model(model: &str) -> anyhow::Result<Arc<dyn Dynamics>> {
     if truth::is_truth(model) {
         return truth::load_truth(model).map_err(anyhow::Error::msg);
     }
-    loader(Path::new(model)).with_context(|| format!("loading model {model}"))
-}
-
-fn no_trained_models(path: &Path) -> anyhow::Result<Arc<dyn Dynamics>> {
-    anyhow::bail!(
-        "cannot load {}: this build serves only truth:spring and truth:pendulum",
-        path.display()
-    )
+    let m = crate::model::TrainedModel::load(Path::new(model))
+        .with_context(|| format!("loading model {model}"))?;
+    Ok(Arc::new(m))
 }
 
 /// The DDS domain from `ROS_DOMAIN_ID` (0 when unset), which ros2-client does

@@ -62,7 +62,7 @@ impl Default for NodeParams {
             qos_depth: 10,
             diagnostics_period: 1.0,
             warn_period: 5.0,
-            max_rollout_steps: 100_000,
+            max_rollout_steps: 10_000,
             record_dir: String::new(),
             record_split_mb: 0,
             record_split_seconds: 0.0,
@@ -116,7 +116,7 @@ const SPECS: &[(&str, Kind, &str)] = &[
     ),
     (
         "horizon",
-        Kind::Int(1, 1_000_000),
+        Kind::Int(1, 100_000),
         "steps predicted per incoming state",
     ),
     (
@@ -142,7 +142,7 @@ const SPECS: &[(&str, Kind, &str)] = &[
     ),
     (
         "max_rollout_steps",
-        Kind::Int(1, 100_000_000),
+        Kind::Int(1, 1_000_000),
         "largest steps of a Rollout call",
     ),
     (

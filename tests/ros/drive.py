@@ -31,12 +31,14 @@ import _rosutil as ru  # noqa: E402
 
 rclpy = ru.require_rclpy()
 from rclpy.executors import ExternalShutdownException  # noqa: E402
+from rclpy.serialization import serialize_message  # noqa: E402
 
 from builtin_interfaces.msg import Time  # noqa: E402
 from geometry_msgs.msg import Point, Vector3  # noqa: E402
 from mcgnode_msgs.msg import NodeDiagnostics, ParticleForces, ParticleState, PredictedTrajectory  # noqa: E402
 from mcgnode_msgs.srv import Rollout  # noqa: E402
 from rcl_interfaces.msg import Log  # noqa: E402
+from rcl_interfaces.srv import GetParameters  # noqa: E402
 
 NS = 1_000_000_000
 
@@ -242,6 +244,16 @@ class Driver:
         resp, _ = self.call(Rollout.Request(initial=bad, steps=5), a.timeout)
         check(not resp.success and "malformed" in resp.message, f"malformed Rollout accepted: {resp.message}")
 
+        # The parameters are visible to ROS tools (read through the parameter service).
+        pclient = self.node.create_client(GetParameters, "/mcgnode/get_parameters")
+        check(pclient.wait_for_service(timeout_sec=a.timeout), "no /mcgnode/get_parameters service")
+        fut = pclient.call_async(GetParameters.Request(names=["horizon", "model", "dt"]))
+        rclpy.spin_until_future_complete(self.node, fut, timeout_sec=a.timeout)
+        check(fut.done(), "no get_parameters response")
+        vals = fut.result().values
+        check(len(vals) == 3 and vals[0].integer_value == a.horizon and vals[1].string_value == "truth:spring"
+              and vals[2].double_value == a.dt, f"get_parameters gave {vals}")
+
         # Malformed inputs.
         malformed = []
         for i, how in enumerate(["short", "nan", "edge", "dim"]):
@@ -258,12 +270,15 @@ class Driver:
         t_bad = time.monotonic()
         for m in malformed:
             self.publish(m)
+        # Bytes that are not a ParticleState at all (a truncated serialization).
+        raw = serialize_message(spring_state(rng, 5, Time(sec=base + 1500, nanosec=0)))
+        self.pub.publish(raw[: len(raw) // 3])
         # After the warning period, one more: its warning reports the suppressed ones.
         self.wait(lambda: time.monotonic() - t_bad > a.warn_period + 0.3, a.warn_period + 5, "the warning period")
         late = spring_state(rng, 5, Time(sec=base + 2000, nanosec=0))
         late.velocities = late.velocities[:2]
         self.publish(late)
-        n_bad = len(malformed) + 1
+        n_bad = len(malformed) + 2
 
         # Still answering: a valid state after the bad ones, and a Rollout call.
         stamp = Time(sec=base + 3000, nanosec=5)
@@ -298,6 +313,7 @@ class Driver:
             "discovery_wait_s": round(discovery_s, 3),
             "predictions": n_valid,
             "rejected": d.rejected,
+            "undecodable": 1,
             "rosout_warnings": len(warned()),
             "first_prediction_ms": round(1000 * first_prediction_s, 2),
             "prediction_latency_ms": {
