@@ -7,7 +7,10 @@ use mcgnode::model::Variant;
 use mcgnode::physics::{SystemConfig, SystemKind};
 
 fn training_step(c: &mut Criterion) {
-    for (name, kind) in [("spring", SystemKind::Spring), ("pendulum", SystemKind::Pendulum)] {
+    for (name, kind) in [
+        ("spring", SystemKind::Spring),
+        ("pendulum", SystemKind::Pendulum),
+    ] {
         c.bench_function(&format!("train step 5-{name} mcgnode b100"), |b| {
             b.iter(|| train_step_seconds(kind, Variant::Mcgnode, 100, 1).unwrap())
         });

@@ -1,7 +1,9 @@
 //! The hand-written, forward-only inference kernel: the same equations as
-//! [`crate::model::net`], on plain slices, with every buffer allocated once per
-//! graph in a [`Workspace`]. Rollouts and the ROS node run on this; candle is
+//! [`crate::model::net`], on plain slices (feature-major, see [`dense`]), with
+//! every buffer allocated once per graph in a [`Workspace`]. Rollouts and the ROS node run on this; candle is
 //! only for training. Tested against candle's forward to 1e-12.
+
+mod dense;
 
 use crate::model::mlp::squareplus_f64;
 use crate::model::params::Weights;
@@ -10,97 +12,8 @@ use crate::model::solve::lu_solve_in_place;
 use crate::model::variant::Hyper;
 use crate::system::Graph;
 use anyhow::{bail, Context, Result};
+use dense::Mlp as KMlp;
 use rand::SeedableRng;
-
-/// One linear layer, weights `[inputs, outputs]` row-major.
-#[derive(Clone, Debug)]
-struct Dense {
-    w: Vec<f64>,
-    b: Vec<f64>,
-    inp: usize,
-    out: usize,
-}
-
-/// An MLP with squareplus between layers.
-#[derive(Clone, Debug)]
-struct KMlp {
-    layers: Vec<Dense>,
-}
-
-impl KMlp {
-    fn load(w: &Weights, name: &str) -> Result<Option<Self>> {
-        let mut layers = vec![];
-        loop {
-            let i = layers.len();
-            let (Some(wt), Some(bs)) = (
-                w.get(&format!("{name}.l{i}.w")),
-                w.get(&format!("{name}.l{i}.b")),
-            ) else {
-                break;
-            };
-            if wt.shape.len() != 2 || bs.shape != [wt.shape[1]] {
-                bail!("parameter {name}.l{i} has inconsistent shapes");
-            }
-            layers.push(Dense {
-                w: wt.data.clone(),
-                b: bs.data.clone(),
-                inp: wt.shape[0],
-                out: wt.shape[1],
-            });
-        }
-        if layers.is_empty() {
-            return Ok(None);
-        }
-        for p in layers.windows(2) {
-            if p[0].out != p[1].inp {
-                bail!("MLP {name}: layer sizes do not chain");
-            }
-        }
-        Ok(Some(Self { layers }))
-    }
-
-    fn inp(&self) -> usize {
-        self.layers[0].inp
-    }
-
-    fn width(&self) -> usize {
-        self.layers
-            .iter()
-            .map(|l| l.out.max(l.inp))
-            .max()
-            .unwrap_or(0)
-    }
-
-    /// `y = mlp(x)`; `t1`, `t2` are scratch of at least `width()`.
-    #[inline]
-    fn forward(&self, x: &[f64], y: &mut [f64], t1: &mut [f64], t2: &mut [f64]) {
-        let nl = self.layers.len();
-        t1[..x.len()].copy_from_slice(x);
-        for (li, l) in self.layers.iter().enumerate() {
-            let dst: &mut [f64] = if li + 1 == nl {
-                &mut y[..l.out]
-            } else {
-                &mut t2[..l.out]
-            };
-            dst.copy_from_slice(&l.b);
-            for (i, &xi) in t1[..l.inp].iter().enumerate() {
-                if xi == 0.0 {
-                    continue; // one-hot inputs are mostly zero
-                }
-                let row = &l.w[i * l.out..(i + 1) * l.out];
-                for (d, w) in dst.iter_mut().zip(row) {
-                    *d += xi * w;
-                }
-            }
-            if li + 1 < nl {
-                for d in dst.iter_mut() {
-                    *d = squareplus_f64(*d);
-                }
-                t1[..l.out].copy_from_slice(dst);
-            }
-        }
-    }
-}
 
 /// A trained model's forward pass, ready to run.
 #[derive(Clone, Debug)]
@@ -118,17 +31,24 @@ pub struct Kernel {
 }
 
 /// Buffers for one graph; reused across steps so that the loop allocates nothing.
+/// Activations are feature-major: `buf[feature · rows + row]`.
 #[derive(Clone, Debug)]
 pub struct Workspace {
     /// The graph as the kernel sees it.
     pub plan: GraphPlan,
+    /// Node inputs (one-hot type, q, q̇), or NODE's flat (q, q̇).
     x: Vec<f64>,
     h: Vec<f64>,
     agg: Vec<f64>,
+    glob: Vec<f64>,
+    w_in: Vec<f64>,
     he: Vec<f64>,
     he_new: Vec<f64>,
-    glob: Vec<f64>,
-    cat: Vec<f64>,
+    hs: Vec<f64>,
+    hr: Vec<f64>,
+    msg: Vec<f64>,
+    f_edge: Vec<f64>,
+    f_node: Vec<f64>,
     t1: Vec<f64>,
     t2: Vec<f64>,
     /// Forces of the last evaluation, `n·d` (force-predicting variants).
@@ -136,8 +56,6 @@ pub struct Workspace {
     /// Antisymmetric pairwise forces of the last evaluation, `E·d`, on
     /// `plan.recv[e]` due to `plan.send[e]` (MCGNODE).
     pub edge_force: Vec<f64>,
-    fpair: Vec<f64>,
-    type_em: Vec<f64>,
     incid: Vec<Vec<(usize, f64)>>,
     dq: Vec<f64>,
     kmat: Vec<f64>,
@@ -234,7 +152,7 @@ impl Kernel {
     pub fn workspace(&self, graph: &Graph) -> Result<Workspace, String> {
         self.supports(graph)?;
         let plan = GraphPlan::new(graph);
-        let (n, d, em) = (plan.n, plan.dim, self.hyper.embed);
+        let (n, d, em, t) = (plan.n, plan.dim, self.hyper.embed, self.hyper.types);
         let ne = plan.recv.len();
         let mlps = [
             &self.node_mlp,
@@ -250,22 +168,16 @@ impl Kernel {
             .filter_map(|m| m.as_ref())
             .map(|m| m.width())
             .max()
-            .unwrap_or(0);
+            .unwrap_or(1);
         for (a, b) in &self.rounds {
             width = width.max(a.width()).max(b.width());
         }
-        let xin = self
-            .node_em
-            .as_ref()
-            .map(|m| m.inp())
-            .unwrap_or(0)
-            .max(self.hyper.types + 2 * d);
+        let rows = n.max(ne).max(1);
         let x_len = if self.node_mlp.is_some() {
             2 * n * d
         } else {
-            n * xin
+            (t + 2 * d) * n
         };
-        let width = width.max(2 * n * d).max(2 * em + 1);
         let mut incid = vec![vec![]; n];
         for (r, bar) in plan.bars.iter().enumerate() {
             incid[bar.a].push((r, 1.0));
@@ -276,18 +188,21 @@ impl Kernel {
         let k = plan.bars.len();
         Ok(Workspace {
             x: vec![0.0; x_len],
-            h: vec![0.0; n * em],
-            agg: vec![0.0; n * em],
-            he: vec![0.0; ne * em],
-            he_new: vec![0.0; ne * em],
-            glob: vec![0.0; n * em],
-            cat: vec![0.0; 2 * em + xin],
-            t1: vec![0.0; width],
-            t2: vec![0.0; width],
+            h: vec![0.0; em * n],
+            agg: vec![0.0; em * n],
+            glob: vec![0.0; em * n],
+            w_in: vec![0.0; d * ne],
+            he: vec![0.0; em * ne],
+            he_new: vec![0.0; em * ne],
+            hs: vec![0.0; em * ne],
+            hr: vec![0.0; em * ne],
+            msg: vec![0.0; em * ne],
+            f_edge: vec![0.0; d * ne],
+            f_node: vec![0.0; d * n],
+            t1: vec![0.0; width * rows],
+            t2: vec![0.0; width * rows],
             force: vec![0.0; n * d],
             edge_force: vec![0.0; ne / 2 * d],
-            fpair: vec![0.0; 2 * d],
-            type_em: vec![0.0; self.hyper.types * em],
             incid,
             dq: vec![0.0; k * d],
             kmat: vec![0.0; k * k],
@@ -296,64 +211,47 @@ impl Kernel {
         })
     }
 
-    /// Writes (one-hot type, q_i, q̇_i) into `ws.cat`; returns its length.
-    fn node_features(&self, ws: &mut Workspace, q: &[f64], v: &[f64], i: usize) -> usize {
-        let (d, t) = (ws.plan.dim, self.hyper.types);
-        let c = &mut ws.cat;
-        c[..t].iter_mut().for_each(|x| *x = 0.0);
-        c[ws.plan.types[i]] = 1.0;
-        c[t..t + d].copy_from_slice(&q[i * d..(i + 1) * d]);
-        c[t + d..t + 2 * d].copy_from_slice(&v[i * d..(i + 1) * d]);
-        t + 2 * d
-    }
-
     /// Accelerations at (q, v), written to `acc` (`n·d`). Forces (and pairwise
     /// forces for MCGNODE) are left in `ws.force` / `ws.edge_force`.
     pub fn acceleration(&self, ws: &mut Workspace, q: &[f64], v: &[f64], acc: &mut [f64]) {
-        let (n, d, em) = (ws.plan.n, ws.plan.dim, self.hyper.embed);
+        let (n, d, em, t) = (ws.plan.n, ws.plan.dim, self.hyper.embed, self.hyper.types);
         let bias = self.hyper.variant.biases();
         if let Some(m) = &self.node_mlp {
             let nd = n * d;
             ws.x[..nd].copy_from_slice(q);
             ws.x[nd..2 * nd].copy_from_slice(v);
-            m.forward(&ws.x[..2 * nd], acc, &mut ws.t1, &mut ws.t2);
+            m.forward(&ws.x[..2 * nd], &[], 1, acc, &mut ws.t1, &mut ws.t2);
             return;
         }
-        // Node embeddings. Decoupled variants embed the type alone: one per type.
-        let node_em = self.node_em.as_ref().expect("checked in new");
-        if bias.decoupled {
-            let t = self.hyper.types;
-            for ty in 0..t {
-                ws.cat[..t].iter_mut().for_each(|x| *x = 0.0);
-                ws.cat[ty] = 1.0;
-                let h = &mut ws.type_em[ty * em..(ty + 1) * em];
-                node_em.forward(&ws.cat[..t], h, &mut ws.t1, &mut ws.t2);
-                h.iter_mut().for_each(|x| *x = squareplus_f64(*x));
-            }
-            for i in 0..n {
-                let ty = ws.plan.types[i];
-                ws.h[i * em..(i + 1) * em].copy_from_slice(&ws.type_em[ty * em..(ty + 1) * em]);
-            }
-        } else {
-            for i in 0..n {
-                let len = self.node_features(ws, q, v, i);
-                let (cat, h) = (&ws.cat[..len], &mut ws.h[i * em..(i + 1) * em]);
-                node_em.forward(cat, h, &mut ws.t1, &mut ws.t2);
-                h.iter_mut().for_each(|x| *x = squareplus_f64(*x));
-            }
-        }
-        // Edge embeddings of w_ij = q_i − q_j.
         let ne = ws.plan.recv.len();
-        let edge_em = self.edge_em.as_ref().expect("checked in new");
-        for e in 0..ne {
-            let (r, s) = (ws.plan.recv[e], ws.plan.send[e]);
+        let sqp = |x: &mut [f64]| x.iter_mut().for_each(|v| *v = squareplus_f64(*v));
+        // Node inputs (one-hot, q, q̇), feature-major.
+        ws.x[..t * n].fill(0.0);
+        for (i, &ty) in ws.plan.types.iter().enumerate() {
+            ws.x[ty * n + i] = 1.0;
             for c in 0..d {
-                ws.cat[c] = q[r * d + c] - q[s * d + c];
+                ws.x[(t + c) * n + i] = q[i * d + c];
+                ws.x[(t + d + c) * n + i] = v[i * d + c];
             }
-            let he = &mut ws.he[e * em..(e + 1) * em];
-            edge_em.forward(&ws.cat[..d], he, &mut ws.t1, &mut ws.t2);
-            he.iter_mut().for_each(|x| *x = squareplus_f64(*x));
         }
+        // Node embeddings: of the type alone when decoupled.
+        let node_in = if bias.decoupled {
+            t * n
+        } else {
+            (t + 2 * d) * n
+        };
+        let node_em = self.node_em.as_ref().expect("checked in new");
+        node_em.forward(&ws.x[..node_in], &[], n, &mut ws.h, &mut ws.t1, &mut ws.t2);
+        sqp(&mut ws.h);
+        // Edge embeddings of w_ij = q_i − q_j.
+        for (e, (&r, &s)) in ws.plan.recv.iter().zip(&ws.plan.send).enumerate() {
+            for c in 0..d {
+                ws.w_in[c * ne + e] = q[r * d + c] - q[s * d + c];
+            }
+        }
+        let edge_em = self.edge_em.as_ref().expect("checked in new");
+        edge_em.forward(&ws.w_in, &[], ne, &mut ws.he, &mut ws.t1, &mut ws.t2);
+        sqp(&mut ws.he);
         // Message passing. In the last round, skip what no decoder reads: node
         // updates when forces come from edges, edge updates when they come from nodes.
         let rounds = self.rounds.len();
@@ -361,48 +259,43 @@ impl Kernel {
             let last = l + 1 == rounds;
             let nodes_needed = !(last && bias.pairwise);
             let edges_needed = !last || bias.pairwise;
-            ws.agg.iter_mut().for_each(|x| *x = 0.0);
-            for e in 0..ne {
-                let (r, s) = (ws.plan.recv[e], ws.plan.send[e]);
-                if nodes_needed {
-                    ws.cat[..em].copy_from_slice(&ws.h[s * em..(s + 1) * em]);
-                    ws.cat[em..2 * em].copy_from_slice(&ws.he[e * em..(e + 1) * em]);
-                    let (cat, rest) = ws.cat.split_at_mut(2 * em);
-                    let msg = &mut rest[..em];
-                    wv.forward(cat, msg, &mut ws.t1, &mut ws.t2);
-                    for (a, m) in ws.agg[r * em..(r + 1) * em].iter_mut().zip(msg.iter()) {
-                        *a += m;
-                    }
-                }
-                if edges_needed {
-                    ws.cat[..em].copy_from_slice(&ws.h[r * em..(r + 1) * em]);
-                    ws.cat[em..2 * em].copy_from_slice(&ws.h[s * em..(s + 1) * em]);
-                    let hn = &mut ws.he_new[e * em..(e + 1) * em];
-                    we.forward(&ws.cat[..2 * em], hn, &mut ws.t1, &mut ws.t2);
-                    for (x, old) in hn.iter_mut().zip(&ws.he[e * em..(e + 1) * em]) {
-                        *x = squareplus_f64(*x + old);
-                    }
+            for k in 0..em {
+                let (hk, base) = (&ws.h[k * n..(k + 1) * n], k * ne);
+                for (e, (&r, &s)) in ws.plan.recv.iter().zip(&ws.plan.send).enumerate() {
+                    ws.hs[base + e] = hk[s];
+                    ws.hr[base + e] = hk[r];
                 }
             }
             if nodes_needed {
+                // h_i ← sqp(h_i + Σ_j W_V (h_j ‖ h_ij)).
+                wv.forward(&ws.hs, &ws.he, ne, &mut ws.msg, &mut ws.t1, &mut ws.t2);
+                ws.agg.fill(0.0);
+                for k in 0..em {
+                    let m = &ws.msg[k * ne..(k + 1) * ne];
+                    let a = &mut ws.agg[k * n..(k + 1) * n];
+                    for (&r, mv) in ws.plan.recv.iter().zip(m) {
+                        a[r] += mv;
+                    }
+                }
                 for (h, a) in ws.h.iter_mut().zip(&ws.agg) {
                     *h = squareplus_f64(*h + a);
                 }
             }
             if edges_needed {
+                // h_ij ← sqp(h_ij + W_E (h_i ‖ h_j)), from the node states before this round.
+                we.forward(&ws.hr, &ws.hs, ne, &mut ws.he_new, &mut ws.t1, &mut ws.t2);
+                for (x, old) in ws.he_new.iter_mut().zip(&ws.he) {
+                    *x = squareplus_f64(*x + old);
+                }
                 std::mem::swap(&mut ws.he, &mut ws.he_new);
             }
         }
-        // Global (body) embedding.
+        // Global (body) embedding of (one-hot, q, q̇).
         if let Some(g) = &self.glob_em {
-            for i in 0..n {
-                let len = self.node_features(ws, q, v, i);
-                let out = &mut ws.glob[i * em..(i + 1) * em];
-                g.forward(&ws.cat[..len], out, &mut ws.t1, &mut ws.t2);
-                out.iter_mut().for_each(|x| *x = squareplus_f64(*x));
-            }
+            g.forward(&ws.x, &[], n, &mut ws.glob, &mut ws.t1, &mut ws.t2);
+            sqp(&mut ws.glob);
         }
-        // Decoders.
+        // Decoders, into node-major forces (or accelerations for GNODE).
         let out: &mut [f64] = if bias.constrained {
             &mut ws.force
         } else {
@@ -410,46 +303,37 @@ impl Kernel {
         };
         if let Some(eo) = &self.edge_out {
             // Newton's third law: F_ab = (f_ab − f_ba)/2 on a, −F_ab on b.
-            out.iter_mut().for_each(|x| *x = 0.0);
+            out.fill(0.0);
+            eo.forward(&ws.he, &[], ne, &mut ws.f_edge, &mut ws.t1, &mut ws.t2);
             let half = ne / 2;
             for e in 0..half {
-                let (fab, fba) = ws.fpair.split_at_mut(d);
-                eo.forward(&ws.he[e * em..(e + 1) * em], fab, &mut ws.t1, &mut ws.t2);
-                let p = e + half;
-                eo.forward(&ws.he[p * em..(p + 1) * em], fba, &mut ws.t1, &mut ws.t2);
                 let (a, b) = (ws.plan.recv[e], ws.plan.send[e]);
                 for c in 0..d {
-                    let f = (fab[c] - fba[c]) * 0.5;
+                    let f = (ws.f_edge[c * ne + e] - ws.f_edge[c * ne + e + half]) * 0.5;
                     ws.edge_force[e * d + c] = f;
                     out[a * d + c] += f;
                     out[b * d + c] -= f;
                 }
             }
             if let Some(bo) = &self.body_out {
+                bo.forward(&ws.glob, &[], n, &mut ws.f_node, &mut ws.t1, &mut ws.t2);
                 for i in 0..n {
-                    let fb = &mut ws.fpair[..d];
-                    bo.forward(&ws.glob[i * em..(i + 1) * em], fb, &mut ws.t1, &mut ws.t2);
                     for c in 0..d {
-                        out[i * d + c] += fb[c];
+                        out[i * d + c] += ws.f_node[c * n + i];
                     }
                 }
             }
         } else if let Some(no) = &self.node_out {
+            let g: &[f64] = if self.glob_em.is_some() {
+                &ws.glob
+            } else {
+                &[]
+            };
+            no.forward(&ws.h, g, n, &mut ws.f_node, &mut ws.t1, &mut ws.t2);
             for i in 0..n {
-                let len = if self.glob_em.is_some() {
-                    ws.cat[..em].copy_from_slice(&ws.h[i * em..(i + 1) * em]);
-                    ws.cat[em..2 * em].copy_from_slice(&ws.glob[i * em..(i + 1) * em]);
-                    2 * em
-                } else {
-                    ws.cat[..em].copy_from_slice(&ws.h[i * em..(i + 1) * em]);
-                    em
-                };
-                no.forward(
-                    &ws.cat[..len],
-                    &mut out[i * d..(i + 1) * d],
-                    &mut ws.t1,
-                    &mut ws.t2,
-                );
+                for c in 0..d {
+                    out[i * d + c] = ws.f_node[c * n + i];
+                }
             }
         }
         if bias.constrained {
@@ -472,12 +356,7 @@ impl Kernel {
                 let mut s = 0.0;
                 let mut rhs = 0.0;
                 for c in 0..d {
-                    let (qb, vb) = match &bar.b {
-                        BarEnd::Particle(b) => (q[b * d + c], v[b * d + c]),
-                        BarEnd::Fixed(p) => (p[c], 0.0),
-                    };
-                    let dq = q[bar.a * d + c] - qb;
-                    let dv = v[bar.a * d + c] - vb;
+                    let (dq, dv) = bar.delta(q, v, d, c);
                     ws.dq[r * d + c] = dq;
                     s += dv * dv;
                     rhs += dq * inv_m[ws.plan.types[bar.a]] * ws.force[bar.a * d + c];

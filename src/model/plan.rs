@@ -13,6 +13,18 @@ pub struct Bar {
     pub b: BarEnd,
 }
 
+impl Bar {
+    /// Component `c` of q_a − q_b and q̇_a − q̇_b (a fixed end has zero velocity).
+    #[inline]
+    pub fn delta(&self, q: &[f64], v: &[f64], d: usize, c: usize) -> (f64, f64) {
+        let (qb, vb) = match &self.b {
+            BarEnd::Particle(b) => (q[b * d + c], v[b * d + c]),
+            BarEnd::Fixed(p) => (p[c], 0.0),
+        };
+        (q[self.a * d + c] - qb, v[self.a * d + c] - vb)
+    }
+}
+
 /// The far end of a bar.
 #[derive(Clone, Debug, PartialEq)]
 pub enum BarEnd {
@@ -90,12 +102,7 @@ impl GraphPlan {
         for (r, bar) in self.bars.iter().enumerate() {
             let mut s = 0.0;
             for c in 0..d {
-                let (qb, vb) = match &bar.b {
-                    BarEnd::Particle(b) => (q[b * d + c], v[b * d + c]),
-                    BarEnd::Fixed(p) => (p[c], 0.0),
-                };
-                let dq = q[bar.a * d + c] - qb;
-                let dv = v[bar.a * d + c] - vb;
+                let (dq, dv) = bar.delta(q, v, d, c);
                 a[r * nd + bar.a * d + c] = dq;
                 if let BarEnd::Particle(b) = bar.b {
                     a[r * nd + b * d + c] = -dq;
