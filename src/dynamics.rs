@@ -39,25 +39,29 @@ pub trait Dynamics: Send + Sync {
     /// Forces at a state.
     fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String>;
 
-    /// Velocity-Verlet rollout: `steps + 1` states including `start`.
+    /// Velocity-Verlet rollout of `steps` steps of `dt`, keeping `start` and
+    /// every `every`-th state (so a coarse output can come from a fine
+    /// integration step).
     ///
     /// The velocity-dependent acceleration at the new position is evaluated at
     /// the half-step velocity, which keeps the scheme explicit.
-    fn rollout(
+    fn rollout_every(
         &self,
         graph: &Graph,
         start: &State,
         dt: f64,
         steps: usize,
+        every: usize,
     ) -> Result<Vec<State>, String> {
         self.supports(graph)?;
         start.validate(graph)?;
-        let mut out = Vec::with_capacity(steps + 1);
+        let every = every.max(1);
+        let mut out = Vec::with_capacity(steps / every + 1);
         let mut s = start.clone();
         let mut a = vec![0.0; graph.ndof()];
         self.acceleration(graph, &s, &mut a)?;
         out.push(s.clone());
-        for _ in 0..steps {
+        for step in 1..=steps {
             for ((q, v), a) in s.q.iter_mut().zip(s.v.iter_mut()).zip(&a) {
                 *q += *v * dt + 0.5 * a * dt * dt;
                 *v += 0.5 * a * dt;
@@ -68,12 +72,24 @@ pub trait Dynamics: Send + Sync {
             }
             if s.q.iter().chain(&s.v).any(|x| !x.is_finite()) {
                 return Err(format!(
-                    "rollout diverged (non-finite state) after {} steps",
-                    out.len()
+                    "rollout diverged (non-finite state) at step {step}"
                 ));
             }
-            out.push(s.clone());
+            if step % every == 0 {
+                out.push(s.clone());
+            }
         }
         Ok(out)
+    }
+
+    /// Velocity-Verlet rollout: `steps + 1` states including `start`.
+    fn rollout(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+    ) -> Result<Vec<State>, String> {
+        self.rollout_every(graph, start, dt, steps, 1)
     }
 }

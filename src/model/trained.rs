@@ -132,20 +132,21 @@ impl Dynamics for TrainedModel {
         Ok(Forces { total, edges })
     }
 
-    fn rollout(
+    fn rollout_every(
         &self,
         graph: &Graph,
         start: &State,
         dt: f64,
         steps: usize,
+        every: usize,
     ) -> Result<Vec<State>, String> {
         let mut ws = self.kernel.workspace(graph)?;
         start.validate(graph)?;
         if !(dt.is_finite() && dt > 0.0) {
             return Err(format!("time step must be positive and finite, got {dt}"));
         }
-        let mut out = Vec::with_capacity(steps + 1);
-        self.rollout_with(&mut ws, start, dt, steps, 1, |_, q, v| {
+        let mut out = Vec::with_capacity(steps / every.max(1) + 1);
+        self.rollout_with(&mut ws, start, dt, steps, every, |_, q, v| {
             out.push(State {
                 q: q.to_vec(),
                 v: v.to_vec(),
