@@ -6,6 +6,7 @@
 //! Data flows one way: [`physics`] → [`data`] (bags) → `model` + `train` →
 //! model file → `kernel` + `rollout` → [`data`] → `metrics`.
 
+pub mod baselines;
 pub mod bench;
 pub mod cli;
 pub mod data;
@@ -16,6 +17,7 @@ pub mod metrics;
 pub mod model;
 pub mod physics;
 pub mod plot;
+pub mod replay;
 pub mod ros;
 pub mod system;
 pub mod train;

@@ -215,7 +215,11 @@ fn plot_is_written_as_png() {
     assert_eq!(&bytes[12..16], b"IHDR");
     let w = u32::from_be_bytes(bytes[16..20].try_into().unwrap());
     let h = u32::from_be_bytes(bytes[20..24].try_into().unwrap());
-    assert_eq!((w, h), (2 * 460, 4 * 300), "a column per panel, a row per metric");
+    assert_eq!(
+        (w, h),
+        (2 * 460, 4 * 300),
+        "a column per panel, a row per metric"
+    );
     assert!(
         bytes.len() > 10_000,
         "suspiciously small PNG ({} bytes)",

@@ -137,17 +137,11 @@ fn model_gradients_match_finite_differences() {
         let grads = net.loss(&batch).unwrap().backward().unwrap();
         for name in net.store.names().to_vec() {
             let var = net.store.get(&name).unwrap().clone();
-            let base = var
-                .as_tensor()
-                .flatten_all()
-                .unwrap()
-                .to_vec1::<f64>()
-                .unwrap();
             // A parameter the loss does not depend on (the last edge update when
             // only node outputs are decoded) has no gradient: zero.
             let g_an = grads
                 .get(&var)
-                .map(|g| g.clone())
+                .cloned()
                 .unwrap_or_else(|| var.as_tensor().zeros_like().unwrap())
                 .flatten_all()
                 .unwrap()
@@ -161,7 +155,7 @@ fn model_gradients_match_finite_differences() {
                 .unwrap();
             for i in [0, base.len() / 2, base.len() - 1] {
                 let h = 1e-6;
-                let mut eval = |delta: f64| {
+                let eval = |delta: f64| {
                     let mut p = base.clone();
                     p[i] += delta;
                     var.set(&Tensor::from_vec(p, var.shape(), &Device::Cpu).unwrap())

@@ -3,6 +3,7 @@
 mod bench;
 mod demo;
 mod evaluate;
+mod replay;
 mod rollout;
 mod simulate;
 mod train;
@@ -32,6 +33,8 @@ enum Command {
     Demo(demo::Args),
     /// Measure training-step and rollout speed.
     Bench(bench::Args),
+    /// Replay a bag through a model: RE, EE and ME against lead time for every recorded start state (table, JSON, PNG).
+    Replay(replay::Args),
     /// Run the ROS 2 node.
     Serve(crate::ros::ServeArgs),
 }
@@ -50,6 +53,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Evaluate(a) => evaluate::run(a),
         Command::Demo(a) => demo::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::Replay(a) => replay::run(a),
         Command::Serve(a) => crate::ros::run_serve(a),
     }
 }

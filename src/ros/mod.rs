@@ -9,12 +9,17 @@
 //! - [`record`]: MCAP recording of states, predictions and forces;
 //! - [`truth`]: the ground-truth physics as a servable model;
 //! - [`node`]: the DDS entities and the event loop.
+//! - [`training`]: the Train and LoadModel services, training in the
+//!   background and atomic model swaps announced on `/mcgnode/model_swap`;
+//! - [`action`]: the Train action (per-epoch feedback, cancel).
 
+pub mod action;
 pub mod msgs;
 pub mod node;
 pub mod params;
 pub mod predict;
 pub mod record;
+pub mod training;
 pub mod truth;
 pub mod yaml;
 

@@ -104,10 +104,10 @@ impl Logger {
 }
 
 /// What the tasks share.
-struct Shared {
-    params: NodeParams,
+pub(super) struct Shared {
+    pub(super) params: NodeParams,
     /// Behind a lock so a model swap (Train, LoadModel) can replace it.
-    model: RwLock<Arc<dyn Dynamics>>,
+    pub(super) model: RwLock<Arc<dyn Dynamics>>,
     stats: Stats,
     /// Limits warnings about bad input states.
     warn_input: Mutex<RateLimiter>,
@@ -115,13 +115,16 @@ struct Shared {
     warn_service: Mutex<RateLimiter>,
     /// Limits warnings about recording failures.
     warn_record: Mutex<RateLimiter>,
-    log: Logger,
+    pub(super) log: Logger,
     /// MCAP recording, when `record_dir` is set.
-    recorder: Option<Mutex<Recorder>>,
+    pub(super) recorder: Option<Mutex<Recorder>>,
+    /// Train/LoadModel state and the swap announcer.
+    pub(super) training: super::training::Training,
 }
 
 impl Shared {
-    fn model(&self) -> Arc<dyn Dynamics> {
+    /// The model served now.
+    pub(super) fn model(&self) -> Arc<dyn Dynamics> {
         self.model
             .read()
             .unwrap_or_else(PoisonError::into_inner)
@@ -171,7 +174,13 @@ impl Shared {
     fn handle_state(&self, msg: ParticleState, received_ns: u64) -> Result<Prediction, String> {
         self.record(|r| r.state(received_ns, &msg));
         let model = self.model();
-        let p = predict::predict(model.as_ref(), &msg, self.params.dt, self.params.horizon)?;
+        let p = predict::predict(
+            model.as_ref(),
+            &msg,
+            self.params.dt,
+            self.params.horizon,
+            self.params.substeps,
+        )?;
         self.record(|r| r.prediction(now_ns(), &p.trajectory, &p.forces));
         Ok(p)
     }
@@ -347,6 +356,7 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
             )
             .map_err(e("the Rollout service"))?,
     };
+    let (training, training_endpoints) = super::training::create(&mut node, &params)?;
     let spinner = node.spinner().map_err(e("the node spinner"))?;
     let recorder = if params.record_dir.is_empty() {
         None
@@ -365,6 +375,7 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         warn_service: limiter(),
         warn_record: limiter(),
         recorder,
+        training,
         model: RwLock::new(model),
         stats: Stats::default(),
         log: Logger {
@@ -403,6 +414,7 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         tokio::spawn(input_loop(shared.clone(), input, trajectory, forces));
         tokio::spawn(rollout_loop(shared.clone(), rollout));
         tokio::spawn(diagnostics_loop(shared.clone(), diagnostics));
+        super::training::spawn(shared.clone(), training_endpoints);
         wait_for_shutdown().await
     });
     shared
@@ -507,8 +519,9 @@ async fn rollout_loop(shared: Arc<Shared>, server: Server<RolloutRequest, Rollou
         };
         let model = shared.model();
         let (default_dt, max_steps) = (shared.params.dt, shared.params.max_rollout_steps);
+        let fine_dt = default_dt / f64::from(shared.params.substeps.max(1));
         let job = tokio::task::spawn_blocking(move || {
-            rollout_response(model.as_ref(), &req, default_dt, max_steps)
+            rollout_response(model.as_ref(), &req, default_dt, fine_dt, max_steps)
         });
         let resp = job.await.unwrap_or_else(|join| RolloutResponse {
             success: false,
@@ -530,11 +543,14 @@ async fn rollout_loop(shared: Arc<Shared>, server: Server<RolloutRequest, Rollou
     }
 }
 
-/// The Rollout service's work: checks the request, then predicts.
+/// The Rollout service's work: checks the request, then predicts. `dt = 0` in the request means `default_dt`;
+/// the model is integrated with steps no longer than `fine_dt` (the node's
+/// `dt / substeps`) and sampled every `dt`.
 pub fn rollout_response(
     model: &dyn Dynamics,
     req: &RolloutRequest,
     default_dt: f64,
+    fine_dt: f64,
     max_steps: u32,
 ) -> RolloutResponse {
     let fail = |message: String| RolloutResponse {
@@ -553,7 +569,12 @@ pub fn rollout_response(
         Ok(x) => x,
         Err(e) => return fail(e),
     };
-    match predict::trajectory(model, &req.initial, &graph, &start, dt, req.steps) {
+    let substeps = if dt.is_finite() && dt > 0.0 {
+        ((dt / fine_dt).round() as u32).max(1)
+    } else {
+        1
+    };
+    match predict::trajectory(model, &req.initial, &graph, &start, dt, req.steps, substeps) {
         Ok(trajectory) => RolloutResponse {
             success: true,
             message: format!("{} states, dt = {dt}", trajectory.states.len()),
@@ -597,13 +618,13 @@ mod tests {
             steps: 50,
             ..RolloutRequest::default()
         };
-        let r = rollout_response(model.as_ref(), &req, 0.01, 10);
+        let r = rollout_response(model.as_ref(), &req, 0.01, 0.01, 10);
         assert!(
             !r.success && r.message.contains("max_rollout_steps"),
             "{}",
             r.message
         );
-        let r = rollout_response(model.as_ref(), &req, 0.01, 100);
+        let r = rollout_response(model.as_ref(), &req, 0.01, 0.01, 100);
         assert!(
             !r.success && r.message.contains("malformed"),
             "{}",

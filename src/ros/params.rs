@@ -29,6 +29,10 @@ pub struct NodeParams {
     pub horizon: u32,
     /// Time step of predictions, seconds.
     pub dt: f64,
+    /// Integration steps per prediction step: the model is integrated with
+    /// `dt / substeps` (e.g. the training data's simulator step) and every
+    /// `substeps`-th state is published.
+    pub substeps: u32,
     /// Reliable (true) or best-effort (false) QoS on the topics.
     pub qos_reliable: bool,
     /// Keep-last history depth of the topics.
@@ -45,6 +49,9 @@ pub struct NodeParams {
     pub record_split_mb: u32,
     /// Start a new bag after this many seconds (0 = no duration limit).
     pub record_split_seconds: f64,
+    /// Folder for models trained by the node; empty: `<record_dir>/models`,
+    /// or a temporary folder when not recording.
+    pub model_dir: String,
 }
 
 impl Default for NodeParams {
@@ -58,6 +65,7 @@ impl Default for NodeParams {
             rollout_service: "/mcgnode/rollout".into(),
             horizon: 100,
             dt: 0.001,
+            substeps: 1,
             qos_reliable: true,
             qos_depth: 10,
             diagnostics_period: 1.0,
@@ -66,6 +74,7 @@ impl Default for NodeParams {
             record_dir: String::new(),
             record_split_mb: 0,
             record_split_seconds: 0.0,
+            model_dir: String::new(),
         }
     }
 }
@@ -123,6 +132,16 @@ const SPECS: &[(&str, Kind, &str)] = &[
         "dt",
         Kind::Double(true),
         "time step of predictions, seconds",
+    ),
+    (
+        "substeps",
+        Kind::Int(1, 1_000_000),
+        "integration steps per prediction step (the model is integrated with dt / substeps)",
+    ),
+    (
+        "model_dir",
+        Kind::Str,
+        "folder for models trained by the node (empty: <record_dir>/models, or a temporary folder)",
     ),
     (
         "qos_reliable",
@@ -297,6 +316,7 @@ impl NodeParams {
             "diagnostics_topic" => self.diagnostics_topic = s,
             "rollout_service" => self.rollout_service = s,
             "record_dir" => self.record_dir = s,
+            "model_dir" => self.model_dir = s,
             _ => unreachable_key(key),
         }
     }
@@ -304,6 +324,7 @@ impl NodeParams {
     fn set_int(&mut self, key: &str, v: u32) {
         match key {
             "horizon" => self.horizon = v,
+            "substeps" => self.substeps = v,
             "qos_depth" => self.qos_depth = v,
             "max_rollout_steps" => self.max_rollout_steps = v,
             "record_split_mb" => self.record_split_mb = v,
@@ -343,6 +364,8 @@ impl NodeParams {
             "diagnostics_topic" => q(&self.diagnostics_topic),
             "rollout_service" => q(&self.rollout_service),
             "record_dir" => q(&self.record_dir),
+            "model_dir" => q(&self.model_dir),
+            "substeps" => self.substeps.to_string(),
             "horizon" => self.horizon.to_string(),
             "qos_depth" => self.qos_depth.to_string(),
             "max_rollout_steps" => self.max_rollout_steps.to_string(),

@@ -30,7 +30,8 @@ pub fn accept(model: &dyn Dynamics, input: &ParticleState) -> Result<(Graph, Sta
 }
 
 /// Rolls the model out `steps` steps of `dt` from `input` (already accepted
-/// as `graph` + `start`); the states are stamped `k·dt` after the input.
+/// as `graph` + `start`), integrating with `dt / substeps`; the states are
+/// stamped `k·dt` after the input.
 pub fn trajectory(
     model: &dyn Dynamics,
     input: &ParticleState,
@@ -38,12 +39,14 @@ pub fn trajectory(
     start: &State,
     dt: f64,
     steps: u32,
+    substeps: u32,
 ) -> Result<PredictedTrajectory, String> {
     if !(dt.is_finite() && dt > 0.0) {
         return Err(format!("dt = {dt} must be finite and > 0"));
     }
+    let sub = substeps.max(1) as usize;
     let states = model
-        .rollout(graph, start, dt, steps as usize)
+        .rollout_every(graph, start, dt / sub as f64, steps as usize * sub, sub)
         .map_err(|e| format!("rollout failed: {e}"))?;
     let t0 = input.header.stamp.as_nanos();
     let states = states
@@ -135,9 +138,10 @@ pub fn predict(
     input: &ParticleState,
     dt: f64,
     horizon: u32,
+    substeps: u32,
 ) -> Result<Prediction, String> {
     let (graph, start) = accept(model, input)?;
-    let trajectory = trajectory(model, input, &graph, &start, dt, horizon)?;
+    let trajectory = trajectory(model, input, &graph, &start, dt, horizon, substeps)?;
     let forces = forces(model, &input.header, &graph, &start)?;
     Ok(Prediction { trajectory, forces })
 }
@@ -177,7 +181,7 @@ mod tests {
     fn prediction_is_stamped_from_the_input() {
         let model = load_truth("truth:spring").unwrap();
         let input = spring_state();
-        let p = predict(model.as_ref(), &input, 0.001, 7).unwrap();
+        let p = predict(model.as_ref(), &input, 0.001, 7, 1).unwrap();
         assert_eq!(p.trajectory.header, input.header);
         assert_eq!(p.forces.header, input.header);
         assert_eq!(p.trajectory.initial, input);
@@ -217,10 +221,10 @@ mod tests {
             (edge, "out of range"),
             (dim, "dimension"),
         ] {
-            let e = predict(model.as_ref(), &bad, 0.001, 3).unwrap_err();
+            let e = predict(model.as_ref(), &bad, 0.001, 3, 1).unwrap_err();
             assert!(e.contains("malformed") && e.contains(want), "{e}");
         }
-        let e = predict(model.as_ref(), &spring_state(), f64::NAN, 3).unwrap_err();
+        let e = predict(model.as_ref(), &spring_state(), f64::NAN, 3, 1).unwrap_err();
         assert!(e.contains("dt"), "{e}");
     }
 }

@@ -1,0 +1,65 @@
+//! A trained baseline on disk: JSON like [`crate::model::ModelFile`], with its
+//! own format tag so neither loader mistakes one for the other.
+
+use super::net::BaselineHyper;
+use crate::model::file::{TrainedOn, TrainingReport};
+use crate::model::params::Weights;
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Format tag written in every baseline file.
+pub const FORMAT: &str = "mcgnode-baseline/1";
+
+/// A trained baseline.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BaselineFile {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Version of mcgnode that wrote it.
+    pub crate_version: String,
+    /// Architecture.
+    pub hyper: BaselineHyper,
+    /// Training data, when trained from bags.
+    pub trained_on: Option<TrainedOn>,
+    /// Training outcome.
+    pub training: TrainingReport,
+    /// Parameters.
+    pub weights: Weights,
+}
+
+impl BaselineFile {
+    /// Writes the file atomically (temporary file in the same folder, then rename).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let dir = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let mut tmp = tempfile::NamedTempFile::new_in(dir)
+            .with_context(|| format!("creating a temporary file in {}", dir.display()))?;
+        serde_json::to_writer_pretty(&mut tmp, self)?;
+        use std::io::Write;
+        tmp.write_all(b"\n")?;
+        tmp.as_file().sync_all()?;
+        tmp.persist(path)
+            .with_context(|| format!("writing baseline file {}", path.display()))?;
+        Ok(())
+    }
+
+    /// Reads and checks a baseline file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read baseline file {}", path.display()))?;
+        let m: BaselineFile = serde_json::from_str(&text)
+            .with_context(|| format!("{} is not a valid mcgnode baseline file", path.display()))?;
+        if m.format != FORMAT {
+            bail!(
+                "{}: unsupported baseline format {:?} (expected {FORMAT})",
+                path.display(),
+                m.format
+            );
+        }
+        Ok(m)
+    }
+}

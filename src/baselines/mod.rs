@@ -1,0 +1,38 @@
+//! Baselines of the paper: LGN and HGN (graph networks that output a
+//! Lagrangian / Hamiltonian, differentiated into accelerations) and GNS
+//! (encode-process-decode graph network simulator predicting accelerations).
+//! They use the same data, splits, metrics and rollout (the
+//! [`crate::dynamics::Dynamics`] trait) as the GNODE family.
+//!
+//! Choices (the paper gives few details):
+//! * LGN/HGN use a full graph network ([`graphnet`]; embeddings 8, MLPs with
+//!   one hidden layer of 16, squareplus, one round, as the paper's table). It
+//!   outputs a potential V_θ(q) as a sum of node and edge energies; the kinetic
+//!   energy is ½ q̇ᵀMq̇ (LGN) or ½ pᵀM⁻¹p (HGN) with a learnable diagonal mass
+//!   per particle type, "since Cartesian coordinates are used" (paper, after
+//!   Finzi et al. 2020).
+//! * Derivatives come from generic code ([`mechanics`]) that works for any
+//!   scalar L(q, q̇) or H(q, p) and handles rigid bars; it is tested against
+//!   hand-written Lagrangians and Hamiltonians of the true systems.
+//! * LGN and HGN need candle grad-of-grad ([`autodiff`]): they switch on
+//!   `CANDLE_GRAD_DO_NOT_DETACH` themselves and refuse to run on a thread
+//!   where candle has already fixed the old setting.
+//! * HGN trains on (q̇, ṗ); its data come from RK4 on (q, p)
+//!   ([`hgn::rk4_trajectories`]). LGN and GNS train on accelerations.
+
+pub mod autodiff;
+pub mod gns;
+pub mod graphnet;
+pub mod hgn;
+pub mod lgn;
+pub mod mechanics;
+pub mod net;
+
+pub use net::{BaselineHyper, BaselineNet, Kind};
+pub mod file;
+pub mod train;
+pub mod trained;
+
+pub use file::BaselineFile;
+pub use train::train_baseline;
+pub use trained::TrainedBaseline;

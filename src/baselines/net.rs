@@ -1,0 +1,220 @@
+//! The baseline models' hyperparameters and parameters, and the one entry
+//! point (`acceleration`, `loss`) that dispatches to LGN, HGN or GNS.
+
+use super::graphnet::{GraphNet, GraphNetSpec};
+use super::{gns, hgn, lgn};
+use crate::model::batch::Batch;
+use crate::model::mlp::Mlp;
+use crate::model::params::ParamStore;
+use anyhow::{bail, Result};
+use candle_core::Tensor;
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
+
+/// Which baseline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Kind {
+    /// Lagrangian graph network.
+    Lgn,
+    /// Hamiltonian graph network.
+    Hgn,
+    /// Graph network simulator.
+    Gns,
+}
+
+impl Kind {
+    /// All baselines.
+    pub const ALL: [Kind; 3] = [Kind::Lgn, Kind::Hgn, Kind::Gns];
+
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::Lgn => "lgn",
+            Kind::Hgn => "hgn",
+            Kind::Gns => "gns",
+        }
+    }
+
+    /// Whether the model is differentiated twice (needs candle's
+    /// `CANDLE_GRAD_DO_NOT_DETACH`, see [`super::autodiff`]).
+    pub fn second_order(self) -> bool {
+        self != Kind::Gns
+    }
+}
+
+impl fmt::Display for Kind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Kind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let t = s.trim().to_ascii_lowercase();
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name() == t)
+            .ok_or_else(|| format!("unknown baseline {s:?}; expected one of lgn, hgn, gns"))
+    }
+}
+
+/// Architecture of a baseline.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BaselineHyper {
+    /// Which baseline.
+    pub kind: Kind,
+    /// Spatial dimension.
+    pub dim: usize,
+    /// Particle types (one-hot width).
+    pub types: usize,
+    /// Hidden units per MLP (paper, LGN/HGN: 16).
+    pub hidden: usize,
+    /// Node/edge latent width (paper, LGN/HGN: 8).
+    pub latent: usize,
+    /// Message-passing rounds (paper, LGN/HGN: 1; GNS processor steps).
+    pub rounds: usize,
+}
+
+impl BaselineHyper {
+    /// Defaults: LGN/HGN as the paper's table (embeddings 8, hidden 16, one
+    /// round); GNS small (latent 16, hidden 16, 2 processor steps; the original
+    /// uses 128 and 10).
+    pub fn new(kind: Kind, dim: usize, types: usize) -> Self {
+        let (latent, rounds) = match kind {
+            Kind::Lgn | Kind::Hgn => (8, 1),
+            Kind::Gns => (16, 2),
+        };
+        Self {
+            kind,
+            dim,
+            types: types.max(1),
+            hidden: 16,
+            latent,
+            rounds,
+        }
+    }
+}
+
+/// A baseline's parameters and networks.
+#[derive(Clone, Debug)]
+pub struct BaselineNet {
+    /// Architecture.
+    pub hyper: BaselineHyper,
+    /// Parameters.
+    pub store: ParamStore,
+    /// The graph network.
+    pub graph: GraphNet,
+    /// LGN/HGN: per-node energy readout; GNS: acceleration decoder.
+    pub node_out: Mlp,
+    /// LGN/HGN: per-edge energy readout.
+    pub edge_out: Option<Mlp>,
+}
+
+impl BaselineNet {
+    /// A freshly initialised model (seeded by `rng`).
+    pub fn new(hyper: BaselineHyper, rng: &mut impl Rng) -> Result<Self> {
+        if hyper.dim != 2 && hyper.dim != 3 {
+            bail!("baseline dimension must be 2 or 3, got {}", hyper.dim);
+        }
+        if hyper.hidden == 0 || hyper.latent == 0 {
+            bail!("hidden and latent widths must be positive");
+        }
+        if hyper.kind.second_order() {
+            super::autodiff::ensure_second_order()?;
+        }
+        let (d, t, h, l) = (hyper.dim, hyper.types, hyper.hidden, hyper.latent);
+        let mut store = ParamStore::new();
+        let energy = hyper.kind != Kind::Gns;
+        let spec = GraphNetSpec {
+            // LGN/HGN: a potential V(q), inputs type and position; GNS: type,
+            // position and velocity (as GNODE; position stands in for the
+            // original's distance-to-boundary features, needed for anchors).
+            node_in: if energy { t + d } else { t + 2 * d },
+            dim: d,
+            hidden: h,
+            latent: l,
+            rounds: hyper.rounds,
+            residual: !energy,
+            edge_distance: !energy,
+        };
+        let graph = GraphNet::new(&mut store, spec, rng)?;
+        let out = if energy { 1 } else { d };
+        let node_out = Mlp::new(&mut store, "node_out", &[l, h, out], rng)?;
+        let edge_out = if energy {
+            Some(Mlp::new(&mut store, "edge_out", &[l, h, 1], rng)?)
+        } else {
+            None
+        };
+        if energy {
+            store.insert("log_mass", &[t], vec![0.0; t])?;
+        }
+        Ok(Self {
+            hyper,
+            store,
+            graph,
+            node_out,
+            edge_out,
+        })
+    }
+
+    /// Learned masses per row of the batch, `(B·n, 1)` (LGN/HGN).
+    pub fn row_masses(&self, b: &Batch) -> Result<Tensor> {
+        let m = self.store.get("log_mass")?.as_tensor().exp()?;
+        Ok(m.index_select(&b.types, 0)?.unsqueeze(1)?)
+    }
+
+    /// The learned potential V(q) summed over the batch (LGN/HGN): per-node
+    /// plus per-directed-edge energies from the graph network.
+    pub fn potential(&self, b: &Batch, q: &Tensor) -> Result<Tensor> {
+        let x = Tensor::cat(&[&b.onehot, q], 1)?;
+        let (h, e) = self.graph.run(&self.store, b, q, &x)?;
+        let mut v = self.node_out.forward(&self.store, &h)?.sum_all()?;
+        if let (Some(e), Some(eo)) = (e, &self.edge_out) {
+            v = (v + eo.forward(&self.store, &e)?.sum_all()?)?;
+        }
+        Ok(v)
+    }
+
+    /// Predicted accelerations `(B·n, d)`.
+    pub fn acceleration(&self, b: &Batch) -> Result<Tensor> {
+        self.check(b)?;
+        match self.hyper.kind {
+            Kind::Lgn => lgn::acceleration(self, b),
+            Kind::Hgn => hgn::acceleration(self, b),
+            Kind::Gns => gns::acceleration(self, b),
+        }
+    }
+
+    /// Training loss: MSE on accelerations (LGN, GNS) or on (q̇, ṗ) (HGN,
+    /// targets derived from the batch's velocities and accelerations with the
+    /// true `masses`, one per particle).
+    pub fn loss(&self, b: &Batch, masses: &[f64]) -> Result<Tensor> {
+        self.check(b)?;
+        let Some(t) = &b.target else {
+            bail!("batch has no targets");
+        };
+        match self.hyper.kind {
+            Kind::Hgn => hgn::loss(self, b, masses),
+            _ => Ok((self.acceleration(b)? - t)?.sqr()?.mean_all()?),
+        }
+    }
+
+    fn check(&self, b: &Batch) -> Result<()> {
+        if b.dim != self.hyper.dim {
+            bail!(
+                "{} was built for {}D systems, got {}D",
+                self.hyper.kind,
+                self.hyper.dim,
+                b.dim
+            );
+        }
+        if self.hyper.kind.second_order() {
+            super::autodiff::ensure_second_order()?;
+        }
+        Ok(())
+    }
+}

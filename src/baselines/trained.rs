@@ -1,0 +1,98 @@
+//! A trained baseline serving [`Dynamics`]: a candle forward per call (LGN and
+//! HGN differentiate at inference too; they are baselines, speed is secondary).
+
+use super::file::BaselineFile;
+use super::net::BaselineNet;
+use crate::dynamics::{Dynamics, Forces};
+use crate::model::batch::Batch;
+use crate::model::plan::GraphPlan;
+use crate::system::{Graph, State};
+use anyhow::Result;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use std::path::Path;
+
+/// A trained baseline ready for rollouts.
+#[derive(Clone, Debug)]
+pub struct TrainedBaseline {
+    /// Metadata and weights.
+    pub file: BaselineFile,
+    /// The network with those weights.
+    pub net: BaselineNet,
+}
+
+impl TrainedBaseline {
+    /// Loads a baseline file.
+    pub fn load(path: &Path) -> Result<Self> {
+        Self::from_file(BaselineFile::load(path)?)
+    }
+
+    /// Builds the network of an in-memory file.
+    pub fn from_file(file: BaselineFile) -> Result<Self> {
+        let mut net = BaselineNet::new(file.hyper.clone(), &mut ChaCha8Rng::seed_from_u64(0))?;
+        net.store.load(&file.weights)?;
+        Ok(Self { file, net })
+    }
+
+    fn accel(&self, graph: &Graph, state: &State) -> Result<Vec<f64>, String> {
+        self.supports(graph)?;
+        state.validate(graph)?;
+        let plan = GraphPlan::new(graph);
+        let run = || -> Result<Vec<f64>> {
+            let b = Batch::new(&plan, &[state], None, self.net.hyper.types)?;
+            Ok(self.net.acceleration(&b)?.flatten_all()?.to_vec1::<f64>()?)
+        };
+        run().map_err(|e| format!("{e:#}"))
+    }
+}
+
+impl Dynamics for TrainedBaseline {
+    fn describe(&self) -> String {
+        let t = &self.file.training;
+        format!(
+            "{} baseline ({} epochs, validation loss {:.3e})",
+            self.file.hyper.kind, t.epochs_run, t.validation_loss
+        )
+    }
+
+    fn supports(&self, graph: &Graph) -> Result<(), String> {
+        graph.validate()?;
+        let h = &self.file.hyper;
+        if graph.dim != h.dim {
+            return Err(format!(
+                "{} was trained on {}D systems, the graph is {}D",
+                h.kind, h.dim, graph.dim
+            ));
+        }
+        if let Some(t) = graph.types.iter().find(|&&t| t as usize >= h.types) {
+            return Err(format!(
+                "particle type {t} is unknown to the model (it knows {} types)",
+                h.types
+            ));
+        }
+        Ok(())
+    }
+
+    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
+        if out.len() != graph.ndof() {
+            return Err("output buffer has the wrong size".into());
+        }
+        out.copy_from_slice(&self.accel(graph, state)?);
+        Ok(())
+    }
+
+    /// Total force m∘q̈ with the true masses (as for acceleration-predicting
+    /// GNODE variants); no pairwise forces.
+    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String> {
+        let a = self.accel(graph, state)?;
+        let total = a
+            .iter()
+            .enumerate()
+            .map(|(i, x)| x * graph.masses[i / graph.dim])
+            .collect();
+        Ok(Forces {
+            total,
+            edges: vec![],
+        })
+    }
+}

@@ -1,0 +1,327 @@
+//! The Train action (`mcgnode_msgs/action/Train`, msg/Train.action): the same
+//! training as the Train service, with per-epoch feedback and cancel.
+//!
+//! A goal is refused while another training runs. A cancel makes the next
+//! epoch's callback stop training; the goal ends CANCELED and the old model
+//! stays. Failures end ABORTED with the reason in the result's `message`.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+
+use anyhow::anyhow;
+use ros2_client::action::{
+    ActionServerQosPolicies, AsyncActionServer, ExecutingGoalHandle, GoalEndStatus,
+};
+use ros2_client::action_msgs::GoalId;
+use ros2_client::log::LogLevel;
+use ros2_client::qos::{Durability, History};
+use ros2_client::{ActionTypeName, Message, Name, Node, QosProfile, ServiceMapping};
+use serde::{Deserialize, Serialize};
+
+use crate::train::EpochReport;
+
+use super::msgs::{TrainRequest, TrainResponse, PACKAGE};
+use super::node::Shared;
+use super::training::{claim, reliable_qos, run_training, BUSY};
+
+/// Name of the Train action.
+pub const TRAIN_ACTION: &str = "/mcgnode/train_action";
+
+/// Goal of `mcgnode_msgs/action/Train` (the Train service's request).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TrainGoal {
+    /// Bags to train on; empty = what the node recorded.
+    pub bags: Vec<String>,
+    /// Model variant; empty = mcgnode.
+    pub variant: String,
+    /// Training epochs.
+    pub epochs: u32,
+    /// Random seed.
+    pub seed: u64,
+}
+impl Message for TrainGoal {}
+
+/// Result of `mcgnode_msgs/action/Train` (the Train service's response).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TrainResult {
+    /// Whether the new model was swapped in.
+    pub success: bool,
+    /// Details or the failure reason.
+    pub message: String,
+    /// Where the model was written.
+    pub model_path: String,
+    /// Training loss at the kept epoch.
+    pub train_loss: f64,
+    /// Validation loss at the kept epoch.
+    pub validation_loss: f64,
+}
+impl Message for TrainResult {}
+
+/// Feedback of `mcgnode_msgs/action/Train`, one per epoch.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TrainFeedback {
+    /// Epoch just finished, from 1.
+    pub epoch: u32,
+    /// Epochs asked for.
+    pub epochs: u32,
+    /// Mean training loss of the epoch.
+    pub train_loss: f64,
+    /// Validation loss after the epoch.
+    pub validation_loss: f64,
+    /// Best validation loss so far.
+    pub best_validation_loss: f64,
+}
+impl Message for TrainFeedback {}
+
+impl From<&EpochReport> for TrainFeedback {
+    fn from(r: &EpochReport) -> Self {
+        TrainFeedback {
+            epoch: u32::try_from(r.epoch).unwrap_or(u32::MAX),
+            epochs: u32::try_from(r.epochs).unwrap_or(u32::MAX),
+            train_loss: r.train_loss,
+            validation_loss: r.validation_loss,
+            best_validation_loss: r.best,
+        }
+    }
+}
+
+impl From<TrainResponse> for TrainResult {
+    fn from(r: TrainResponse) -> Self {
+        TrainResult {
+            success: r.success,
+            message: r.message,
+            model_path: r.model_path,
+            train_loss: r.train_loss,
+            validation_loss: r.validation_loss,
+        }
+    }
+}
+
+type ActionServer = AsyncActionServer<TrainGoal, TrainResult, TrainFeedback>;
+
+/// The Train action server, handed to [`spawn`].
+pub struct TrainActionServer(ActionServer);
+
+/// The goal being executed and its cancel flag.
+type Running = Arc<Mutex<Option<(GoalId, Arc<AtomicBool>)>>>;
+
+/// Creates the action server (QoS as rclpy's action defaults: reliable,
+/// volatile services and feedback; transient-local status).
+pub(super) fn create(node: &mut Node) -> anyhow::Result<TrainActionServer> {
+    let status = QosProfile::publisher_default()
+        .durability(Durability::TransientLocal)
+        .history(History::KeepLast { depth: 1 });
+    let qos = ActionServerQosPolicies {
+        goal_service: reliable_qos(),
+        result_service: reliable_qos(),
+        cancel_service: reliable_qos(),
+        feedback_publisher: reliable_qos(),
+        status_publisher: status,
+    };
+    let name = Name::parse(TRAIN_ACTION).map_err(|e| anyhow!("action name: {e:?}"))?;
+    let server = node
+        .create_action_server(
+            ServiceMapping::Enhanced,
+            &name,
+            &ActionTypeName::new(PACKAGE, "Train"),
+            qos,
+        )
+        .map_err(|e| anyhow!("creating the Train action: {e:?}"))?;
+    Ok(TrainActionServer(AsyncActionServer::new(server)))
+}
+
+/// Starts the goal and cancel tasks (inside the runtime).
+pub(super) fn spawn(shared: Arc<Shared>, server: TrainActionServer) {
+    let server = Arc::new(server.0);
+    let running: Running = Arc::new(Mutex::new(None));
+    tokio::spawn(goal_loop(shared.clone(), server.clone(), running.clone()));
+    tokio::spawn(cancel_loop(shared, server, running));
+}
+
+/// Accepts goals while no training runs, and starts each.
+async fn goal_loop(shared: Arc<Shared>, server: Arc<ActionServer>, running: Running) {
+    let warn = |m: String| {
+        shared
+            .log
+            .log(LogLevel::Warn, &format!("Train action: {m}"))
+    };
+    loop {
+        let handle = match server.receive_new_goal().await {
+            Ok(h) => h,
+            Err(e) => {
+                warn(format!("undecodable goal: {e:?}"));
+                continue;
+            }
+        };
+        let Some(goal) = server.get_new_goal(handle.clone()) else {
+            continue;
+        };
+        let Some(claim) = claim(&shared) else {
+            warn(format!("goal {BUSY}"));
+            if let Err(e) = server.reject_goal(handle).await {
+                warn(format!("rejecting a goal failed: {e:?}"));
+            }
+            continue;
+        };
+        let accepted = match server.accept_goal(handle).await {
+            Ok(a) => a,
+            Err(e) => {
+                warn(format!("accepting a goal failed: {e:?}"));
+                continue;
+            }
+        };
+        let executing = match server.start_executing_goal(accepted).await {
+            Ok(x) => x,
+            Err(e) => {
+                warn(format!("starting a goal failed: {e:?}"));
+                continue;
+            }
+        };
+        let cancel = Arc::new(AtomicBool::new(false));
+        *running.lock().unwrap_or_else(PoisonError::into_inner) =
+            Some((executing.goal_id(), cancel.clone()));
+        let req = TrainRequest {
+            bags: goal.bags,
+            variant: goal.variant,
+            epochs: goal.epochs,
+            seed: goal.seed,
+        };
+        tokio::spawn(execute(
+            shared.clone(),
+            server.clone(),
+            running.clone(),
+            executing,
+            req,
+            cancel,
+            claim,
+        ));
+    }
+}
+
+/// Trains for one goal, forwarding feedback, then sends the result.
+async fn execute(
+    shared: Arc<Shared>,
+    server: Arc<ActionServer>,
+    running: Running,
+    handle: ExecutingGoalHandle<TrainGoal>,
+    req: TrainRequest,
+    cancel: Arc<AtomicBool>,
+    claim: super::training::Claim,
+) {
+    let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<TrainFeedback>();
+    let (worker, flag) = (shared.clone(), cancel.clone());
+    let job = tokio::task::spawn_blocking(move || {
+        let _claim = claim;
+        run_training(
+            &worker,
+            &req,
+            &flag,
+            |r| {
+                // The receiver lives until the job ends.
+                let _ = tx.send(TrainFeedback::from(r));
+            },
+            "Train action",
+        )
+    });
+    tokio::pin!(job);
+    let resp = loop {
+        tokio::select! {
+            Some(fb) = rx.recv() => {
+                // Fails once the goal is canceling: expected, not worth a warning.
+                let _ = server.publish_feedback(handle.clone(), fb).await;
+            }
+            done = &mut job => break done,
+        }
+    };
+    let resp = resp.unwrap_or_else(|join| TrainResponse {
+        success: false,
+        message: format!("training task failed: {join}"),
+        ..TrainResponse::default()
+    });
+    *running.lock().unwrap_or_else(PoisonError::into_inner) = None;
+    let status = if resp.success {
+        GoalEndStatus::Succeeded
+    } else if cancel.load(Ordering::Acquire) {
+        GoalEndStatus::Canceled
+    } else {
+        GoalEndStatus::Aborted
+    };
+    // Resolves once the client has asked for the result.
+    if let Err(e) = server
+        .send_result_response(handle, status, TrainResult::from(resp))
+        .await
+    {
+        shared.log.log(
+            LogLevel::Warn,
+            &format!("Train action: sending the result failed: {e:?}"),
+        );
+    }
+}
+
+/// Accepts cancel requests for the running goal; others are refused.
+async fn cancel_loop(shared: Arc<Shared>, server: Arc<ActionServer>, running: Running) {
+    loop {
+        let request = match server.receive_cancel_request().await {
+            Ok(r) => r,
+            Err(e) => {
+                shared.log.log(
+                    LogLevel::Warn,
+                    &format!("Train action: undecodable cancel request: {e:?}"),
+                );
+                continue;
+            }
+        };
+        let current = running
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone();
+        let to_cancel: Vec<GoalId> = match &current {
+            Some((id, flag)) if request.contains_goal(id) => {
+                flag.store(true, Ordering::Release);
+                shared.log.log(
+                    LogLevel::Info,
+                    "Train action: cancel requested; stopping after the current epoch",
+                );
+                vec![*id]
+            }
+            _ => Vec::new(),
+        };
+        if let Err(e) = server
+            .respond_to_cancel_requests(&request, to_cancel.into_iter())
+            .await
+        {
+            shared.log.log(
+                LogLevel::Warn,
+                &format!("Train action: answering a cancel failed: {e:?}"),
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn feedback_and_result_carry_the_figures() {
+        let r = EpochReport {
+            epoch: 3,
+            epochs: 7,
+            train_loss: 0.5,
+            validation_loss: 0.25,
+            best: 0.2,
+            elapsed: 1.0,
+        };
+        let fb = TrainFeedback::from(&r);
+        assert_eq!((fb.epoch, fb.epochs), (3, 7));
+        assert_eq!(fb.best_validation_loss, 0.2);
+        let res = TrainResult::from(TrainResponse {
+            success: true,
+            message: "m".into(),
+            model_path: "/x.json".into(),
+            train_loss: 1.0,
+            validation_loss: 2.0,
+        });
+        assert!(res.success && res.model_path == "/x.json" && res.validation_loss == 2.0);
+    }
+}
