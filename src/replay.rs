@@ -488,19 +488,21 @@ pub fn replay_bag(
 }
 
 /// What the node's Replay service does: replays the bag at `path` through
-/// `model` the way the node predicts (steps of `dt`, `horizon_steps` steps
-/// ahead) and returns the report with its JSON encoding.
+/// `model` the way the node predicts (integration steps of `dt / substeps`,
+/// `horizon_steps` steps of `dt` ahead) and returns the report with its JSON
+/// encoding.
 pub fn replay_as_node(
     model: &dyn Dynamics,
     path: &str,
     dt: f64,
+    substeps: u32,
     horizon_steps: u32,
 ) -> Result<(ReplayReport, String)> {
     if path.trim().is_empty() {
         bail!("no bag given: set `bag` to the path of an MCAP file");
     }
     let opts = ReplayOptions {
-        dt: Some(dt),
+        dt: Some(dt / f64::from(substeps.max(1))),
         horizon: Some(f64::from(horizon_steps) * dt),
         ..ReplayOptions::default()
     };

@@ -431,14 +431,14 @@ fn replay_as_node_uses_the_nodes_settings() {
     use mcgnode::replay::replay_as_node;
     let model = TrainedModel::load(&root("bags/models/spring5-mcgnode.json")).expect("model");
     let bag = root("bags/spring5-sample.mcap");
-    let (r, json) = replay_as_node(&model, bag.to_str().unwrap(), 0.1, 20).expect("replay");
-    assert_eq!(r.dt, 0.1);
+    let (r, json) = replay_as_node(&model, bag.to_str().unwrap(), 0.1, 4, 20).expect("replay");
+    assert_eq!(r.dt, 0.025, "dt / substeps");
     assert!((r.horizon - 2.0).abs() < 1e-12);
     let j: serde_json::Value = serde_json::from_str(&json).expect("JSON");
     assert_eq!(j["starts"], r.starts);
     assert_eq!(j["summary"]["re"]["gmean"][3], r.summary.re.gmean[3]);
-    let e = replay_as_node(&model, " ", 0.1, 20).unwrap_err();
+    let e = replay_as_node(&model, " ", 0.1, 1, 20).unwrap_err();
     assert!(format!("{e:#}").contains("no bag given"), "{e:#}");
-    let e = replay_as_node(&model, "/nonexistent/b.mcap", 0.1, 20).unwrap_err();
+    let e = replay_as_node(&model, "/nonexistent/b.mcap", 0.1, 1, 20).unwrap_err();
     assert!(format!("{e:#}").contains("/nonexistent/b.mcap"), "{e:#}");
 }

@@ -93,6 +93,13 @@ impl ModelFile {
         use std::io::Write;
         tmp.write_all(b"\n")?;
         tmp.as_file().sync_all()?;
+        // tempfile creates 0600; a model file is an ordinary shareable file.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            tmp.as_file()
+                .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+        }
         tmp.persist(path)
             .with_context(|| format!("writing model file {}", path.display()))?;
         Ok(())

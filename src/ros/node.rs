@@ -22,7 +22,8 @@ use crate::data::msg::{Header, ParticleState, Time, PARTICLE_STATE_TYPE};
 use crate::dynamics::Dynamics;
 
 use super::msgs::{
-    NodeDiagnostics, ParticleForces, PredictedTrajectory, RolloutRequest, RolloutResponse, PACKAGE,
+    NodeDiagnostics, ParticleForces, PredictedTrajectory, ReplayRequest, ReplayResponse,
+    RolloutRequest, RolloutResponse, PACKAGE,
 };
 use super::params::{NodeParams, NODE_NAME};
 use super::predict::{self, Prediction};
@@ -357,6 +358,15 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
             .map_err(e("the Rollout service"))?,
     };
     let (training, training_endpoints) = super::training::create(&mut node, &params)?;
+    let replay = node
+        .create_server(
+            ServiceMapping::Enhanced,
+            &ros_name(REPLAY_SERVICE)?,
+            &ServiceTypeName::new(PACKAGE, "Replay"),
+            service_qos(),
+            service_qos(),
+        )
+        .map_err(e("the Replay service"))?;
     let spinner = node.spinner().map_err(e("the node spinner"))?;
     let recorder = if params.record_dir.is_empty() {
         None
@@ -413,6 +423,7 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         } = endpoints;
         tokio::spawn(input_loop(shared.clone(), input, trajectory, forces));
         tokio::spawn(rollout_loop(shared.clone(), rollout));
+        tokio::spawn(replay_loop(shared.clone(), replay));
         tokio::spawn(diagnostics_loop(shared.clone(), diagnostics));
         super::training::spawn(shared.clone(), training_endpoints);
         wait_for_shutdown().await
@@ -581,6 +592,63 @@ pub fn rollout_response(
             trajectory,
         },
         Err(e) => fail(e),
+    }
+}
+
+/// Name of the Replay service (`mcgnode_msgs/srv/Replay`).
+pub const REPLAY_SERVICE: &str = "/mcgnode/replay";
+
+/// Answers Replay calls: the bag through the model served now, with the
+/// node's dt and horizon (see [`crate::replay::replay_as_node`]); failures go
+/// back in the response.
+async fn replay_loop(shared: Arc<Shared>, server: Server<ReplayRequest, ReplayResponse>) {
+    loop {
+        let (id, req) = match server.async_receive_request().await {
+            Ok(r) => r,
+            Err(e) => {
+                shared.log.log(
+                    LogLevel::Warn,
+                    &format!("undecodable Replay request: {e:?}"),
+                );
+                continue;
+            }
+        };
+        let model = shared.model();
+        let p = &shared.params;
+        let (dt, substeps, horizon) = (p.dt, p.substeps, p.horizon);
+        let job = tokio::task::spawn_blocking(move || {
+            crate::replay::replay_as_node(model.as_ref(), &req.bag, dt, substeps, horizon)
+        });
+        let resp = match job.await {
+            Ok(Ok((r, json))) => ReplayResponse {
+                success: true,
+                message: format!(
+                    "{} starts, {} comparisons, mean RE {:.3e}",
+                    r.starts, r.comparisons, r.averages.re
+                ),
+                report_json: json,
+            },
+            Ok(Err(e)) => ReplayResponse {
+                message: format!("{e:#}"),
+                ..ReplayResponse::default()
+            },
+            Err(join) => ReplayResponse {
+                message: format!("replay task failed: {join}"),
+                ..ReplayResponse::default()
+            },
+        };
+        if !resp.success {
+            shared.failed(
+                &format!("Replay call failed: {}", resp.message),
+                &shared.warn_service,
+            );
+        }
+        if let Err(e) = server.async_send_response(id, resp).await {
+            shared.log.log(
+                LogLevel::Warn,
+                &format!("sending a Replay response failed: {e:?}"),
+            );
+        }
     }
 }
 
