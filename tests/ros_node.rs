@@ -7,95 +7,13 @@
 //! Every child runs in its own process group, killed if it overruns its bound.
 
 use std::fs;
-use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitStatus, Stdio};
-use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::process::Command;
+use std::time::Duration;
 
-const BIN: &str = env!("CARGO_BIN_EXE_mcgnode");
-const ROOT: &str = env!("CARGO_MANIFEST_DIR");
+mod common;
 
-/// What a bounded child left behind.
-struct Outcome {
-    status: ExitStatus,
-    stdout: String,
-    stderr: String,
-}
-
-/// Runs `cmd` in its own process group with output to files; after `limit`
-/// the whole group is killed and the test fails with what it printed.
-fn run_bounded(cmd: &mut Command, limit: Duration, dir: &Path) -> Outcome {
-    let out_path = dir.join("stdout.txt");
-    let err_path = dir.join("stderr.txt");
-    let mut child = cmd
-        .current_dir(ROOT)
-        .stdin(Stdio::null())
-        .stdout(fs::File::create(&out_path).expect("creating stdout file"))
-        .stderr(fs::File::create(&err_path).expect("creating stderr file"))
-        .process_group(0)
-        .spawn()
-        .unwrap_or_else(|e| panic!("cannot start {cmd:?}: {e}"));
-    let start = Instant::now();
-    let status = loop {
-        if let Some(s) = child.try_wait().expect("waiting for the child") {
-            break Some(s);
-        }
-        if start.elapsed() > limit {
-            break None;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    let read = |p: &Path| fs::read_to_string(p).unwrap_or_default();
-    match status {
-        Some(status) => Outcome {
-            status,
-            stdout: read(&out_path),
-            stderr: read(&err_path),
-        },
-        None => {
-            let _ = Command::new("kill")
-                .args(["-KILL", "--", &format!("-{}", child.id())])
-                .status();
-            let _ = child.wait();
-            panic!(
-                "{cmd:?} overran {limit:?} and was killed\n--- stdout\n{}\n--- stderr\n{}",
-                read(&out_path),
-                read(&err_path)
-            );
-        }
-    }
-}
-
-/// The rclpy environment, built once per test binary: fails with the command
-/// to run when the venv is missing.
-fn ros_env() -> PathBuf {
-    static BUILT: Mutex<bool> = Mutex::new(false);
-    let mut built = BUILT.lock().unwrap_or_else(|e| e.into_inner());
-    let root = Path::new(ROOT);
-    let venv_ok = root.join(".venv/bin/python3").exists()
-        && root.join(".venv/share/rosidl_default_generators").exists();
-    assert!(
-        venv_ok,
-        "the rclpy venv is missing: run `scripts/setup_venv.sh` (in {ROOT}), then re-run this test"
-    );
-    if !*built {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let o = run_bounded(
-            Command::new("bash").arg("scripts/build_msgs.sh"),
-            Duration::from_secs(300),
-            dir.path(),
-        );
-        assert!(
-            o.status.success(),
-            "scripts/build_msgs.sh failed:\n{}\n{}",
-            o.stdout,
-            o.stderr
-        );
-        *built = true;
-    }
-    root.join("build/msgs/env.sh")
-}
+use common::{in_netns, ros_env, run_bounded, BIN, ROOT};
 
 /// A parameter file for the tests (short horizon, fast diagnostics);
 /// `record_dir` records with bags split every second.
@@ -127,18 +45,6 @@ fn summary_number(summary: &str, key: &str) -> u64 {
         .collect::<String>()
         .parse()
         .unwrap_or_else(|_| panic!("{key} is not a number in {summary}"))
-}
-
-/// `scripts/netns.sh bash -c script` with BIN, ENV, PARAMS exported.
-fn in_netns(script: &str, params: &Path, env_sh: &Path) -> Command {
-    let mut c = Command::new("bash");
-    c.arg("scripts/netns.sh")
-        .args(["bash", "-c", script])
-        .env("BIN", BIN)
-        .env("ENV", env_sh)
-        .env("PARAMS", params)
-        .env_remove("ROS_DOMAIN_ID");
-    c
 }
 
 #[test]

@@ -31,20 +31,8 @@ pub struct BaselineFile {
 impl BaselineFile {
     /// Writes the file atomically (temporary file in the same folder, then rename).
     pub fn save(&self, path: &Path) -> Result<()> {
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let mut tmp = tempfile::NamedTempFile::new_in(dir)
-            .with_context(|| format!("creating a temporary file in {}", dir.display()))?;
-        serde_json::to_writer_pretty(&mut tmp, self)?;
-        use std::io::Write;
-        tmp.write_all(b"\n")?;
-        tmp.as_file().sync_all()?;
-        tmp.persist(path)
-            .with_context(|| format!("writing baseline file {}", path.display()))?;
-        Ok(())
+        crate::model::file::write_json_atomic(path, self)
+            .with_context(|| format!("writing baseline file {}", path.display()))
     }
 
     /// Reads and checks a baseline file.

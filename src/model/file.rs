@@ -82,27 +82,8 @@ pub struct ModelFile {
 impl ModelFile {
     /// Writes the file atomically (temporary file in the same folder, then rename).
     pub fn save(&self, path: &Path) -> Result<()> {
-        let dir = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let mut tmp = tempfile::NamedTempFile::new_in(dir)
-            .with_context(|| format!("creating a temporary file in {}", dir.display()))?;
-        serde_json::to_writer_pretty(&mut tmp, self)?;
-        use std::io::Write;
-        tmp.write_all(b"\n")?;
-        tmp.as_file().sync_all()?;
-        // tempfile creates 0600; a model file is an ordinary shareable file.
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            tmp.as_file()
-                .set_permissions(std::fs::Permissions::from_mode(0o644))?;
-        }
-        tmp.persist(path)
-            .with_context(|| format!("writing model file {}", path.display()))?;
-        Ok(())
+        write_json_atomic(path, self)
+            .with_context(|| format!("writing model file {}", path.display()))
     }
 
     /// Reads and checks a model file.
@@ -120,4 +101,29 @@ impl ModelFile {
         }
         Ok(m)
     }
+}
+
+/// Writes `value` as pretty JSON to `path` atomically: a temporary file in the
+/// same folder, synced, made 0644 (tempfile creates 0600; model files are
+/// ordinary shareable files), then renamed over `path`.
+pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    use std::io::Write;
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut tmp = tempfile::NamedTempFile::new_in(dir)
+        .with_context(|| format!("creating a temporary file in {}", dir.display()))?;
+    serde_json::to_writer_pretty(&mut tmp, value)?;
+    tmp.write_all(b"\n")?;
+    tmp.as_file().sync_all()?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        tmp.as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    }
+    tmp.persist(path)?;
+    Ok(())
 }
