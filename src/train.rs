@@ -3,7 +3,7 @@
 
 use crate::model::batch::Batch;
 use crate::model::file::TrainingReport;
-use crate::model::params::Weights;
+use crate::model::params::{ParamStore, Weights};
 use crate::model::plan::GraphPlan;
 use crate::model::{Hyper, Net};
 use crate::system::{Graph, State};
@@ -71,7 +71,7 @@ pub struct Trained {
 
 /// Adam (Kingma & Ba) on flat parameter vectors: cheaper than one candle op per
 /// moment update for models with a few hundred parameters.
-struct Adam {
+pub struct Adam {
     lr: f64,
     m: Vec<Vec<f64>>,
     v: Vec<Vec<f64>>,
@@ -79,7 +79,9 @@ struct Adam {
 }
 
 impl Adam {
-    fn new(lr: f64, sizes: &[usize]) -> Self {
+    /// Zero moments for the store's parameters.
+    pub fn new(lr: f64, store: &ParamStore) -> Self {
+        let sizes: Vec<usize> = store.vars().iter().map(|v| v.elem_count()).collect();
         Self {
             lr,
             m: sizes.iter().map(|&n| vec![0.0; n]).collect(),
@@ -88,14 +90,20 @@ impl Adam {
         }
     }
 
-    fn step(&mut self, net: &Net, grads: &candle_core::backprop::GradStore) -> Result<()> {
+    /// One update from the gradients of a loss (parameters without a gradient
+    /// are left alone).
+    pub fn step(
+        &mut self,
+        store: &ParamStore,
+        grads: &candle_core::backprop::GradStore,
+    ) -> Result<()> {
         const B1: f64 = 0.9;
         const B2: f64 = 0.999;
         const EPS: f64 = 1e-8;
         self.t += 1;
         let c1 = 1.0 - B1.powi(self.t);
         let c2 = 1.0 - B2.powi(self.t);
-        for (k, var) in net.store.vars().iter().enumerate() {
+        for (k, var) in store.vars().iter().enumerate() {
             let Some(g) = grads.get(var) else { continue };
             let g = g.flatten_all()?.to_vec1::<f64>()?;
             let mut p = var.as_tensor().flatten_all()?.to_vec1::<f64>()?;
@@ -111,26 +119,13 @@ impl Adam {
     }
 }
 
-/// Mean loss over a set of states, in chunks.
-fn mean_loss(net: &Net, plan: &GraphPlan, states: &[&State], acc: &[&[f64]]) -> Result<f64> {
-    let mut total = 0.0;
-    for (s, a) in states.chunks(1000).zip(acc.chunks(1000)) {
-        let b = Batch::new(plan, s, Some(a), net.hyper.types)?;
-        total += net.loss(&b)?.to_scalar::<f64>()? * s.len() as f64;
-    }
-    Ok(total / states.len().max(1) as f64)
-}
-
-/// Trains a fresh model of `hyper` on states of one graph with their
-/// accelerations. `on_epoch` sees every epoch and returns false to cancel.
-pub fn train(
-    hyper: Hyper,
+/// Checks training data against its graph and the settings.
+pub fn check_data(
     graph: &Graph,
     states: &[State],
     acc: &[Vec<f64>],
     cfg: &TrainConfig,
-    mut on_epoch: impl FnMut(&EpochReport) -> bool,
-) -> Result<Trained> {
+) -> Result<()> {
     if states.len() != acc.len() {
         bail!("{} states but {} accelerations", states.len(), acc.len());
     }
@@ -151,47 +146,56 @@ pub fn train(
             bail!("accelerations of state {i} have the wrong size or are not finite");
         }
     }
-    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-    let net = Net::new(hyper, &mut rng)?;
-    let plan = GraphPlan::new(graph);
+    Ok(())
+}
 
-    let mut order: Vec<usize> = (0..states.len()).collect();
-    order.shuffle(&mut rng);
-    let n_val =
-        ((states.len() as f64 * cfg.validation).round() as usize).clamp(1, states.len() - 1);
+/// The loop every trainable model shares: a seeded split of `n` samples
+/// (validation fraction from `cfg`), shuffled batches, Adam on `store`,
+/// validation after every epoch, early stopping; the best weights are loaded
+/// back into `store`. `loss(indices)` is the mean loss over those samples;
+/// `on_epoch` returns false to cancel.
+pub fn fit(
+    store: &ParamStore,
+    n: usize,
+    cfg: &TrainConfig,
+    rng: &mut ChaCha8Rng,
+    loss: impl Fn(&[usize]) -> Result<Tensor>,
+    mut on_epoch: impl FnMut(&EpochReport) -> bool,
+) -> Result<TrainingReport> {
+    let mut order: Vec<usize> = (0..n).collect();
+    order.shuffle(rng);
+    let n_val = ((n as f64 * cfg.validation).round() as usize).clamp(1, n - 1);
     let (val_idx, train_idx) = order.split_at(n_val);
     let mut train_idx = train_idx.to_vec();
-    let val_s: Vec<&State> = val_idx.iter().map(|&i| &states[i]).collect();
-    let val_a: Vec<&[f64]> = val_idx.iter().map(|&i| acc[i].as_slice()).collect();
-
-    let sizes: Vec<usize> = net.store.vars().iter().map(|v| v.elem_count()).collect();
-    let mut adam = Adam::new(cfg.lr, &sizes);
+    let validation = |idx: &[usize]| -> Result<f64> {
+        let mut total = 0.0;
+        for chunk in idx.chunks(1000) {
+            total += loss(chunk)?.to_scalar::<f64>()? * chunk.len() as f64;
+        }
+        Ok(total / idx.len() as f64)
+    };
+    let mut adam = Adam::new(cfg.lr, store);
     let start = Instant::now();
     let mut best = f64::INFINITY;
-    let mut best_weights: Weights = net.store.weights()?;
+    let mut best_weights: Weights = store.weights()?;
     let (mut best_epoch, mut best_train) = (0, f64::NAN);
     let mut epochs_run = 0;
     let mut stopped_early = false;
     for epoch in 1..=cfg.epochs {
-        train_idx.shuffle(&mut rng);
-        let mut sum = 0.0;
-        let mut count = 0usize;
+        train_idx.shuffle(rng);
+        let (mut sum, mut count) = (0.0, 0usize);
         for chunk in train_idx.chunks(cfg.batch) {
-            let s: Vec<&State> = chunk.iter().map(|&i| &states[i]).collect();
-            let a: Vec<&[f64]> = chunk.iter().map(|&i| acc[i].as_slice()).collect();
-            let b = Batch::new(&plan, &s, Some(&a), net.hyper.types)?;
-            let loss = net.loss(&b)?;
-            let l = loss.to_scalar::<f64>()?;
-            if !l.is_finite() {
-                bail!("training diverged at epoch {epoch} (loss {l})");
+            let l = loss(chunk)?;
+            let lv = l.to_scalar::<f64>()?;
+            if !lv.is_finite() {
+                bail!("training diverged at epoch {epoch} (loss {lv})");
             }
-            let grads = loss.backward()?;
-            adam.step(&net, &grads)?;
-            sum += l * chunk.len() as f64;
+            adam.step(store, &l.backward()?)?;
+            sum += lv * chunk.len() as f64;
             count += chunk.len();
         }
         let train_loss = sum / count as f64;
-        let val = mean_loss(&net, &plan, &val_s, &val_a)?;
+        let val = validation(val_idx)?;
         epochs_run = epoch;
         if !val.is_finite() {
             bail!("validation loss is not finite at epoch {epoch}");
@@ -200,7 +204,7 @@ pub fn train(
             best = val;
             best_epoch = epoch;
             best_train = train_loss;
-            best_weights = net.store.weights()?;
+            best_weights = store.weights()?;
         }
         let report = EpochReport {
             epoch,
@@ -218,24 +222,43 @@ pub fn train(
             break;
         }
     }
-    let mut net = net;
-    net.store.load(&best_weights)?;
-    Ok(Trained {
-        net,
-        report: TrainingReport {
-            seed: cfg.seed,
-            epochs_requested: cfg.epochs,
-            epochs_run,
-            best_epoch,
-            train_loss: best_train,
-            validation_loss: best,
-            stopped_early,
-            seconds: start.elapsed().as_secs_f64(),
-            batch: cfg.batch,
-            lr: cfg.lr,
-            patience: cfg.patience,
-        },
+    store.load(&best_weights)?;
+    Ok(TrainingReport {
+        seed: cfg.seed,
+        epochs_requested: cfg.epochs,
+        epochs_run,
+        best_epoch,
+        train_loss: best_train,
+        validation_loss: best,
+        stopped_early,
+        seconds: start.elapsed().as_secs_f64(),
+        batch: cfg.batch,
+        lr: cfg.lr,
+        patience: cfg.patience,
     })
+}
+
+/// Trains a fresh model of `hyper` on states of one graph with their
+/// accelerations. `on_epoch` sees every epoch and returns false to cancel.
+pub fn train(
+    hyper: Hyper,
+    graph: &Graph,
+    states: &[State],
+    acc: &[Vec<f64>],
+    cfg: &TrainConfig,
+    on_epoch: impl FnMut(&EpochReport) -> bool,
+) -> Result<Trained> {
+    check_data(graph, states, acc, cfg)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+    let net = Net::new(hyper, &mut rng)?;
+    let plan = GraphPlan::new(graph);
+    let loss = |idx: &[usize]| -> Result<Tensor> {
+        let s: Vec<&State> = idx.iter().map(|&i| &states[i]).collect();
+        let a: Vec<&[f64]> = idx.iter().map(|&i| acc[i].as_slice()).collect();
+        net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?)
+    };
+    let report = fit(&net.store, states.len(), cfg, &mut rng, loss, on_epoch)?;
+    Ok(Trained { net, report })
 }
 
 /// Whether MCGNODE learns a body-force branch.

@@ -468,7 +468,7 @@ fn baselines_train_save_load_and_roll_out() {
 #[test]
 #[ignore = "measurement; run explicitly"]
 fn measure_step_times() {
-    use mcgnode::baselines::train::Adam;
+    use mcgnode::train::Adam;
     let (g, s, a) = dataset(SystemKind::Spring, 5, 2, 1);
     let plan = GraphPlan::new(&g);
     let refs: Vec<&State> = s.iter().take(100).collect();

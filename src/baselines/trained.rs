@@ -29,7 +29,7 @@ impl TrainedBaseline {
 
     /// Builds the network of an in-memory file.
     pub fn from_file(file: BaselineFile) -> Result<Self> {
-        let mut net = BaselineNet::new(file.hyper.clone(), &mut ChaCha8Rng::seed_from_u64(0))?;
+        let net = BaselineNet::new(file.hyper.clone(), &mut ChaCha8Rng::seed_from_u64(0))?;
         net.store.load(&file.weights)?;
         Ok(Self { file, net })
     }

@@ -67,7 +67,7 @@ impl Kernel {
     pub fn new(hyper: &Hyper, w: &Weights) -> Result<Self> {
         // Names, shapes and finiteness are checked against the architecture that
         // `hyper` defines, so the loops below can trust every size.
-        let mut reference = crate::model::Net::new(
+        let reference = crate::model::Net::new(
             hyper.clone(),
             &mut rand_chacha::ChaCha8Rng::seed_from_u64(0),
         )?;

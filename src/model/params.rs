@@ -93,8 +93,9 @@ impl ParamStore {
         Ok(out)
     }
 
-    /// Overwrites every parameter from plain arrays; names and shapes must match.
-    pub fn load(&mut self, weights: &Weights) -> Result<()> {
+    /// Overwrites every parameter from plain arrays; names and shapes must
+    /// match. (Candle variables have interior mutability, hence `&self`.)
+    pub fn load(&self, weights: &Weights) -> Result<()> {
         if weights.len() != self.names.len() {
             bail!(
                 "model file has {} parameters, the architecture needs {}",
