@@ -20,7 +20,7 @@ if [ ! -x "$VENV/bin/cmake" ] || [ ! -d "$VENV/share/rosidl_default_generators" 
     echo "error: no rclpy/rosidl venv at $VENV; run: scripts/setup_venv.sh" >&2
     exit 1
 fi
-missing=$(grep -o ':msg/[A-Za-z][A-Za-z]*\.\(msg\|srv\)' "$PKG/CMakeLists.txt" | while read -r f; do
+missing=$(grep -o ':msg/[A-Za-z][A-Za-z]*\.\(msg\|srv\|action\)' "$PKG/CMakeLists.txt" | while read -r f; do
     [ -f "$SRC_ROOT/${f#:}" ] || echo "$f"; done)
 if [ -n "$missing" ]; then
     echo "error: interface files missing under $SRC_ROOT: $missing" >&2

@@ -304,7 +304,7 @@ fn advance(
     // round-off in the stamps) from getting one extra tiny step.
     let steps = ((span / dt) * (1.0 - 1e-9)).ceil().max(1.0) as usize;
     let h = span / steps as f64;
-    let mut states = model.rollout(&tr.graph, from, h, steps)?;
+    let mut states = model.rollout_every(&tr.graph, from, h, steps, steps)?;
     states
         .pop()
         .ok_or_else(|| "the model returned no states".to_string())
