@@ -2,8 +2,8 @@
 //! compare with what was recorded (RE, EE, ME over time, paper's metrics).
 
 use crate::data::bag::Bag;
+use crate::dynamics::Dynamics;
 use crate::metrics::{error_curves, summarize, ErrorCurves, Summary};
-use crate::model::TrainedModel;
 use crate::physics::{Field, SystemConfig};
 use crate::system::State;
 use anyhow::{bail, Context, Result};
@@ -78,7 +78,14 @@ pub struct Evaluation {
 }
 
 /// Rolls `model` out from each trajectory's first state and scores it.
-pub fn evaluate(model: &TrainedModel, bag: &Bag, opts: &EvalOptions) -> Result<Evaluation> {
+/// `train_starts` are the fingerprints of the model's training starts: a test
+/// trajectory that starts at one of them is refused (unless allowed).
+pub fn evaluate(
+    model: &dyn Dynamics,
+    train_starts: &[String],
+    bag: &Bag,
+    opts: &EvalOptions,
+) -> Result<Evaluation> {
     let sys = bag_system(bag)?;
     let dt = match (opts.dt, &sys) {
         (Some(dt), _) => dt,
@@ -102,8 +109,7 @@ pub fn evaluate(model: &TrainedModel, bag: &Bag, opts: &EvalOptions) -> Result<E
         bail!("the bag has no trajectories");
     }
     if !opts.allow_overlap {
-        let train: std::collections::HashSet<&String> =
-            model.file.trained_on.start_fingerprints.iter().collect();
+        let train: std::collections::HashSet<&String> = train_starts.iter().collect();
         let overlap = trajs
             .iter()
             .filter(|t| train.contains(&fingerprint(&t.samples[0].state)))
@@ -121,10 +127,6 @@ pub fn evaluate(model: &TrainedModel, bag: &Bag, opts: &EvalOptions) -> Result<E
     let start = Instant::now();
     for tr in &trajs {
         let g = &tr.graph;
-        let mut ws = model
-            .kernel
-            .workspace(g)
-            .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", tr.id))?;
         let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
         let interval = if times.len() > 1 {
             times[1] - times[0]
@@ -139,21 +141,8 @@ pub fn evaluate(model: &TrainedModel, bag: &Bag, opts: &EvalOptions) -> Result<E
             );
         }
         let steps = every * (times.len() - 1);
-        let mut pred = Vec::with_capacity(times.len());
-        model
-            .rollout_with(
-                &mut ws,
-                &tr.samples[0].state,
-                dt,
-                steps,
-                every,
-                |_, q, v| {
-                    pred.push(State {
-                        q: q.to_vec(),
-                        v: v.to_vec(),
-                    })
-                },
-            )
+        let pred = model
+            .rollout_every(g, &tr.samples[0].state, dt, steps, every)
             .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", tr.id))?;
         steps_total = steps;
         let truth: Vec<State> = tr.samples.iter().map(|s| s.state.clone()).collect();
@@ -163,7 +152,7 @@ pub fn evaluate(model: &TrainedModel, bag: &Bag, opts: &EvalOptions) -> Result<E
     let summary = summarize(&curves).map_err(anyhow::Error::msg)?;
     Ok(Evaluation {
         averages: summary.time_average(),
-        model: crate::dynamics::Dynamics::describe(model),
+        model: model.describe(),
         system: trajs[0].system.clone(),
         particles: trajs[0].graph.n(),
         trajectories: trajs.len(),

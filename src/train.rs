@@ -299,19 +299,25 @@ impl Default for ModelOptions {
     }
 }
 
-/// Trains a model from trajectory bags and returns the model file (not yet saved).
-pub fn train_from_bags(
-    variant: crate::model::Variant,
+/// Training data read from bags: the dataset and what a model file records about it.
+pub struct TrainingData {
+    /// States and target accelerations on one graph.
+    pub dataset: crate::data::dataset::Dataset,
+    /// What the model file says about its training data.
+    pub trained_on: crate::model::file::TrainedOn,
+    /// The simulator configuration from the first bag's metadata, if any.
+    pub system_config: Option<crate::physics::SystemConfig>,
+}
+
+/// Reads training bags into a dataset (recorded accelerations, else finite
+/// differences; `log` says which) with fingerprints of every trajectory's start.
+pub fn load_training_data(
     bags: &[std::path::PathBuf],
-    opts: &ModelOptions,
-    cfg: &TrainConfig,
-    log: impl FnMut(&str),
-    on_epoch: impl FnMut(&EpochReport) -> bool,
-) -> Result<crate::model::ModelFile> {
+    mut log: impl FnMut(&str),
+) -> Result<TrainingData> {
     use crate::data::bag::read_trajectories;
     use crate::data::dataset::{digest, AccSource, Dataset};
     use crate::evaluate::{bag_system, fingerprint};
-    let mut log = log;
     if bags.is_empty() {
         bail!("no training bags given");
     }
@@ -332,12 +338,55 @@ pub fn train_from_bags(
         AccSource::FiniteDifference => "finite-difference",
     };
     log(&format!(
-        "training {variant} on {} states of {} trajectories ({}-particle {}D graph); accelerations: {source}",
+        "{} states of {} trajectories ({}-particle {}D graph); accelerations: {source}",
         ds.len(),
         trajectories.len(),
         ds.graph.n(),
         ds.graph.dim
     ));
+    let first = trajectories.first().expect("dataset is not empty");
+    let trained_on = crate::model::file::TrainedOn {
+        system: first.system.clone(),
+        particles: ds.graph.n(),
+        dim: ds.graph.dim,
+        bag: bags
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(","),
+        bag_sha256: digests.join(","),
+        accelerations: source.to_string(),
+        trajectories: trajectories.len(),
+        states: ds.len(),
+        start_fingerprints: trajectories
+            .iter()
+            .filter_map(|t| t.samples.first())
+            .map(|s| fingerprint(&s.state))
+            .collect(),
+        system_config: system_config
+            .as_ref()
+            .map(serde_json::to_value)
+            .transpose()?,
+    };
+    Ok(TrainingData {
+        dataset: ds,
+        trained_on,
+        system_config,
+    })
+}
+
+/// Trains a model from trajectory bags and returns the model file (not yet saved).
+pub fn train_from_bags(
+    variant: crate::model::Variant,
+    bags: &[std::path::PathBuf],
+    opts: &ModelOptions,
+    cfg: &TrainConfig,
+    mut log: impl FnMut(&str),
+    on_epoch: impl FnMut(&EpochReport) -> bool,
+) -> Result<crate::model::ModelFile> {
+    log(&format!("training {variant}"));
+    let data = load_training_data(bags, &mut log)?;
+    let ds = &data.dataset;
     let types = opts.types.unwrap_or(
         ds.graph
             .types
@@ -355,7 +404,10 @@ pub fn train_from_bags(
         BodyForce::Off => false,
         BodyForce::Auto => {
             let closed = ds.graph.anchors.is_empty()
-                && system_config.as_ref().is_some_and(|s| s.field.is_free());
+                && data
+                    .system_config
+                    .as_ref()
+                    .is_some_and(|s| s.field.is_free());
             !closed
         }
     };
@@ -370,31 +422,11 @@ pub fn train_from_bags(
         ));
     }
     let trained = train(hyper, &ds.graph, &ds.states, &ds.acc, cfg, on_epoch)?;
-    let first = trajectories.first().expect("dataset is not empty");
     Ok(crate::model::ModelFile {
         format: crate::model::file::FORMAT.to_string(),
         crate_version: env!("CARGO_PKG_VERSION").to_string(),
         hyper: trained.net.hyper.clone(),
-        trained_on: crate::model::file::TrainedOn {
-            system: first.system.clone(),
-            particles: ds.graph.n(),
-            dim: ds.graph.dim,
-            bag: bags
-                .iter()
-                .map(|p| p.display().to_string())
-                .collect::<Vec<_>>()
-                .join(","),
-            bag_sha256: digests.join(","),
-            accelerations: source.to_string(),
-            trajectories: trajectories.len(),
-            states: ds.len(),
-            start_fingerprints: trajectories
-                .iter()
-                .filter_map(|t| t.samples.first())
-                .map(|s| fingerprint(&s.state))
-                .collect(),
-            system_config: system_config.map(serde_json::to_value).transpose()?,
-        },
+        trained_on: data.trained_on,
         training: trained.report,
         weights: trained.net.store.weights()?,
     })

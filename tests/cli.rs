@@ -167,6 +167,54 @@ fn pipeline_and_bad_input() {
     assert_eq!(r.trajectories[0].graph.n(), 50);
     assert_eq!(r.trajectories[0].samples.len(), 6); // 0.5 s saved every 0.1 s, plus the start
 
+    // Baselines train on the same bags and evaluate through the same code.
+    for kind in ["gns", "lgn"] {
+        let out = format!("{kind}.json");
+        ok(&mcgnode(
+            &[
+                "train",
+                "--model",
+                kind,
+                "--data",
+                "train.mcap",
+                "--epochs",
+                "2",
+                "--out",
+                &out,
+            ],
+            d,
+        ));
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join(&out)).unwrap()).unwrap();
+        assert_eq!(m["hyper"]["kind"], kind);
+        assert_eq!(
+            m["trained_on"]["start_fingerprints"]
+                .as_array()
+                .unwrap()
+                .len(),
+            8
+        );
+        let e: serde_json::Value = serde_json::from_str(&ok(&mcgnode(
+            &[
+                "evaluate",
+                "--model",
+                &out,
+                "--bag",
+                "test.mcap",
+                "--trajectories",
+                "1",
+                "--json",
+            ],
+            d,
+        )))
+        .unwrap();
+        assert!(e["averages"]["re"].as_f64().unwrap().is_finite());
+        fails_with(
+            &mcgnode(&["evaluate", "--model", &out, "--bag", "train.mcap"], d),
+            "start where training",
+        );
+    }
+
     // Bad input: unknown system/model, missing or corrupt files.
     fails_with(
         &mcgnode(&["simulate", "--system", "galaxy", "--out", "x.mcap"], d),

@@ -20,6 +20,7 @@
 //! * HGN trains on (q̇, ṗ); its data come from RK4 on (q, p)
 //!   ([`hgn::rk4_trajectories`]). LGN and GNS train on accelerations.
 
+pub mod any;
 pub mod autodiff;
 pub mod gns;
 pub mod graphnet;
@@ -33,6 +34,7 @@ pub mod file;
 pub mod train;
 pub mod trained;
 
+pub use any::{load_any_model, LoadedModel};
 pub use file::BaselineFile;
-pub use train::train_baseline;
+pub use train::{train_baseline, train_baseline_from_bags};
 pub use trained::TrainedBaseline;

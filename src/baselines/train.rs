@@ -51,3 +51,29 @@ pub fn train_baseline(
     };
     Ok(TrainedBaseline { file, net })
 }
+
+/// Trains a baseline from trajectory bags, as [`crate::train::train_from_bags`]
+/// does for the GNODE family (same data, split and loop); returns the file.
+pub fn train_baseline_from_bags(
+    kind: super::Kind,
+    bags: &[std::path::PathBuf],
+    cfg: &TrainConfig,
+    mut log: impl FnMut(&str),
+    on_epoch: impl FnMut(&EpochReport) -> bool,
+) -> Result<BaselineFile> {
+    log(&format!("training {kind}"));
+    let data = crate::train::load_training_data(bags, &mut log)?;
+    let ds = &data.dataset;
+    let types = ds
+        .graph
+        .types
+        .iter()
+        .map(|&t| t as usize + 1)
+        .max()
+        .unwrap_or(1);
+    let hyper = BaselineHyper::new(kind, ds.graph.dim, types);
+    let trained = train_baseline(hyper, &ds.graph, &ds.states, &ds.acc, cfg, on_epoch)?;
+    let mut file = trained.file;
+    file.trained_on = Some(data.trained_on);
+    Ok(file)
+}

@@ -115,7 +115,12 @@ pub fn run(a: Args) -> Result<()> {
         let bag = read_trajectories(p)?;
         let mut curves = vec![];
         for (v, m) in &models {
-            let e = evaluate(m, &bag, &EvalOptions::default())?;
+            let e = evaluate(
+                m,
+                &m.file.trained_on.start_fingerprints,
+                &bag,
+                &EvalOptions::default(),
+            )?;
             println!("{}", table(&e, 6));
             json.push(serde_json::json!({
                 "model": v.name(), "particles": n,

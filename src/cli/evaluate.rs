@@ -2,14 +2,13 @@
 
 use crate::data::bag::read_trajectories;
 use crate::evaluate::{evaluate, table, EvalOptions};
-use crate::model::TrainedModel;
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 
 /// Options of `evaluate`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct Args {
-    /// Trained model file.
+    /// Trained model file (GNODE family or baseline).
     #[arg(long)]
     pub model: PathBuf,
     /// Test bag: each trajectory's first state is the rollout's start, the rest the truth.
@@ -37,7 +36,7 @@ pub struct Args {
 
 /// Runs `evaluate`.
 pub fn run(a: Args) -> Result<()> {
-    let model = TrainedModel::load(&a.model)?;
+    let model = crate::baselines::load_any_model(&a.model)?;
     let bag = read_trajectories(&a.bag).with_context(|| format!("reading {}", a.bag.display()))?;
     let opts = EvalOptions {
         dt: a.dt,
@@ -45,16 +44,15 @@ pub fn run(a: Args) -> Result<()> {
         max_trajectories: a.trajectories,
         allow_overlap: a.allow_overlap,
     };
-    let e = evaluate(&model, &bag, &opts)?;
+    let e = evaluate(
+        model.dynamics.as_ref(),
+        &model.start_fingerprints,
+        &bag,
+        &opts,
+    )?;
     if let Some(p) = &a.plot {
         let title = format!("{}-particle {}", e.particles, e.system);
-        crate::plot::plot_summaries(
-            p,
-            &[(
-                title,
-                vec![(model.file.hyper.variant.to_string(), e.summary.clone())],
-            )],
-        )?;
+        crate::plot::plot_summaries(p, &[(title, vec![(model.name.clone(), e.summary.clone())])])?;
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&e)?);

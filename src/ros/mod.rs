@@ -75,14 +75,14 @@ pub fn effective_params(args: &ServeArgs) -> Result<NodeParams, String> {
     Ok(p)
 }
 
-/// `truth:<system>`, or a trained model file.
+/// `truth:<system>`, or a trained model file (GNODE family or baseline).
 pub fn load_model(model: &str) -> anyhow::Result<Arc<dyn Dynamics>> {
     if truth::is_truth(model) {
         return truth::load_truth(model).map_err(anyhow::Error::msg);
     }
-    let m = crate::model::TrainedModel::load(Path::new(model))
+    let m = crate::baselines::load_any_model(Path::new(model))
         .with_context(|| format!("loading model {model}"))?;
-    Ok(Arc::new(m))
+    Ok(m.dynamics)
 }
 
 /// The DDS domain from `ROS_DOMAIN_ID` (0 when unset), which ros2-client does
