@@ -13,7 +13,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::{in_netns, ros_env, run_bounded, BIN, ROOT};
+use common::{driver_outcome, in_netns, ros_env, run_bounded, BIN, ROOT};
 
 /// A parameter file for the tests (short horizon, fast diagnostics);
 /// `record_dir` records with bags split every second.
@@ -76,20 +76,7 @@ fn node_serves_rclpy_clients() {
         Duration::from_secs(120),
         dir.path(),
     );
-    let node_log = fs::read_to_string(&log).unwrap_or_default();
-    let report = format!(
-        "--- stdout\n{}\n--- stderr\n{}\n--- node log\n{node_log}",
-        o.stdout, o.stderr
-    );
-    assert!(
-        o.status.success(),
-        "the rclpy driver or the node failed\n{report}"
-    );
-    let summary = o
-        .stdout
-        .lines()
-        .find_map(|l| l.strip_prefix("DRIVE_SUMMARY "))
-        .unwrap_or_else(|| panic!("no DRIVE_SUMMARY line\n{report}"));
+    let (summary, node_log, report) = driver_outcome(&o, &log, "DRIVE_SUMMARY ");
     println!("rclpy driver summary: {summary}");
     assert!(node_log.contains("serving truth:spring"), "{report}");
     assert!(node_log.contains("shutting down"), "{report}");
@@ -102,10 +89,10 @@ fn node_serves_rclpy_clients() {
     assert!(node_log.contains("similar warnings suppressed"), "{report}");
 
     // The recording, split by duration, read back by mcap-ros2-support and rosbags.
-    let predictions = summary_number(summary, "predictions");
+    let predictions = summary_number(&summary, "predictions");
     // Undecodable samples cannot be recorded as ParticleState.
-    let received =
-        predictions + summary_number(summary, "rejected") - summary_number(summary, "undecodable");
+    let received = predictions + summary_number(&summary, "rejected")
+        - summary_number(&summary, "undecodable");
     let check = run_bounded(
         Command::new(".venv/bin/python3")
             .arg("tests/ros/check_recording.py")

@@ -14,7 +14,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::{in_netns, ros_env, run_bounded, BIN};
+use common::{driver_outcome, in_netns, ros_env, run_bounded, BIN};
 
 /// `mcgnode <args>`, which must succeed.
 fn mcgnode(args: &[&str], dir: &Path) {
@@ -122,20 +122,7 @@ fn node_retrains_and_swaps_models() {
         Duration::from_secs(200),
         d,
     );
-    let node_log = fs::read_to_string(&log).unwrap_or_default();
-    let report = format!(
-        "--- stdout\n{}\n--- stderr\n{}\n--- node log\n{node_log}",
-        o.stdout, o.stderr
-    );
-    assert!(
-        o.status.success(),
-        "the driver or the node failed\n{report}"
-    );
-    let summary = o
-        .stdout
-        .lines()
-        .find_map(|l| l.strip_prefix("TRAIN_SUMMARY "))
-        .unwrap_or_else(|| panic!("no TRAIN_SUMMARY line\n{report}"));
+    let (summary, node_log, report) = driver_outcome(&o, &log, "TRAIN_SUMMARY ");
     println!("train driver summary: {summary}");
     // The log says why each failure happened and announces each swap.
     for needle in [

@@ -106,3 +106,25 @@ pub fn in_netns(script: &str, params: &Path, env_sh: &Path) -> Command {
         .env_remove("ROS_DOMAIN_ID");
     c
 }
+
+/// Checks that a driver run (an rclpy script beside the node) succeeded and
+/// returns its summary (the line after `prefix`), the node's log, and a
+/// report of everything both printed, for assertion messages.
+pub fn driver_outcome(o: &Outcome, node_log: &Path, prefix: &str) -> (String, String, String) {
+    let log = fs::read_to_string(node_log).unwrap_or_default();
+    let report = format!(
+        "--- stdout\n{}\n--- stderr\n{}\n--- node log\n{log}",
+        o.stdout, o.stderr
+    );
+    assert!(
+        o.status.success(),
+        "the driver or the node failed\n{report}"
+    );
+    let summary = o
+        .stdout
+        .lines()
+        .find_map(|l| l.strip_prefix(prefix))
+        .unwrap_or_else(|| panic!("no {prefix}line\n{report}"))
+        .to_string();
+    (summary, log, report)
+}
