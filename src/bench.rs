@@ -68,6 +68,8 @@ pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, 
             batch: 0,
             lr: 0.0,
             patience: 0,
+            noise: 0.0,
+            points: None,
         },
         weights: net.store.weights()?,
     };

@@ -25,6 +25,83 @@ pub struct EdgeForce {
     pub force: Vec<f64>,
 }
 
+/// The outcome of one rollout among many ([`Dynamics::rollout_many`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rollout {
+    /// The start and every kept state, up to (not including) divergence.
+    pub states: Vec<State>,
+    /// The integration step at which the state became non-finite, if it did.
+    pub diverged_at: Option<usize>,
+}
+
+/// Velocity Verlet for many starts of one graph in lockstep: `accel` gets the
+/// still-finite states of a step together, so models with a large per-call
+/// cost (the candle baselines) pay it once per step rather than once per
+/// trajectory. The arithmetic per trajectory is exactly that of
+/// [`Dynamics::rollout_every`]; a trajectory that turns non-finite is dropped
+/// from the batch and reported in [`Rollout::diverged_at`].
+pub fn verlet_lockstep(
+    graph: &Graph,
+    starts: &[State],
+    dt: f64,
+    steps: usize,
+    every: usize,
+    mut accel: impl FnMut(&[State], &mut [Vec<f64>]) -> Result<(), String>,
+) -> Result<Vec<Rollout>, String> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(format!("time step must be positive and finite, got {dt}"));
+    }
+    for s in starts {
+        s.validate(graph)?;
+    }
+    let every = every.max(1);
+    let mut out: Vec<Rollout> = starts
+        .iter()
+        .map(|s| Rollout {
+            states: vec![s.clone()],
+            diverged_at: None,
+        })
+        .collect();
+    // `active[k]` is the trajectory index of `cur[k]`.
+    let mut active: Vec<usize> = (0..starts.len()).collect();
+    let mut cur: Vec<State> = starts.to_vec();
+    let mut acc = vec![vec![0.0; graph.ndof()]; cur.len()];
+    if !cur.is_empty() {
+        accel(&cur, &mut acc)?;
+    }
+    for step in 1..=steps {
+        if cur.is_empty() {
+            break;
+        }
+        for (s, a) in cur.iter_mut().zip(&acc) {
+            for ((q, v), a) in s.q.iter_mut().zip(s.v.iter_mut()).zip(a) {
+                *q += *v * dt + 0.5 * a * dt * dt;
+                *v += 0.5 * a * dt;
+            }
+        }
+        accel(&cur, &mut acc)?;
+        let mut k = 0;
+        while k < cur.len() {
+            let s = &mut cur[k];
+            for (v, a) in s.v.iter_mut().zip(&acc[k]) {
+                *v += 0.5 * a * dt;
+            }
+            if s.q.iter().chain(&s.v).any(|x| !x.is_finite()) {
+                out[active[k]].diverged_at = Some(step);
+                cur.remove(k);
+                acc.remove(k);
+                active.remove(k);
+                continue;
+            }
+            if step % every == 0 {
+                out[active[k]].states.push(s.clone());
+            }
+            k += 1;
+        }
+    }
+    Ok(out)
+}
+
 /// Something that predicts accelerations of a particle system.
 pub trait Dynamics: Send + Sync {
     /// A short human-readable description ("mcgnode trained on 5-spring", ...).
@@ -80,6 +157,42 @@ pub trait Dynamics: Send + Sync {
             }
         }
         Ok(out)
+    }
+
+    /// Accelerations of several states of one graph, one `n * dim` vector per
+    /// state. The default calls [`Dynamics::acceleration`] per state.
+    fn acceleration_batch(
+        &self,
+        graph: &Graph,
+        states: &[State],
+        out: &mut [Vec<f64>],
+    ) -> Result<(), String> {
+        if states.len() != out.len() {
+            return Err("one output buffer per state is needed".into());
+        }
+        for (s, o) in states.iter().zip(out.iter_mut()) {
+            self.acceleration(graph, s, o)?;
+        }
+        Ok(())
+    }
+
+    /// Rollouts of many starts of one graph, each as
+    /// [`Dynamics::rollout_every`] would do it, except that a rollout that
+    /// diverges keeps its states so far (see [`Rollout`]) instead of failing
+    /// the call. The default steps all starts in lockstep with
+    /// [`Dynamics::acceleration_batch`] ([`verlet_lockstep`]).
+    fn rollout_many(
+        &self,
+        graph: &Graph,
+        starts: &[State],
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<Rollout>, String> {
+        self.supports(graph)?;
+        verlet_lockstep(graph, starts, dt, steps, every, |s, a| {
+            self.acceleration_batch(graph, s, a)
+        })
     }
 
     /// Velocity-Verlet rollout: `steps + 1` states including `start`.

@@ -68,6 +68,9 @@ pub struct Evaluation {
     pub steps: usize,
     /// Wall time of all rollouts, seconds.
     pub rollout_seconds: f64,
+    /// Trajectories whose rollout diverged (non-finite state); from then on
+    /// they score the worst errors (see [`crate::metrics`]).
+    pub diverged: usize,
     /// Geometric means and 95% bands over trajectories.
     pub summary: Summary,
     /// Time averages of the geometric-mean curves (t > 0).
@@ -122,11 +125,10 @@ pub fn evaluate(
             );
         }
     }
-    let mut curves = vec![];
-    let mut steps_total = 0;
-    let start = Instant::now();
-    for tr in &trajs {
-        let g = &tr.graph;
+    // Trajectories on the same graph with the same sampling are rolled out
+    // together (the candle baselines batch them; see Dynamics::rollout_many).
+    let mut groups: Vec<(usize, usize, Vec<usize>)> = vec![]; // (every, steps, members)
+    for (i, tr) in trajs.iter().enumerate() {
         let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
         let interval = if times.len() > 1 {
             times[1] - times[0]
@@ -141,13 +143,44 @@ pub fn evaluate(
             );
         }
         let steps = every * (times.len() - 1);
-        let pred = model
-            .rollout_every(g, &tr.samples[0].state, dt, steps, every)
-            .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", tr.id))?;
-        steps_total = steps;
-        let truth: Vec<State> = tr.samples.iter().map(|s| s.state.clone()).collect();
-        curves.push(error_curves(g, &field, &truth, &pred, &times).map_err(anyhow::Error::msg)?);
+        match groups
+            .iter_mut()
+            .find(|(e, st, m)| *e == every && *st == steps && trajs[m[0]].graph == tr.graph)
+        {
+            Some(g) => g.2.push(i),
+            None => groups.push((every, steps, vec![i])),
+        }
     }
+    let mut curves: Vec<Option<ErrorCurves>> = vec![None; trajs.len()];
+    let mut steps_total = 0;
+    let mut diverged = 0;
+    let start = Instant::now();
+    for (every, steps, members) in &groups {
+        let g = &trajs[members[0]].graph;
+        let starts: Vec<State> = members
+            .iter()
+            .map(|&i| trajs[i].samples[0].state.clone())
+            .collect();
+        let rollouts = model
+            .rollout_many(g, &starts, dt, *steps, *every)
+            .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", trajs[members[0]].id))?;
+        steps_total = *steps;
+        for (&i, r) in members.iter().zip(rollouts) {
+            let tr = trajs[i];
+            let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
+            let k = r.states.len().min(times.len());
+            let truth: Vec<State> = tr.samples[..k].iter().map(|s| s.state.clone()).collect();
+            let c = error_curves(g, &field, &truth, &r.states[..k], &times[..k])
+                .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", tr.id))?;
+            curves[i] = Some(if r.diverged_at.is_some() {
+                diverged += 1;
+                ErrorCurves::diverged(c, &times)
+            } else {
+                c
+            });
+        }
+    }
+    let curves: Vec<ErrorCurves> = curves.into_iter().flatten().collect();
     let rollout_seconds = start.elapsed().as_secs_f64();
     let summary = summarize(&curves).map_err(anyhow::Error::msg)?;
     Ok(Evaluation {
@@ -159,6 +192,7 @@ pub fn evaluate(
         dt,
         steps: steps_total,
         rollout_seconds,
+        diverged,
         summary,
         curves,
     })
@@ -185,6 +219,12 @@ pub fn table(e: &Evaluation, rows: usize) -> String {
         );
     }
     let a = s.time_average();
+    if e.diverged > 0 {
+        out += &format!(
+            "({} of {} rollouts diverged: worst errors from then on)\n",
+            e.diverged, e.trajectories
+        );
+    }
     out += &format!(
         "{:>8}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}\n",
         "mean", a.re, a.ee, a.me, a.me_scaled

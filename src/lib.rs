@@ -18,6 +18,8 @@ pub mod model;
 pub mod physics;
 pub mod plot;
 pub mod replay;
+pub mod reproduce;
 pub mod ros;
+pub mod simulate;
 pub mod system;
 pub mod train;

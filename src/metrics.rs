@@ -8,6 +8,14 @@
 //!   state;
 //! * ME(t) = ‖P̂ − P‖₂ / (‖P̂‖₂ + ‖P‖₂), P the total linear momentum.
 //!
+//! Beside these relative errors, the absolute ones the paper shows for the
+//! peridynamic solid: ‖q̂ − q‖₂ ([`ErrorCurves::re_abs`]) and ‖P̂ − P‖₂
+//! ([`ErrorCurves::me_abs`]).
+//!
+//! A rollout that diverged (non-finite state) scores the worst value from
+//! then on: 1 for the relative errors (their maximum), [`DIVERGED`] for the
+//! absolute ones ([`ErrorCurves::diverged`]).
+//!
 //! A ratio 0/0 (both quantities exactly zero) is defined as 0: the prediction
 //! matches. Caveat for ME: when the true momentum is zero (the spring starts)
 //! both momenta sit at round-off level and ME is close to 1 for any prediction
@@ -22,6 +30,10 @@ use crate::system::{Graph, State};
 /// Values are clamped to this before taking logs (a zero error would
 /// otherwise have log −∞), so an exact zero shows up as 1e-300.
 pub const LOG_FLOOR: f64 = 1e-300;
+
+/// The absolute error of a diverged rollout: a finite stand-in for +∞ so
+/// that logs, bands and JSON stay finite.
+pub const DIVERGED: f64 = 1e300;
 
 /// z-value of a two-sided 95% normal band.
 const Z95: f64 = 1.96;
@@ -40,6 +52,31 @@ pub struct ErrorCurves {
     /// ‖P̂ − P‖ / (Σ m|v̂| + Σ m|v|): momentum error relative to the scale of
     /// the motion, in [0, 1]; meaningful also when P ≈ 0.
     pub me_scaled: Vec<f64>,
+    /// Absolute rollout error ‖q̂ − q‖₂.
+    #[serde(default)]
+    pub re_abs: Vec<f64>,
+    /// Absolute momentum error ‖P̂ − P‖₂.
+    #[serde(default)]
+    pub me_abs: Vec<f64>,
+}
+
+impl ErrorCurves {
+    /// Curves of a rollout that diverged: `curves` covers the states before
+    /// divergence; the remaining times up to `times.len()` get the worst
+    /// values (relative 1, absolute [`DIVERGED`]).
+    pub fn diverged(mut curves: ErrorCurves, times: &[f64]) -> ErrorCurves {
+        let k = curves.t.len();
+        for &t in &times[k.min(times.len())..] {
+            curves.t.push(t);
+            curves.re.push(1.0);
+            curves.ee.push(1.0);
+            curves.me.push(1.0);
+            curves.me_scaled.push(1.0);
+            curves.re_abs.push(DIVERGED);
+            curves.me_abs.push(DIVERGED);
+        }
+        curves
+    }
 }
 
 /// a / b with 0/0 = 0.
@@ -96,6 +133,8 @@ pub fn error_curves(
         ee: Vec::with_capacity(times.len()),
         me: Vec::with_capacity(times.len()),
         me_scaled: Vec::with_capacity(times.len()),
+        re_abs: Vec::with_capacity(times.len()),
+        me_abs: Vec::with_capacity(times.len()),
     };
     for (k, (s, p)) in truth.iter().zip(pred).enumerate() {
         s.validate(graph)
@@ -119,12 +158,14 @@ pub fn error_curves(
             dm,
             momentum_scale(graph, p) + momentum_scale(graph, s),
         ));
+        c.re_abs.push(dq);
+        c.me_abs.push(dm);
     }
     Ok(c)
 }
 
 /// Geometric mean and 95% band of one metric over trajectories, per time.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Band {
     /// exp(mean(log x)) over trajectories.
     pub gmean: Vec<f64>,
@@ -156,6 +197,12 @@ pub struct Summary {
     pub me: Band,
     /// Momentum error relative to the momentum scale.
     pub me_scaled: Band,
+    /// Absolute rollout error (empty where not computed, e.g. replay).
+    #[serde(default)]
+    pub re_abs: Band,
+    /// Absolute momentum error (empty where not computed).
+    #[serde(default)]
+    pub me_abs: Band,
 }
 
 fn band(curves: &[ErrorCurves], pick: impl Fn(&ErrorCurves) -> &Vec<f64>) -> Band {
@@ -196,6 +243,8 @@ pub fn summarize(curves: &[ErrorCurves]) -> Result<Summary, String> {
             c.ee.len(),
             c.me.len(),
             c.me_scaled.len(),
+            c.re_abs.len(),
+            c.me_abs.len(),
         ]
         .iter()
         .any(|l| *l != len)
@@ -211,7 +260,13 @@ pub fn summarize(curves: &[ErrorCurves]) -> Result<Summary, String> {
                 ));
             }
         }
-        let mut vals = c.re.iter().chain(&c.ee).chain(&c.me).chain(&c.me_scaled);
+        let mut vals =
+            c.re.iter()
+                .chain(&c.ee)
+                .chain(&c.me)
+                .chain(&c.me_scaled)
+                .chain(&c.re_abs)
+                .chain(&c.me_abs);
         if let Some(x) = vals.find(|x| !(x.is_finite() && **x >= 0.0)) {
             return Err(format!("curve {i} has an invalid error value {x}"));
         }
@@ -223,6 +278,8 @@ pub fn summarize(curves: &[ErrorCurves]) -> Result<Summary, String> {
         ee: band(curves, |c| &c.ee),
         me: band(curves, |c| &c.me),
         me_scaled: band(curves, |c| &c.me_scaled),
+        re_abs: band(curves, |c| &c.re_abs),
+        me_abs: band(curves, |c| &c.me_abs),
     })
 }
 
@@ -237,6 +294,12 @@ pub struct Averages {
     pub me: f64,
     /// ME relative to the momentum scale.
     pub me_scaled: f64,
+    /// Absolute rollout error.
+    #[serde(default)]
+    pub re_abs: f64,
+    /// Absolute momentum error.
+    #[serde(default)]
+    pub me_abs: f64,
 }
 
 impl Summary {
@@ -257,6 +320,8 @@ impl Summary {
             ee: avg(&self.ee),
             me: avg(&self.me),
             me_scaled: avg(&self.me_scaled),
+            re_abs: avg(&self.re_abs),
+            me_abs: avg(&self.me_abs),
         }
     }
 

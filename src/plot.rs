@@ -9,7 +9,7 @@ use anyhow::{anyhow, bail, Context};
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
-use crate::metrics::{Band, Summary, LOG_FLOOR};
+use crate::metrics::{Band, Summary, DIVERGED, LOG_FLOOR};
 
 /// DejaVu Sans, embedded so text renders without system fonts (license in
 /// assets/LICENSE-DejaVu.txt).
@@ -45,13 +45,62 @@ const COLORS: [RGBColor; 8] = [
 /// Selects one metric's band from a summary.
 type Pick = fn(&Summary) -> &Band;
 
-/// The rows of the figure: label and the band it plots.
-const ROWS: [(&str, Pick); 4] = [
-    ("RE(t)", |s| &s.re),
-    ("EE(t)", |s| &s.ee),
-    ("ME(t)", |s| &s.me),
-    ("ME scaled", |s| &s.me_scaled),
-];
+/// A metric a figure row can show.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Metric {
+    /// Relative rollout error RE(t).
+    Re,
+    /// Energy violation error EE(t).
+    Ee,
+    /// Momentum error ME(t) (paper definition).
+    Me,
+    /// Momentum error relative to the momentum scale.
+    MeScaled,
+    /// Absolute rollout error ‖q̂ − q‖.
+    ReAbs,
+    /// Absolute momentum error ‖P̂ − P‖.
+    MeAbs,
+}
+
+impl Metric {
+    /// Axis label.
+    pub fn label(self) -> &'static str {
+        match self {
+            Metric::Re => "RE(t)",
+            Metric::Ee => "EE(t)",
+            Metric::Me => "ME(t)",
+            Metric::MeScaled => "ME scaled",
+            Metric::ReAbs => "|q̂ − q|",
+            Metric::MeAbs => "|P̂ − P|",
+        }
+    }
+
+    fn pick(self) -> Pick {
+        match self {
+            Metric::Re => |s| &s.re,
+            Metric::Ee => |s| &s.ee,
+            Metric::Me => |s| &s.me,
+            Metric::MeScaled => |s| &s.me_scaled,
+            Metric::ReAbs => |s| &s.re_abs,
+            Metric::MeAbs => |s| &s.me_abs,
+        }
+    }
+}
+
+/// The rows of [`plot_summaries`].
+const ROWS: [Metric; 4] = [Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled];
+
+/// A tick label: at most 3 decimals, no trailing zeros ("0.3", not
+/// "0.30000000000000004").
+fn tick(v: f64) -> String {
+    let s = format!("{v:.3}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" {
+        "0".into()
+    } else {
+        s.into()
+    }
+}
 
 /// Smallest and largest positive (non-floored) value of a row, padded to
 /// whole decades; (1e-16, 1) when everything is zero.
@@ -60,7 +109,9 @@ fn y_range(models: &[(String, Summary)], pick: Pick) -> (f64, f64) {
     for (_, s) in models {
         let b = pick(s);
         for &x in b.lo.iter().chain(&b.hi).chain(&b.gmean) {
-            if x.is_finite() && x > LOG_FLOOR * 10.0 {
+            // Floored zeros and diverged stand-ins would stretch the axis
+            // to 1e±300; they are drawn clamped at its edge instead.
+            if x.is_finite() && x > LOG_FLOOR * 10.0 && x < DIVERGED / 10.0 {
                 lo = lo.min(x);
                 hi = hi.max(x);
             }
@@ -91,6 +142,18 @@ pub fn plot_summaries(
     path: &Path,
     panels: &[(String, Vec<(String, Summary)>)],
 ) -> anyhow::Result<()> {
+    plot_metrics(path, panels, &ROWS)
+}
+
+/// [`plot_summaries`] with a chosen list of rows.
+pub fn plot_metrics(
+    path: &Path,
+    panels: &[(String, Vec<(String, Summary)>)],
+    rows: &[Metric],
+) -> anyhow::Result<()> {
+    if rows.is_empty() {
+        bail!("nothing to plot: no metrics");
+    }
     if panels.is_empty() {
         bail!("nothing to plot: no panels");
     }
@@ -101,8 +164,9 @@ pub fn plot_summaries(
         for (name, s) in models {
             let n = s.t.len();
             let ok = n > 0
-                && [&s.re, &s.ee, &s.me]
+                && rows
                     .iter()
+                    .map(|m| m.pick()(s))
                     .all(|b| b.gmean.len() == n && b.lo.len() == n && b.hi.len() == n);
             if !ok {
                 bail!(
@@ -112,21 +176,22 @@ pub fn plot_summaries(
         }
     }
     ensure_font()?;
-    let size = (CELL.0 * panels.len() as u32, CELL.1 * ROWS.len() as u32);
+    let size = (CELL.0 * panels.len() as u32, CELL.1 * rows.len() as u32);
     let root = BitMapBackend::new(path, size).into_drawing_area();
     root.fill(&WHITE)?;
-    let cells = root.split_evenly((ROWS.len(), panels.len()));
-    for (r, (label, pick)) in ROWS.iter().enumerate() {
+    let cells = root.split_evenly((rows.len(), panels.len()));
+    for (r, m) in rows.iter().enumerate() {
+        let (label, pick) = (m.label(), m.pick());
         for (c, (title, models)) in panels.iter().enumerate() {
             let area = &cells[r * panels.len() + c];
             draw_cell(
                 area,
                 title,
                 label,
-                *pick,
+                pick,
                 models,
                 r == 0,
-                r + 1 == ROWS.len(),
+                r + 1 == rows.len(),
             )
             .with_context(|| format!("drawing {label} of {title}"))?;
         }
@@ -170,7 +235,7 @@ fn draw_cell(
     let mut mesh = chart.configure_mesh();
     mesh.y_desc(label)
         .y_label_formatter(&|v| format!("{v:.0e}"))
-        .x_label_formatter(&|v| format!("{v}"))
+        .x_label_formatter(&|v| tick(*v))
         .label_style((FAMILY, 13))
         .axis_desc_style((FAMILY, 15))
         .light_line_style(WHITE.mix(0.0));
@@ -210,5 +275,127 @@ fn draw_cell(
             .label_font((FAMILY, 13))
             .draw()?;
     }
+    Ok(())
+}
+
+/// One model's line in a sweep figure: (x, geometric mean, band low, band high).
+pub type SweepLine = (String, Vec<(f64, f64, f64, f64)>);
+
+/// A sweep figure (errors against noise level or data size): one panel per
+/// entry of `panels` (title, y label, lines), log y, log x when `log_x`,
+/// each model a line with markers and a shaded band.
+pub fn plot_sweep(
+    path: &Path,
+    x_label: &str,
+    log_x: bool,
+    panels: &[(String, String, Vec<SweepLine>)],
+) -> anyhow::Result<()> {
+    if panels.is_empty() || panels.iter().any(|p| p.2.iter().all(|l| l.1.is_empty())) {
+        bail!("nothing to plot: a sweep panel has no points");
+    }
+    ensure_font()?;
+    let root =
+        BitMapBackend::new(path, (CELL.0 * panels.len() as u32, CELL.1 + 40)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let cells = root.split_evenly((1, panels.len()));
+    for ((title, y_label, lines), area) in panels.iter().zip(&cells) {
+        draw_sweep(area, title, y_label, x_label, log_x, lines)
+            .with_context(|| format!("drawing sweep panel {title}"))?;
+    }
+    root.present()
+        .with_context(|| format!("writing plot {}", path.display()))?;
+    Ok(())
+}
+
+fn draw_sweep(
+    area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    title: &str,
+    y_label: &str,
+    x_label: &str,
+    log_x: bool,
+    lines: &[SweepLine],
+) -> anyhow::Result<()> {
+    let pts = || lines.iter().flat_map(|l| l.1.iter());
+    let usable = |y: f64| y.is_finite() && y > LOG_FLOOR * 10.0 && y < DIVERGED / 10.0;
+    let (mut ylo, mut yhi) = (f64::INFINITY, 0.0_f64);
+    for p in pts() {
+        for y in [p.1, p.2, p.3] {
+            if usable(y) {
+                ylo = ylo.min(y);
+                yhi = yhi.max(y);
+            }
+        }
+    }
+    if !ylo.is_finite() {
+        (ylo, yhi) = (1e-16, 1.0);
+    }
+    let ylo = 10f64.powf(ylo.max(yhi * 1e-20).log10().floor());
+    let mut yhi = 10f64.powf(yhi.log10().ceil());
+    if yhi <= ylo {
+        yhi = ylo * 10.0;
+    }
+    let xs = || pts().map(|p| if log_x { p.0.max(1e-300).log10() } else { p.0 });
+    let x0 = xs().fold(f64::INFINITY, f64::min);
+    let mut x1 = xs().fold(f64::NEG_INFINITY, f64::max);
+    if x1 <= x0 {
+        x1 = x0 + 1.0;
+    }
+    let pad = 0.05 * (x1 - x0);
+    let tx = move |x: f64| if log_x { x.max(1e-300).log10() } else { x };
+    let clamp = |y: f64| y.clamp(ylo, yhi);
+    let mut chart = ChartBuilder::on(area)
+        .margin(8)
+        .caption(title, (FAMILY, 18))
+        .x_label_area_size(40)
+        .y_label_area_size(62)
+        .build_cartesian_2d((x0 - pad)..(x1 + pad), (ylo..yhi).log_scale())?;
+    chart
+        .configure_mesh()
+        .y_desc(y_label)
+        .x_desc(x_label)
+        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .x_label_formatter(&|v| {
+            if log_x {
+                format!("{}", 10f64.powf(*v).round())
+            } else {
+                tick(*v)
+            }
+        })
+        .label_style((FAMILY, 13))
+        .axis_desc_style((FAMILY, 15))
+        .light_line_style(WHITE.mix(0.0))
+        .draw()?;
+    for (i, (name, p)) in lines.iter().enumerate() {
+        if p.is_empty() {
+            continue;
+        }
+        let color = COLORS[i % COLORS.len()];
+        let mut poly: Vec<(f64, f64)> = p.iter().map(|q| (tx(q.0), clamp(q.2))).collect();
+        poly.extend(p.iter().rev().map(|q| (tx(q.0), clamp(q.3))));
+        chart.draw_series(std::iter::once(Polygon::new(
+            poly,
+            color.mix(0.15).filled(),
+        )))?;
+        chart
+            .draw_series(LineSeries::new(
+                p.iter().map(|q| (tx(q.0), clamp(q.1))),
+                color.stroke_width(2),
+            ))?
+            .label(name.as_str())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+            });
+        chart.draw_series(
+            p.iter()
+                .map(|q| Circle::new((tx(q.0), clamp(q.1)), 4, color.filled())),
+        )?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.5))
+        .label_font((FAMILY, 13))
+        .draw()?;
     Ok(())
 }

@@ -424,6 +424,8 @@ pub fn replay(model: &dyn Dynamics, bag: &Bag, opts: &ReplayOptions) -> Result<R
             ee: empty_band(),
             me: empty_band(),
             me_scaled: empty_band(),
+            re_abs: empty_band(),
+            me_abs: empty_band(),
         },
         worst: Worst::default(),
         averages: Averages {
@@ -431,6 +433,8 @@ pub fn replay(model: &dyn Dynamics, bag: &Bag, opts: &ReplayOptions) -> Result<R
             ee: f64::NAN,
             me: f64::NAN,
             me_scaled: f64::NAN,
+            re_abs: f64::NAN,
+            me_abs: f64::NAN,
         },
         seconds: 0.0,
     };
@@ -450,6 +454,8 @@ pub fn replay(model: &dyn Dynamics, bag: &Bag, opts: &ReplayOptions) -> Result<R
         ee: empty_band(),
         me: empty_band(),
         me_scaled: empty_band(),
+        re_abs: empty_band(),
+        me_abs: empty_band(),
     };
     for (j, b) in bins.iter().enumerate().filter(|(_, b)| b.count() > 0) {
         s.t.push(j as f64 * p.bin_width);
@@ -606,6 +612,8 @@ mod tests {
                 ee: vec![v[1]],
                 me: vec![v[2]],
                 me_scaled: vec![v[3]],
+                re_abs: vec![0.0],
+                me_abs: vec![0.0],
             })
             .collect();
         let want = summarize(&curves).unwrap();

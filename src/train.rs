@@ -1,6 +1,7 @@
 //! Training: MSE on accelerations, Adam, batches of 100, a seeded 75:25 split,
 //! early stopping on the validation loss (the best weights are kept).
 
+use crate::data::dataset::Dataset;
 use crate::model::batch::Batch;
 use crate::model::file::TrainingReport;
 use crate::model::params::{ParamStore, Weights};
@@ -27,8 +28,17 @@ pub struct TrainConfig {
     pub validation: f64,
     /// Stop when the validation loss has not improved for this many epochs.
     pub patience: usize,
-    /// Seed for initialisation, split and shuffling.
+    /// Seed for initialisation, split and shuffling (and, through distinct
+    /// streams, subsampling and noise).
     pub seed: u64,
+    /// Gaussian noise on the target accelerations, percent of their standard
+    /// deviation (paper's noise experiments: 0, 1, 5, 10). Applied by
+    /// [`apply_data_options`].
+    pub noise: f64,
+    /// Train on a seeded random subset of this many states (paper's
+    /// data-efficiency experiments: 100 to 10,000); `None`: all. Applied by
+    /// [`apply_data_options`].
+    pub points: Option<usize>,
 }
 
 impl Default for TrainConfig {
@@ -40,6 +50,8 @@ impl Default for TrainConfig {
             validation: 0.25,
             patience: 1_000,
             seed: 0,
+            noise: 0.0,
+            points: None,
         }
     }
 }
@@ -235,7 +247,39 @@ pub fn fit(
         batch: cfg.batch,
         lr: cfg.lr,
         patience: cfg.patience,
+        noise: cfg.noise,
+        points: cfg.points,
     })
+}
+
+/// Mixed into [`TrainConfig::seed`] for the subsample's stream ("points"), so
+/// it is independent of initialisation and shuffling.
+const POINTS_STREAM: u64 = 0x706f_696e_7473;
+/// Mixed into [`TrainConfig::seed`] for the noise stream ("noise").
+const NOISE_STREAM: u64 = 0x6e_6f69_7365;
+
+/// Applies the data options of `cfg` to a training set: first the subsample
+/// ([`TrainConfig::points`], [`Dataset::subsample`]), then the noise
+/// ([`TrainConfig::noise`], [`Dataset::add_noise`]), so the noise scale is
+/// that of the data actually trained on. `log` says what was done.
+pub fn apply_data_options(
+    ds: &mut Dataset,
+    cfg: &TrainConfig,
+    mut log: impl FnMut(&str),
+) -> Result<()> {
+    if let Some(points) = cfg.points {
+        let total = ds.len();
+        ds.subsample(points, cfg.seed ^ POINTS_STREAM)?;
+        log(&format!("using {points} of {total} states"));
+    }
+    let sigma = ds.add_noise(cfg.noise, cfg.seed ^ NOISE_STREAM)?;
+    if cfg.noise > 0.0 {
+        log(&format!(
+            "added {}% noise: σ = {sigma:.3e} to accelerations",
+            cfg.noise
+        ));
+    }
+    Ok(())
 }
 
 /// Trains a fresh model of `hyper` on states of one graph with their
@@ -316,7 +360,7 @@ pub fn load_training_data(
     mut log: impl FnMut(&str),
 ) -> Result<TrainingData> {
     use crate::data::bag::read_trajectories;
-    use crate::data::dataset::{digest, AccSource, Dataset};
+    use crate::data::dataset::{digest, AccSource};
     use crate::evaluate::{bag_system, fingerprint};
     if bags.is_empty() {
         bail!("no training bags given");
@@ -385,7 +429,9 @@ pub fn train_from_bags(
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<crate::model::ModelFile> {
     log(&format!("training {variant}"));
-    let data = load_training_data(bags, &mut log)?;
+    let mut data = load_training_data(bags, &mut log)?;
+    apply_data_options(&mut data.dataset, cfg, &mut log)?;
+    data.trained_on.states = data.dataset.len();
     let ds = &data.dataset;
     let types = opts.types.unwrap_or(
         ds.graph

@@ -336,3 +336,101 @@ fn help_documents_every_subcommand() {
         );
     }
 }
+
+#[test]
+fn simulate_peridynamic_solid_defaults_to_3d() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let base = ["simulate", "--system", "peridynamic", "--trajectories", "2"];
+    ok(&mcgnode(
+        &[&base[..], &["--particles", "125", "--out", "p.mcap"]].concat(),
+        d,
+    ));
+    let bag = mcgnode::data::bag::read_trajectories(d.join("p.mcap")).unwrap();
+    assert_eq!(bag.trajectories.len(), 2);
+    let t = &bag.trajectories[0];
+    assert_eq!(t.system, "peridynamic");
+    assert_eq!(
+        (t.graph.dim, t.graph.n(), t.graph.edges.len()),
+        (3, 125, 780)
+    );
+    assert_eq!(t.samples.len(), 100);
+    assert_eq!(bag.metadata["integrator"], "verlet");
+    ok(&mcgnode(
+        &[
+            &base[..],
+            &["--particles", "8", "--dim", "3", "--out", "q.mcap"],
+        ]
+        .concat(),
+        d,
+    ));
+    fails_with(
+        &mcgnode(
+            &[&base[..], &["--particles", "100", "--out", "x.mcap"]].concat(),
+            d,
+        ),
+        "cube number",
+    );
+    fails_with(
+        &mcgnode(
+            &[
+                &base[..],
+                &["--particles", "125", "--dim", "2", "--out", "x.mcap"],
+            ]
+            .concat(),
+            d,
+        ),
+        "3-dimensional",
+    );
+}
+
+#[test]
+fn simulate_rk4_matches_verlet() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let run = |integrator: &str, out: &str| {
+        ok(&mcgnode(
+            &[
+                "simulate",
+                "--system",
+                "spring",
+                "--particles",
+                "5",
+                "--trajectories",
+                "3",
+                "--states",
+                "20",
+                "--seed",
+                "4",
+                "--integrator",
+                integrator,
+                "--out",
+                out,
+            ],
+            d,
+        ));
+        mcgnode::data::bag::read_trajectories(d.join(out)).unwrap()
+    };
+    let (rk4, verlet) = (run("rk4", "rk4.mcap"), run("verlet", "verlet.mcap"));
+    assert_eq!(rk4.metadata["integrator"], "rk4");
+    assert_eq!(verlet.metadata["integrator"], "verlet");
+    assert_eq!(rk4.trajectories.len(), 3);
+    let mut worst = 0.0_f64;
+    for (a, b) in rk4.trajectories.iter().zip(&verlet.trajectories) {
+        assert_eq!(a.samples.len(), 20);
+        assert_eq!(a.samples[0].state, b.samples[0].state, "same starts");
+        for (x, y) in a.samples.iter().zip(&b.samples) {
+            for (p, q) in x.state.q.iter().zip(&y.state.q) {
+                worst = worst.max((p - q).abs());
+            }
+        }
+    }
+    println!("RK4 vs Verlet, 5 springs, 1.9 s at dt 1e-3: max position difference {worst:.3e}");
+    assert!(worst > 0.0, "the two integrators gave identical data");
+    assert!(worst < 1e-6, "RK4 and Verlet differ by {worst}");
+    assert!(!ok(&mcgnode(&["simulate", "--help"], d)).is_empty());
+    fails_with(
+        &mcgnode(&["simulate", "--integrator", "euler", "--out", "x.mcap"], d),
+        "euler",
+    );
+}

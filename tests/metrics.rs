@@ -127,6 +127,8 @@ fn constant(t: &[f64], re: f64, ee: f64, me: f64) -> ErrorCurves {
         ee: vec![ee; t.len()],
         me: vec![me; t.len()],
         me_scaled: vec![me; t.len()],
+        re_abs: vec![re; t.len()],
+        me_abs: vec![me; t.len()],
     }
 }
 
@@ -182,6 +184,8 @@ fn growing(t: &[f64], a: f64) -> Summary {
                 ee: t.iter().map(|x| f * a * 0.1 * (1.0 + x)).collect(),
                 me: t.iter().map(|x| f * a * 1e-3 * (2.0 + x.sin())).collect(),
                 me_scaled: t.iter().map(|_| 0.0).collect(),
+                re_abs: t.iter().map(|x| f * x).collect(),
+                me_abs: t.iter().map(|_| 0.0).collect(),
             }
         })
         .collect();
@@ -233,4 +237,93 @@ fn plot_is_written_as_png() {
     assert!(plot_summaries(&path, &[("empty".into(), vec![])]).is_err());
     let missing = dir.path().join("no/such/dir/x.png");
     assert!(plot_summaries(&missing, &panels).is_err());
+}
+
+#[test]
+fn absolute_errors_and_diverged_rollouts() {
+    use mcgnode::metrics::DIVERGED;
+    let g = SystemConfig::new(SystemKind::Spring, 3).graph();
+    let f = Field::default();
+    let truth = State {
+        q: vec![0.0, 0.0, 1.0, 0.0, 0.0, 1.0],
+        v: vec![1.0, 0.0, 0.0, 0.0, -1.0, 0.0],
+    };
+    let mut pred = truth.clone();
+    pred.q[0] += 3.0;
+    pred.q[1] += 4.0;
+    pred.v[0] += 0.5;
+    let c = error_curves(&g, &f, std::slice::from_ref(&truth), &[pred], &[1.0]).unwrap();
+    // ‖Δq‖ = 5; ΔP = (0.5, 0) with unit masses.
+    assert!(close(c.re_abs[0], 5.0, 1e-15), "{}", c.re_abs[0]);
+    assert!(close(c.me_abs[0], 0.5, 1e-15), "{}", c.me_abs[0]);
+    // A rollout that diverged after its first state scores the worst values.
+    let d = ErrorCurves::diverged(c.clone(), &[1.0, 2.0, 3.0]);
+    assert_eq!(d.t, vec![1.0, 2.0, 3.0]);
+    assert_eq!(d.re[1..], [1.0, 1.0]);
+    assert_eq!(d.me_abs[1..], [DIVERGED, DIVERGED]);
+    let s = summarize(&[d.clone(), d]).unwrap();
+    assert!(s.re_abs.gmean.iter().all(|x| x.is_finite()));
+    assert!(close(s.re_abs.gmean[2], DIVERGED, 1e-9));
+}
+
+/// Accelerations that blow up once |q| passes a threshold: a model whose
+/// rollouts diverge after a while.
+struct Exploding;
+
+impl mcgnode::dynamics::Dynamics for Exploding {
+    fn describe(&self) -> String {
+        "exploding".into()
+    }
+    fn supports(&self, _: &Graph) -> Result<(), String> {
+        Ok(())
+    }
+    fn acceleration(&self, _: &Graph, s: &State, out: &mut [f64]) -> Result<(), String> {
+        let r = s.q.iter().map(|x| x * x).sum::<f64>().sqrt();
+        for o in out.iter_mut() {
+            *o = if r > 3.0 { f64::INFINITY } else { 1.0 };
+        }
+        Ok(())
+    }
+    fn forces(&self, _: &Graph, _: &State) -> Result<mcgnode::dynamics::Forces, String> {
+        Ok(Default::default())
+    }
+}
+
+/// A diverging rollout keeps its states so far, is counted, and scores the
+/// worst values from then on instead of failing the evaluation.
+#[test]
+fn diverged_rollouts_are_scored_not_fatal() {
+    use mcgnode::dynamics::Dynamics;
+    let mut c = SystemConfig::new(SystemKind::Spring, 3);
+    c.states = 31;
+    let trajs = c.simulate(2, 7);
+    let g = c.graph();
+    let starts: Vec<State> = trajs.iter().map(|t| t.samples[0].state.clone()).collect();
+    let r = Exploding
+        .rollout_many(&g, &starts, 0.01, 3000, 100)
+        .unwrap();
+    for x in &r {
+        let at = x.diverged_at.expect("diverges");
+        assert_eq!(
+            x.states.len(),
+            1 + (at - 1) / 100,
+            "states kept up to divergence"
+        );
+        assert!(x.states.iter().all(|s| s.validate(&g).is_ok()));
+    }
+    let bag = mcgnode::data::bag::Bag {
+        trajectories: trajs,
+        metadata: [(
+            mcgnode::evaluate::META_SYSTEM.to_string(),
+            serde_json::to_string(&c).unwrap(),
+        )]
+        .into_iter()
+        .collect(),
+    };
+    let e = mcgnode::evaluate::evaluate(&Exploding, &[], &bag, &Default::default()).unwrap();
+    assert_eq!(e.diverged, 2);
+    assert_eq!(*e.summary.re.gmean.last().unwrap(), 1.0);
+    let worst = *e.summary.re_abs.gmean.last().unwrap();
+    assert!(close(worst, mcgnode::metrics::DIVERGED, 1e-12), "{worst}");
+    assert!(mcgnode::evaluate::table(&e, 4).contains("2 of 2 rollouts diverged"));
 }

@@ -544,3 +544,174 @@ fn truth_implements_dynamics() {
         );
     }
 }
+
+/// Mean distance of the particles from their centroid (3D).
+fn mean_radius(s: &State) -> f64 {
+    let n = s.q.len() / 3;
+    let mut c = [0.0; 3];
+    for p in s.q.chunks(3) {
+        for (ck, x) in c.iter_mut().zip(p) {
+            *ck += x / n as f64;
+        }
+    }
+    (0..n)
+        .map(|i| norm(&(0..3).map(|k| s.q[i * 3 + k] - c[k]).collect::<Vec<_>>()))
+        .sum::<f64>()
+        / n as f64
+}
+
+#[test]
+fn peridynamic_cube_graph_is_the_documented_lattice() {
+    use mcgnode::physics::config::PERIDYNAMIC_HORIZON;
+    let cfg = SystemConfig::new(SystemKind::Peridynamic, 125);
+    assert_eq!(cfg.dim, 3);
+    cfg.validate().unwrap();
+    let g = cfg.graph();
+    assert_eq!(g.dim, 3);
+    assert_eq!(g.n(), 125);
+    assert!(g.anchors.is_empty());
+    assert_eq!(g.types, vec![0; 125]);
+    assert_eq!(g.masses, vec![1.0; 125]);
+    // 3·k²(k−1) face bonds + 3·2·k(k−1)² face diagonals = 300 + 480.
+    assert_eq!(g.edges.len(), 780);
+    let (mut faces, mut diagonals) = (0, 0);
+    for e in &g.edges {
+        assert_eq!(e.kind, EdgeKind::Spring);
+        let Endpoint::Particle(b) = e.b else {
+            panic!("bond to an anchor")
+        };
+        assert!(e.a < b);
+        if (e.rest_length - 1.0).abs() < 1e-12 {
+            faces += 1;
+            assert!((e.stiffness - 1.0).abs() < 1e-12);
+        } else {
+            diagonals += 1;
+            assert!((e.rest_length - 2f64.sqrt()).abs() < 1e-12);
+            assert!((e.stiffness - 1.0 / 2f64.sqrt()).abs() < 1e-12);
+        }
+        assert!(e.rest_length <= PERIDYNAMIC_HORIZON);
+    }
+    assert_eq!((faces, diagonals), (300, 480));
+    // Particle i = x + k(y + kz), centred: 0 is the (−2, −2, −2) corner and
+    // the bonds' rest lengths are the reference distances.
+    let s = cfg.start_for(&g, 1, 0);
+    let g2 = g.clone();
+    let mut reference = State {
+        q: vec![0.0; 375],
+        v: vec![0.0; 375],
+    };
+    for i in 0..125 {
+        let idx = [i % 5, (i / 5) % 5, i / 25];
+        for (x, j) in reference.q[i * 3..i * 3 + 3].iter_mut().zip(idx) {
+            *x = j as f64 - 2.0;
+        }
+    }
+    assert!(hamiltonian(&g2, &cfg.field, &reference).abs() < 1e-24);
+    assert!(
+        norm(
+            &s.q.iter()
+                .zip(&reference.q)
+                .map(|(a, b)| a - b)
+                .collect::<Vec<_>>()
+        ) < 1.5
+    );
+    // Both cube sizes count bonds right.
+    assert_eq!(
+        SystemConfig::new(SystemKind::Peridynamic, 8)
+            .graph()
+            .edges
+            .len(),
+        12 + 12
+    );
+}
+
+#[test]
+fn peridynamic_solid_conserves_momentum_and_energy_and_expands() {
+    let cfg = SystemConfig::new(SystemKind::Peridynamic, 125);
+    assert_eq!((cfg.dt, cfg.save_every, cfg.states), (1e-3, 100, 100));
+    assert!(cfg.field.is_free());
+    let trajs = cfg.try_simulate(2, 5).unwrap();
+    assert_eq!(trajs.len(), 2);
+    let (mut dp, mut de, mut expanded) = (0.0_f64, 0.0_f64, 0.0_f64);
+    let mut p_rel = f64::INFINITY;
+    for t in &trajs {
+        assert_eq!(t.system, "peridynamic");
+        assert_eq!(t.samples.len(), 100);
+        let g = &t.graph;
+        let s0 = &t.samples[0].state;
+        let p0 = s0.momentum(g);
+        let pscale = momentum_scale(g, s0);
+        p_rel = p_rel.min(norm(&p0) / pscale);
+        let h0 = hamiltonian(g, &cfg.field, s0);
+        let r0 = mean_radius(s0);
+        let mut rmax = 0.0_f64;
+        for s in &t.samples {
+            let p = s.state.momentum(g);
+            dp = dp.max(norm(&(0..3).map(|c| p[c] - p0[c]).collect::<Vec<_>>()) / pscale);
+            de = de.max((hamiltonian(g, &cfg.field, &s.state) - h0).abs() / h0.abs());
+            rmax = rmax.max(mean_radius(&s.state));
+        }
+        expanded = expanded.max(rmax / r0);
+    }
+    println!(
+        "peridynamic 125, 10 s at dt 1e-3: momentum error {dp:.3e} (relative to Σm|v|), \
+         relative energy error {de:.3e}, max mean-radius growth {expanded:.4}, |p0|/Σm|v| ≥ {p_rel:.3e}"
+    );
+    assert!(dp < 1e-12, "momentum error {dp}");
+    // Measured 3e-7: Verlet's bounded O(dt²) energy error at dt 1e-3; 1e-5
+    // leaves a 30× margin and still catches a force inconsistent with H.
+    assert!(de < 1e-5, "energy error {de}");
+    assert!(expanded > 1.0, "the compressed solid never expanded");
+    assert!(p_rel > 0.0, "momentum should be small but not zero");
+}
+
+#[test]
+fn peridynamic_bad_input_and_seeds() {
+    for n in [100, 1, 0, 9] {
+        let err = SystemConfig::new(SystemKind::Peridynamic, n)
+            .validate()
+            .unwrap_err();
+        assert!(
+            err.contains("cube number") && err.contains(&n.to_string()),
+            "{n}: {err}"
+        );
+        assert!(SystemConfig::new(SystemKind::Peridynamic, n)
+            .try_simulate(1, 0)
+            .is_err());
+    }
+    let mut c = SystemConfig::new(SystemKind::Peridynamic, 27);
+    c.validate().unwrap();
+    c.dim = 2;
+    let err = c.validate().unwrap_err();
+    assert!(err.contains("3-dimensional") && err.contains('2'), "{err}");
+    assert_eq!(
+        "peridynamic".parse::<SystemKind>().unwrap(),
+        SystemKind::Peridynamic
+    );
+    assert_eq!(SystemKind::Peridynamic.to_string(), "peridynamic");
+
+    // Different seeds, different starts; the same seed, the same start.
+    let c = SystemConfig::new(SystemKind::Peridynamic, 27);
+    let g = c.graph();
+    let (a, b) = (c.start_for(&g, 1, 0), c.start_for(&g, 2, 0));
+    assert_ne!(a, b);
+    assert_eq!(a, c.start_for(&g, 1, 0));
+    assert_ne!(a, c.start_for(&g, 1, 1));
+    // Compressed by 2–8 % (with ±0.01 jitter), so every bond is short.
+    for s in [&a, &b] {
+        let longest = g
+            .edges
+            .iter()
+            .map(|e| {
+                let Endpoint::Particle(j) = e.b else { panic!() };
+                let r = norm(
+                    &(0..3)
+                        .map(|k| s.q[e.a * 3 + k] - s.q[j * 3 + k])
+                        .collect::<Vec<_>>(),
+                );
+                r / e.rest_length
+            })
+            .fold(0.0_f64, f64::max);
+        assert!(longest < 1.0, "a bond is stretched at the start: {longest}");
+    }
+}

@@ -195,3 +195,152 @@ fn constrained_training_on_pendulum() {
         t.report.validation_loss
     );
 }
+
+fn spring_dataset(trajectories: usize) -> mcgnode::data::dataset::Dataset {
+    let trajs = SystemConfig::new(SystemKind::Spring, 5).simulate(trajectories, 1);
+    mcgnode::data::dataset::Dataset::from_trajectories(&trajs).unwrap()
+}
+
+#[test]
+fn subsample_keeps_a_seeded_ordered_subset() {
+    let full = spring_dataset(5);
+    assert_eq!(full.len(), 500);
+    let mut a = full.clone();
+    a.subsample(120, 7).unwrap();
+    assert_eq!((a.len(), a.acc.len()), (120, 120));
+    let mut b = full.clone();
+    b.subsample(120, 7).unwrap();
+    assert_eq!(a, b, "same seed, same subset");
+    let mut c = full.clone();
+    c.subsample(120, 8).unwrap();
+    assert_ne!(a.states, c.states, "another seed, another subset");
+    // Kept pairs are the original ones, in their original order.
+    let pos: Vec<usize> = a
+        .states
+        .iter()
+        .map(|s| full.states.iter().position(|x| x == s).unwrap())
+        .collect();
+    assert!(pos.windows(2).all(|w| w[0] < w[1]), "order not kept");
+    for (k, &i) in pos.iter().enumerate() {
+        assert_eq!(a.acc[k], full.acc[i], "state and target separated");
+    }
+    let mut all = full.clone();
+    all.subsample(500, 1).unwrap();
+    assert_eq!(all, full);
+    for bad in [501, 1, 0] {
+        let err = full.clone().subsample(bad, 1).unwrap_err().to_string();
+        assert!(
+            err.contains(&bad.to_string()) && err.contains("500"),
+            "{err}"
+        );
+    }
+}
+
+#[test]
+fn add_noise_has_the_requested_spread() {
+    let clean = spring_dataset(10);
+    let values: Vec<f64> = clean.acc.iter().flatten().copied().collect();
+    assert!(values.len() >= 10_000, "{} components", values.len());
+    let std = |x: &[f64]| {
+        let m = x.iter().sum::<f64>() / x.len() as f64;
+        (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / x.len() as f64).sqrt()
+    };
+    let mut zero = clean.clone();
+    assert_eq!(zero.add_noise(0.0, 3).unwrap(), 0.0);
+    assert_eq!(zero, clean, "0 % noise must leave the data bit-identical");
+
+    let mut noisy = clean.clone();
+    let sigma = noisy.add_noise(10.0, 3).unwrap();
+    assert!((sigma - 0.1 * std(&values)).abs() < 1e-12 * sigma);
+    assert_eq!(noisy.states, clean.states, "noise only on the targets");
+    let diff: Vec<f64> = noisy
+        .acc
+        .iter()
+        .flatten()
+        .zip(&values)
+        .map(|(a, b)| a - b)
+        .collect();
+    let got = std(&diff);
+    println!(
+        "10 % noise: σ = {sigma:.4e}, empirical {got:.4e} over {} components",
+        diff.len()
+    );
+    assert!(
+        (got / sigma - 1.0).abs() < 0.05,
+        "σ {sigma}, empirical {got}"
+    );
+    let mut again = clean.clone();
+    again.add_noise(10.0, 3).unwrap();
+    assert_eq!(again, noisy, "same seed, same noise");
+    for bad in [-1.0, f64::NAN, f64::INFINITY] {
+        assert!(clean.clone().add_noise(bad, 3).is_err(), "{bad}");
+    }
+}
+
+#[test]
+fn training_on_a_subset_reports_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = dir.path().join("train.mcap");
+    let trajs = SystemConfig::new(SystemKind::Spring, 5).simulate(4, 1);
+    mcgnode::data::bag::write_trajectories(&bag, &trajs, &Default::default()).unwrap();
+    let cfg = TrainConfig {
+        epochs: 2,
+        points: Some(200),
+        noise: 5.0,
+        seed: 4,
+        ..TrainConfig::default()
+    };
+    let mut lines = vec![];
+    let file = mcgnode::train::train_from_bags(
+        Variant::Gnode,
+        &[bag],
+        &mcgnode::train::ModelOptions::default(),
+        &cfg,
+        |m| lines.push(m.to_string()),
+        |_| true,
+    )
+    .unwrap();
+    assert_eq!(file.training.points, Some(200));
+    assert_eq!(file.training.noise, 5.0);
+    assert_eq!(file.trained_on.states, 200);
+    assert_eq!(file.trained_on.trajectories, 4);
+    assert!(
+        lines.iter().any(|l| l == "using 200 of 400 states"),
+        "{lines:?}"
+    );
+    assert!(
+        lines.iter().any(|l| l.starts_with("added 5% noise: σ = ")),
+        "{lines:?}"
+    );
+    let too_many = TrainConfig {
+        points: Some(401),
+        ..cfg
+    };
+    let err = mcgnode::train::train_from_bags(
+        Variant::Gnode,
+        &[dir.path().join("train.mcap")],
+        &mcgnode::train::ModelOptions::default(),
+        &too_many,
+        |_| {},
+        |_| true,
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(err.contains("401"), "{err}");
+}
+
+/// Model files written before the noise and points fields still load, as
+/// trained on all clean data.
+#[test]
+fn old_model_files_load_without_noise_and_points() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    for name in ["spring5-mcgnode.json", "pendulum5-mcgnode.json"] {
+        let path = root.join("bags/models").join(name);
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(!text.contains("\"points\""), "{name} is not an old file");
+        let m = ModelFile::load(&path).unwrap();
+        assert_eq!(m.training.noise, 0.0);
+        assert_eq!(m.training.points, None);
+    }
+}

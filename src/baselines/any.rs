@@ -46,3 +46,73 @@ pub fn load_any_model(path: &Path) -> Result<LoadedModel> {
         dynamics: Arc::new(m),
     })
 }
+
+/// A model of the GNODE family or a baseline, named as on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModelKind {
+    /// NODE, GNODE, CGNODE, CDGNODE, MCGNODE.
+    Family(crate::model::Variant),
+    /// LGN, HGN, GNS.
+    Baseline(super::Kind),
+}
+
+impl ModelKind {
+    /// The lower-case name ("mcgnode", "lgn", ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::Family(v) => v.name(),
+            ModelKind::Baseline(k) => k.name(),
+        }
+    }
+}
+
+impl std::fmt::Display for ModelKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for ModelKind {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.parse::<crate::model::Variant>() {
+            Ok(v) => Ok(ModelKind::Family(v)),
+            Err(_) => s
+                .parse::<super::Kind>()
+                .map(ModelKind::Baseline)
+                .map_err(|_| {
+                    format!(
+                        "unknown model {s:?}; expected one of node, gnode, cgnode, cdgnode, \
+                     mcgnode, lgn, hgn, gns"
+                    )
+                }),
+        }
+    }
+}
+
+/// Trains any model from bags (the GNODE family with `opts`; baselines use
+/// their paper architecture), saves it to `out` and returns its training figures.
+pub fn train_any_from_bags(
+    kind: ModelKind,
+    bags: &[std::path::PathBuf],
+    opts: &crate::train::ModelOptions,
+    cfg: &crate::train::TrainConfig,
+    log: impl FnMut(&str),
+    on_epoch: impl FnMut(&crate::train::EpochReport) -> bool,
+    out: &Path,
+) -> Result<crate::model::file::TrainingReport> {
+    let saving = || format!("saving {}", out.display());
+    Ok(match kind {
+        ModelKind::Family(v) => {
+            let f = crate::train::train_from_bags(v, bags, opts, cfg, log, on_epoch)?;
+            f.save(out).with_context(saving)?;
+            f.training
+        }
+        ModelKind::Baseline(k) => {
+            let f = super::train_baseline_from_bags(k, bags, cfg, log, on_epoch)?;
+            f.save(out).with_context(saving)?;
+            f.training
+        }
+    })
+}

@@ -34,7 +34,7 @@ pub mod file;
 pub mod train;
 pub mod trained;
 
-pub use any::{load_any_model, LoadedModel};
+pub use any::{load_any_model, train_any_from_bags, LoadedModel, ModelKind};
 pub use file::BaselineFile;
 pub use train::{train_baseline, train_baseline_from_bags};
 pub use trained::TrainedBaseline;

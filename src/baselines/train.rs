@@ -62,7 +62,9 @@ pub fn train_baseline_from_bags(
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<BaselineFile> {
     log(&format!("training {kind}"));
-    let data = crate::train::load_training_data(bags, &mut log)?;
+    let mut data = crate::train::load_training_data(bags, &mut log)?;
+    crate::train::apply_data_options(&mut data.dataset, cfg, &mut log)?;
+    data.trained_on.states = data.dataset.len();
     let ds = &data.dataset;
     let types = ds
         .graph

@@ -81,6 +81,34 @@ impl Dynamics for TrainedBaseline {
         Ok(())
     }
 
+    /// One candle call for all states (the per-call cost dominates small graphs).
+    fn acceleration_batch(
+        &self,
+        graph: &Graph,
+        states: &[State],
+        out: &mut [Vec<f64>],
+    ) -> Result<(), String> {
+        if states.len() != out.len() {
+            return Err("one output buffer per state is needed".into());
+        }
+        if states.is_empty() {
+            return Ok(());
+        }
+        self.supports(graph)?;
+        let plan = GraphPlan::new(graph);
+        let nd = graph.ndof();
+        let run = || -> Result<Vec<f64>> {
+            let refs: Vec<&State> = states.iter().collect();
+            let b = Batch::new(&plan, &refs, None, self.net.hyper.types)?;
+            Ok(self.net.acceleration(&b)?.flatten_all()?.to_vec1::<f64>()?)
+        };
+        let flat = run().map_err(|e| format!("{e:#}"))?;
+        for (o, chunk) in out.iter_mut().zip(flat.chunks(nd)) {
+            o.copy_from_slice(chunk);
+        }
+        Ok(())
+    }
+
     /// Total force m∘q̈ with the true masses (as for acceleration-predicting
     /// GNODE variants); no pairwise forces.
     fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String> {

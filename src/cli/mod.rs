@@ -4,6 +4,7 @@ mod bench;
 mod demo;
 mod evaluate;
 mod replay;
+mod reproduce;
 mod rollout;
 mod simulate;
 mod train;
@@ -35,6 +36,8 @@ enum Command {
     Bench(bench::Args),
     /// Replay a bag through a model: RE, EE and ME against lead time for every recorded start state (table, JSON, PNG).
     Replay(replay::Args),
+    /// Run every experiment of the paper (biases, baselines, zero-shot, peridynamic solid, drag/force, noise, data efficiency) and write DIR/report.md with figures.
+    Reproduce(reproduce::Args),
     /// Run the ROS 2 node.
     Serve(crate::ros::ServeArgs),
 }
@@ -54,6 +57,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Demo(a) => demo::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Replay(a) => replay::run(a),
+        Command::Reproduce(a) => reproduce::run(a),
         Command::Serve(a) => crate::ros::run_serve(a),
     }
 }

@@ -1,19 +1,18 @@
 //! `mcgnode simulate`.
 
-use crate::data::bag::write_trajectories;
-use crate::evaluate::META_SYSTEM;
 use crate::physics::{SystemConfig, SystemKind};
-use anyhow::{Context, Result};
-use std::collections::BTreeMap;
+pub use crate::simulate::{simulate_to, simulate_with, DataIntegrator};
+use anyhow::Result;
 use std::path::PathBuf;
 
 /// Options of `simulate`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct Args {
-    /// System: spring (ring of springs) or pendulum (chain of rigid bars).
+    /// System: spring (ring of springs), pendulum (chain of rigid bars) or
+    /// peridynamic (3D elastic cube of k³ particles, e.g. 125, compressed and released).
     #[arg(long, default_value = "spring")]
     pub system: SystemKind,
-    /// Number of particles.
+    /// Number of particles (peridynamic: a cube number, 8, 27, 64, 125, ...).
     #[arg(long, default_value_t = 5)]
     pub particles: usize,
     /// Number of trajectories (random initial conditions).
@@ -31,27 +30,33 @@ pub struct Args {
     /// Constant external force on every particle, "fx,fy[,fz]".
     #[arg(long, value_parser = super::parse_vector)]
     pub force: Option<Vec<f64>>,
-    /// Integration step [s] (default: pendulum 1e-5, spring 1e-3).
+    /// Integration step [s] (default: pendulum 1e-5, spring and peridynamic 1e-3).
     #[arg(long)]
     pub dt: Option<f64>,
-    /// Integration steps between saved states (default: pendulum 1000, spring 100).
+    /// Integration steps between saved states (default: pendulum 1000, spring and peridynamic 100).
     #[arg(long)]
     pub save_every: Option<usize>,
     /// Saved states per trajectory, including the first (default 100).
     #[arg(long)]
     pub states: Option<usize>,
-    /// Gravity along −y (default: pendulum 10, spring 0).
+    /// Gravity along −y (default: pendulum 10, spring and peridynamic 0).
     #[arg(long)]
     pub gravity: Option<f64>,
-    /// Spatial dimension (2 or 3).
-    #[arg(long, default_value_t = 2)]
-    pub dim: usize,
+    /// Spatial dimension, 2 or 3 (default: 3 for peridynamic, which must be 3D; 2 otherwise).
+    #[arg(long)]
+    pub dim: Option<usize>,
+    /// Integrator: verlet (velocity Verlet + RATTLE, the default) or rk4
+    /// (Hamiltonian RK4 on (q, p), the paper's data for HGN).
+    #[arg(long, value_enum, default_value_t = DataIntegrator::Verlet)]
+    pub integrator: DataIntegrator,
 }
 
 /// Builds the simulator configuration from the options.
 pub fn config(a: &Args) -> Result<SystemConfig> {
     let mut c = SystemConfig::new(a.system, a.particles);
-    c.dim = a.dim;
+    if let Some(d) = a.dim {
+        c.dim = d;
+    }
     if let Some(d) = a.drag {
         c.field.drag = d;
     }
@@ -74,40 +79,21 @@ pub fn config(a: &Args) -> Result<SystemConfig> {
     Ok(c)
 }
 
-/// Simulates and writes a bag; returns the configuration used.
-pub fn simulate_to(
-    cfg: &SystemConfig,
-    trajectories: usize,
-    seed: u64,
-    out: &PathBuf,
-) -> Result<()> {
-    let trajs = cfg
-        .try_simulate(trajectories, seed)
-        .map_err(anyhow::Error::msg)?;
-    let mut meta = BTreeMap::new();
-    meta.insert(META_SYSTEM.to_string(), serde_json::to_string(cfg)?);
-    meta.insert("seed".to_string(), seed.to_string());
-    meta.insert(
-        "generator".to_string(),
-        format!("mcgnode {} simulate", env!("CARGO_PKG_VERSION")),
-    );
-    write_trajectories(out, &trajs, &meta).with_context(|| format!("writing {}", out.display()))?;
-    Ok(())
-}
-
 /// Runs `simulate`.
 pub fn run(a: Args) -> Result<()> {
     let cfg = config(&a)?;
     let t0 = std::time::Instant::now();
-    simulate_to(&cfg, a.trajectories, a.seed, &a.out)?;
+    simulate_with(&cfg, a.integrator, a.trajectories, a.seed, &a.out)?;
     eprintln!(
-        "wrote {} trajectories of a {}-particle {} ({} states every {} s, dt {}) to {} in {:.1} s",
+        "wrote {} trajectories of a {}-particle {}D {} ({} states every {} s, dt {}, {}) to {} in {:.1} s",
         a.trajectories,
         cfg.particles,
+        cfg.dim,
         cfg.kind.name(),
         cfg.states,
         cfg.dt * cfg.save_every as f64,
         cfg.dt,
+        a.integrator.name(),
         a.out.display(),
         t0.elapsed().as_secs_f64()
     );

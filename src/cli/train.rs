@@ -43,6 +43,14 @@ pub struct Args {
     /// Message-passing rounds (paper: 1).
     #[arg(long, default_value_t = 1)]
     pub rounds: usize,
+    /// Gaussian noise added to the target accelerations, in percent of their
+    /// standard deviation (the paper's noise experiments use 0, 1, 5 and 10).
+    #[arg(long, default_value_t = 0.0, value_name = "PERCENT")]
+    pub noise: f64,
+    /// Train on a seeded random subset of N states (train + validation) instead
+    /// of all of them (the paper's data-efficiency experiments use 100 to 10000).
+    #[arg(long, value_name = "N")]
+    pub points: Option<usize>,
     /// MCGNODE body-force branch: auto (off for closed systems), on, off.
     #[arg(long, value_enum, default_value_t = BodyForce::Auto)]
     pub body_force: BodyForce,
@@ -115,6 +123,8 @@ pub fn run(a: Args) -> Result<()> {
         batch: a.batch,
         patience: a.patience,
         seed: a.seed,
+        noise: a.noise,
+        points: a.points,
         ..TrainConfig::default()
     };
     let opts = ModelOptions {

@@ -60,6 +60,14 @@ pub struct TrainingReport {
     pub lr: f64,
     /// Early-stopping patience, epochs.
     pub patience: usize,
+    /// Gaussian noise added to the target accelerations, percent of their
+    /// standard deviation (0 in files written before this field existed).
+    #[serde(default)]
+    pub noise: f64,
+    /// Training pairs kept by subsampling; `None`: all of them (and in files
+    /// written before this field existed).
+    #[serde(default)]
+    pub points: Option<usize>,
 }
 
 /// A trained model on disk.

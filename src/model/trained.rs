@@ -1,7 +1,7 @@
 //! A trained model, loaded from its file, running on the inference kernel.
 
 use super::file::ModelFile;
-use crate::dynamics::{Dynamics, EdgeForce, Forces};
+use crate::dynamics::{Dynamics, EdgeForce, Forces, Rollout};
 use crate::kernel::{Kernel, Workspace};
 use crate::system::{Graph, State};
 use anyhow::Result;
@@ -37,8 +37,27 @@ impl TrainedModel {
         dt: f64,
         steps: usize,
         every: usize,
-        mut visit: impl FnMut(usize, &[f64], &[f64]),
+        visit: impl FnMut(usize, &[f64], &[f64]),
     ) -> Result<(), String> {
+        match self.verlet(ws, start, dt, steps, every, visit) {
+            None => Ok(()),
+            Some(step) => Err(format!(
+                "rollout diverged (non-finite state) at step {step}"
+            )),
+        }
+    }
+
+    /// The loop of [`TrainedModel::rollout_with`]; returns the step at which
+    /// the state became non-finite, if it did.
+    fn verlet(
+        &self,
+        ws: &mut Workspace,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+        mut visit: impl FnMut(usize, &[f64], &[f64]),
+    ) -> Option<usize> {
         let d = start.q.len();
         let mut q = start.q.clone();
         let mut v = start.v.clone();
@@ -58,15 +77,13 @@ impl TrainedModel {
                 finite &= q[i].is_finite() && v[i].is_finite();
             }
             if !finite {
-                return Err(format!(
-                    "rollout diverged (non-finite state) at step {step}"
-                ));
+                return Some(step);
             }
             if step % every == 0 {
                 visit(step, &q, &v);
             }
         }
-        Ok(())
+        None
     }
 }
 
@@ -153,5 +170,38 @@ impl Dynamics for TrainedModel {
             })
         })?;
         Ok(out)
+    }
+
+    /// One kernel rollout per start (no batching needed: the kernel has no
+    /// per-call overhead), keeping the states of a diverged one.
+    fn rollout_many(
+        &self,
+        graph: &Graph,
+        starts: &[State],
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<Rollout>, String> {
+        let mut ws = self.kernel.workspace(graph)?;
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(format!("time step must be positive and finite, got {dt}"));
+        }
+        starts
+            .iter()
+            .map(|start| {
+                start.validate(graph)?;
+                let mut states = Vec::with_capacity(steps / every.max(1) + 1);
+                let diverged_at = self.verlet(&mut ws, start, dt, steps, every, |_, q, v| {
+                    states.push(State {
+                        q: q.to_vec(),
+                        v: v.to_vec(),
+                    })
+                });
+                Ok(Rollout {
+                    states,
+                    diverged_at,
+                })
+            })
+            .collect()
     }
 }

@@ -1,5 +1,13 @@
-//! The paper's systems (spring rings and n-pendulums): their graphs, random
-//! initial states and ground-truth trajectories.
+//! The paper's systems (spring rings, n-pendulums and a peridynamic solid):
+//! their graphs, random initial states and ground-truth trajectories.
+//!
+//! The peridynamic solid is bond-based peridynamics on a simple-cubic lattice:
+//! every pair of particles closer than the horizon δ =
+//! [`PERIDYNAMIC_HORIZON`]·r0 in the reference configuration is a bond, and a
+//! bond of reference vector ξ and micromodulus c pulls with c·s, s =
+//! (|η+ξ| − |ξ|)/|ξ| its stretch. That is exactly a spring of rest length |ξ|
+//! and stiffness c/|ξ|, so the solid is an ordinary spring [`Graph`] and the
+//! one simulator, Hamiltonian and models all apply unchanged.
 
 use std::f64::consts::PI;
 
@@ -13,18 +21,41 @@ use super::integrator::Integrator;
 use super::{Field, SystemKind};
 use crate::system::{Edge, EdgeKind, Endpoint, Graph, Sample, State, Trajectory};
 
+/// Peridynamic horizon δ in units of the lattice spacing r0. 1.5 bonds each
+/// particle to its 6 face neighbours (|ξ| = r0) and 12 face diagonals
+/// (|ξ| = √2·r0) but not to the body diagonals (√3·r0 > 1.5·r0): the
+/// smallest horizon whose bonds resist shear, so the cube holds its shape.
+pub const PERIDYNAMIC_HORIZON: f64 = 1.5;
+
+/// k when `n` = k³ with k ≥ 2: the side of a peridynamic cube.
+fn cube_side(n: usize) -> Option<usize> {
+    let k = (n as f64).cbrt().round() as usize;
+    (k >= 2 && k.checked_pow(3) == Some(n)).then_some(k)
+}
+
+/// The side of the smallest cube holding `n` lattice sites (at least 1).
+fn enclosing_side(n: usize) -> usize {
+    let mut k = ((n as f64).cbrt().floor() as usize).max(1);
+    while k.saturating_pow(3) < n {
+        k += 1;
+    }
+    k
+}
+
 /// Everything needed to generate trajectories of one system.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SystemConfig {
-    /// Spring ring or pendulum chain.
+    /// Spring ring, pendulum chain or peridynamic solid.
     pub kind: SystemKind,
-    /// Number of particles (balls or bobs).
+    /// Number of particles (balls, bobs or lattice sites; a cube k³ for a
+    /// peridynamic solid).
     pub particles: usize,
-    /// Spatial dimension, 2 or 3.
+    /// Spatial dimension, 2 or 3 (always 3 for a peridynamic solid).
     pub dim: usize,
-    /// Spring stiffness k.
+    /// Spring stiffness k (peridynamic: the stiffness of a nearest-neighbour
+    /// bond, micromodulus c = k·r0).
     pub stiffness: f64,
-    /// Spring rest length r0.
+    /// Spring rest length r0 (peridynamic: the lattice spacing).
     pub rest_length: f64,
     /// Pendulum bar length l.
     pub bar_length: f64,
@@ -42,17 +73,18 @@ pub struct SystemConfig {
 
 impl SystemConfig {
     /// The paper's setup: unit k, r0, l and m; pendulum g = 10, dt = 1e-5,
-    /// saved every 1000 steps; spring g = 0, dt = 1e-3, saved every 100 steps;
-    /// 100 saved states; no drag or external force; 2D.
+    /// saved every 1000 steps; spring and peridynamic g = 0, dt = 1e-3, saved
+    /// every 100 steps; 100 saved states; no drag or external force; 2D
+    /// ([`SystemKind::default_dim`]: 3D for the peridynamic solid).
     pub fn new(kind: SystemKind, particles: usize) -> Self {
         let (gravity, dt, save_every) = match kind {
-            SystemKind::Spring => (0.0, 1e-3, 100),
+            SystemKind::Spring | SystemKind::Peridynamic => (0.0, 1e-3, 100),
             SystemKind::Pendulum => (10.0, 1e-5, 1000),
         };
         SystemConfig {
             kind,
             particles,
-            dim: 2,
+            dim: kind.default_dim(),
             stiffness: 1.0,
             rest_length: 1.0,
             bar_length: 1.0,
@@ -73,6 +105,21 @@ impl SystemConfig {
         let min = match self.kind {
             SystemKind::Spring => 2,
             SystemKind::Pendulum => 1,
+            SystemKind::Peridynamic => {
+                if cube_side(self.particles).is_none() {
+                    return Err(format!(
+                        "a peridynamic solid needs a cube number of particles (8, 27, 64, 125, ...), got {}",
+                        self.particles
+                    ));
+                }
+                if self.dim != 3 {
+                    return Err(format!(
+                        "a peridynamic solid is 3-dimensional: dimension must be 3, got {}",
+                        self.dim
+                    ));
+                }
+                8
+            }
         };
         if self.particles < min {
             return Err(format!(
@@ -107,10 +154,22 @@ impl SystemConfig {
     /// The system's graph. Spring: a ring of springs i–(i+1 mod n) (a single
     /// spring for n = 2). Pendulum: particle 0 barred to anchor 0 at the
     /// origin, then bars (i−1)–i. All particle types are 0.
+    ///
+    /// Peridynamic (3D whatever `dim` says): a simple-cubic lattice of k×k×k
+    /// sites (n = k³) with spacing r0, centred at the origin, particle
+    /// i = x + k·(y + k·z) at ((x, y, z) − (k−1)/2)·r0. A bond joins every pair
+    /// whose reference distance |ξ| ≤ δ = [`PERIDYNAMIC_HORIZON`]·r0 (face
+    /// neighbours and face diagonals: 780 bonds for k = 5), as a spring of rest
+    /// length |ξ| and stiffness c/|ξ| with micromodulus c = k_s·r0, so a
+    /// nearest-neighbour bond has stiffness k_s = `stiffness` and a diagonal
+    /// one k_s/√2. Bonds are listed with a < b. No anchors. A particle count
+    /// that is not a cube (rejected by [`SystemConfig::validate`]) fills the
+    /// first n sites of the smallest enclosing cube.
     pub fn graph(&self) -> Graph {
         let n = self.particles;
         let mut edges = vec![];
         let mut anchors = vec![];
+        let mut dim = self.dim;
         match self.kind {
             SystemKind::Spring => {
                 let ring = if n >= 3 { n } else { n.saturating_sub(1) };
@@ -140,9 +199,13 @@ impl SystemConfig {
                     });
                 }
             }
+            SystemKind::Peridynamic => {
+                dim = 3;
+                edges = self.peridynamic_bonds();
+            }
         }
         Graph {
-            dim: self.dim,
+            dim,
             types: vec![0; n],
             masses: vec![self.mass; n],
             edges,
@@ -166,11 +229,103 @@ impl SystemConfig {
     /// bar. Velocities are thus consistent with the bars (A q̇ = 0). Works for
     /// tree-shaped bar graphs; particles not reached from an anchor stay at
     /// the origin at rest.
+    ///
+    /// Peridynamic: isotropic compression, then release. The reference
+    /// lattice is scaled by (1 − ε), ε ~ U(0.02, 0.08) per trajectory, and
+    /// every coordinate perturbed by U(−0.01, 0.01)·r0; every velocity
+    /// component is U(−0.05, 0.05)·r0·√(k/m), the mass-weighted mean is
+    /// removed and a common drift with components U(−0.01, 0.01)·r0·√(k/m)
+    /// added, so the total momentum is small but not zero (the paper remarks
+    /// on these systems' low momentum).
     pub fn initial_state(&self, graph: &Graph, rng: &mut impl Rng) -> State {
         match self.kind {
             SystemKind::Spring => self.spring_start(graph, rng),
             SystemKind::Pendulum => self.pendulum_start(graph, rng),
+            SystemKind::Peridynamic => self.peridynamic_start(graph, rng),
         }
+    }
+
+    /// Reference position of lattice site `i` of a cube of side `k`.
+    fn lattice_site(&self, i: usize, k: usize) -> [f64; 3] {
+        let half = (k as f64 - 1.0) / 2.0;
+        let idx = [i % k, (i / k) % k, i / (k * k)];
+        idx.map(|x| (x as f64 - half) * self.rest_length)
+    }
+
+    /// The bonds of [`SystemConfig::graph`] for a peridynamic solid.
+    fn peridynamic_bonds(&self) -> Vec<Edge> {
+        let n = self.particles;
+        let k = enclosing_side(n);
+        let r0 = self.rest_length;
+        let micromodulus = self.stiffness * r0;
+        // Integer offsets within the horizon, in lattice units.
+        let reach = PERIDYNAMIC_HORIZON.floor() as i64;
+        let mut offsets = vec![];
+        for dz in -reach..=reach {
+            for dy in -reach..=reach {
+                for dx in -reach..=reach {
+                    let d2 = dx * dx + dy * dy + dz * dz;
+                    // Only offsets to a higher index, so each bond is listed
+                    // once; the small slack keeps |ξ| = δ exactly inside.
+                    let forward = (dz, dy, dx) > (0, 0, 0);
+                    if forward && (d2 as f64) <= PERIDYNAMIC_HORIZON.powi(2) + 1e-9 {
+                        offsets.push((dx, dy, dz, (d2 as f64).sqrt() * r0));
+                    }
+                }
+            }
+        }
+        let mut edges = vec![];
+        let ki = k as i64;
+        for i in 0..n {
+            let (x, y, z) = ((i % k) as i64, ((i / k) % k) as i64, (i / (k * k)) as i64);
+            for &(dx, dy, dz, len) in &offsets {
+                let (u, v, w) = (x + dx, y + dy, z + dz);
+                if !(0..ki).contains(&u) || !(0..ki).contains(&v) || !(0..ki).contains(&w) {
+                    continue;
+                }
+                let j = (u + ki * (v + ki * w)) as usize;
+                if j >= n {
+                    continue;
+                }
+                edges.push(Edge {
+                    a: i,
+                    b: Endpoint::Particle(j),
+                    kind: EdgeKind::Spring,
+                    rest_length: len,
+                    stiffness: micromodulus / len,
+                });
+            }
+        }
+        edges
+    }
+
+    fn peridynamic_start(&self, graph: &Graph, rng: &mut impl Rng) -> State {
+        let (n, d) = (graph.n(), graph.dim);
+        let k = enclosing_side(n);
+        let r0 = self.rest_length;
+        let vscale = r0 * (self.stiffness / self.mass).sqrt();
+        let scale = 1.0 - rng.random_range(0.02..0.08);
+        let mut q = vec![0.0; n * d];
+        let mut v = vec![0.0; n * d];
+        for i in 0..n {
+            let site = self.lattice_site(i, k);
+            for c in 0..d {
+                let x = site.get(c).copied().unwrap_or(0.0);
+                q[i * d + c] = scale * x + rng.random_range(-0.01..0.01) * r0;
+            }
+        }
+        for x in v.iter_mut() {
+            *x = rng.random_range(-0.05..0.05) * vscale;
+        }
+        let mtot: f64 = graph.masses.iter().sum();
+        for c in 0..d {
+            let mean = (0..n).map(|i| graph.masses[i] * v[i * d + c]).sum::<f64>() / mtot;
+            let drift = rng.random_range(-0.01..0.01) * vscale;
+            for i in 0..n {
+                v[i * d + c] += drift - mean;
+            }
+        }
+        State { q, v }
     }
 
     fn spring_start(&self, graph: &Graph, rng: &mut impl Rng) -> State {

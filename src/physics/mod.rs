@@ -4,8 +4,8 @@
 //! * [`forces`]: applied forces and the Hamiltonian;
 //! * [`constraints`]: bars, the exact constrained acceleration, residuals;
 //! * [`integrator`]: velocity Verlet + SHAKE/RATTLE;
-//! * [`config`]: the paper's spring and pendulum systems, initial states,
-//!   trajectory generation;
+//! * [`config`]: the paper's spring, pendulum and peridynamic-solid systems,
+//!   initial states, trajectory generation;
 //! * [`truth`]: the physics behind the [`crate::dynamics::Dynamics`] trait.
 
 pub mod config;
@@ -29,7 +29,7 @@ pub use truth::Truth;
 #[cfg(doc)]
 use crate::system::Graph;
 
-/// The two system families of the paper.
+/// The system families of the paper.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum SystemKind {
@@ -37,17 +37,35 @@ pub enum SystemKind {
     Spring,
     /// A chain of particles joined by rigid bars, hanging from the origin.
     Pendulum,
+    /// A 3D elastic cube of k×k×k particles, bond-based peridynamics (bonds
+    /// are springs to every particle within the horizon
+    /// [`config::PERIDYNAMIC_HORIZON`]), compressed isotropically and released.
+    Peridynamic,
 }
 
 impl SystemKind {
     /// Every kind, in the order they are listed to users.
-    pub const ALL: [SystemKind; 2] = [SystemKind::Spring, SystemKind::Pendulum];
+    pub const ALL: [SystemKind; 3] = [
+        SystemKind::Spring,
+        SystemKind::Pendulum,
+        SystemKind::Peridynamic,
+    ];
+
+    /// The spatial dimension [`SystemConfig::new`] gives this kind: 3 for the
+    /// peridynamic solid (a cube), 2 otherwise (the paper's setups).
+    pub fn default_dim(self) -> usize {
+        match self {
+            SystemKind::Peridynamic => 3,
+            SystemKind::Spring | SystemKind::Pendulum => 2,
+        }
+    }
 
     /// The name used on the command line and in trajectories.
     pub fn name(self) -> &'static str {
         match self {
             SystemKind::Spring => "spring",
             SystemKind::Pendulum => "pendulum",
+            SystemKind::Peridynamic => "peridynamic",
         }
     }
 }

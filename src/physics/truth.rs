@@ -5,7 +5,7 @@ use super::constraints::{acceleration, Bars};
 use super::forces::applied_forces;
 use super::integrator::Integrator;
 use super::Field;
-use crate::dynamics::{Dynamics, EdgeForce, Forces};
+use crate::dynamics::{Dynamics, EdgeForce, Forces, Rollout};
 use crate::system::{EdgeKind, Endpoint, Graph, State};
 
 /// Exact dynamics of a graph in a field.
@@ -133,5 +133,25 @@ impl Dynamics for Truth {
             }
         }
         Ok(out)
+    }
+
+    /// [`Dynamics::rollout_every`] (RATTLE) per start; the truth does not diverge.
+    fn rollout_many(
+        &self,
+        graph: &Graph,
+        starts: &[State],
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<Rollout>, String> {
+        starts
+            .iter()
+            .map(|s| {
+                Ok(Rollout {
+                    states: self.rollout_every(graph, s, dt, steps, every)?,
+                    diverged_at: None,
+                })
+            })
+            .collect()
     }
 }

@@ -1,0 +1,60 @@
+//! `mcgnode reproduce`: every experiment of the paper, one report.
+
+use crate::reproduce::{run as run_all, scale::Scale, Options};
+use anyhow::Result;
+use std::path::PathBuf;
+
+/// Options of `reproduce`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Args {
+    /// Output folder: report.md, PNG figures, results.json, data/ (bags), models/.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// A few minutes instead of the full run: tiny data and epochs, same experiments and report.
+    #[arg(long)]
+    pub quick: bool,
+    /// Epochs of every model (full default: 200 for the main comparison, 100 elsewhere; paper: 10000).
+    #[arg(long)]
+    pub epochs: Option<usize>,
+    /// Trainings and evaluations run side by side (default: the number of cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// Runs `reproduce`.
+pub fn run(a: Args) -> Result<()> {
+    let mut scale = if a.quick {
+        Scale::quick()
+    } else {
+        Scale::full()
+    };
+    if let Some(e) = a.epochs {
+        if e == 0 {
+            anyhow::bail!("--epochs must be at least 1");
+        }
+        scale = scale.with_epochs(e);
+    }
+    let threads = a
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let opts = Options {
+        out: a.out.clone(),
+        scale,
+        threads,
+        command: std::env::args().collect::<Vec<_>>().join(" "),
+    };
+    let outcome = run_all(&opts, &|m| eprintln!("{m}"))?;
+    let failed = outcome.rows.iter().filter(|r| r.error.is_some()).count();
+    println!(
+        "reproduce done in {:.0} s: {} ({} evaluations{})",
+        outcome.seconds,
+        outcome.report.display(),
+        outcome.rows.len(),
+        if failed > 0 {
+            format!(", {failed} failed: see the report")
+        } else {
+            String::new()
+        }
+    );
+    Ok(())
+}

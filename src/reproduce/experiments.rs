@@ -1,0 +1,860 @@
+//! The paper's experiments, each writing its figures and returning its
+//! section of the report and its result rows.
+
+use super::lab::{Job, Lab, TrainSpec, Trained};
+use super::report::{error_table, num, table, Row};
+use super::scale::Scale;
+use crate::baselines::{Kind, ModelKind};
+use crate::evaluate::Evaluation;
+use crate::model::Variant;
+use crate::physics::{SystemConfig, SystemKind};
+use crate::plot::{plot_metrics, plot_sweep, Metric, SweepLine};
+use crate::train::TrainConfig;
+use anyhow::Result;
+use std::path::PathBuf;
+
+/// Seed of every training set; test sets use [`TEST_SEED`] (disjoint starts).
+const TRAIN_SEED: u64 = 1;
+/// Seed of every test set.
+const TEST_SEED: u64 = 1001;
+
+/// Trained models by label, failures kept.
+pub type TrainedList = Vec<(String, anyhow::Result<Trained>)>;
+
+/// A section of the report.
+pub struct Section {
+    /// Markdown, starting with its `##` heading.
+    pub markdown: String,
+    /// Result rows.
+    pub rows: Vec<Row>,
+    /// Trained models (for the timing tables).
+    pub trained: TrainedList,
+}
+
+const FAMILY: [Variant; 5] = [
+    Variant::Node,
+    Variant::Gnode,
+    Variant::Cgnode,
+    Variant::Cdgnode,
+    Variant::Mcgnode,
+];
+const BASELINES: [Kind; 3] = [Kind::Lgn, Kind::Hgn, Kind::Gns];
+
+fn cfg(epochs: usize) -> TrainConfig {
+    TrainConfig {
+        epochs,
+        patience: epochs,
+        seed: 0,
+        ..TrainConfig::default()
+    }
+}
+
+/// An evaluation job description: (row experiment, system, label, particles, x, model, bag, dt, max).
+struct EvalJob {
+    experiment: &'static str,
+    system: String,
+    label: String,
+    particles: usize,
+    x: Option<f64>,
+    model: PathBuf,
+    bag: PathBuf,
+    dt: Option<f64>,
+    max: usize,
+}
+
+fn run_evals(lab: &Lab, jobs: Vec<EvalJob>) -> Vec<Row> {
+    let work: Vec<Job<'_, Evaluation>> = jobs
+        .iter()
+        .map(|j| {
+            Box::new(move || {
+                let e = lab.evaluate(&j.model, &j.bag, j.dt, j.max);
+                if let Ok(e) = &e {
+                    lab.say(&format!(
+                        "evaluated {} on {}-particle {}: RE {:.2e}, EE {:.2e} ({:.1} s)",
+                        j.label,
+                        j.particles,
+                        j.system,
+                        e.averages.re,
+                        e.averages.ee,
+                        e.rollout_seconds
+                    ));
+                }
+                e
+            }) as Job<'_, Evaluation>
+        })
+        .collect();
+    let results = lab.pool(work);
+    jobs.iter()
+        .zip(results)
+        .map(|(j, e)| Row::new(j.experiment, &j.system, &j.label, j.particles, j.x, &e))
+        .collect()
+}
+
+/// Panels for [`plot_metrics`]: one per particle count, the given models.
+fn panels(
+    rows: &[Row],
+    system: &str,
+    sizes: &[usize],
+    models: &[String],
+) -> Vec<(String, Vec<(String, crate::metrics::Summary)>)> {
+    sizes
+        .iter()
+        .map(|&n| {
+            let curves = models
+                .iter()
+                .filter_map(|m| {
+                    rows.iter()
+                        .find(|r| r.particles == n && &r.model == m && r.system == system)
+                        .and_then(|r| r.summary.clone().map(|s| (m.clone(), s)))
+                })
+                .collect();
+            (format!("{n}-{system}"), curves)
+        })
+        .filter(|p: &(String, Vec<_>)| !p.1.is_empty())
+        .collect()
+}
+
+fn figure(
+    lab: &Lab,
+    name: &str,
+    panels: &[(String, Vec<(String, crate::metrics::Summary)>)],
+    rows: &[Metric],
+) -> String {
+    let path = lab.dir.join(name);
+    match plot_metrics(&path, panels, rows) {
+        Ok(()) => format!("![{name}]({name})\n\n"),
+        Err(e) => format!("(figure {name} could not be drawn: {e:#})\n\n"),
+    }
+}
+
+fn failures(trained: &[(String, anyhow::Result<Trained>)]) -> String {
+    let mut s = String::new();
+    for (label, t) in trained {
+        if let Err(e) = t {
+            s += &format!("- training {label} failed: {e:#}\n");
+        }
+    }
+    if !s.is_empty() {
+        s = format!("Failures:\n\n{s}\n");
+    }
+    s
+}
+
+/// Biases, baselines, zero-shot sizes and timing on one system family
+/// (paper Figs. 1–4, the zero-shot figure and the timing tables).
+pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Section> {
+    let sys = kind.name();
+    let base = SystemConfig::new(kind, 5);
+    let train_bag = lab.bag(
+        &format!("train-5-{sys}"),
+        &base,
+        sc.train_trajectories,
+        TRAIN_SEED,
+        false,
+    )?;
+    // HGN learns from RK4 data on (q, p), as in the paper.
+    let hgn_bag = lab.bag(
+        &format!("train-5-{sys}-rk4"),
+        &base,
+        sc.train_trajectories,
+        TRAIN_SEED,
+        true,
+    )?;
+    let (sizes, bsizes, states, dt) = match kind {
+        SystemKind::Pendulum => (
+            &sc.pendulum_sizes,
+            &sc.baseline_pendulum_sizes,
+            sc.pendulum_states,
+            Some(sc.pendulum_dt),
+        ),
+        _ => (
+            &sc.spring_sizes,
+            &sc.baseline_spring_sizes,
+            sc.spring_states,
+            None,
+        ),
+    };
+    let mut all_sizes: Vec<usize> = sizes.iter().chain(bsizes.iter()).copied().collect();
+    all_sizes.sort_unstable();
+    all_sizes.dedup();
+    let mut test_bags = vec![];
+    for &n in &all_sizes {
+        let mut c = SystemConfig::new(kind, n);
+        c.states = states;
+        test_bags.push((
+            n,
+            lab.bag(
+                &format!("test-{n}-{sys}"),
+                &c,
+                sc.test_trajectories,
+                TEST_SEED,
+                false,
+            )?,
+        ));
+    }
+    lab.say(&format!("{sys}: simulated training and test bags"));
+    let kinds: Vec<ModelKind> = FAMILY
+        .iter()
+        .map(|&v| ModelKind::Family(v))
+        .chain(BASELINES.iter().map(|&k| ModelKind::Baseline(k)))
+        .collect();
+    let specs: Vec<TrainSpec> = kinds
+        .iter()
+        .map(|&k| TrainSpec {
+            label: format!("{k}-5-{sys}"),
+            kind: k,
+            bags: vec![if k == ModelKind::Baseline(Kind::Hgn) {
+                hgn_bag.clone()
+            } else {
+                train_bag.clone()
+            }],
+            cfg: cfg(sc.epochs),
+        })
+        .collect();
+    let trained = lab.train_all(&specs);
+    lab.say(&format!("{sys}: trained {} models", specs.len()));
+    let mut jobs = vec![];
+    for (k, t) in kinds.iter().zip(&trained) {
+        let Ok(t) = t else { continue };
+        let (evals, max): (Vec<usize>, usize) = match k {
+            ModelKind::Family(Variant::Node) => (vec![5], sc.test_trajectories),
+            ModelKind::Family(_) => (sizes.clone(), sc.test_trajectories),
+            ModelKind::Baseline(_) => (bsizes.clone(), sc.baseline_test_trajectories),
+        };
+        for n in evals {
+            let bag = &test_bags
+                .iter()
+                .find(|b| b.0 == n)
+                .expect("bag simulated")
+                .1;
+            jobs.push(EvalJob {
+                experiment: "comparison",
+                system: sys.into(),
+                label: k.name().into(),
+                particles: n,
+                x: None,
+                model: t.path.clone(),
+                bag: bag.clone(),
+                dt,
+                max,
+            });
+        }
+    }
+    let mut rows = run_evals(lab, jobs);
+    let mut md = format!("## {sys}: inductive biases, baselines, zero-shot sizes\n\n");
+    md += &format!(
+        "Trained on {} trajectories of the 5-{sys} ({} states), {} epochs each; \
+         evaluated from held-out starts (seed {TEST_SEED}) over {} s with rollout step {} s \
+         ({} test trajectories for the GNODE family, {} for LGN/HGN/GNS). \
+         NODE is transductive: it runs only on the size it was trained on.\n\n",
+        sc.train_trajectories,
+        sc.train_trajectories * base.states,
+        sc.epochs,
+        (states - 1) as f64
+            * match kind {
+                SystemKind::Pendulum => 0.01,
+                _ => 0.1,
+            },
+        dt.unwrap_or(base.dt),
+        sc.test_trajectories,
+        sc.baseline_test_trajectories,
+    );
+    let fam: Vec<String> = FAMILY.iter().map(|v| v.name().to_string()).collect();
+    md += &format!(
+        "### Each bias in turn (paper Figs. 1 and 4)\n\n{}",
+        figure(
+            lab,
+            &format!("biases-{sys}.png"),
+            &panels(&rows, sys, sizes, &fam),
+            &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
+        )
+    );
+    let bl: Vec<String> = ["mcgnode", "lgn", "hgn", "gns"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    md += &format!(
+        "### MCGNODE against LGN, HGN and GNS (paper Figs. 2–3)\n\n{}",
+        figure(
+            lab,
+            &format!("baselines-{sys}.png"),
+            &panels(&rows, sys, bsizes, &bl),
+            &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
+        )
+    );
+    let mut sorted: Vec<&Row> = rows.iter().collect();
+    sorted.sort_by_key(|r| r.particles);
+    md += "Time-averaged geometric means (t > 0):\n\n";
+    md += &error_table(&sorted);
+    md += "\n";
+    let section_trained: TrainedList = specs.iter().map(|s| s.label.clone()).zip(trained).collect();
+    md += &failures(&section_trained);
+    if kind == SystemKind::Spring && !sc.large_springs.is_empty() {
+        let mut jobs = vec![];
+        for &(n, t) in &sc.large_springs {
+            let mut c = SystemConfig::new(kind, n);
+            c.states = states;
+            let bag = lab.bag(&format!("test-{n}-{sys}"), &c, t, TEST_SEED, false)?;
+            for (label, tr) in &section_trained {
+                let Ok(tr) = tr else { continue };
+                let name = label.split('-').next().unwrap_or("");
+                if name == "mcgnode" || name == "gnode" {
+                    jobs.push(EvalJob {
+                        experiment: "large",
+                        system: sys.into(),
+                        label: name.into(),
+                        particles: n,
+                        x: None,
+                        model: tr.path.clone(),
+                        bag: bag.clone(),
+                        dt,
+                        max: t,
+                    });
+                }
+            }
+        }
+        let large = run_evals(lab, jobs);
+        md += "### Zero-shot to large rings (beyond the paper)\n\n";
+        md += "Trained on 5 springs, run unchanged on hundreds and thousands; rollout time \
+                is the wall time of one trajectory on the hand-written kernel (one core).\n\n";
+        md += &error_table(&large.iter().collect::<Vec<_>>());
+        md += "\n";
+        rows.extend(large);
+    }
+    md += &format!("### Training and forward-simulation time ({sys}; paper Tables 3–4)\n\n");
+    let mut timing = vec![];
+    for (label, t) in &section_trained {
+        let Ok(t) = t else { continue };
+        let name = label.split('-').next().unwrap_or("");
+        let fwd = rows
+            .iter()
+            .find(|r| r.model == name && r.particles == 5 && r.experiment == "comparison")
+            .map_or(f64::NAN, |r| r.rollout_seconds);
+        let r = &t.report;
+        timing.push(vec![
+            name.to_string(),
+            r.epochs_run.to_string(),
+            format!("{:.1}", r.seconds),
+            format!("{:.1}", 1e3 * r.seconds / r.epochs_run.max(1) as f64),
+            format!("{fwd:.3}"),
+            num(r.validation_loss),
+        ]);
+    }
+    md += &table(
+        &[
+            "model",
+            "epochs",
+            "training s",
+            "ms/epoch",
+            "forward simulation s (one 5-particle trajectory)",
+            "best validation MSE",
+        ],
+        &timing,
+    );
+    md += &format!(
+        "\nTraining ran {} models at a time on this machine's cores, so times include \
+         contention; the forward simulation covers the whole test horizon.\n\n",
+        lab.threads
+    );
+    Ok(Section {
+        markdown: md,
+        rows,
+        trained: section_trained,
+    })
+}
+
+/// The 3D peridynamic solid: MCGNODE vs GNODE vs GNS (paper Fig. 9, its
+/// tables and the absolute-error figure).
+pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
+    let sys = "peridynamic";
+    let base = SystemConfig::new(SystemKind::Peridynamic, sc.peri_particles);
+    let train_bag = lab.bag(
+        "train-peridynamic",
+        &base,
+        sc.peri_train_trajectories,
+        TRAIN_SEED,
+        false,
+    )?;
+    let mut tc = base.clone();
+    tc.states = sc.peri_states;
+    let test_bag = lab.bag(
+        "test-peridynamic",
+        &tc,
+        sc.peri_test_trajectories,
+        TEST_SEED,
+        false,
+    )?;
+    let kinds = [
+        ModelKind::Family(Variant::Mcgnode),
+        ModelKind::Family(Variant::Gnode),
+        ModelKind::Baseline(Kind::Gns),
+    ];
+    let specs: Vec<TrainSpec> = kinds
+        .iter()
+        .map(|&k| TrainSpec {
+            label: format!("{k}-{sys}"),
+            kind: k,
+            bags: vec![train_bag.clone()],
+            cfg: cfg(sc.peri_epochs),
+        })
+        .collect();
+    let trained = lab.train_all(&specs);
+    let mut jobs = vec![];
+    for (k, t) in kinds.iter().zip(&trained) {
+        if let Ok(t) = t {
+            jobs.push(EvalJob {
+                experiment: "peridynamic",
+                system: sys.into(),
+                label: k.name().into(),
+                particles: sc.peri_particles,
+                x: None,
+                model: t.path.clone(),
+                bag: test_bag.clone(),
+                dt: None,
+                max: sc.peri_test_trajectories,
+            });
+        }
+    }
+    let rows = run_evals(lab, jobs);
+    let k = (sc.peri_particles as f64).cbrt().round() as usize;
+    let mut md = "## 3D peridynamic solid (paper Fig. 9 and Appendix tables)\n\n".to_string();
+    md += &format!(
+        "A {k}×{k}×{k} cube ({} particles, bonds within 1.5 lattice spacings) compressed \
+         isotropically by 2–8 % and released; {} training trajectories, {} epochs; {} test \
+         trajectories over {:.1} s. The cube has a small net momentum, so ME is relative to a \
+         small number; the absolute errors are shown too (paper's appendix figure).\n\n",
+        sc.peri_particles,
+        sc.peri_train_trajectories,
+        sc.peri_epochs,
+        sc.peri_test_trajectories,
+        (sc.peri_states - 1) as f64 * base.dt * base.save_every as f64
+    );
+    let names: Vec<String> = kinds.iter().map(|k| k.name().to_string()).collect();
+    md += &figure(
+        lab,
+        "peridynamic.png",
+        &panels(&rows, sys, &[sc.peri_particles], &names),
+        &[Metric::Re, Metric::Me, Metric::ReAbs, Metric::MeAbs],
+    );
+    // The paper's tables: RE and ME at whole seconds.
+    let mut body = vec![];
+    if let Some(s) = rows.iter().find_map(|r| r.summary.as_ref()) {
+        let last = *s.t.last().unwrap_or(&0.0);
+        let mut t = 0.0;
+        while t <= last + 1e-9 {
+            let mut line = vec![format!("{t:.1}")];
+            for m in &names {
+                match rows
+                    .iter()
+                    .find(|r| &r.model == m)
+                    .and_then(|r| r.summary.as_ref())
+                {
+                    Some(s) => {
+                        let (re, _, me) = s.at(t);
+                        line.push(format!("{} / {}", num(re), num(me)));
+                    }
+                    None => line.push("–".into()),
+                }
+            }
+            body.push(line);
+            t += (last / 10.0).max(0.1);
+        }
+    }
+    let header: Vec<String> = std::iter::once("t [s]".to_string())
+        .chain(names.iter().map(|m| format!("{m} RE / ME")))
+        .collect();
+    md += &table(
+        &header.iter().map(|s| s.as_str()).collect::<Vec<_>>(),
+        &body,
+    );
+    md += "\nTime averages, with the absolute errors:\n\n";
+    md += &table(
+        &["model", "RE", "ME", "|q̂ − q|", "|P̂ − P|", "diverged"],
+        &rows
+            .iter()
+            .map(|r| {
+                let a = &r.averages;
+                vec![
+                    r.model.clone(),
+                    num(a.re),
+                    num(a.me),
+                    num(a.re_abs),
+                    num(a.me_abs),
+                    format!("{}/{}", r.diverged, r.trajectories),
+                ]
+            })
+            .collect::<Vec<_>>(),
+    );
+    let trained: Vec<_> = specs.iter().map(|s| s.label.clone()).zip(trained).collect();
+    md += "\n";
+    md += &failures(&trained);
+    Ok(Section {
+        markdown: md,
+        rows,
+        trained,
+    })
+}
+
+/// Drag −0.1 q̇ and a constant external force on the 5-spring: MCGNODE vs
+/// NODE (paper appendix "Drag and external force").
+pub fn drag_and_force(lab: &Lab, sc: &Scale) -> Result<Section> {
+    let mut cases = vec![];
+    for (name, drag, force) in [
+        ("spring+drag", 0.1, vec![]),
+        ("spring+force", 0.0, vec![0.5, 0.0]),
+    ] {
+        let mut c = SystemConfig::new(SystemKind::Spring, 5);
+        c.field.drag = drag;
+        c.field.force = force;
+        let train = lab.bag(
+            &format!("train-5-{name}"),
+            &c,
+            sc.sweep_train_trajectories,
+            TRAIN_SEED,
+            false,
+        )?;
+        c.states = sc.sweep_states;
+        let test = lab.bag(
+            &format!("test-5-{name}"),
+            &c,
+            sc.sweep_test_trajectories,
+            TEST_SEED,
+            false,
+        )?;
+        cases.push((name, train, test));
+    }
+    let mut specs = vec![];
+    for (name, train, _) in &cases {
+        for v in [Variant::Mcgnode, Variant::Node] {
+            specs.push(TrainSpec {
+                label: format!("{v}-5-{name}"),
+                kind: ModelKind::Family(v),
+                bags: vec![train.clone()],
+                cfg: cfg(sc.sweep_epochs),
+            });
+        }
+    }
+    let trained = lab.train_all(&specs);
+    let mut jobs = vec![];
+    for (s, t) in specs.iter().zip(&trained) {
+        let Ok(t) = t else { continue };
+        let case = cases.iter().find(|c| s.bags[0] == c.1).expect("case");
+        jobs.push(EvalJob {
+            experiment: "drag-force",
+            system: case.0.into(),
+            label: s.kind.name().into(),
+            particles: 5,
+            x: None,
+            model: t.path.clone(),
+            bag: case.2.clone(),
+            dt: None,
+            max: sc.sweep_test_trajectories,
+        });
+    }
+    let rows = run_evals(lab, jobs);
+    let mut md = "## Drag and external force (paper appendix)\n\n".to_string();
+    md += &format!(
+        "5-spring with drag −0.1 q̇, and with a constant force (0.5, 0) on every particle; \
+         {} training trajectories, {} epochs; MCGNODE learns the field with its body-force \
+         branch. {} test trajectories over {:.0} s.\n\n",
+        sc.sweep_train_trajectories,
+        sc.sweep_epochs,
+        sc.sweep_test_trajectories,
+        (sc.sweep_states - 1) as f64 * 0.1
+    );
+    let names = vec!["mcgnode".to_string(), "node".to_string()];
+    let mut p = panels(&rows, "spring+drag", &[5], &names);
+    p.extend(panels(&rows, "spring+force", &[5], &names));
+    md += &figure(
+        lab,
+        "drag-force.png",
+        &p,
+        &[Metric::Re, Metric::Ee, Metric::Me],
+    );
+    md += &table(
+        &["system", "model", "RE", "EE", "ME", "diverged"],
+        &rows
+            .iter()
+            .map(|r| {
+                vec![
+                    r.system.clone(),
+                    r.model.clone(),
+                    num(r.averages.re),
+                    num(r.averages.ee),
+                    num(r.averages.me),
+                    format!("{}/{}", r.diverged, r.trajectories),
+                ]
+            })
+            .collect::<Vec<_>>(),
+    );
+    let trained: Vec<_> = specs.iter().map(|s| s.label.clone()).zip(trained).collect();
+    md += "\n";
+    md += &failures(&trained);
+    Ok(Section {
+        markdown: md,
+        rows,
+        trained,
+    })
+}
+
+/// Lines of a sweep figure: per model, (x, time-averaged gmean, band) of `pick`.
+fn sweep_lines(
+    rows: &[Row],
+    models: &[&str],
+    pick: fn(&crate::metrics::Summary) -> &crate::metrics::Band,
+) -> Vec<SweepLine> {
+    models
+        .iter()
+        .map(|m| {
+            let mut pts: Vec<(f64, f64, f64, f64)> = rows
+                .iter()
+                .filter(|r| r.model == *m)
+                .filter_map(|r| {
+                    let s = r.summary.as_ref()?;
+                    let b = pick(s);
+                    let avg = |v: &[f64]| {
+                        let v = &v[1.min(v.len())..];
+                        v.iter().sum::<f64>() / v.len().max(1) as f64
+                    };
+                    Some((r.x?, avg(&b.gmean), avg(&b.lo), avg(&b.hi)))
+                })
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            (m.to_string(), pts)
+        })
+        .collect()
+}
+
+/// A sweep over training settings on the 5-spring (noise or data size).
+fn sweep(
+    lab: &Lab,
+    sc: &Scale,
+    experiment: &'static str,
+    models: &[ModelKind],
+    xs: &[f64],
+    train_trajectories: usize,
+    set: fn(&mut TrainConfig, f64),
+) -> Result<(Vec<Row>, TrainedList)> {
+    let c = SystemConfig::new(SystemKind::Spring, 5);
+    let train = lab.bag(
+        &format!("train-5-spring-{experiment}"),
+        &c,
+        train_trajectories,
+        TRAIN_SEED,
+        false,
+    )?;
+    let train_rk4 = if models.contains(&ModelKind::Baseline(Kind::Hgn)) {
+        Some(lab.bag(
+            &format!("train-5-spring-{experiment}-rk4"),
+            &c,
+            train_trajectories,
+            TRAIN_SEED,
+            true,
+        )?)
+    } else {
+        None
+    };
+    let mut tc = c.clone();
+    tc.states = sc.sweep_states;
+    let test = lab.bag(
+        &format!("test-5-spring-{experiment}"),
+        &tc,
+        sc.sweep_test_trajectories,
+        TEST_SEED,
+        false,
+    )?;
+    let mut specs = vec![];
+    for &x in xs {
+        for &k in models {
+            let mut cfg = cfg(sc.sweep_epochs);
+            set(&mut cfg, x);
+            let bag = match (&train_rk4, k) {
+                (Some(b), ModelKind::Baseline(Kind::Hgn)) => b.clone(),
+                _ => train.clone(),
+            };
+            specs.push((
+                x,
+                TrainSpec {
+                    label: format!("{k}-5-spring-{experiment}-{x}"),
+                    kind: k,
+                    bags: vec![bag],
+                    cfg,
+                },
+            ));
+        }
+    }
+    let plain: Vec<TrainSpec> = specs.iter().map(|s| s.1.clone()).collect();
+    let trained = lab.train_all(&plain);
+    let mut jobs = vec![];
+    for ((x, s), t) in specs.iter().zip(&trained) {
+        let Ok(t) = t else { continue };
+        jobs.push(EvalJob {
+            experiment,
+            system: "spring".into(),
+            label: s.kind.name().into(),
+            particles: 5,
+            x: Some(*x),
+            model: t.path.clone(),
+            bag: test.clone(),
+            dt: None,
+            max: sc.sweep_test_trajectories,
+        });
+    }
+    let rows = run_evals(lab, jobs);
+    let trained = plain.iter().map(|s| s.label.clone()).zip(trained).collect();
+    Ok((rows, trained))
+}
+
+/// How a sweep is shown.
+struct SweepText<'a> {
+    title: &'a str,
+    intro: String,
+    fig: &'a str,
+    x_label: &'a str,
+    log_x: bool,
+    models: &'a [&'a str],
+}
+
+fn sweep_section(lab: &Lab, t: SweepText<'_>, rows: Vec<Row>, trained: TrainedList) -> Section {
+    let SweepText {
+        title,
+        intro,
+        fig,
+        x_label,
+        log_x,
+        models,
+    } = t;
+    let mut md = format!("## {title}\n\n{intro}\n\n");
+    let panels = vec![
+        (
+            "5-spring: RE".to_string(),
+            "time-averaged RE".to_string(),
+            sweep_lines(&rows, models, |s| &s.re),
+        ),
+        (
+            "5-spring: EE".to_string(),
+            "time-averaged EE".to_string(),
+            sweep_lines(&rows, models, |s| &s.ee),
+        ),
+    ];
+    match plot_sweep(&lab.dir.join(fig), x_label, log_x, &panels) {
+        Ok(()) => md += &format!("![{fig}]({fig})\n\n"),
+        Err(e) => md += &format!("(figure {fig} could not be drawn: {e:#})\n\n"),
+    }
+    let mut xs: Vec<f64> = rows.iter().filter_map(|r| r.x).collect();
+    xs.sort_by(f64::total_cmp);
+    xs.dedup();
+    let header: Vec<String> = std::iter::once(x_label.to_string())
+        .chain(models.iter().map(|m| format!("{m} RE / EE")))
+        .collect();
+    let body: Vec<Vec<String>> = xs
+        .iter()
+        .map(|x| {
+            std::iter::once(format!("{x}"))
+                .chain(models.iter().map(|m| {
+                    match rows.iter().find(|r| r.model == *m && r.x == Some(*x)) {
+                        Some(r) if r.error.is_none() => {
+                            format!("{} / {}", num(r.averages.re), num(r.averages.ee))
+                        }
+                        Some(r) => format!("failed: {}", r.error.clone().unwrap_or_default()),
+                        None => "not trained".into(),
+                    }
+                }))
+                .collect()
+        })
+        .collect();
+    md += &table(
+        &header.iter().map(|s| s.as_str()).collect::<Vec<_>>(),
+        &body,
+    );
+    md += "\n";
+    md += &failures(&trained);
+    Section {
+        markdown: md,
+        rows,
+        trained,
+    }
+}
+
+/// Robustness to noise on the training accelerations (paper "Robustness to Noise").
+pub fn noise(lab: &Lab, sc: &Scale) -> Result<Section> {
+    let models = [
+        ModelKind::Family(Variant::Gnode),
+        ModelKind::Family(Variant::Mcgnode),
+        ModelKind::Baseline(Kind::Lgn),
+        ModelKind::Baseline(Kind::Hgn),
+    ];
+    let (rows, trained) = sweep(
+        lab,
+        sc,
+        "noise",
+        &models,
+        &sc.noise,
+        sc.sweep_train_trajectories,
+        |c, x| c.noise = x,
+    )?;
+    let intro = format!(
+        "5-spring, {} training trajectories whose target accelerations carry Gaussian noise \
+         of the given % of their standard deviation; {} epochs; {} test trajectories over {:.0} s \
+         (clean truth).",
+        sc.sweep_train_trajectories,
+        sc.sweep_epochs,
+        sc.sweep_test_trajectories,
+        (sc.sweep_states - 1) as f64 * 0.1
+    );
+    Ok(sweep_section(
+        lab,
+        SweepText {
+            title: "Robustness to noise (paper Section \"Robustness to Noise\")",
+            intro,
+            fig: "noise.png",
+            x_label: "noise (% of std)",
+            log_x: false,
+            models: &["gnode", "mcgnode", "lgn", "hgn"],
+        },
+        rows,
+        trained,
+    ))
+}
+
+/// Data efficiency: training points 100 … 10,000 (paper appendix "Training efficiency").
+pub fn data_efficiency(lab: &Lab, sc: &Scale) -> Result<Section> {
+    let models = [
+        ModelKind::Family(Variant::Mcgnode),
+        ModelKind::Family(Variant::Node),
+        ModelKind::Baseline(Kind::Hgn),
+    ];
+    let max = sc.points.iter().copied().max().unwrap_or(100);
+    let xs: Vec<f64> = sc.points.iter().map(|&p| p as f64).collect();
+    let (rows, trained) = sweep(
+        lab,
+        sc,
+        "points",
+        &models,
+        &xs,
+        max.div_ceil(100),
+        |c, x| c.points = Some(x as usize),
+    )?;
+    let intro = format!(
+        "5-spring; each model sees the given number of training states, drawn at random \
+         from {} trajectories (75 % of them train, 25 % validate); {} epochs; {} test \
+         trajectories over {:.0} s.",
+        max.div_ceil(100),
+        sc.sweep_epochs,
+        sc.sweep_test_trajectories,
+        (sc.sweep_states - 1) as f64 * 0.1
+    );
+    Ok(sweep_section(
+        lab,
+        SweepText {
+            title: "Data efficiency (paper appendix \"Training efficiency\")",
+            intro,
+            fig: "data-efficiency.png",
+            x_label: "training points",
+            log_x: true,
+            models: &["mcgnode", "node", "hgn"],
+        },
+        rows,
+        trained,
+    ))
+}

@@ -1,0 +1,149 @@
+//! What `reproduce` writes: result rows (results.json) and the markdown of
+//! report.md.
+
+use crate::evaluate::Evaluation;
+use crate::metrics::{Averages, Summary, DIVERGED, LOG_FLOOR};
+use serde::Serialize;
+
+/// One evaluation in results.json.
+#[derive(Clone, Debug, Serialize)]
+pub struct Row {
+    /// Experiment ("biases", "baselines", "peridynamic", "noise", ...).
+    pub experiment: String,
+    /// System ("spring", "pendulum", "peridynamic", "spring+drag", ...).
+    pub system: String,
+    /// Model label.
+    pub model: String,
+    /// Particles of the test system.
+    pub particles: usize,
+    /// Swept value (noise %, training points), if any.
+    pub x: Option<f64>,
+    /// Test trajectories.
+    pub trajectories: usize,
+    /// Rollouts that diverged.
+    pub diverged: usize,
+    /// Time averages of the geometric-mean curves.
+    pub averages: Averages,
+    /// Rollout wall time per trajectory, seconds.
+    pub rollout_seconds: f64,
+    /// Why the evaluation (or the model's training) failed, if it did.
+    pub error: Option<String>,
+    /// The curves (not in results.json: the figures show them).
+    #[serde(skip)]
+    pub summary: Option<Summary>,
+}
+
+impl Row {
+    /// A row from an evaluation, or from its failure.
+    pub fn new(
+        experiment: &str,
+        system: &str,
+        model: &str,
+        particles: usize,
+        x: Option<f64>,
+        e: &anyhow::Result<Evaluation>,
+    ) -> Row {
+        let nan = Averages {
+            re: f64::NAN,
+            ee: f64::NAN,
+            me: f64::NAN,
+            me_scaled: f64::NAN,
+            re_abs: f64::NAN,
+            me_abs: f64::NAN,
+        };
+        let mut r = Row {
+            experiment: experiment.into(),
+            system: system.into(),
+            model: model.into(),
+            particles,
+            x,
+            trajectories: 0,
+            diverged: 0,
+            averages: nan,
+            rollout_seconds: f64::NAN,
+            error: None,
+            summary: None,
+        };
+        match e {
+            Ok(e) => {
+                r.trajectories = e.trajectories;
+                r.diverged = e.diverged;
+                r.averages = e.averages;
+                r.rollout_seconds = e.rollout_seconds / e.trajectories.max(1) as f64;
+                r.summary = Some(e.summary.clone());
+            }
+            Err(err) => r.error = Some(format!("{err:#}")),
+        }
+        r
+    }
+}
+
+/// A number for a table: 3 significant digits, "diverged" for the
+/// stand-in, "–" for NaN.
+pub fn num(x: f64) -> String {
+    if x.is_nan() {
+        "–".into()
+    } else if x >= DIVERGED / 10.0 {
+        "diverged".into()
+    } else if x <= LOG_FLOOR * 10.0 {
+        "0".into()
+    } else {
+        format!("{x:.2e}")
+    }
+}
+
+/// A markdown table.
+pub fn table(header: &[&str], rows: &[Vec<String>]) -> String {
+    let mut s = format!("| {} |\n", header.join(" | "));
+    s += &format!("|{}\n", header.iter().map(|_| "---|").collect::<String>());
+    for r in rows {
+        s += &format!("| {} |\n", r.join(" | "));
+    }
+    s
+}
+
+/// The standard error table of rows: model, particles, RE, EE, ME, ME scaled,
+/// diverged, rollout time.
+pub fn error_table(rows: &[&Row]) -> String {
+    let body: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| {
+            let a = &r.averages;
+            match &r.error {
+                Some(e) => vec![
+                    r.model.clone(),
+                    r.particles.to_string(),
+                    format!("failed: {}", e.replace('|', "/").replace('\n', " ")),
+                    String::new(),
+                    String::new(),
+                    String::new(),
+                    String::new(),
+                    String::new(),
+                ],
+                None => vec![
+                    r.model.clone(),
+                    r.particles.to_string(),
+                    num(a.re),
+                    num(a.ee),
+                    num(a.me),
+                    num(a.me_scaled),
+                    format!("{}/{}", r.diverged, r.trajectories),
+                    format!("{:.3}", r.rollout_seconds),
+                ],
+            }
+        })
+        .collect();
+    table(
+        &[
+            "model",
+            "particles",
+            "RE",
+            "EE",
+            "ME",
+            "ME scaled",
+            "diverged",
+            "rollout s/trajectory",
+        ],
+        &body,
+    )
+}

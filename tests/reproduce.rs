@@ -1,0 +1,113 @@
+//! `mcgnode reproduce --quick`: every experiment runs end to end through the
+//! binary and writes a complete report with finite numbers. Run with
+//! `cargo test --release --test reproduce`.
+
+use std::path::Path;
+use std::process::Command;
+
+fn is_png(p: &Path) -> bool {
+    std::fs::read(p)
+        .map(|b| b.len() > 1000 && b.starts_with(b"\x89PNG\r\n\x1a\n"))
+        .unwrap_or(false)
+}
+
+#[test]
+fn quick_reproduce_writes_a_complete_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("repro");
+    let o = Command::new(env!("CARGO_BIN_EXE_mcgnode"))
+        .args(["reproduce", "--quick", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "reproduce failed:\n{stderr}");
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    for heading in [
+        "## What the paper claims, and what we measured",
+        "## spring: inductive biases, baselines, zero-shot sizes",
+        "## pendulum: inductive biases, baselines, zero-shot sizes",
+        "### Zero-shot to large rings",
+        "### Training and forward-simulation time (spring",
+        "### Training and forward-simulation time (pendulum",
+        "## 3D peridynamic solid",
+        "## Drag and external force",
+        "## Robustness to noise",
+        "## Data efficiency",
+        "## Settings",
+    ] {
+        assert!(report.contains(heading), "report lacks {heading:?}");
+    }
+    assert!(!report.contains("failed"), "a model failed:\n{report}");
+    assert!(!report.contains("could not be drawn"), "{report}");
+    // Every figure the report links exists and is a PNG.
+    let mut figures = 0;
+    for line in report.lines().filter(|l| l.starts_with("![")) {
+        let name = &line[line.find("](").unwrap() + 2..line.len() - 1];
+        assert!(is_png(&out.join(name)), "{name} is not a PNG");
+        figures += 1;
+    }
+    assert_eq!(
+        figures, 8,
+        "biases and baselines per system, peridynamic, drag/force, noise, data"
+    );
+    // Every evaluation succeeded with finite metrics; every experiment and
+    // every model of the paper is there.
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let evals = json["evaluations"].as_array().unwrap();
+    for e in evals {
+        assert!(e["error"].is_null(), "{e}");
+        for k in ["re", "ee", "me", "me_scaled", "re_abs", "me_abs"] {
+            let x = e["averages"][k].as_f64();
+            assert!(x.is_some_and(|x| x.is_finite() && x >= 0.0), "{k} of {e}");
+        }
+        // Relative errors are at most 1 by definition.
+        for k in ["re", "ee", "me", "me_scaled"] {
+            assert!(e["averages"][k].as_f64().unwrap() <= 1.0, "{k} of {e}");
+        }
+    }
+    let has = |exp: &str, model: &str| {
+        evals
+            .iter()
+            .any(|e| e["experiment"] == exp && e["model"] == model)
+    };
+    for m in [
+        "node", "gnode", "cgnode", "cdgnode", "mcgnode", "lgn", "hgn", "gns",
+    ] {
+        assert!(has("comparison", m), "no comparison row for {m}");
+    }
+    for (exp, m) in [
+        ("large", "mcgnode"),
+        ("peridynamic", "mcgnode"),
+        ("peridynamic", "gnode"),
+        ("peridynamic", "gns"),
+        ("drag-force", "node"),
+        ("noise", "lgn"),
+        ("noise", "hgn"),
+        ("points", "hgn"),
+        ("points", "node"),
+    ] {
+        assert!(has(exp, m), "no {exp} row for {m}");
+    }
+    // Noise and data-size rows carry their setting; the models record it.
+    assert!(evals
+        .iter()
+        .any(|e| e["experiment"] == "noise" && e["x"].as_f64() == Some(10.0)));
+    let training = json["training"].as_array().unwrap();
+    assert!(training
+        .iter()
+        .any(|t| t["training"]["noise"].as_f64() == Some(10.0)));
+    assert!(training
+        .iter()
+        .any(|t| t["training"]["points"].as_u64() == Some(100)));
+    // MCGNODE without body forces conserves the peridynamic cube's momentum.
+    let peri = evals
+        .iter()
+        .find(|e| e["experiment"] == "peridynamic" && e["model"] == "mcgnode")
+        .unwrap();
+    assert!(
+        peri["averages"]["me_abs"].as_f64().unwrap() < 1e-9,
+        "{peri}"
+    );
+}
