@@ -95,7 +95,9 @@ pub fn run(opts: &Options, log: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
            lie. Tables: the time average of the geometric-mean curve (t > 0). A rollout that \
            diverges scores the worst value from then on (relative errors 1).\n\n";
     md += "## What the paper claims, and what we measured\n\n";
-    md += &claims(&rows);
+    let trained: Vec<&(String, Result<lab::Trained>)> =
+        sections.iter().flat_map(|s| s.trained.iter()).collect();
+    md += &claims(&rows, &trained);
     md += "\n";
     for s in &sections {
         md += &s.markdown;
@@ -154,13 +156,39 @@ fn verdict(ok: bool, partly: bool) -> &'static str {
 }
 
 /// The paper's headline claims next to this run's numbers.
-fn claims(rows: &[Row]) -> String {
+fn claims(rows: &[Row], trained: &[&(String, Result<lab::Trained>)]) -> String {
     let mut out = String::new();
     let mut line = |s: String| out += &format!("- {s}\n");
+    for sys in ["pendulum", "spring"] {
+        let per_epoch = |m: &str| {
+            trained
+                .iter()
+                .find(|(l, _)| l.starts_with(&format!("{m}-5-{sys}")))
+                .and_then(|(_, t)| t.as_ref().ok())
+                .map(|t| t.report.seconds / t.report.epochs_run.max(1) as f64)
+        };
+        let ms: Vec<(&str, Option<f64>)> = ["mcgnode", "gnode", "hgn", "lgn"]
+            .iter()
+            .map(|m| (*m, per_epoch(m)))
+            .collect();
+        if ms.iter().all(|(_, t)| t.is_some()) {
+            let t = |i: usize| ms[i].1.unwrap_or(f64::NAN);
+            let fastest = (1..4).all(|i| t(0) <= t(i));
+            let lgn_slowest = (0..3).all(|i| t(3) >= t(i));
+            line(format!(
+                "Training cost on the 5-{sys} (paper: MCGNODE fastest, LGN slowest): seconds                  per epoch {} — {}.",
+                ms.iter()
+                    .map(|(m, v)| format!("{m} {:.2}", v.unwrap_or(f64::NAN)))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                verdict(fastest && lgn_slowest, fastest || lgn_slowest)
+            ));
+        }
+    }
     for (sys, paper_orders) in [("pendulum", 4.0), ("spring", 2.0)] {
-        let m = find(rows, "comparison", sys, "mcgnode", 5);
-        let l = find(rows, "comparison", sys, "lgn", 5);
-        let h = find(rows, "comparison", sys, "hgn", 5);
+        let m = find(rows, "baselines", sys, "mcgnode", 5);
+        let l = find(rows, "baselines", sys, "lgn", 5);
+        let h = find(rows, "baselines", sys, "hgn", 5);
         if let (Some(m), Some(l), Some(h)) = (m, l, h) {
             let (ol, oh) = (
                 orders(m.averages.ee, l.averages.ee),
@@ -183,8 +211,8 @@ fn claims(rows: &[Row]) -> String {
         }
     }
     if let (Some(m), Some(g)) = (
-        find(rows, "comparison", "spring", "mcgnode", 5),
-        find(rows, "comparison", "spring", "gnode", 5),
+        find(rows, "biases", "spring", "mcgnode", 5),
+        find(rows, "biases", "spring", "gnode", 5),
     ) {
         line(format!(
             "ME of MCGNODE on springs is zero (paper): our spring starts have zero momentum, \
@@ -202,11 +230,11 @@ fn claims(rows: &[Row]) -> String {
         let ladder: Vec<String> = ["node", "gnode", "cgnode", "cdgnode", "mcgnode"]
             .iter()
             .map(|m| {
-                let v = find(rows, "comparison", sys, m, 5).map_or(f64::NAN, |r| r.averages.re);
+                let v = find(rows, "biases", sys, m, 5).map_or(f64::NAN, |r| r.averages.re);
                 format!("{m} {}", num(v))
             })
             .collect();
-        let re = |m| find(rows, "comparison", sys, m, 5).map_or(f64::NAN, |r| r.averages.re);
+        let re = |m| find(rows, "biases", sys, m, 5).map_or(f64::NAN, |r| r.averages.re);
         let best = ["node", "gnode", "cgnode", "cdgnode"]
             .iter()
             .all(|m| re("mcgnode") <= re(m));

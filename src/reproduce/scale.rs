@@ -8,8 +8,11 @@ use serde::Serialize;
 pub struct Scale {
     /// Name shown in the report ("full" or "quick").
     pub name: String,
-    /// Epochs of every model in the bias and baseline comparisons (paper: 10,000).
+    /// Epochs of MCGNODE, LGN, HGN and GNS in the baseline comparison (paper: 10,000).
     pub epochs: usize,
+    /// Epochs of the GNODE family in the bias comparison, the large rings and
+    /// the drag/force experiment (paper: 10,000).
+    pub family_epochs: usize,
     /// Training trajectories of the 5-spring and 5-pendulum (100 states each; paper: 100).
     pub train_trajectories: usize,
     /// Test trajectories per size for the GNODE family (paper: 100).
@@ -64,6 +67,7 @@ impl Scale {
         Scale {
             name: "full".into(),
             epochs: 200,
+            family_epochs: 2000,
             train_trajectories: 50,
             test_trajectories: 20,
             baseline_test_trajectories: 4,
@@ -79,8 +83,8 @@ impl Scale {
             peri_train_trajectories: 10,
             peri_test_trajectories: 4,
             peri_states: 100,
-            peri_epochs: 100,
-            sweep_epochs: 100,
+            peri_epochs: 300,
+            sweep_epochs: 200,
             sweep_train_trajectories: 20,
             sweep_test_trajectories: 4,
             sweep_states: 101,
@@ -94,6 +98,7 @@ impl Scale {
         Scale {
             name: "quick".into(),
             epochs: 10,
+            family_epochs: 20,
             train_trajectories: 3,
             test_trajectories: 2,
             baseline_test_trajectories: 1,
@@ -122,6 +127,7 @@ impl Scale {
     /// Overrides every epoch count (e.g. the paper's 10,000).
     pub fn with_epochs(mut self, epochs: usize) -> Self {
         self.epochs = epochs;
+        self.family_epochs = epochs;
         self.peri_epochs = epochs;
         self.sweep_epochs = epochs;
         self
