@@ -349,22 +349,31 @@ fn draw_sweep(
         .x_label_area_size(40)
         .y_label_area_size(62)
         .build_cartesian_2d((x0 - pad)..(x1 + pad), (ylo..yhi).log_scale())?;
-    chart
-        .configure_mesh()
-        .y_desc(y_label)
+    let x_ticks = |v: &f64| {
+        if !log_x {
+            tick(*v)
+        } else if (v - v.round()).abs() < 1e-6 {
+            format!("{}", 10f64.powf(v.round()))
+        } else {
+            String::new()
+        }
+    };
+    let mut mesh = chart.configure_mesh();
+    mesh.y_desc(y_label)
         .x_desc(x_label)
         .y_label_formatter(&|v| format!("{v:.0e}"))
-        .x_label_formatter(&|v| {
-            if log_x {
-                format!("{}", 10f64.powf(*v).round())
-            } else {
-                tick(*v)
-            }
-        })
+        // On a log axis only whole decades are labelled (plotters places
+        // ticks at round numbers of log10 x, among them the integers), and
+        // its many ticks get no grid lines.
+        .x_labels(if log_x { 40 } else { 10 })
+        .x_label_formatter(&x_ticks)
         .label_style((FAMILY, 13))
         .axis_desc_style((FAMILY, 15))
-        .light_line_style(WHITE.mix(0.0))
-        .draw()?;
+        .light_line_style(WHITE.mix(0.0));
+    if log_x {
+        mesh.disable_x_mesh();
+    }
+    mesh.draw()?;
     for (i, (name, p)) in lines.iter().enumerate() {
         if p.is_empty() {
             continue;

@@ -213,6 +213,25 @@ fn pipeline_and_bad_input() {
             &mcgnode(&["evaluate", "--model", &out, "--bag", "train.mcap"], d),
             "start where training",
         );
+        // `rollout` takes baseline files too.
+        let bag = format!("{kind}-rollout.mcap");
+        ok(&mcgnode(
+            &[
+                "rollout",
+                "--model",
+                &out,
+                "--particles",
+                "7",
+                "--duration",
+                "0.3",
+                "--out",
+                &bag,
+            ],
+            d,
+        ));
+        let r = mcgnode::data::bag::read_trajectories(d.join(&bag)).unwrap();
+        assert_eq!(r.trajectories[0].graph.n(), 7);
+        assert_eq!(r.trajectories[0].samples.len(), 4);
     }
 
     // Bad input: unknown system/model, missing or corrupt files.
@@ -323,7 +342,14 @@ fn help_documents_every_subcommand() {
     let dir = tempfile::tempdir().unwrap();
     let top = ok(&mcgnode(&["--help"], dir.path()));
     for sub in [
-        "simulate", "train", "rollout", "evaluate", "demo", "bench", "serve",
+        "simulate",
+        "train",
+        "rollout",
+        "evaluate",
+        "demo",
+        "bench",
+        "serve",
+        "reproduce",
     ] {
         assert!(top.contains(sub), "top-level help lacks {sub}");
         let h = ok(&mcgnode(&[sub, "--help"], dir.path()));

@@ -1,10 +1,10 @@
 //! `mcgnode rollout`.
 
+use crate::baselines::load_any_model;
 use crate::data::bag::{read_trajectories, write_trajectories};
 use crate::evaluate::{bag_system, META_SYSTEM};
-use crate::model::TrainedModel;
 use crate::physics::{SystemConfig, SystemKind};
-use crate::system::{Sample, State, Trajectory};
+use crate::system::{Sample, Trajectory};
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -12,7 +12,7 @@ use std::path::PathBuf;
 /// Options of `rollout`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct Args {
-    /// Trained model file.
+    /// Trained model file (GNODE family or a baseline).
     #[arg(long)]
     pub model: PathBuf,
     /// System whose initial state to draw (as `simulate` draws them).
@@ -46,7 +46,7 @@ pub struct Args {
 
 /// Runs `rollout`.
 pub fn run(a: Args) -> Result<()> {
-    let model = TrainedModel::load(&a.model)?;
+    let model = load_any_model(&a.model)?.dynamics;
     let (graph, start, system, mut cfg) = match &a.initial {
         Some(p) => {
             let bag = read_trajectories(p).with_context(|| format!("reading {}", p.display()))?;
@@ -77,27 +77,24 @@ pub fn run(a: Args) -> Result<()> {
         bail!("duration and dt must be positive");
     }
     let steps = (a.duration / dt).round() as usize;
-    let mut ws = model.kernel.workspace(&graph).map_err(anyhow::Error::msg)?;
-    start.validate(&graph).map_err(anyhow::Error::msg)?;
-    let mut samples = vec![];
-    let mut acc = vec![0.0; graph.ndof()];
     let t0 = std::time::Instant::now();
-    let kernel = &model.kernel;
-    let mut ws2 = kernel.workspace(&graph).map_err(anyhow::Error::msg)?;
-    model
-        .rollout_with(&mut ws, &start, dt, steps, every, |step, q, v| {
-            kernel.acceleration(&mut ws2, q, v, &mut acc);
-            samples.push(Sample {
-                t: step as f64 * dt,
-                state: State {
-                    q: q.to_vec(),
-                    v: v.to_vec(),
-                },
-                acc: Some(acc.clone()),
-            })
-        })
+    // The GNODE family integrates on the allocation-free kernel, baselines on candle.
+    let states = model
+        .rollout_every(&graph, &start, dt, steps, every)
         .map_err(anyhow::Error::msg)?;
     let secs = t0.elapsed().as_secs_f64();
+    let mut acc = vec![0.0; graph.ndof()];
+    let mut samples = Vec::with_capacity(states.len());
+    for (k, state) in states.into_iter().enumerate() {
+        model
+            .acceleration(&graph, &state, &mut acc)
+            .map_err(anyhow::Error::msg)?;
+        samples.push(Sample {
+            t: (k * every) as f64 * dt,
+            state,
+            acc: Some(acc.clone()),
+        });
+    }
     let n = samples.len();
     let tr = Trajectory {
         id: 0,

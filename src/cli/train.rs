@@ -1,8 +1,8 @@
 //! `mcgnode train`.
 
-use crate::model::Variant;
-use crate::train::{train_from_bags, BodyForce, EpochReport, ModelOptions, TrainConfig};
-use anyhow::{Context, Result};
+use crate::baselines::{train_any_from_bags, ModelKind};
+use crate::train::{BodyForce, EpochReport, ModelOptions, TrainConfig};
+use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -11,8 +11,8 @@ use std::path::PathBuf;
 #[derive(clap::Args, Debug, Clone)]
 pub struct Args {
     /// Model: node, gnode, cgnode, cdgnode, mcgnode, or a baseline: lgn, hgn, gns.
-    #[arg(long, value_parser = parse_model)]
-    pub model: ModelChoice,
+    #[arg(long)]
+    pub model: ModelKind,
     /// Training bag(s) of ParticleState messages (repeat or comma-separate).
     #[arg(long, required = true, value_delimiter = ',')]
     pub data: Vec<PathBuf>,
@@ -57,24 +57,6 @@ pub struct Args {
     /// Print nothing but errors.
     #[arg(long)]
     pub quiet: bool,
-}
-
-/// A model of the GNODE family or a baseline.
-#[derive(Clone, Copy, Debug)]
-pub enum ModelChoice {
-    /// NODE, GNODE, CGNODE, CDGNODE, MCGNODE.
-    Family(Variant),
-    /// LGN, HGN, GNS.
-    Baseline(crate::baselines::Kind),
-}
-
-fn parse_model(s: &str) -> Result<ModelChoice, String> {
-    match s.parse::<Variant>() {
-        Ok(v) => Ok(ModelChoice::Family(v)),
-        Err(_) => s.parse::<crate::baselines::Kind>().map(ModelChoice::Baseline).map_err(|_| {
-            format!("unknown model {s:?}; expected one of node, gnode, cgnode, cdgnode, mcgnode, lgn, hgn, gns")
-        }),
-    }
 }
 
 /// Progress: a bar on a terminal, plain lines otherwise.
@@ -141,20 +123,7 @@ pub fn run(a: Args) -> Result<()> {
         }
     };
     let progress = progress(a.epochs, a.quiet);
-    let saved = |r: Result<()>| r.with_context(|| format!("saving {}", a.out.display()));
-    let training = match a.model {
-        ModelChoice::Family(v) => {
-            let file = train_from_bags(v, &a.data, &opts, &cfg, log, progress)?;
-            saved(file.save(&a.out))?;
-            file.training
-        }
-        ModelChoice::Baseline(k) => {
-            let file = crate::baselines::train_baseline_from_bags(k, &a.data, &cfg, log, progress)?;
-            saved(file.save(&a.out))?;
-            file.training
-        }
-    };
-    let t = &training;
+    let t = &train_any_from_bags(a.model, &a.data, &opts, &cfg, log, progress, &a.out)?;
     if !a.quiet {
         eprintln!(
             "wrote {}: {} epochs{} in {:.1} s, best epoch {}, train MSE {:.3e}, validation MSE {:.3e}",

@@ -133,6 +133,39 @@ fn figure(
     }
 }
 
+/// A table of rows: one column per (header, cell) pair.
+type Column = (&'static str, fn(&Row) -> String);
+
+fn rows_table(rows: &[Row], columns: &[Column]) -> String {
+    let header: Vec<&str> = columns.iter().map(|c| c.0).collect();
+    let body: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| columns.iter().map(|c| c.1(r)).collect())
+        .collect();
+    table(&header, &body)
+}
+
+fn diverged(r: &Row) -> String {
+    format!("{}/{}", r.diverged, r.trajectories)
+}
+
+/// Closes a section: the failures of its trainings after its markdown.
+fn section(
+    mut md: String,
+    rows: Vec<Row>,
+    specs: &[TrainSpec],
+    trained: Vec<anyhow::Result<Trained>>,
+) -> Section {
+    let trained: TrainedList = specs.iter().map(|s| s.label.clone()).zip(trained).collect();
+    md += "\n";
+    md += &failures(&trained);
+    Section {
+        markdown: md,
+        rows,
+        trained,
+    }
+}
+
 fn failures(trained: &[(String, anyhow::Result<Trained>)]) -> String {
     let mut s = String::new();
     for (label, t) in trained {
@@ -506,31 +539,18 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
         &body,
     );
     md += "\nTime averages, with the absolute errors:\n\n";
-    md += &table(
-        &["model", "RE", "ME", "|q̂ − q|", "|P̂ − P|", "diverged"],
-        &rows
-            .iter()
-            .map(|r| {
-                let a = &r.averages;
-                vec![
-                    r.model.clone(),
-                    num(a.re),
-                    num(a.me),
-                    num(a.re_abs),
-                    num(a.me_abs),
-                    format!("{}/{}", r.diverged, r.trajectories),
-                ]
-            })
-            .collect::<Vec<_>>(),
+    md += &rows_table(
+        &rows,
+        &[
+            ("model", |r| r.model.clone()),
+            ("RE", |r| num(r.averages.re)),
+            ("ME", |r| num(r.averages.me)),
+            ("|q̂ − q|", |r| num(r.averages.re_abs)),
+            ("|P̂ − P|", |r| num(r.averages.me_abs)),
+            ("diverged", diverged),
+        ],
     );
-    let trained: Vec<_> = specs.iter().map(|s| s.label.clone()).zip(trained).collect();
-    md += "\n";
-    md += &failures(&trained);
-    Ok(Section {
-        markdown: md,
-        rows,
-        trained,
-    })
+    Ok(section(md, rows, &specs, trained))
 }
 
 /// Drag −0.1 q̇ and a constant external force on the 5-spring: MCGNODE vs
@@ -609,30 +629,18 @@ pub fn drag_and_force(lab: &Lab, sc: &Scale) -> Result<Section> {
         &p,
         &[Metric::Re, Metric::Ee, Metric::Me],
     );
-    md += &table(
-        &["system", "model", "RE", "EE", "ME", "diverged"],
-        &rows
-            .iter()
-            .map(|r| {
-                vec![
-                    r.system.clone(),
-                    r.model.clone(),
-                    num(r.averages.re),
-                    num(r.averages.ee),
-                    num(r.averages.me),
-                    format!("{}/{}", r.diverged, r.trajectories),
-                ]
-            })
-            .collect::<Vec<_>>(),
+    md += &rows_table(
+        &rows,
+        &[
+            ("system", |r| r.system.clone()),
+            ("model", |r| r.model.clone()),
+            ("RE", |r| num(r.averages.re)),
+            ("EE", |r| num(r.averages.ee)),
+            ("ME", |r| num(r.averages.me)),
+            ("diverged", diverged),
+        ],
     );
-    let trained: Vec<_> = specs.iter().map(|s| s.label.clone()).zip(trained).collect();
-    md += "\n";
-    md += &failures(&trained);
-    Ok(Section {
-        markdown: md,
-        rows,
-        trained,
-    })
+    Ok(section(md, rows, &specs, trained))
 }
 
 /// Lines of a sweep figure: per model, (x, time-averaged gmean, band) of `pick`.
