@@ -545,8 +545,8 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
             ("model", |r| r.model.clone()),
             ("RE", |r| num(r.averages.re)),
             ("ME", |r| num(r.averages.me)),
-            ("|q̂ − q|", |r| num(r.averages.re_abs)),
-            ("|P̂ − P|", |r| num(r.averages.me_abs)),
+            ("‖q̂ − q‖", |r| num(r.averages.re_abs)),
+            ("‖P̂ − P‖", |r| num(r.averages.me_abs)),
             ("diverged", diverged),
         ],
     );

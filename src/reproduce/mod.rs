@@ -176,7 +176,7 @@ fn claims(rows: &[Row], trained: &[&(String, Result<lab::Trained>)]) -> String {
             let fastest = (1..4).all(|i| t(0) <= t(i));
             let lgn_slowest = (0..3).all(|i| t(3) >= t(i));
             line(format!(
-                "Training cost on the 5-{sys} (paper: MCGNODE fastest, LGN slowest): seconds                  per epoch {} — {}.",
+                "Training cost on the 5-{sys} (paper: MCGNODE fastest, LGN slowest): seconds per epoch {} — {}.",
                 ms.iter()
                     .map(|(m, v)| format!("{m} {:.2}", v.unwrap_or(f64::NAN)))
                     .collect::<Vec<_>>()
