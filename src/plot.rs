@@ -180,16 +180,22 @@ pub fn plot_metrics(
     let root = BitMapBackend::new(path, size).into_drawing_area();
     root.fill(&WHITE)?;
     let cells = root.split_evenly((rows.len(), panels.len()));
+    let mut names: Vec<&str> = vec![];
+    for (name, _) in panels.iter().flat_map(|p| &p.1) {
+        if !names.contains(&name.as_str()) {
+            names.push(name);
+        }
+    }
     for (r, m) in rows.iter().enumerate() {
         let (label, pick) = (m.label(), m.pick());
         for (c, (title, models)) in panels.iter().enumerate() {
             let area = &cells[r * panels.len() + c];
             draw_cell(
                 area,
-                title,
-                label,
+                (title, label),
                 pick,
                 models,
+                &names,
                 r == 0,
                 r + 1 == rows.len(),
             )
@@ -201,12 +207,14 @@ pub fn plot_metrics(
     Ok(())
 }
 
+/// `names`: every model of the figure, in order; a model keeps its colour
+/// across panels.
 fn draw_cell(
     area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
-    title: &str,
-    label: &str,
+    (title, label): (&str, &str),
     pick: Pick,
     models: &[(String, Summary)],
+    names: &[&str],
     top: bool,
     bottom: bool,
 ) -> anyhow::Result<()> {
@@ -243,7 +251,8 @@ fn draw_cell(
         mesh.x_desc("time (s)");
     }
     mesh.draw()?;
-    for (i, (name, s)) in models.iter().enumerate() {
+    for (name, s) in models {
+        let i = names.iter().position(|n| n == name).unwrap_or(0);
         let color = COLORS[i % COLORS.len()];
         let b = pick(s);
         let mut poly: Vec<(f64, f64)> =
