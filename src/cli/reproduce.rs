@@ -10,10 +10,10 @@ pub struct Args {
     /// Output folder: report.md, PNG figures, results.json, data/ (bags), models/.
     #[arg(long)]
     pub out: PathBuf,
-    /// A few minutes instead of the full run: tiny data and epochs, same experiments and report.
+    /// Toy scale (about 20 s on 2 cores, against 74 min for the full run): tiny data and epochs, same experiments and report.
     #[arg(long)]
     pub quick: bool,
-    /// Epochs of every model (full default: 200 for the main comparison, 100 elsewhere; paper: 10000).
+    /// Epochs of every model (full defaults: 2000 for the GNODE family, 200 for the baseline comparison, noise and data efficiency, 300 for the peridynamic solid; paper: 10000).
     #[arg(long)]
     pub epochs: Option<usize>,
     /// Trainings and evaluations run side by side (default: the number of cores).
