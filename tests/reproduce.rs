@@ -2,8 +2,11 @@
 //! binary and writes a complete report with finite numbers. Run with
 //! `cargo test --release --test reproduce`.
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
+use std::time::Duration;
 
 fn is_png(p: &Path) -> bool {
     std::fs::read(p)
@@ -15,13 +18,15 @@ fn is_png(p: &Path) -> bool {
 fn quick_reproduce_writes_a_complete_report() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("repro");
-    let o = Command::new(env!("CARGO_BIN_EXE_mcgnode"))
-        .args(["reproduce", "--quick", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "reproduce failed:\n{stderr}");
+    // Bounded: a hang fails the test with what the run printed (~20 s normally).
+    let o = common::run_bounded(
+        Command::new(common::BIN)
+            .args(["reproduce", "--quick", "--out"])
+            .arg(&out),
+        Duration::from_secs(600),
+        dir.path(),
+    );
+    assert!(o.status.success(), "reproduce failed:\n{}", o.stderr);
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     for heading in [
         "## What the paper claims, and what we measured",
