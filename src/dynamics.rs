@@ -102,6 +102,19 @@ pub fn verlet_lockstep(
     Ok(out)
 }
 
+/// The buffers of [`Dynamics::acceleration_batch`]: one per state.
+pub fn check_batch(states: &[State], out: &[Vec<f64>]) -> Result<(), String> {
+    if states.len() == out.len() {
+        Ok(())
+    } else {
+        Err(format!(
+            "{} states but {} output buffers: one per state is needed",
+            states.len(),
+            out.len()
+        ))
+    }
+}
+
 /// Something that predicts accelerations of a particle system.
 pub trait Dynamics: Send + Sync {
     /// A short human-readable description ("mcgnode trained on 5-spring", ...).
@@ -167,9 +180,7 @@ pub trait Dynamics: Send + Sync {
         states: &[State],
         out: &mut [Vec<f64>],
     ) -> Result<(), String> {
-        if states.len() != out.len() {
-            return Err("one output buffer per state is needed".into());
-        }
+        check_batch(states, out)?;
         for (s, o) in states.iter().zip(out.iter_mut()) {
             self.acceleration(graph, s, o)?;
         }

@@ -88,9 +88,7 @@ impl Dynamics for TrainedBaseline {
         states: &[State],
         out: &mut [Vec<f64>],
     ) -> Result<(), String> {
-        if states.len() != out.len() {
-            return Err("one output buffer per state is needed".into());
-        }
+        crate::dynamics::check_batch(states, out)?;
         if states.is_empty() {
             return Ok(());
         }

@@ -671,16 +671,32 @@ fn sweep_lines(
         .collect()
 }
 
-/// A sweep over training settings on the 5-spring (noise or data size).
-fn sweep(
-    lab: &Lab,
-    sc: &Scale,
+/// A sweep over one training setting on the 5-spring (noise or data size):
+/// what to train and how the section shows it.
+struct Sweep<'a> {
     experiment: &'static str,
-    models: &[ModelKind],
-    xs: &[f64],
+    models: &'a [ModelKind],
+    xs: &'a [f64],
     train_trajectories: usize,
     set: fn(&mut TrainConfig, f64),
-) -> Result<(Vec<Row>, TrainedList)> {
+    title: &'a str,
+    intro: String,
+    fig: &'a str,
+    x_label: &'a str,
+    log_x: bool,
+}
+
+/// Trains every model at every setting, evaluates them and writes the
+/// section (a sweep figure of RE and EE, and their table).
+fn sweep(lab: &Lab, sc: &Scale, w: Sweep<'_>) -> Result<Section> {
+    let Sweep {
+        experiment,
+        models,
+        xs,
+        train_trajectories,
+        set,
+        ..
+    } = w;
     let c = SystemConfig::new(SystemKind::Spring, 5);
     let train = lab.bag(
         &format!("train-5-spring-{experiment}"),
@@ -747,29 +763,16 @@ fn sweep(
         });
     }
     let rows = run_evals(lab, jobs);
-    let trained = plain.iter().map(|s| s.label.clone()).zip(trained).collect();
-    Ok((rows, trained))
-}
-
-/// How a sweep is shown.
-struct SweepText<'a> {
-    title: &'a str,
-    intro: String,
-    fig: &'a str,
-    x_label: &'a str,
-    log_x: bool,
-    models: &'a [&'a str],
-}
-
-fn sweep_section(lab: &Lab, t: SweepText<'_>, rows: Vec<Row>, trained: TrainedList) -> Section {
-    let SweepText {
+    let Sweep {
         title,
         intro,
         fig,
         x_label,
         log_x,
-        models,
-    } = t;
+        ..
+    } = w;
+    let names: Vec<&str> = models.iter().map(|k| k.name()).collect();
+    let models = &names[..];
     let mut md = format!("## {title}\n\n{intro}\n\n");
     let panels = vec![
         (
@@ -813,13 +816,7 @@ fn sweep_section(lab: &Lab, t: SweepText<'_>, rows: Vec<Row>, trained: TrainedLi
         &header.iter().map(|s| s.as_str()).collect::<Vec<_>>(),
         &body,
     );
-    md += "\n";
-    md += &failures(&trained);
-    Section {
-        markdown: md,
-        rows,
-        trained,
-    }
+    Ok(section(md, rows, &plain, trained))
 }
 
 /// Robustness to noise on the training accelerations (paper "Robustness to Noise").
@@ -830,15 +827,6 @@ pub fn noise(lab: &Lab, sc: &Scale) -> Result<Section> {
         ModelKind::Baseline(Kind::Lgn),
         ModelKind::Baseline(Kind::Hgn),
     ];
-    let (rows, trained) = sweep(
-        lab,
-        sc,
-        "noise",
-        &models,
-        &sc.noise,
-        sc.sweep_train_trajectories,
-        |c, x| c.noise = x,
-    )?;
     let intro = format!(
         "5-spring, {} training trajectories whose target accelerations carry Gaussian noise \
          of the given % of their standard deviation; {} epochs; {} test trajectories over {:.0} s \
@@ -848,19 +836,22 @@ pub fn noise(lab: &Lab, sc: &Scale) -> Result<Section> {
         sc.sweep_test_trajectories,
         (sc.sweep_states - 1) as f64 * 0.1
     );
-    Ok(sweep_section(
+    sweep(
         lab,
-        SweepText {
+        sc,
+        Sweep {
+            experiment: "noise",
+            models: &models,
+            xs: &sc.noise,
+            train_trajectories: sc.sweep_train_trajectories,
+            set: |c, x| c.noise = x,
             title: "Robustness to noise (paper Section \"Robustness to Noise\")",
             intro,
             fig: "noise.png",
             x_label: "noise (% of std)",
             log_x: false,
-            models: &["gnode", "mcgnode", "lgn", "hgn"],
         },
-        rows,
-        trained,
-    ))
+    )
 }
 
 /// Data efficiency: training points 100 … 10,000 (paper appendix "Training efficiency").
@@ -872,15 +863,6 @@ pub fn data_efficiency(lab: &Lab, sc: &Scale) -> Result<Section> {
     ];
     let max = sc.points.iter().copied().max().unwrap_or(100);
     let xs: Vec<f64> = sc.points.iter().map(|&p| p as f64).collect();
-    let (rows, trained) = sweep(
-        lab,
-        sc,
-        "points",
-        &models,
-        &xs,
-        max.div_ceil(100),
-        |c, x| c.points = Some(x as usize),
-    )?;
     let intro = format!(
         "5-spring; each model sees the given number of training states, drawn at random \
          from {} trajectories (75 % of them train, 25 % validate); {} epochs; {} test \
@@ -890,17 +872,20 @@ pub fn data_efficiency(lab: &Lab, sc: &Scale) -> Result<Section> {
         sc.sweep_test_trajectories,
         (sc.sweep_states - 1) as f64 * 0.1
     );
-    Ok(sweep_section(
+    sweep(
         lab,
-        SweepText {
+        sc,
+        Sweep {
+            experiment: "points",
+            models: &models,
+            xs: &xs,
+            train_trajectories: max.div_ceil(100),
+            set: |c, x| c.points = Some(x as usize),
             title: "Data efficiency (paper appendix \"Training efficiency\")",
             intro,
             fig: "data-efficiency.png",
             x_label: "training points",
             log_x: true,
-            models: &["mcgnode", "node", "hgn"],
         },
-        rows,
-        trained,
-    ))
+    )
 }
