@@ -11,6 +11,7 @@ pub mod bench;
 pub mod cli;
 pub mod data;
 pub mod dynamics;
+pub mod engine;
 pub mod evaluate;
 pub mod kernel;
 pub mod metrics;

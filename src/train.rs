@@ -2,9 +2,10 @@
 //! early stopping on the validation loss (the best weights are kept).
 
 use crate::data::dataset::Dataset;
+use crate::engine::Engine;
 use crate::model::batch::Batch;
 use crate::model::file::TrainingReport;
-use crate::model::params::{ParamStore, Weights};
+use crate::model::params::ParamStore;
 use crate::model::plan::GraphPlan;
 use crate::model::{Hyper, Net};
 use crate::system::{Graph, State};
@@ -39,6 +40,10 @@ pub struct TrainConfig {
     /// data-efficiency experiments: 100 to 10,000); `None`: all. Applied by
     /// [`apply_data_options`].
     pub points: Option<usize>,
+    /// Gradient engine of the GNODE family (the baselines always use candle).
+    pub engine: EngineKind,
+    /// Threads of the native engine; results do not depend on it.
+    pub threads: usize,
 }
 
 impl Default for TrainConfig {
@@ -52,6 +57,8 @@ impl Default for TrainConfig {
             seed: 0,
             noise: 0.0,
             points: None,
+            engine: EngineKind::Native,
+            threads: crate::engine::all_cores(),
         }
     }
 }
@@ -81,53 +88,148 @@ pub struct Trained {
     pub report: TrainingReport,
 }
 
-/// Adam (Kingma & Ba) on flat parameter vectors: cheaper than one candle op per
-/// moment update for models with a few hundred parameters.
+/// Adam (Kingma & Ba) on one flat parameter vector: the same update for
+/// both engines and every model kind.
 pub struct Adam {
     lr: f64,
-    m: Vec<Vec<f64>>,
-    v: Vec<Vec<f64>>,
+    m: Vec<f64>,
+    v: Vec<f64>,
     t: i32,
 }
 
 impl Adam {
-    /// Zero moments for the store's parameters.
-    pub fn new(lr: f64, store: &ParamStore) -> Self {
-        let sizes: Vec<usize> = store.vars().iter().map(|v| v.elem_count()).collect();
+    /// Zero moments for `len` parameters.
+    pub fn new(lr: f64, len: usize) -> Self {
         Self {
             lr,
-            m: sizes.iter().map(|&n| vec![0.0; n]).collect(),
-            v: sizes.iter().map(|&n| vec![0.0; n]).collect(),
+            m: vec![0.0; len],
+            v: vec![0.0; len],
             t: 0,
         }
     }
 
-    /// One update from the gradients of a loss (parameters without a gradient
-    /// are left alone).
-    pub fn step(
-        &mut self,
-        store: &ParamStore,
-        grads: &candle_core::backprop::GradStore,
-    ) -> Result<()> {
+    /// One update of `theta` from `grad`.
+    pub fn step(&mut self, theta: &mut [f64], grad: &[f64]) {
         const B1: f64 = 0.9;
         const B2: f64 = 0.999;
         const EPS: f64 = 1e-8;
         self.t += 1;
         let c1 = 1.0 - B1.powi(self.t);
         let c2 = 1.0 - B2.powi(self.t);
-        for (k, var) in store.vars().iter().enumerate() {
-            let Some(g) = grads.get(var) else { continue };
-            let g = g.flatten_all()?.to_vec1::<f64>()?;
-            let mut p = var.as_tensor().flatten_all()?.to_vec1::<f64>()?;
-            let (m, v) = (&mut self.m[k], &mut self.v[k]);
-            for i in 0..p.len() {
-                m[i] = B1 * m[i] + (1.0 - B1) * g[i];
-                v[i] = B2 * v[i] + (1.0 - B2) * g[i] * g[i];
-                p[i] -= self.lr * (m[i] / c1) / ((v[i] / c2).sqrt() + EPS);
-            }
-            var.set(&Tensor::from_vec(p, var.shape(), var.device())?)?;
+        for (((p, g), m), v) in theta.iter_mut().zip(grad).zip(&mut self.m).zip(&mut self.v) {
+            *m = B1 * *m + (1.0 - B1) * g;
+            *v = B2 * *v + (1.0 - B2) * g * g;
+            *p -= self.lr * (*m / c1) / ((*v / c2).sqrt() + EPS);
         }
-        Ok(())
+    }
+}
+
+/// What [`fit`] minimises: a mean loss over samples, with its gradient, as a
+/// function of one flat parameter vector.
+pub trait Objective {
+    /// Mean loss over the samples `idx` at `theta`, its gradient written to `grad`.
+    fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64>;
+    /// Mean loss over the samples `idx` at `theta`.
+    fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64>;
+}
+
+/// The parameters of a candle store as one flat vector, in definition order.
+pub fn flat_params(store: &ParamStore) -> Result<Vec<f64>> {
+    let mut out = vec![];
+    for v in store.vars() {
+        out.extend(v.as_tensor().flatten_all()?.to_vec1::<f64>()?);
+    }
+    Ok(out)
+}
+
+/// Sets a candle store's parameters from a flat vector (definition order).
+pub fn set_flat_params(store: &ParamStore, theta: &[f64]) -> Result<()> {
+    let mut at = 0;
+    for v in store.vars() {
+        let n = v.elem_count();
+        v.set(&Tensor::from_vec(
+            theta[at..at + n].to_vec(),
+            v.shape(),
+            v.device(),
+        )?)?;
+        at += n;
+    }
+    if at != theta.len() {
+        bail!("{} parameters given, the model has {at}", theta.len());
+    }
+    Ok(())
+}
+
+/// A candle loss `loss(indices)` over a store, differentiated by candle's
+/// autodiff: the reference engine, and the one the baselines use.
+pub struct CandleObjective<'a, F> {
+    store: &'a ParamStore,
+    loss: F,
+}
+
+impl<'a, F: Fn(&[usize]) -> Result<Tensor>> CandleObjective<'a, F> {
+    /// The objective of `loss` on `store`'s parameters.
+    pub fn new(store: &'a ParamStore, loss: F) -> Self {
+        Self { store, loss }
+    }
+}
+
+impl<F: Fn(&[usize]) -> Result<Tensor>> Objective for CandleObjective<'_, F> {
+    fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64> {
+        set_flat_params(self.store, theta)?;
+        let l = (self.loss)(idx)?;
+        let value = l.to_scalar::<f64>()?;
+        let grads = l.backward()?;
+        let mut at = 0;
+        for var in self.store.vars() {
+            let n = var.elem_count();
+            match grads.get(&var) {
+                Some(g) => grad[at..at + n].copy_from_slice(&g.flatten_all()?.to_vec1::<f64>()?),
+                // Parameters the loss does not read have no gradient.
+                None => grad[at..at + n].fill(0.0),
+            }
+            at += n;
+        }
+        Ok(value)
+    }
+
+    fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64> {
+        set_flat_params(self.store, theta)?;
+        let mut total = 0.0;
+        for chunk in idx.chunks(1000) {
+            total += (self.loss)(chunk)?.to_scalar::<f64>()? * chunk.len() as f64;
+        }
+        Ok(total / idx.len() as f64)
+    }
+}
+
+/// The hand-written engine on one graph's states and target accelerations.
+pub struct EngineObjective<'a> {
+    engine: &'a mut Engine,
+    states: &'a [State],
+    targets: &'a [Vec<f64>],
+}
+
+impl<'a> EngineObjective<'a> {
+    /// The objective of `engine` on these states and targets.
+    pub fn new(engine: &'a mut Engine, states: &'a [State], targets: &'a [Vec<f64>]) -> Self {
+        Self {
+            engine,
+            states,
+            targets,
+        }
+    }
+}
+
+impl Objective for EngineObjective<'_> {
+    fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64> {
+        Ok(self
+            .engine
+            .loss_grad(theta, self.states, self.targets, idx, grad))
+    }
+
+    fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64> {
+        Ok(self.engine.loss(theta, self.states, self.targets, idx))
     }
 }
 
@@ -162,16 +264,15 @@ pub fn check_data(
 }
 
 /// The loop every trainable model shares: a seeded split of `n` samples
-/// (validation fraction from `cfg`), shuffled batches, Adam on `store`,
-/// validation after every epoch, early stopping; the best weights are loaded
-/// back into `store`. `loss(indices)` is the mean loss over those samples;
-/// `on_epoch` returns false to cancel.
+/// (validation fraction from `cfg`), shuffled batches, Adam on the flat
+/// parameters `theta`, validation after every epoch, early stopping; the best
+/// parameters are left in `theta`. `on_epoch` returns false to cancel.
 pub fn fit(
-    store: &ParamStore,
+    theta: &mut [f64],
     n: usize,
     cfg: &TrainConfig,
     rng: &mut ChaCha8Rng,
-    loss: impl Fn(&[usize]) -> Result<Tensor>,
+    objective: &mut impl Objective,
     mut on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainingReport> {
     let mut order: Vec<usize> = (0..n).collect();
@@ -179,17 +280,11 @@ pub fn fit(
     let n_val = ((n as f64 * cfg.validation).round() as usize).clamp(1, n - 1);
     let (val_idx, train_idx) = order.split_at(n_val);
     let mut train_idx = train_idx.to_vec();
-    let validation = |idx: &[usize]| -> Result<f64> {
-        let mut total = 0.0;
-        for chunk in idx.chunks(1000) {
-            total += loss(chunk)?.to_scalar::<f64>()? * chunk.len() as f64;
-        }
-        Ok(total / idx.len() as f64)
-    };
-    let mut adam = Adam::new(cfg.lr, store);
+    let mut adam = Adam::new(cfg.lr, theta.len());
+    let mut grad = vec![0.0; theta.len()];
     let start = Instant::now();
     let mut best = f64::INFINITY;
-    let mut best_weights: Weights = store.weights()?;
+    let mut best_theta = theta.to_vec();
     let (mut best_epoch, mut best_train) = (0, f64::NAN);
     let mut epochs_run = 0;
     let mut stopped_early = false;
@@ -197,17 +292,16 @@ pub fn fit(
         train_idx.shuffle(rng);
         let (mut sum, mut count) = (0.0, 0usize);
         for chunk in train_idx.chunks(cfg.batch) {
-            let l = loss(chunk)?;
-            let lv = l.to_scalar::<f64>()?;
+            let lv = objective.loss_grad(theta, chunk, &mut grad)?;
             if !lv.is_finite() {
                 bail!("training diverged at epoch {epoch} (loss {lv})");
             }
-            adam.step(store, &l.backward()?)?;
+            adam.step(theta, &grad);
             sum += lv * chunk.len() as f64;
             count += chunk.len();
         }
         let train_loss = sum / count as f64;
-        let val = validation(val_idx)?;
+        let val = objective.loss(theta, val_idx)?;
         epochs_run = epoch;
         if !val.is_finite() {
             bail!("validation loss is not finite at epoch {epoch}");
@@ -216,7 +310,7 @@ pub fn fit(
             best = val;
             best_epoch = epoch;
             best_train = train_loss;
-            best_weights = store.weights()?;
+            best_theta.copy_from_slice(theta);
         }
         let report = EpochReport {
             epoch,
@@ -234,7 +328,7 @@ pub fn fit(
             break;
         }
     }
-    store.load(&best_weights)?;
+    theta.copy_from_slice(&best_theta);
     Ok(TrainingReport {
         seed: cfg.seed,
         epochs_requested: cfg.epochs,
@@ -294,15 +388,41 @@ pub fn train(
 ) -> Result<Trained> {
     check_data(graph, states, acc, cfg)?;
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+    // Both engines start from the same seeded initialisation.
     let net = Net::new(hyper, &mut rng)?;
-    let plan = GraphPlan::new(graph);
-    let loss = |idx: &[usize]| -> Result<Tensor> {
-        let s: Vec<&State> = idx.iter().map(|&i| &states[i]).collect();
-        let a: Vec<&[f64]> = idx.iter().map(|&i| acc[i].as_slice()).collect();
-        net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?)
+    let report = match cfg.engine {
+        EngineKind::Candle => {
+            let plan = GraphPlan::new(graph);
+            let loss = |idx: &[usize]| -> Result<Tensor> {
+                let s: Vec<&State> = idx.iter().map(|&i| &states[i]).collect();
+                let a: Vec<&[f64]> = idx.iter().map(|&i| acc[i].as_slice()).collect();
+                net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?)
+            };
+            let mut theta = flat_params(&net.store)?;
+            let mut obj = CandleObjective::new(&net.store, loss);
+            let report = fit(&mut theta, states.len(), cfg, &mut rng, &mut obj, on_epoch)?;
+            set_flat_params(&net.store, &theta)?;
+            report
+        }
+        EngineKind::Native => {
+            let mut engine = Engine::new(&net.hyper, graph, cfg.threads)?;
+            let mut theta = engine.layout().flatten(&net.store.weights()?)?;
+            let mut obj = EngineObjective::new(&mut engine, states, acc);
+            let report = fit(&mut theta, states.len(), cfg, &mut rng, &mut obj, on_epoch)?;
+            net.store.load(&engine.layout().weights(&theta))?;
+            report
+        }
     };
-    let report = fit(&net.store, states.len(), cfg, &mut rng, loss, on_epoch)?;
     Ok(Trained { net, report })
+}
+
+/// Which engine computes the GNODE family's gradients.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum EngineKind {
+    /// Hand-written reverse mode on the kernel's layout, over all cores (default).
+    Native,
+    /// Candle's autodiff: the reference.
+    Candle,
 }
 
 /// Whether MCGNODE learns a body-force branch.

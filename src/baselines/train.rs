@@ -10,7 +10,9 @@ use super::trained::TrainedBaseline;
 use crate::model::batch::Batch;
 use crate::model::plan::GraphPlan;
 use crate::system::{Graph, State};
-use crate::train::{check_data, fit, EpochReport, TrainConfig};
+use crate::train::{
+    check_data, fit, flat_params, set_flat_params, CandleObjective, EpochReport, TrainConfig,
+};
 use anyhow::{bail, Result};
 use candle_core::Tensor;
 use rand::SeedableRng;
@@ -40,7 +42,10 @@ pub fn train_baseline(
         let a: Vec<&[f64]> = idx.iter().map(|&i| acc[i].as_slice()).collect();
         net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?, masses)
     };
-    let training = fit(&net.store, states.len(), cfg, &mut rng, loss, on_epoch)?;
+    let mut theta = flat_params(&net.store)?;
+    let mut obj = CandleObjective::new(&net.store, loss);
+    let training = fit(&mut theta, states.len(), cfg, &mut rng, &mut obj, on_epoch)?;
+    set_flat_params(&net.store, &theta)?;
     let file = BaselineFile {
         format: FORMAT.to_string(),
         crate_version: env!("CARGO_PKG_VERSION").to_string(),

@@ -5,6 +5,7 @@
 
 mod dense;
 
+use crate::model::arch::{Arch, Block, LOG_MASS};
 use crate::model::mlp::squareplus_f64;
 use crate::model::params::Weights;
 use crate::model::plan::{BarEnd, GraphPlan};
@@ -72,31 +73,27 @@ impl Kernel {
             &mut rand_chacha::ChaCha8Rng::seed_from_u64(0),
         )?;
         reference.store.load(w)?;
-        let ld = |n: &str| KMlp::load(w, n);
+        let arch = Arch::new(hyper);
+        let ld = |b: Block| KMlp::load(w, &b.prefix());
         let mut rounds = vec![];
-        let graph_rounds = if hyper.variant.biases().graph {
-            hyper.rounds
-        } else {
-            0
-        };
-        for l in 0..graph_rounds {
-            let v = ld(&format!("mp{l}.v"))?.with_context(|| format!("missing round {l}"))?;
-            let e = ld(&format!("mp{l}.e"))?.with_context(|| format!("missing round {l}"))?;
+        for l in 0..arch.rounds {
+            let v = ld(Block::Message(l))?.with_context(|| format!("missing round {l}"))?;
+            let e = ld(Block::EdgeUpdate(l))?.with_context(|| format!("missing round {l}"))?;
             rounds.push((v, e));
         }
         let inv_mass = w
-            .get("log_mass")
+            .get(LOG_MASS)
             .map(|a| a.data.iter().map(|x| (-x).exp()).collect());
         let k = Self {
             hyper: hyper.clone(),
-            node_mlp: ld("node")?,
-            node_em: ld("node_em")?,
-            edge_em: ld("edge_em")?,
+            node_mlp: ld(Block::Flat)?,
+            node_em: ld(Block::NodeEmbed)?,
+            edge_em: ld(Block::EdgeEmbed)?,
             rounds,
-            node_out: ld("node_out")?,
-            glob_em: ld("glob_em")?,
-            edge_out: ld("edge_out")?,
-            body_out: ld("body_out")?,
+            node_out: ld(Block::NodeDecoder)?,
+            glob_em: ld(Block::GlobalEmbed)?,
+            edge_out: ld(Block::EdgeDecoder)?,
+            body_out: ld(Block::BodyDecoder)?,
             inv_mass,
         };
         let b = hyper.variant.biases();

@@ -1,6 +1,7 @@
 //! Learned dynamics: the GNODE family and NODE in candle (training), and the
 //! model file that hands trained weights to the inference kernel.
 
+pub mod arch;
 pub mod batch;
 pub mod mlp;
 pub mod net;
@@ -9,6 +10,7 @@ pub mod plan;
 pub mod solve;
 pub mod variant;
 
+pub use arch::{Arch, Block};
 pub use net::Net;
 pub use variant::{Hyper, Variant};
 pub mod file;
