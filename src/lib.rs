@@ -6,6 +6,7 @@
 //! Data flows one way: [`physics`] → [`data`] (bags) → `model` + `train` →
 //! model file → `kernel` + `rollout` → [`data`] → `metrics`.
 
+pub mod alloc;
 pub mod baselines;
 pub mod bench;
 pub mod cli;

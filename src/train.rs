@@ -14,6 +14,7 @@ use candle_core::Tensor;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 use std::time::Instant;
 
 /// Training settings.
@@ -161,44 +162,115 @@ pub fn set_flat_params(store: &ParamStore, theta: &[f64]) -> Result<()> {
 }
 
 /// A candle loss `loss(indices)` over a store, differentiated by candle's
-/// autodiff: the reference engine, and the one the baselines use.
+/// autodiff: the reference engine, and the one the baselines use. With more
+/// than one thread, a batch is cut into one chunk per thread whose gradients
+/// are summed in order (so results depend on the thread count only through
+/// rounding); candle itself runs each chunk on one thread.
 pub struct CandleObjective<'a, F> {
     store: &'a ParamStore,
     loss: F,
+    pool: Option<rayon::ThreadPool>,
+    threads: usize,
 }
 
-impl<'a, F: Fn(&[usize]) -> Result<Tensor>> CandleObjective<'a, F> {
-    /// The objective of `loss` on `store`'s parameters.
+impl<'a, F: Fn(&[usize]) -> Result<Tensor> + Sync> CandleObjective<'a, F> {
+    /// The objective of `loss` on `store`'s parameters, on one thread.
     pub fn new(store: &'a ParamStore, loss: F) -> Self {
-        Self { store, loss }
+        Self {
+            store,
+            loss,
+            pool: None,
+            threads: 1,
+        }
+    }
+
+    /// The same, with batches cut over `threads` threads.
+    pub fn with_threads(store: &'a ParamStore, loss: F, threads: usize) -> Result<Self> {
+        let threads = threads.max(1);
+        let pool = if threads > 1 {
+            Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()?,
+            )
+        } else {
+            None
+        };
+        Ok(Self {
+            store,
+            loss,
+            pool,
+            threads,
+        })
+    }
+
+    /// Mean loss and its gradient over one chunk.
+    fn chunk(&self, idx: &[usize], with_grad: bool) -> Result<(f64, Vec<f64>)> {
+        let l = (self.loss)(idx)?;
+        let value = l.to_scalar::<f64>()?;
+        let mut out = vec![];
+        if with_grad {
+            let grads = l.backward()?;
+            for var in self.store.vars() {
+                match grads.get(&var) {
+                    Some(g) => out.extend(g.flatten_all()?.to_vec1::<f64>()?),
+                    // Parameters the loss does not read have no gradient.
+                    None => out.extend(std::iter::repeat_n(0.0, var.elem_count())),
+                }
+            }
+        }
+        Ok((value, out))
+    }
+
+    /// The chunks of `idx` (at most `max` samples each, at least one per
+    /// thread when there are enough), evaluated in order.
+    fn chunks(
+        &self,
+        idx: &[usize],
+        max: usize,
+        with_grad: bool,
+    ) -> Result<Vec<(usize, f64, Vec<f64>)>> {
+        let size = idx.len().div_ceil(self.threads).clamp(1, max);
+        let parts: Vec<&[usize]> = idx.chunks(size).collect();
+        let run = |c: &&[usize]| -> Result<(usize, f64, Vec<f64>)> {
+            let (l, g) = self.chunk(c, with_grad)?;
+            Ok((c.len(), l, g))
+        };
+        match &self.pool {
+            Some(pool) if parts.len() > 1 => pool.install(|| parts.par_iter().map(run).collect()),
+            _ => parts.iter().map(run).collect(),
+        }
     }
 }
 
-impl<F: Fn(&[usize]) -> Result<Tensor>> Objective for CandleObjective<'_, F> {
+impl<F: Fn(&[usize]) -> Result<Tensor> + Sync> Objective for CandleObjective<'_, F> {
     fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64> {
         set_flat_params(self.store, theta)?;
-        let l = (self.loss)(idx)?;
-        let value = l.to_scalar::<f64>()?;
-        let grads = l.backward()?;
-        let mut at = 0;
-        for var in self.store.vars() {
-            let n = var.elem_count();
-            match grads.get(&var) {
-                Some(g) => grad[at..at + n].copy_from_slice(&g.flatten_all()?.to_vec1::<f64>()?),
-                // Parameters the loss does not read have no gradient.
-                None => grad[at..at + n].fill(0.0),
-            }
-            at += n;
+        let n = idx.len() as f64;
+        let parts = self.chunks(idx, usize::MAX, true)?;
+        if let [(_, l, g)] = parts.as_slice() {
+            grad.copy_from_slice(g);
+            return Ok(*l);
         }
-        Ok(value)
+        grad.fill(0.0);
+        let mut total = 0.0;
+        for (len, l, g) in parts {
+            let w = len as f64 / n;
+            total += l * w;
+            for (x, y) in grad.iter_mut().zip(&g) {
+                *x += y * w;
+            }
+        }
+        Ok(total)
     }
 
     fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64> {
         set_flat_params(self.store, theta)?;
-        let mut total = 0.0;
-        for chunk in idx.chunks(1000) {
-            total += (self.loss)(chunk)?.to_scalar::<f64>()? * chunk.len() as f64;
-        }
+        let total: f64 = self
+            .chunks(idx, 1000, false)?
+            .iter()
+            .map(|(len, l, _)| l * *len as f64)
+            .sum();
         Ok(total / idx.len() as f64)
     }
 }

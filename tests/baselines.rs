@@ -298,6 +298,30 @@ fn loss_of(net: &BaselineNet, b: &Batch, g: &Graph) -> f64 {
     net.loss(b, &g.masses).unwrap().to_scalar::<f64>().unwrap()
 }
 
+/// LGN's accelerations with the Hessian taken as the learned mass (exact for
+/// its Lagrangian) equal the generic Euler–Lagrange ones, with and without bars.
+#[test]
+fn lgn_shortcut_equals_generic_euler_lagrange() {
+    for (sys, n) in [(SystemKind::Spring, 5), (SystemKind::Pendulum, 4)] {
+        let (g, s, _) = dataset(sys, n, 1, 4);
+        let plan = GraphPlan::new(&g);
+        let refs: Vec<&State> = s.iter().step_by(9).collect();
+        let b = Batch::new(&plan, &refs, None, 1).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+        let net = BaselineNet::new(BaselineHyper::new(Kind::Lgn, 2, 1), &mut rng).unwrap();
+        let lm = net.store.get("log_mass").unwrap();
+        lm.set(&Tensor::new(&[0.4f64], &Device::Cpu).unwrap())
+            .unwrap();
+        let flat = |t: Tensor| t.flatten_all().unwrap().to_vec1::<f64>().unwrap();
+        let fast = flat(mcgnode::baselines::lgn::acceleration(&net, &b).unwrap());
+        let generic = flat(mcgnode::baselines::lgn::acceleration_generic(&net, &b).unwrap());
+        let scale = generic.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(scale > 0.0);
+        let d = max_diff(&fast, &generic);
+        assert!(d <= 1e-12 * scale, "{sys:?}: shortcut vs generic {d:.2e}");
+    }
+}
+
 /// d loss/dθ by candle (through the derivative of the learned scalar) against
 /// central finite differences, for a few entries of several parameters.
 #[test]

@@ -30,6 +30,7 @@ pub fn train_baseline(
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainedBaseline> {
     check_data(graph, states, acc, cfg)?;
+    crate::alloc::keep_freed_memory();
     if graph.dim != hyper.dim {
         bail!("the model is {}D, the data {}D", hyper.dim, graph.dim);
     }
@@ -43,7 +44,7 @@ pub fn train_baseline(
         net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?, masses)
     };
     let mut theta = flat_params(&net.store)?;
-    let mut obj = CandleObjective::new(&net.store, loss);
+    let mut obj = CandleObjective::with_threads(&net.store, loss, cfg.threads)?;
     let training = fit(&mut theta, states.len(), cfg, &mut rng, &mut obj, on_epoch)?;
     set_flat_params(&net.store, &theta)?;
     let file = BaselineFile {

@@ -1,7 +1,7 @@
 //! `mcgnode train`.
 
 use crate::baselines::{train_any_from_bags, ModelKind};
-use crate::train::{BodyForce, EpochReport, ModelOptions, TrainConfig};
+use crate::train::{BodyForce, EngineKind, EpochReport, ModelOptions, TrainConfig};
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
@@ -54,6 +54,14 @@ pub struct Args {
     /// MCGNODE body-force branch: auto (off for closed systems), on, off.
     #[arg(long, value_enum, default_value_t = BodyForce::Auto)]
     pub body_force: BodyForce,
+    /// Gradient engine of the GNODE family: native (hand-written, all
+    /// cores) or candle (the autodiff reference). Baselines always use candle.
+    #[arg(long, value_enum, default_value_t = EngineKind::Native)]
+    pub engine: EngineKind,
+    /// Training threads of the native engine (default: all cores). The
+    /// trained weights do not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
     /// Print nothing but errors.
     #[arg(long)]
     pub quiet: bool,
@@ -107,6 +115,8 @@ pub fn run(a: Args) -> Result<()> {
         seed: a.seed,
         noise: a.noise,
         points: a.points,
+        engine: a.engine,
+        threads: a.threads.unwrap_or_else(crate::engine::all_cores),
         ..TrainConfig::default()
     };
     let opts = ModelOptions {
