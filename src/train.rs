@@ -7,7 +7,7 @@ use crate::model::batch::Batch;
 use crate::model::file::TrainingReport;
 use crate::model::params::ParamStore;
 use crate::model::plan::GraphPlan;
-use crate::model::{Hyper, Net};
+use crate::model::{ArchPreset, EdgeInput, Hyper, MessageFn, Net, Variant};
 use crate::system::{Graph, State};
 use anyhow::{bail, Result};
 use candle_core::Tensor;
@@ -521,6 +521,16 @@ pub struct ModelOptions {
     pub body_force: BodyForce,
     /// One-hot width; default: largest type in the data + 1.
     pub types: Option<usize>,
+    /// Architecture preset (the authors' code by default).
+    pub arch: ArchPreset,
+    /// Hidden layers per graph MLP, overriding the preset.
+    pub hidden_layers: Option<usize>,
+    /// Message functions, overriding the preset.
+    pub message: Option<MessageFn>,
+    /// Edge-update input, overriding the preset.
+    pub edge_input: Option<EdgeInput>,
+    /// Per-block hidden sizes (block weight prefix → sizes).
+    pub block_hidden: std::collections::BTreeMap<String, Vec<usize>>,
 }
 
 impl Default for ModelOptions {
@@ -531,7 +541,48 @@ impl Default for ModelOptions {
             rounds: 1,
             body_force: BodyForce::Auto,
             types: None,
+            arch: ArchPreset::Authors,
+            hidden_layers: None,
+            message: None,
+            edge_input: None,
+            block_hidden: Default::default(),
         }
+    }
+}
+
+impl ModelOptions {
+    /// The hyperparameters these options give a variant on a `dim`-D graph of
+    /// `particles` particles with `types` types (body force left on).
+    pub fn hyper(
+        &self,
+        variant: Variant,
+        dim: usize,
+        types: usize,
+        particles: usize,
+    ) -> Result<Hyper> {
+        let mut h = Hyper::new(variant, dim, types, particles).with_preset(self.arch);
+        h.hidden = self.hidden;
+        h.embed = self.embed;
+        h.rounds = self.rounds;
+        h.hidden_layers = self.hidden_layers.unwrap_or(h.hidden_layers);
+        h.message = self.message.unwrap_or(h.message);
+        h.edge_input = self.edge_input.unwrap_or(h.edge_input);
+        h.block_hidden = self.block_hidden.clone();
+        let known: Vec<String> = crate::model::Arch::new(&h)
+            .mlps
+            .iter()
+            .map(|(b, _)| b.prefix())
+            .collect();
+        if let Some(bad) = h.block_hidden.keys().find(|k| !known.contains(k)) {
+            bail!(
+                "--block-hidden names block {bad:?}, which a {variant} model does not have (it has: {})",
+                known.join(", ")
+            );
+        }
+        if h.hidden == 0 || h.embed == 0 {
+            bail!("--hidden and --embed must be positive");
+        }
+        Ok(h)
     }
 }
 
@@ -633,10 +684,7 @@ pub fn train_from_bags(
             .max()
             .unwrap_or(1),
     );
-    let mut hyper = Hyper::new(variant, ds.graph.dim, types, ds.graph.n());
-    hyper.hidden = opts.hidden;
-    hyper.embed = opts.embed;
-    hyper.rounds = opts.rounds;
+    let mut hyper = opts.hyper(variant, ds.graph.dim, types, ds.graph.n())?;
     hyper.body_force = match opts.body_force {
         BodyForce::On => true,
         BodyForce::Off => false,

@@ -1,13 +1,13 @@
 //! The hand-written training engine against candle's autodiff and against
 //! finite differences, for every variant × {2D, 3D} × {body force on, off} ×
-//! {ring, chain with anchor, branched tree of bars, 3D lattice} at sizes the
-//! models were not built for; bit-identical weights whatever the thread
+//! {ring, chain with anchor, branched tree of bars, 3D lattice} × {the
+//! authors' architecture, the paper text's} at sizes the models were not built for; bit-identical weights whatever the thread
 //! count; and both engines ending a seeded training at the same loss.
 
 use mcgnode::engine::Engine;
 use mcgnode::model::batch::Batch;
 use mcgnode::model::plan::GraphPlan;
-use mcgnode::model::{Hyper, Net, TrainedModel, Variant};
+use mcgnode::model::{ArchPreset, Hyper, Net, TrainedModel, Variant};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Edge, EdgeKind, Endpoint, Graph, State};
 use mcgnode::train::{train, EngineKind, TrainConfig};
@@ -148,17 +148,19 @@ fn cases() -> Vec<Case> {
     for (gi, (gname, g)) in graphs.into_iter().enumerate() {
         for v in Variant::ALL {
             for body in [true, false] {
-                // Graph models are built for 5 particles and run on other sizes;
-                // NODE is not inductive.
-                let particles = if v == Variant::Node { g.n() } else { 5 };
-                let mut h = Hyper::new(v, g.dim, 2, particles);
-                h.body_force = body;
-                h.rounds = 1 + gi % 2;
-                out.push(Case {
-                    name: format!("{v} {gname} body={body} rounds={}", h.rounds),
-                    graph: g.clone(),
-                    hyper: h,
-                });
+                for preset in [ArchPreset::Authors, ArchPreset::Paper] {
+                    // Graph models are built for 5 particles and run on other
+                    // sizes; NODE is not inductive.
+                    let particles = if v == Variant::Node { g.n() } else { 5 };
+                    let mut h = Hyper::new(v, g.dim, 2, particles).with_preset(preset);
+                    h.body_force = body;
+                    h.rounds = 1 + gi % 2;
+                    out.push(Case {
+                        name: format!("{v} {gname} body={body} rounds={} {preset:?}", h.rounds),
+                        graph: g.clone(),
+                        hyper: h,
+                    });
+                }
             }
         }
     }

@@ -8,6 +8,7 @@ use super::layout::Layout;
 use crate::model::arch::{Arch, Block, Decoder, NodeInput};
 use crate::model::plan::{BarEnd, GraphPlan};
 use crate::model::solve::lu_solve_in_place;
+use crate::model::variant::EdgeInput;
 use crate::system::State;
 
 /// The read-only part: architecture, parameter offsets, graph.
@@ -86,6 +87,8 @@ pub(crate) struct Chunk {
     he: Vec<Vec<f64>>,
     hs: Vec<Vec<f64>>,
     hr: Vec<Vec<f64>>,
+    /// h_i ⊙ h_j per round (product edge updates).
+    hp: Vec<Vec<f64>>,
     msg: Vec<f64>,
     agg: Vec<f64>,
     glob: Vec<f64>,
@@ -112,6 +115,7 @@ pub(crate) struct Chunk {
     ghe_prev: Vec<f64>,
     gs: Vec<f64>,
     gr: Vec<f64>,
+    gp: Vec<f64>,
     gz: Vec<f64>,
     gmsg: Vec<f64>,
     gglob: Vec<f64>,
@@ -158,6 +162,8 @@ impl Chunk {
             he: (0..=a.rounds).map(|_| z(em * edges)).collect(),
             hs: (0..a.rounds).map(|_| z(em * edges)).collect(),
             hr: (0..a.rounds).map(|_| z(em * edges)).collect(),
+            hp: (0..a.rounds).map(|_| z(em * edges)).collect(),
+            gp: z(em * edges),
             msg: z(em * edges),
             agg: z(em * nodes),
             glob: z(em * nodes),
@@ -435,7 +441,17 @@ impl Chunk {
             if a.updates_edges(l) {
                 // h_ij ← sqp(h_ij + W_E(h_i ‖ h_j)), from the node states before the round.
                 let i = m.ix(Block::EdgeUpdate(l)).expect("round");
-                m.mlp(i).forward(th, hr, hs, edges, &mut self.tapes[i], hen);
+                let tape = &mut self.tapes[i];
+                match a.edge_input {
+                    EdgeInput::Concat => m.mlp(i).forward(th, hr, hs, edges, tape, hen),
+                    EdgeInput::Product => {
+                        let hp = &mut self.hp[l][..em * edges];
+                        for ((p, r), s) in hp.iter_mut().zip(hr.iter()).zip(hs.iter()) {
+                            *p = r * s;
+                        }
+                        m.mlp(i).forward(th, hp, &[], edges, tape, hen);
+                    }
+                }
                 for (x, old) in hen.iter_mut().zip(hel) {
                     *x += old;
                 }
@@ -771,19 +787,26 @@ impl Chunk {
                 gs.fill(0.0);
                 gr.fill(0.0);
                 let i = m.ix(Block::EdgeUpdate(l)).expect("round");
-                let gx = Some((&mut gr[..], &mut gs[..]));
-                m.mlp(i).backward(
-                    th,
-                    &mut self.grad,
-                    hr,
-                    hs,
-                    edges,
-                    &self.tapes[i],
-                    gz,
-                    gx,
-                    s1,
-                    s2,
-                );
+                let (tape, grad) = (&self.tapes[i], &mut self.grad);
+                match a.edge_input {
+                    EdgeInput::Concat => {
+                        let gx = Some((&mut gr[..], &mut gs[..]));
+                        m.mlp(i)
+                            .backward(th, grad, hr, hs, edges, tape, gz, gx, s1, s2);
+                    }
+                    EdgeInput::Product => {
+                        // ∂(h_i ⊙ h_j): ḡ_i = ḡ ⊙ h_j, ḡ_j = ḡ ⊙ h_i.
+                        let (hp, gp) = (&self.hp[l][..em * edges], &mut self.gp[..em * edges]);
+                        gp.fill(0.0);
+                        let gx = Some((&mut gp[..], &mut [][..]));
+                        m.mlp(i)
+                            .backward(th, grad, hp, &[], edges, tape, gz, gx, s1, s2);
+                        for (k, g) in gp.iter().enumerate() {
+                            gr[k] = g * hs[k];
+                            gs[k] = g * hr[k];
+                        }
+                    }
+                }
                 for k in 0..em {
                     for e in 0..edges {
                         ghp[k * nodes + self.recv[e]] += gr[k * edges + e];

@@ -10,7 +10,7 @@ use crate::model::mlp::squareplus_f64;
 use crate::model::params::Weights;
 use crate::model::plan::{BarEnd, GraphPlan};
 use crate::model::solve::lu_solve_in_place;
-use crate::model::variant::Hyper;
+use crate::model::variant::{EdgeInput, Hyper};
 use crate::system::Graph;
 use anyhow::{bail, Context, Result};
 use dense::Mlp as KMlp;
@@ -29,6 +29,7 @@ pub struct Kernel {
     edge_out: Option<KMlp>,
     body_out: Option<KMlp>,
     inv_mass: Option<Vec<f64>>,
+    edge_input: EdgeInput,
 }
 
 /// Buffers for one graph; reused across steps so that the loop allocates nothing.
@@ -95,6 +96,7 @@ impl Kernel {
             edge_out: ld(Block::EdgeDecoder)?,
             body_out: ld(Block::BodyDecoder)?,
             inv_mass,
+            edge_input: arch.edge_input,
         };
         let b = hyper.variant.biases();
         let ok = if b.graph {
@@ -280,7 +282,18 @@ impl Kernel {
             }
             if edges_needed {
                 // h_ij ← sqp(h_ij + W_E (h_i ‖ h_j)), from the node states before this round.
-                we.forward(&ws.hr, &ws.hs, ne, &mut ws.he_new, &mut ws.t1, &mut ws.t2);
+                match self.edge_input {
+                    EdgeInput::Concat => {
+                        we.forward(&ws.hr, &ws.hs, ne, &mut ws.he_new, &mut ws.t1, &mut ws.t2)
+                    }
+                    EdgeInput::Product => {
+                        // h_i ⊙ h_j into `msg`, free at this point of the round.
+                        for ((p, r), s) in ws.msg.iter_mut().zip(&ws.hr).zip(&ws.hs) {
+                            *p = r * s;
+                        }
+                        we.forward(&ws.msg, &[], ne, &mut ws.he_new, &mut ws.t1, &mut ws.t2)
+                    }
+                }
                 for (x, old) in ws.he_new.iter_mut().zip(&ws.he) {
                     *x = squareplus_f64(*x + old);
                 }

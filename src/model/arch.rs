@@ -5,7 +5,7 @@
 //! read it, so adding a bias means changing this description and one stage in
 //! each executor, and no weight name is spelled twice.
 
-use super::variant::{Biases, Hyper};
+use super::variant::{Biases, EdgeInput, Hyper, MessageFn};
 use std::fmt;
 
 /// The parameter holding learnable log-masses, one per particle type.
@@ -110,6 +110,8 @@ pub struct Arch {
     pub constrained: bool,
     /// NODE: the particle count it was built for.
     pub particles: usize,
+    /// What the edge update reads from its end nodes.
+    pub edge_input: EdgeInput,
     /// The biases it was derived from.
     pub biases: Biases,
 }
@@ -132,6 +134,22 @@ impl Arch {
             Decoder::Node { global: body }
         };
         let rounds = if b.graph { h.rounds } else { 0 };
+        // Layer sizes of a block: its override, or `hidden` × `hidden_layers`.
+        let mlp = |block: Block, inp: usize, out: usize, hidden: bool| {
+            let mut sizes = vec![inp];
+            match h.block_hidden.get(&block.prefix()) {
+                Some(hs) => sizes.extend(hs),
+                None if hidden => sizes.extend(std::iter::repeat_n(hid, h.hidden_layers)),
+                None => {}
+            }
+            sizes.push(out);
+            (block, sizes)
+        };
+        let msg_hidden = h.message == MessageFn::Mlp;
+        let edge_in = match h.edge_input {
+            EdgeInput::Concat => 2 * em,
+            EdgeInput::Product => em,
+        };
         if !b.graph {
             let io = h.particles * d;
             let mut sizes = vec![2 * io];
@@ -143,25 +161,25 @@ impl Arch {
                 NodeInput::TypeOnly => t,
                 NodeInput::Full => t + 2 * d,
             };
-            mlps.push((Block::NodeEmbed, vec![node_in, hid, em]));
-            mlps.push((Block::EdgeEmbed, vec![d, hid, em]));
+            mlps.push(mlp(Block::NodeEmbed, node_in, em, true));
+            mlps.push(mlp(Block::EdgeEmbed, d, em, true));
             for l in 0..rounds {
-                mlps.push((Block::Message(l), vec![2 * em, em]));
-                mlps.push((Block::EdgeUpdate(l), vec![2 * em, em]));
+                mlps.push(mlp(Block::Message(l), 2 * em, em, msg_hidden));
+                mlps.push(mlp(Block::EdgeUpdate(l), edge_in, em, msg_hidden));
             }
             if body {
-                mlps.push((Block::GlobalEmbed, vec![t + 2 * d, hid, em]));
+                mlps.push(mlp(Block::GlobalEmbed, t + 2 * d, em, true));
             }
             match decoder {
                 Decoder::Pairwise { body } => {
-                    mlps.push((Block::EdgeDecoder, vec![em, hid, d]));
+                    mlps.push(mlp(Block::EdgeDecoder, em, d, true));
                     if body {
-                        mlps.push((Block::BodyDecoder, vec![em, hid, d]));
+                        mlps.push(mlp(Block::BodyDecoder, em, d, true));
                     }
                 }
                 Decoder::Node { global } => {
                     let inp = if global { 2 * em } else { em };
-                    mlps.push((Block::NodeDecoder, vec![inp, hid, d]));
+                    mlps.push(mlp(Block::NodeDecoder, inp, d, true));
                 }
             }
         }
@@ -175,6 +193,7 @@ impl Arch {
             decoder,
             constrained: b.constrained,
             particles: h.particles,
+            edge_input: h.edge_input,
             biases: b,
         }
     }

@@ -5,7 +5,7 @@ use super::batch::Batch;
 use super::mlp::{squareplus, Mlp};
 use super::params::ParamStore;
 use super::solve::solve;
-use super::variant::{Hyper, Variant};
+use super::variant::{EdgeInput, Hyper, Variant};
 use anyhow::{bail, Result};
 use candle_core::{DType, Device, Tensor};
 use rand::Rng;
@@ -124,7 +124,11 @@ impl Net {
                 let msg = wv.forward(s, &Tensor::cat(&[&hs, e], 1)?)?;
                 let agg = Tensor::zeros((nodes, arch.embed), DType::F64, &Device::Cpu)?
                     .index_add(&b.recv, &msg, 0)?;
-                let e_new = squareplus(&(e + we.forward(s, &Tensor::cat(&[&hr, &hs], 1)?)?)?)?;
+                let ends = match arch.edge_input {
+                    EdgeInput::Concat => Tensor::cat(&[&hr, &hs], 1)?,
+                    EdgeInput::Product => (&hr * &hs)?,
+                };
+                let e_new = squareplus(&(e + we.forward(s, &ends)?)?)?;
                 h = squareplus(&(h + agg)?)?;
                 he = Some(e_new);
             } else {

@@ -216,10 +216,16 @@ impl Dynamics for TrainedModel {
             return Ok(run(starts));
         }
         let groups: Vec<Vec<Rollout>> = std::thread::scope(|s| {
-            let handles: Vec<_> = starts.chunks(per).map(|g| s.spawn(move || run(g))).collect();
+            let handles: Vec<_> = starts
+                .chunks(per)
+                .map(|g| s.spawn(move || run(g)))
+                .collect();
             handles
                 .into_iter()
-                .map(|h| h.join().map_err(|_| "a rollout thread panicked".to_string()))
+                .map(|h| {
+                    h.join()
+                        .map_err(|_| "a rollout thread panicked".to_string())
+                })
                 .collect::<Result<_, String>>()
         })?;
         Ok(groups.into_iter().flatten().collect())
