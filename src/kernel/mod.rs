@@ -11,6 +11,7 @@ use crate::model::params::Weights;
 use crate::model::plan::{BarEnd, GraphPlan};
 use crate::model::solve::lu_solve_in_place;
 use crate::model::variant::{EdgeInput, Hyper};
+use crate::physics::Projector;
 use crate::system::Graph;
 use anyhow::{bail, Context, Result};
 use dense::Mlp as KMlp;
@@ -30,6 +31,7 @@ pub struct Kernel {
     body_out: Option<KMlp>,
     inv_mass: Option<Vec<f64>>,
     edge_input: EdgeInput,
+    project_bars: bool,
 }
 
 /// Buffers for one graph; reused across steps so that the loop allocates nothing.
@@ -62,6 +64,9 @@ pub struct Workspace {
     dq: Vec<f64>,
     kmat: Vec<f64>,
     lambda: Vec<f64>,
+    /// SHAKE/RATTLE onto the bars with the learned masses, for rollouts of
+    /// constrained models on graphs with bars (see [`Kernel::set_project_bars`]).
+    pub projector: Option<Projector>,
 }
 
 impl Kernel {
@@ -97,6 +102,7 @@ impl Kernel {
             body_out: ld(Block::BodyDecoder)?,
             inv_mass,
             edge_input: arch.edge_input,
+            project_bars: true,
         };
         let b = hyper.variant.biases();
         let ok = if b.graph {
@@ -111,6 +117,20 @@ impl Kernel {
             bail!("weights do not match a {} model", hyper.variant);
         }
         Ok(k)
+    }
+
+    /// Whether rollouts project positions and velocities back onto the bars
+    /// every step (RATTLE with the learned masses; on by default). Without it
+    /// a learned rollout lets bar lengths drift by the integrator's error.
+    pub fn set_project_bars(&mut self, on: bool) {
+        self.project_bars = on;
+    }
+
+    /// Learned masses per particle type (constrained models).
+    pub fn learned_masses(&self) -> Option<Vec<f64>> {
+        self.inv_mass
+            .as_ref()
+            .map(|im| im.iter().map(|x| 1.0 / x).collect())
     }
 
     /// The hyperparameters.
@@ -185,6 +205,14 @@ impl Kernel {
             }
         }
         let k = plan.bars.len();
+        let projector = match self.learned_masses() {
+            Some(m) if self.project_bars && k > 0 => {
+                let mut g = graph.clone();
+                g.masses = g.types.iter().map(|&t| m[t as usize]).collect();
+                Some(Projector::new(&g))
+            }
+            _ => None,
+        };
         Ok(Workspace {
             x: vec![0.0; x_len],
             h: vec![0.0; em * n],
@@ -206,6 +234,7 @@ impl Kernel {
             dq: vec![0.0; k * d],
             kmat: vec![0.0; k * k],
             lambda: vec![0.0; k],
+            projector,
             plan,
         })
     }

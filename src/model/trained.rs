@@ -28,7 +28,8 @@ impl TrainedModel {
         Ok(Self { file, kernel })
     }
 
-    /// Velocity-Verlet rollout on the kernel, calling `visit(step, q, v)` for the
+    /// Velocity-Verlet rollout on the kernel (with SHAKE/RATTLE onto the bars,
+    /// using the learned masses, for constrained models), calling `visit(step, q, v)` for the
     /// start and every `every`-th step. Nothing is allocated inside the loop.
     pub fn rollout_with(
         &self,
@@ -66,15 +67,24 @@ impl TrainedModel {
         visit(0, &q, &v);
         let every = every.max(1);
         for step in 1..=steps {
+            if let Some(p) = ws.projector.as_mut() {
+                p.begin(&q);
+            }
             for i in 0..d {
                 q[i] += v[i] * dt + 0.5 * a[i] * dt * dt;
                 v[i] += 0.5 * a[i] * dt;
+            }
+            if let Some(p) = ws.projector.as_mut() {
+                p.shake(&mut q, &mut v, dt);
             }
             self.kernel.acceleration(ws, &q, &v, &mut a);
             let mut finite = true;
             for i in 0..d {
                 v[i] += 0.5 * a[i] * dt;
                 finite &= q[i].is_finite() && v[i].is_finite();
+            }
+            if let Some(p) = ws.projector.as_mut() {
+                p.rattle(&q, &mut v);
             }
             if !finite {
                 return Some(step);
