@@ -71,6 +71,7 @@ pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, 
             points: None,
         },
         weights: net.store.weights()?,
+        optimizer: None,
     };
     let m = TrainedModel::from_file(file)?;
     Ok((net, m))

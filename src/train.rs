@@ -4,12 +4,13 @@
 use crate::data::dataset::Dataset;
 use crate::engine::Engine;
 use crate::model::batch::Batch;
+use crate::model::file::AdamState;
 use crate::model::file::TrainingReport;
-use crate::model::params::ParamStore;
+use crate::model::params::{ParamStore, Weights};
 use crate::model::plan::GraphPlan;
 use crate::model::{ArchPreset, EdgeInput, Hyper, MessageFn, Net, Variant};
 use crate::system::{Graph, State};
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use candle_core::Tensor;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
@@ -45,6 +46,9 @@ pub struct TrainConfig {
     pub engine: EngineKind,
     /// Threads of the native engine; results do not depend on it.
     pub threads: usize,
+    /// Warm start: continue from this model's weights (and its Adam state when
+    /// it has one). Its hyperparameters must be the ones trained.
+    pub init: Option<Box<crate::model::ModelFile>>,
 }
 
 impl Default for TrainConfig {
@@ -60,6 +64,7 @@ impl Default for TrainConfig {
             points: None,
             engine: EngineKind::Native,
             threads: crate::engine::all_cores(),
+            init: None,
         }
     }
 }
@@ -87,6 +92,8 @@ pub struct Trained {
     pub net: Net,
     /// Figures for the model file.
     pub report: TrainingReport,
+    /// Adam's state after the last epoch.
+    pub optimizer: crate::model::file::AdamState,
 }
 
 /// Adam (Kingma & Ba) on one flat parameter vector: the same update for
@@ -107,6 +114,16 @@ impl Adam {
             v: vec![0.0; len],
             t: 0,
         }
+    }
+
+    /// Continues from a saved state (moments flat, in parameter order).
+    pub fn resume(lr: f64, step: i32, m: Vec<f64>, v: Vec<f64>) -> Self {
+        Self { lr, m, v, t: step }
+    }
+
+    /// (updates taken, first moments, second moments).
+    pub fn state(&self) -> (i32, &[f64], &[f64]) {
+        (self.t, &self.m, &self.v)
     }
 
     /// One update of `theta` from `grad`.
@@ -337,14 +354,16 @@ pub fn check_data(
 
 /// The loop every trainable model shares: a seeded split of `n` samples
 /// (validation fraction from `cfg`), shuffled batches, Adam on the flat
-/// parameters `theta`, validation after every epoch, early stopping; the best
-/// parameters are left in `theta`. `on_epoch` returns false to cancel.
+/// parameters `theta` (from `adam`'s state, which is left as the last epoch
+/// made it), validation after every epoch, early stopping; the best parameters
+/// are left in `theta`. `on_epoch` returns false to cancel.
 pub fn fit(
     theta: &mut [f64],
     n: usize,
     cfg: &TrainConfig,
     rng: &mut ChaCha8Rng,
     objective: &mut impl Objective,
+    adam: &mut Adam,
     mut on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainingReport> {
     let mut order: Vec<usize> = (0..n).collect();
@@ -352,7 +371,13 @@ pub fn fit(
     let n_val = ((n as f64 * cfg.validation).round() as usize).clamp(1, n - 1);
     let (val_idx, train_idx) = order.split_at(n_val);
     let mut train_idx = train_idx.to_vec();
-    let mut adam = Adam::new(cfg.lr, theta.len());
+    if adam.m.len() != theta.len() {
+        bail!(
+            "optimiser state has {} entries, the model {}",
+            adam.m.len(),
+            theta.len()
+        );
+    }
     let mut grad = vec![0.0; theta.len()];
     let start = Instant::now();
     let mut best = f64::INFINITY;
@@ -460,9 +485,26 @@ pub fn train(
 ) -> Result<Trained> {
     check_data(graph, states, acc, cfg)?;
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-    // Both engines start from the same seeded initialisation.
+    // Both engines start from the same seeded initialisation (or the warm start).
     let net = Net::new(hyper, &mut rng)?;
-    let report = match cfg.engine {
+    if let Some(init) = &cfg.init {
+        if init.hyper != net.hyper {
+            bail!(
+                "--init model has another architecture ({:?}) than the one to train ({:?})",
+                init.hyper,
+                net.hyper
+            );
+        }
+        net.store.load(&init.weights)?;
+    }
+    // Adam's moments are stored by name; each engine reads them in its order.
+    let adam_for = |order: &dyn Fn(&Weights) -> Result<Vec<f64>>, len: usize| -> Result<Adam> {
+        Ok(match cfg.init.as_ref().and_then(|f| f.optimizer.as_ref()) {
+            Some(st) => Adam::resume(cfg.lr, st.step, order(&st.m)?, order(&st.v)?),
+            None => Adam::new(cfg.lr, len),
+        })
+    };
+    let (report, optimizer) = match cfg.engine {
         EngineKind::Candle => {
             let plan = GraphPlan::new(graph);
             let loss = |idx: &[usize]| -> Result<Tensor> {
@@ -471,21 +513,83 @@ pub fn train(
                 net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?)
             };
             let mut theta = flat_params(&net.store)?;
+            let order = |w: &Weights| -> Result<Vec<f64>> {
+                let mut out = vec![];
+                for name in net.store.names() {
+                    let a = w
+                        .get(name)
+                        .with_context(|| format!("optimiser state lacks {name}"))?;
+                    out.extend_from_slice(&a.data);
+                }
+                Ok(out)
+            };
+            let mut adam = adam_for(&order, theta.len())?;
             let mut obj = CandleObjective::new(&net.store, loss);
-            let report = fit(&mut theta, states.len(), cfg, &mut rng, &mut obj, on_epoch)?;
+            let report = fit(
+                &mut theta,
+                states.len(),
+                cfg,
+                &mut rng,
+                &mut obj,
+                &mut adam,
+                on_epoch,
+            )?;
             set_flat_params(&net.store, &theta)?;
-            report
+            // Same names and shapes as the weights, values from a flat vector.
+            let named = |x: &[f64]| -> Result<Weights> {
+                let mut w = net.store.weights()?;
+                let mut at = 0;
+                for name in net.store.names() {
+                    let a = w.get_mut(name).expect("store names its weights");
+                    let n = a.data.len();
+                    a.data.copy_from_slice(&x[at..at + n]);
+                    at += n;
+                }
+                Ok(w)
+            };
+            let (step, m, v) = adam.state();
+            (
+                report,
+                AdamState {
+                    step,
+                    m: named(m)?,
+                    v: named(v)?,
+                },
+            )
         }
         EngineKind::Native => {
             let mut engine = Engine::new(&net.hyper, graph, cfg.threads)?;
-            let mut theta = engine.layout().flatten(&net.store.weights()?)?;
+            let layout = engine.layout().clone();
+            let mut theta = layout.flatten(&net.store.weights()?)?;
+            let order = |w: &Weights| -> Result<Vec<f64>> { Ok(layout.flatten(w)?) };
+            let mut adam = adam_for(&order, theta.len())?;
             let mut obj = EngineObjective::new(&mut engine, states, acc);
-            let report = fit(&mut theta, states.len(), cfg, &mut rng, &mut obj, on_epoch)?;
-            net.store.load(&engine.layout().weights(&theta))?;
-            report
+            let report = fit(
+                &mut theta,
+                states.len(),
+                cfg,
+                &mut rng,
+                &mut obj,
+                &mut adam,
+                on_epoch,
+            )?;
+            net.store.load(&layout.weights(&theta))?;
+            let (step, m, v) = adam.state();
+            (
+                report,
+                AdamState {
+                    step,
+                    m: layout.weights(m),
+                    v: layout.weights(v),
+                },
+            )
         }
     };
-    Ok(Trained { net, report })
+    Ok(Trained {
+        net,
+        report,
+        optimizer,
+    })
 }
 
 /// Which engine computes the GNODE family's gradients.
@@ -697,6 +801,40 @@ pub fn train_from_bags(
             !closed
         }
     };
+    if let Some(init) = &cfg.init {
+        // A warm start keeps the architecture it was trained with.
+        let h = &init.hyper;
+        if h.variant != variant {
+            bail!("--init model is a {} model, not {variant}", h.variant);
+        }
+        if h.dim != ds.graph.dim || ds.graph.types.iter().any(|&t| t as usize >= h.types) {
+            bail!(
+                "--init model is {}D with {} particle types; the data are {}D with types up to {}",
+                h.dim,
+                h.types,
+                ds.graph.dim,
+                types - 1
+            );
+        }
+        if !variant.biases().graph && h.particles != ds.graph.n() {
+            bail!(
+                "--init NODE model was built for {} particles, the data have {}",
+                h.particles,
+                ds.graph.n()
+            );
+        }
+        log(&format!(
+            "continuing from a model trained for {} epochs (validation MSE {:.3e}), {}",
+            init.training.epochs_run,
+            init.training.validation_loss,
+            if init.optimizer.is_some() {
+                "with its Adam state"
+            } else {
+                "with a fresh Adam state"
+            }
+        ));
+        hyper = h.clone();
+    }
     if variant == crate::model::Variant::Mcgnode {
         log(&format!(
             "body-force branch: {}",
@@ -715,5 +853,6 @@ pub fn train_from_bags(
         trained_on: data.trained_on,
         training: trained.report,
         weights: trained.net.store.weights()?,
+        optimizer: Some(trained.optimizer),
     })
 }

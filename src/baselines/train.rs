@@ -31,6 +31,9 @@ pub fn train_baseline(
 ) -> Result<TrainedBaseline> {
     check_data(graph, states, acc, cfg)?;
     crate::alloc::keep_freed_memory();
+    if cfg.init.is_some() {
+        bail!("--init (warm start) is for the GNODE family; baselines train from scratch");
+    }
     if graph.dim != hyper.dim {
         bail!("the model is {}D, the data {}D", hyper.dim, graph.dim);
     }
@@ -45,7 +48,16 @@ pub fn train_baseline(
     };
     let mut theta = flat_params(&net.store)?;
     let mut obj = CandleObjective::with_threads(&net.store, loss, cfg.threads)?;
-    let training = fit(&mut theta, states.len(), cfg, &mut rng, &mut obj, on_epoch)?;
+    let mut adam = crate::train::Adam::new(cfg.lr, theta.len());
+    let training = fit(
+        &mut theta,
+        states.len(),
+        cfg,
+        &mut rng,
+        &mut obj,
+        &mut adam,
+        on_epoch,
+    )?;
     set_flat_params(&net.store, &theta)?;
     let file = BaselineFile {
         format: FORMAT.to_string(),

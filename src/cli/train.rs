@@ -81,6 +81,10 @@ pub struct Args {
     /// trained weights do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Warm start: continue from this model file's weights (and its Adam
+    /// state, when the file has one); its architecture is kept.
+    #[arg(long, value_name = "MODEL")]
+    pub init: Option<PathBuf>,
     /// Print nothing but errors.
     #[arg(long)]
     pub quiet: bool,
@@ -154,6 +158,12 @@ pub fn run(a: Args) -> Result<()> {
         points: a.points,
         engine: a.engine,
         threads: a.threads.unwrap_or_else(crate::engine::all_cores),
+        init: a
+            .init
+            .as_deref()
+            .map(crate::model::ModelFile::load)
+            .transpose()?
+            .map(Box::new),
         ..TrainConfig::default()
     };
     let opts = ModelOptions {
