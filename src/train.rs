@@ -49,6 +49,9 @@ pub struct TrainConfig {
     /// Warm start: continue from this model's weights (and its Adam state when
     /// it has one). Its hyperparameters must be the ones trained.
     pub init: Option<Box<crate::model::ModelFile>>,
+    /// Scale inputs and outputs by statistics of the training split (stored
+    /// in the model file; see [`crate::model::Norm`]).
+    pub normalize: bool,
 }
 
 impl Default for TrainConfig {
@@ -65,6 +68,7 @@ impl Default for TrainConfig {
             engine: EngineKind::Native,
             threads: crate::engine::all_cores(),
             init: None,
+            normalize: true,
         }
     }
 }
@@ -352,25 +356,46 @@ pub fn check_data(
     Ok(())
 }
 
-/// The loop every trainable model shares: a seeded split of `n` samples
-/// (validation fraction from `cfg`), shuffled batches, Adam on the flat
+/// Sample indices held out for validation, and the rest.
+#[derive(Clone, Debug)]
+pub struct Split {
+    /// Validation samples.
+    pub validation: Vec<usize>,
+    /// Training samples.
+    pub train: Vec<usize>,
+}
+
+/// The seeded split of `n` samples (validation fraction from `cfg`).
+pub fn split(n: usize, cfg: &TrainConfig, rng: &mut ChaCha8Rng) -> Split {
+    let mut order: Vec<usize> = (0..n).collect();
+    order.shuffle(rng);
+    let n_val = ((n as f64 * cfg.validation).round() as usize).clamp(1, n - 1);
+    let train = order.split_off(n_val);
+    Split {
+        validation: order,
+        train,
+    }
+}
+
+/// The loop every trainable model shares: a [`split`] of the samples,
+/// shuffled batches, Adam on the flat
 /// parameters `theta` (from `adam`'s state, which is left as the last epoch
 /// made it), validation after every epoch, early stopping; the best parameters
 /// are left in `theta`. `on_epoch` returns false to cancel.
 pub fn fit(
     theta: &mut [f64],
-    n: usize,
+    split: Split,
     cfg: &TrainConfig,
     rng: &mut ChaCha8Rng,
     objective: &mut impl Objective,
     adam: &mut Adam,
     mut on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainingReport> {
-    let mut order: Vec<usize> = (0..n).collect();
-    order.shuffle(rng);
-    let n_val = ((n as f64 * cfg.validation).round() as usize).clamp(1, n - 1);
-    let (val_idx, train_idx) = order.split_at(n_val);
-    let mut train_idx = train_idx.to_vec();
+    let Split {
+        validation: val_idx,
+        train: mut train_idx,
+    } = split;
+    let val_idx = val_idx.as_slice();
     if adam.m.len() != theta.len() {
         bail!(
             "optimiser state has {} entries, the model {}",
@@ -486,7 +511,13 @@ pub fn train(
     check_data(graph, states, acc, cfg)?;
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     // Both engines start from the same seeded initialisation (or the warm start).
-    let net = Net::new(hyper, &mut rng)?;
+    let mut net = Net::new(hyper, &mut rng)?;
+    let sp = split(states.len(), cfg, &mut rng);
+    if cfg.normalize && cfg.init.is_none() && net.hyper.norm.is_none() {
+        let s: Vec<&State> = sp.train.iter().map(|&i| &states[i]).collect();
+        let a: Vec<&[f64]> = sp.train.iter().map(|&i| acc[i].as_slice()).collect();
+        net.set_norm(Some(crate::model::Norm::from_data(graph, &s, &a)));
+    }
     if let Some(init) = &cfg.init {
         if init.hyper != net.hyper {
             bail!(
@@ -527,7 +558,7 @@ pub fn train(
             let mut obj = CandleObjective::new(&net.store, loss);
             let report = fit(
                 &mut theta,
-                states.len(),
+                sp.clone(),
                 cfg,
                 &mut rng,
                 &mut obj,
@@ -566,7 +597,7 @@ pub fn train(
             let mut obj = EngineObjective::new(&mut engine, states, acc);
             let report = fit(
                 &mut theta,
-                states.len(),
+                sp.clone(),
                 cfg,
                 &mut rng,
                 &mut obj,

@@ -7,7 +7,7 @@
 use mcgnode::engine::Engine;
 use mcgnode::model::batch::Batch;
 use mcgnode::model::plan::GraphPlan;
-use mcgnode::model::{ArchPreset, Hyper, Net, TrainedModel, Variant};
+use mcgnode::model::{ArchPreset, Hyper, Net, Norm, TrainedModel, Variant};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Edge, EdgeKind, Endpoint, Graph, State};
 use mcgnode::train::{train, EngineKind, TrainConfig};
@@ -155,6 +155,16 @@ fn cases() -> Vec<Case> {
                     let mut h = Hyper::new(v, g.dim, 2, particles).with_preset(preset);
                     h.body_force = body;
                     h.rounds = 1 + gi % 2;
+                    // The authors' preset runs with non-trivial input and output scales.
+                    if preset == ArchPreset::Authors {
+                        h.norm = Some(Norm {
+                            q_mean: (0..g.dim).map(|c| 0.3 - 0.2 * c as f64).collect(),
+                            q_scale: 1.7,
+                            v_scale: 0.6,
+                            w_scale: 1.3,
+                            out_scale: 0.4,
+                        });
+                    }
                     out.push(Case {
                         name: format!("{v} {gname} body={body} rounds={} {preset:?}", h.rounds),
                         graph: g.clone(),

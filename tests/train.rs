@@ -47,9 +47,12 @@ fn to_model(t: mcgnode::train::Trained) -> TrainedModel {
 #[test]
 fn training_is_reproducible_and_learns() {
     let (g, s, a) = data(SystemKind::Spring, 5, 10, 1);
+    // Unscaled, so that the first epoch starts far from the data (the scaled
+    // model starts near "predict the mean"; see `normalisation_is_recorded`).
     let cfg = TrainConfig {
         epochs: 40,
         seed: 3,
+        normalize: false,
         ..TrainConfig::default()
     };
     let hy = Hyper::new(Variant::Gnode, 2, 1, 5);
@@ -351,9 +354,11 @@ fn old_model_files_load_without_noise_and_points() {
 #[test]
 fn warm_start_continues_training() {
     let (g, s, a) = data(SystemKind::Spring, 5, 6, 1);
+    // Unscaled, so that a fresh start is far from where training ends.
     let cfg = TrainConfig {
         epochs: 25,
         seed: 2,
+        normalize: false,
         ..TrainConfig::default()
     };
     let hy = Hyper::new(Variant::Mcgnode, 2, 1, 5);
@@ -375,7 +380,7 @@ fn warm_start_continues_training() {
         ..cfg.clone()
     };
     let mut warm_first = f64::NAN;
-    let second = train(hy.clone(), &g, &s, &a, &warm, |r| {
+    let second = train(file.hyper.clone(), &g, &s, &a, &warm, |r| {
         if r.epoch == 1 {
             warm_first = r.validation_loss;
         }
@@ -391,8 +396,71 @@ fn warm_start_continues_training() {
         second.optimizer.step > t.optimizer.step,
         "Adam's step count continues"
     );
-    let mut other = hy.clone();
+    let mut other = file.hyper.clone();
     other.hidden = 7;
     let err = train(other, &g, &s, &a, &warm, |_| true).err().unwrap();
     assert!(err.to_string().contains("architecture"), "{err}");
+}
+
+/// Training scales inputs and outputs by statistics of its training split and
+/// records them; the trained model's kernel applies them (its accelerations
+/// equal candle's on the trained net, which does too).
+#[test]
+fn normalisation_is_recorded_and_applied() {
+    let (g, s, a) = data(SystemKind::Spring, 5, 4, 3);
+    let cfg = TrainConfig {
+        epochs: 3,
+        ..TrainConfig::default()
+    };
+    let t = train(
+        Hyper::new(Variant::Mcgnode, 2, 1, 5),
+        &g,
+        &s,
+        &a,
+        &cfg,
+        |_| true,
+    )
+    .unwrap();
+    let norm = t.net.hyper.norm.clone().expect("normalised by default");
+    let rms = |xs: &mut dyn Iterator<Item = f64>| {
+        let v: Vec<f64> = xs.collect();
+        (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+    };
+    // The split keeps 75 % of the states: the scales are near the full data's.
+    let acc_rms = rms(&mut a.iter().flatten().copied());
+    let v_rms = rms(&mut s.iter().flat_map(|x| x.v.iter().copied()));
+    assert!(
+        (norm.out_scale / acc_rms - 1.0).abs() < 0.1,
+        "{} vs {acc_rms}",
+        norm.out_scale
+    );
+    assert!(
+        (norm.v_scale / v_rms - 1.0).abs() < 0.1,
+        "{} vs {v_rms}",
+        norm.v_scale
+    );
+    assert!(norm.w_scale > 0.1 && norm.q_scale > 0.1);
+    let unscaled = TrainConfig {
+        normalize: false,
+        ..cfg.clone()
+    };
+    let u = train(
+        Hyper::new(Variant::Mcgnode, 2, 1, 5),
+        &g,
+        &s,
+        &a,
+        &unscaled,
+        |_| true,
+    )
+    .unwrap();
+    assert!(u.net.hyper.norm.is_none());
+    // Same weights, different scales: different accelerations.
+    let m = to_model(t);
+    let mut other = m.file.clone();
+    other.hyper.norm = None;
+    let other = TrainedModel::from_file(other).unwrap();
+    let (mut x, mut y) = (vec![0.0; 10], vec![0.0; 10]);
+    m.acceleration(&g, &s[7], &mut x).unwrap();
+    other.acceleration(&g, &s[7], &mut y).unwrap();
+    assert!(x.iter().zip(&y).any(|(p, q)| (p - q).abs() > 1e-6));
 }

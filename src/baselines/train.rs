@@ -49,15 +49,8 @@ pub fn train_baseline(
     let mut theta = flat_params(&net.store)?;
     let mut obj = CandleObjective::with_threads(&net.store, loss, cfg.threads)?;
     let mut adam = crate::train::Adam::new(cfg.lr, theta.len());
-    let training = fit(
-        &mut theta,
-        states.len(),
-        cfg,
-        &mut rng,
-        &mut obj,
-        &mut adam,
-        on_epoch,
-    )?;
+    let sp = crate::train::split(states.len(), cfg, &mut rng);
+    let training = fit(&mut theta, sp, cfg, &mut rng, &mut obj, &mut adam, on_epoch)?;
     set_flat_params(&net.store, &theta)?;
     let file = BaselineFile {
         format: FORMAT.to_string(),

@@ -81,6 +81,10 @@ pub struct Args {
     /// trained weights do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Train on unscaled inputs and outputs (by default they are scaled by
+    /// statistics of the training split, stored in the model file).
+    #[arg(long)]
+    pub no_normalize: bool,
     /// Warm start: continue from this model file's weights (and its Adam
     /// state, when the file has one); its architecture is kept.
     #[arg(long, value_name = "MODEL")]
@@ -158,6 +162,7 @@ pub fn run(a: Args) -> Result<()> {
         points: a.points,
         engine: a.engine,
         threads: a.threads.unwrap_or_else(crate::engine::all_cores),
+        normalize: !a.no_normalize,
         init: a
             .init
             .as_deref()

@@ -81,7 +81,10 @@ pub(crate) struct Chunk {
     laid: usize,
     recv: Vec<usize>,
     send: Vec<usize>,
+    /// Raw inputs (one-hot, q, q̇) for the constraint; NODE: scaled (q, q̇).
     x: Vec<f64>,
+    /// Scaled node inputs (one-hot, (q − μ)/σ_q, q̇/σ_v) for the MLPs.
+    xn: Vec<f64>,
     w_in: Vec<f64>,
     h: Vec<Vec<f64>>,
     he: Vec<Vec<f64>>,
@@ -156,6 +159,11 @@ impl Chunk {
                 a.node_features() * nodes
             } else {
                 2 * n * d * bs
+            }),
+            xn: z(if a.biases.graph {
+                a.node_features() * nodes
+            } else {
+                0
             }),
             w_in: z(d * edges),
             h: (0..=a.rounds).map(|_| z(em * nodes)).collect(),
@@ -297,9 +305,10 @@ impl Chunk {
         let nd = m.plan.n * m.plan.dim;
         for (s, &k) in idx.iter().enumerate() {
             let st = &states[k];
+            let nm = &m.arch.norm;
             for f in 0..nd {
-                self.x[f * bs + s] = st.q[f];
-                self.x[(nd + f) * bs + s] = st.v[f];
+                self.x[f * bs + s] = (st.q[f] - nm.q_mean[f % m.plan.dim]) / nm.q_scale;
+                self.x[(nd + f) * bs + s] = st.v[f] / nm.v_scale;
                 if let Some(t) = targets.get(k) {
                     self.tgt[f * bs + s] = t[f];
                 }
@@ -318,11 +327,15 @@ impl Chunk {
             &mut self.tapes[i],
             &mut self.acc[..nd * bs],
         );
+        let k = m.arch.norm.out_scale;
+        self.acc[..nd * bs].iter_mut().for_each(|a| *a *= k);
     }
 
     fn backward_flat(&mut self, m: &Model, th: &[f64], bs: usize) {
         let i = m.ix(Block::Flat).expect("NODE has a flat MLP");
         let nd = m.plan.n * m.plan.dim;
+        let k = m.arch.norm.out_scale;
+        self.gacc[..nd * bs].iter_mut().for_each(|g| *g *= k);
         m.mlp(i).backward(
             th,
             &mut self.grad,
@@ -346,15 +359,21 @@ impl Chunk {
     ) {
         let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
         let nodes = idx.len() * n;
+        let nm = &m.arch.norm;
         self.x[..t * nodes].fill(0.0);
+        self.xn[..t * nodes].fill(0.0);
         for (s, &k) in idx.iter().enumerate() {
             let st = &states[k];
             for (i, &ty) in m.plan.types.iter().enumerate() {
                 let row = s * n + i;
                 self.x[ty * nodes + row] = 1.0;
+                self.xn[ty * nodes + row] = 1.0;
                 for c in 0..d {
-                    self.x[(t + c) * nodes + row] = st.q[i * d + c];
-                    self.x[(t + d + c) * nodes + row] = st.v[i * d + c];
+                    let (qv, vv) = (st.q[i * d + c], st.v[i * d + c]);
+                    self.x[(t + c) * nodes + row] = qv;
+                    self.x[(t + d + c) * nodes + row] = vv;
+                    self.xn[(t + c) * nodes + row] = (qv - nm.q_mean[c]) / nm.q_scale;
+                    self.xn[(t + d + c) * nodes + row] = vv / nm.v_scale;
                     if let Some(a) = targets.get(k) {
                         self.tgt[c * nodes + row] = a[i * d + c];
                     }
@@ -379,7 +398,7 @@ impl Chunk {
         let h0 = &mut self.h[0][..em * nodes];
         m.mlp(i).forward(
             th,
-            &self.x[..node_in * nodes],
+            &self.xn[..node_in * nodes],
             &[],
             nodes,
             &mut self.tapes[i],
@@ -389,8 +408,9 @@ impl Chunk {
         for c in 0..d {
             let q = &self.x[(t + c) * nodes..(t + c + 1) * nodes];
             let w = &mut self.w_in[c * edges..(c + 1) * edges];
+            let ws = a.norm.w_scale;
             for ((wv, &r), &s) in w.iter_mut().zip(&self.recv).zip(&self.send) {
-                *wv = q[r] - q[s];
+                *wv = (q[r] - q[s]) / ws;
             }
         }
         let i = m.ix(Block::EdgeEmbed).expect("graph model");
@@ -463,8 +483,14 @@ impl Chunk {
         // Global (body) embedding of (one-hot, q, q̇).
         if let Some(i) = m.ix(Block::GlobalEmbed) {
             let g = &mut self.glob[..em * nodes];
-            m.mlp(i)
-                .forward(th, &self.x[..nf * nodes], &[], nodes, &mut self.tapes[i], g);
+            m.mlp(i).forward(
+                th,
+                &self.xn[..nf * nodes],
+                &[],
+                nodes,
+                &mut self.tapes[i],
+                g,
+            );
             squareplus_in_place(g);
         }
         // Decode.
@@ -510,6 +536,8 @@ impl Chunk {
                 m.mlp(i).forward(th, hr_, g, nodes, &mut self.tapes[i], out);
             }
         }
+        let k = a.norm.out_scale;
+        self.out[..d * nodes].iter_mut().for_each(|o| *o *= k);
         // Constrain.
         if a.constrained {
             self.constrain(m, th, bs);
@@ -665,6 +693,8 @@ impl Chunk {
         } else {
             self.gout[..d * nodes].copy_from_slice(&self.gacc[..d * nodes]);
         }
+        let k = a.norm.out_scale;
+        self.gout[..d * nodes].iter_mut().for_each(|g| *g *= k);
         let (gh, ghe, gglob) = (
             &mut self.gh[..em * nodes],
             &mut self.ghe[..em * edges],
@@ -747,7 +777,7 @@ impl Chunk {
         }
         if let Some(i) = m.ix(Block::GlobalEmbed) {
             times_squareplus_grad(gglob, glob);
-            let x = &self.x[..nf * nodes];
+            let x = &self.xn[..nf * nodes];
             m.mlp(i).backward(
                 th,
                 &mut self.grad,
@@ -867,7 +897,7 @@ impl Chunk {
         let gh = &mut self.gh[..em * nodes];
         times_squareplus_grad(gh, &self.h[0][..em * nodes]);
         let i = m.ix(Block::NodeEmbed).expect("graph model");
-        let x = &self.x[..node_in * nodes];
+        let x = &self.xn[..node_in * nodes];
         m.mlp(i).backward(
             th,
             &mut self.grad,

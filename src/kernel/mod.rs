@@ -10,7 +10,7 @@ use crate::model::mlp::squareplus_f64;
 use crate::model::params::Weights;
 use crate::model::plan::{BarEnd, GraphPlan};
 use crate::model::solve::lu_solve_in_place;
-use crate::model::variant::{EdgeInput, Hyper};
+use crate::model::variant::{EdgeInput, Hyper, Norm};
 use crate::physics::Projector;
 use crate::system::Graph;
 use anyhow::{bail, Context, Result};
@@ -31,6 +31,7 @@ pub struct Kernel {
     body_out: Option<KMlp>,
     inv_mass: Option<Vec<f64>>,
     edge_input: EdgeInput,
+    norm: Norm,
     project_bars: bool,
 }
 
@@ -102,6 +103,7 @@ impl Kernel {
             body_out: ld(Block::BodyDecoder)?,
             inv_mass,
             edge_input: arch.edge_input,
+            norm: arch.norm.clone(),
             project_bars: true,
         };
         let b = hyper.variant.biases();
@@ -246,9 +248,13 @@ impl Kernel {
         let bias = self.hyper.variant.biases();
         if let Some(m) = &self.node_mlp {
             let nd = n * d;
-            ws.x[..nd].copy_from_slice(q);
-            ws.x[nd..2 * nd].copy_from_slice(v);
+            let nm = &self.norm;
+            for i in 0..nd {
+                ws.x[i] = (q[i] - nm.q_mean[i % d]) / nm.q_scale;
+                ws.x[nd + i] = v[i] / nm.v_scale;
+            }
             m.forward(&ws.x[..2 * nd], &[], 1, acc, &mut ws.t1, &mut ws.t2);
+            acc.iter_mut().for_each(|a| *a *= nm.out_scale);
             return;
         }
         let ne = ws.plan.recv.len();
@@ -258,8 +264,8 @@ impl Kernel {
         for (i, &ty) in ws.plan.types.iter().enumerate() {
             ws.x[ty * n + i] = 1.0;
             for c in 0..d {
-                ws.x[(t + c) * n + i] = q[i * d + c];
-                ws.x[(t + d + c) * n + i] = v[i * d + c];
+                ws.x[(t + c) * n + i] = (q[i * d + c] - self.norm.q_mean[c]) / self.norm.q_scale;
+                ws.x[(t + d + c) * n + i] = v[i * d + c] / self.norm.v_scale;
             }
         }
         // Node embeddings: of the type alone when decoupled.
@@ -274,7 +280,7 @@ impl Kernel {
         // Edge embeddings of w_ij = q_i − q_j.
         for (e, (&r, &s)) in ws.plan.recv.iter().zip(&ws.plan.send).enumerate() {
             for c in 0..d {
-                ws.w_in[c * ne + e] = q[r * d + c] - q[s * d + c];
+                ws.w_in[c * ne + e] = (q[r * d + c] - q[s * d + c]) / self.norm.w_scale;
             }
         }
         let edge_em = self.edge_em.as_ref().expect("checked in new");
@@ -348,7 +354,8 @@ impl Kernel {
             for e in 0..half {
                 let (a, b) = (ws.plan.recv[e], ws.plan.send[e]);
                 for c in 0..d {
-                    let f = (ws.f_edge[c * ne + e] - ws.f_edge[c * ne + e + half]) * 0.5;
+                    let f = (ws.f_edge[c * ne + e] - ws.f_edge[c * ne + e + half])
+                        * (0.5 * self.norm.out_scale);
                     ws.edge_force[e * d + c] = f;
                     out[a * d + c] += f;
                     out[b * d + c] -= f;
@@ -358,7 +365,7 @@ impl Kernel {
                 bo.forward(&ws.glob, &[], n, &mut ws.f_node, &mut ws.t1, &mut ws.t2);
                 for i in 0..n {
                     for c in 0..d {
-                        out[i * d + c] += ws.f_node[c * n + i];
+                        out[i * d + c] += ws.f_node[c * n + i] * self.norm.out_scale;
                     }
                 }
             }
@@ -371,7 +378,7 @@ impl Kernel {
             no.forward(&ws.h, g, n, &mut ws.f_node, &mut ws.t1, &mut ws.t2);
             for i in 0..n {
                 for c in 0..d {
-                    out[i * d + c] = ws.f_node[c * n + i];
+                    out[i * d + c] = ws.f_node[c * n + i] * self.norm.out_scale;
                 }
             }
         }

@@ -5,7 +5,7 @@
 //! read it, so adding a bias means changing this description and one stage in
 //! each executor, and no weight name is spelled twice.
 
-use super::variant::{Biases, EdgeInput, Hyper, MessageFn};
+use super::variant::{Biases, EdgeInput, Hyper, MessageFn, Norm};
 use std::fmt;
 
 /// The parameter holding learnable log-masses, one per particle type.
@@ -112,6 +112,8 @@ pub struct Arch {
     pub particles: usize,
     /// What the edge update reads from its end nodes.
     pub edge_input: EdgeInput,
+    /// Input and output scales (identity when the model has none).
+    pub norm: Norm,
     /// The biases it was derived from.
     pub biases: Biases,
 }
@@ -194,6 +196,7 @@ impl Arch {
             constrained: b.constrained,
             particles: h.particles,
             edge_input: h.edge_input,
+            norm: h.norm.clone().unwrap_or_else(|| Norm::identity(d)),
             biases: b,
         }
     }

@@ -12,7 +12,7 @@ pub mod variant;
 
 pub use arch::{Arch, Block};
 pub use net::Net;
-pub use variant::{ArchPreset, EdgeInput, Hyper, MessageFn, Variant};
+pub use variant::{ArchPreset, EdgeInput, Hyper, MessageFn, Norm, Variant};
 pub mod file;
 pub mod trained;
 

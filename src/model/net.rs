@@ -82,6 +82,12 @@ impl Net {
         })
     }
 
+    /// Sets the input and output scales (they do not change the parameters).
+    pub fn set_norm(&mut self, norm: Option<super::variant::Norm>) {
+        self.hyper.norm = norm;
+        self.parts.arch = Arch::new(&self.hyper);
+    }
+
     /// Forward pass on a batch: the paper's equations, stage by stage as the
     /// architecture describes them.
     pub fn forward(&self, b: &Batch) -> Result<Output> {
@@ -97,12 +103,14 @@ impl Net {
                 );
             }
             let nd = b.n * b.dim;
-            let x = Tensor::cat(&[b.q.reshape((b.b, nd))?, b.v.reshape((b.b, nd))?], 1)?;
-            let acc = mlp.forward(s, &x)?.reshape((b.b * b.n, b.dim))?;
+            let (q, v) = self.scaled_state(b)?;
+            let x = Tensor::cat(&[q.reshape((b.b, nd))?, v.reshape((b.b, nd))?], 1)?;
+            let acc = (mlp.forward(s, &x)?.reshape((b.b * b.n, b.dim))? * arch.norm.out_scale)?;
             return Ok(Output { acc, force: None });
         }
         // Encode.
-        let full = Tensor::cat(&[&b.onehot, &b.q, &b.v], 1)?;
+        let (q, v) = self.scaled_state(b)?;
+        let full = Tensor::cat(&[&b.onehot, &q, &v], 1)?;
         let node_in = match arch.node_input {
             NodeInput::TypeOnly => b.onehot.clone(),
             NodeInput::Full => full.clone(),
@@ -110,7 +118,7 @@ impl Net {
         let mut h = squareplus(&p.need(Block::NodeEmbed)?.forward(s, &node_in)?)?;
         let nodes = b.b * b.n;
         let mut he = if b.n_directed > 0 {
-            let w = (gather(&b.q, &b.recv)? - gather(&b.q, &b.send)?)?;
+            let w = ((gather(&b.q, &b.recv)? - gather(&b.q, &b.send)?)? / arch.norm.w_scale)?;
             Some(squareplus(&p.need(Block::EdgeEmbed)?.forward(s, &w)?)?)
         } else {
             None
@@ -164,6 +172,7 @@ impl Net {
                 p.need(Block::NodeDecoder)?.forward(s, &inp)?
             }
         };
+        let out = (out * arch.norm.out_scale)?;
         // Constrain.
         if !arch.constrained {
             return Ok(Output {
@@ -176,6 +185,15 @@ impl Net {
             acc,
             force: Some(out),
         })
+    }
+
+    /// Scaled node inputs ((q − μ_q)/σ_q, q̇/σ_v).
+    fn scaled_state(&self, b: &Batch) -> Result<(Tensor, Tensor)> {
+        let n = &self.parts.arch.norm;
+        let mu = Tensor::from_slice(&n.q_mean, (1, b.dim), &Device::Cpu)?;
+        let q = (b.q.broadcast_sub(&mu)? / n.q_scale)?;
+        let v = (&b.v / n.v_scale)?;
+        Ok((q, v))
     }
 
     /// q̈ = M⁻¹(N − Aᵀλ), λ = (A M⁻¹ Aᵀ)⁻¹(A M⁻¹ N + Ȧq̇) (paper eq. for q̈; Π = C = 0).

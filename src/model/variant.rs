@@ -130,6 +130,90 @@ impl ArchPreset {
     }
 }
 
+/// Input and output scales from the training split (GNS-style
+/// normalisation): node inputs are ((q − μ_q)/σ_q, q̇/σ_v), edge inputs
+/// (q_i − q_j)/σ_w, and the network's outputs (accelerations or forces) are
+/// multiplied by σ_a. Scalars (one per quantity, not per axis) keep the
+/// models' symmetries: edge inputs and pairwise forces stay antisymmetric.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Norm {
+    /// Mean position per axis.
+    pub q_mean: Vec<f64>,
+    /// Position scale.
+    pub q_scale: f64,
+    /// Velocity scale.
+    pub v_scale: f64,
+    /// Edge-vector scale.
+    pub w_scale: f64,
+    /// Output scale (accelerations; forces for constrained variants).
+    pub out_scale: f64,
+}
+
+impl Norm {
+    /// No scaling.
+    pub fn identity(dim: usize) -> Self {
+        Self {
+            q_mean: vec![0.0; dim],
+            q_scale: 1.0,
+            v_scale: 1.0,
+            w_scale: 1.0,
+            out_scale: 1.0,
+        }
+    }
+
+    /// Statistics of states (on `graph`'s particle edges) and their target
+    /// accelerations. A zero or non-finite spread gives scale 1.
+    pub fn from_data(
+        graph: &crate::system::Graph,
+        states: &[&crate::system::State],
+        targets: &[&[f64]],
+    ) -> Self {
+        let d = graph.dim;
+        let scale = |sum2: f64, count: usize| {
+            let s = (sum2 / count.max(1) as f64).sqrt();
+            if s.is_finite() && s > 0.0 {
+                s
+            } else {
+                1.0
+            }
+        };
+        let mut q_mean = vec![0.0; d];
+        let mut count = 0usize;
+        for s in states {
+            for (i, x) in s.q.iter().enumerate() {
+                q_mean[i % d] += x;
+            }
+            count += s.q.len() / d;
+        }
+        q_mean.iter_mut().for_each(|m| *m /= count.max(1) as f64);
+        let (mut q2, mut v2, mut w2, mut a2) = (0.0, 0.0, 0.0, 0.0);
+        let mut edges = 0usize;
+        for s in states {
+            for (i, x) in s.q.iter().enumerate() {
+                q2 += (x - q_mean[i % d]).powi(2);
+            }
+            v2 += s.v.iter().map(|x| x * x).sum::<f64>();
+            for (a, b, _) in graph.particle_edges() {
+                for c in 0..d {
+                    w2 += (s.q[a * d + c] - s.q[b * d + c]).powi(2);
+                }
+                edges += 1;
+            }
+        }
+        for t in targets {
+            a2 += t.iter().map(|x| x * x).sum::<f64>();
+        }
+        let n = states.iter().map(|s| s.q.len()).sum::<usize>();
+        Self {
+            q_mean,
+            q_scale: scale(q2, n),
+            v_scale: scale(v2, n),
+            w_scale: scale(w2, edges * d),
+            out_scale: scale(a2, targets.iter().map(|t| t.len()).sum()),
+        }
+    }
+}
+
 fn one() -> usize {
     1
 }
@@ -181,6 +265,10 @@ pub struct Hyper {
     /// the block's weight prefix (e.g. `edge_out` → [16, 16]).
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub block_hidden: std::collections::BTreeMap<String, Vec<usize>>,
+    /// Input and output scales (none: unscaled, as in files written before
+    /// normalisation existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub norm: Option<Norm>,
 }
 
 impl Hyper {
@@ -209,6 +297,7 @@ impl Hyper {
             message,
             edge_input,
             block_hidden: Default::default(),
+            norm: None,
         }
     }
 }
