@@ -3,8 +3,10 @@
 //! of ROS 2 `ParticleState` messages, rolled out on a hand-written kernel, and
 //! served as a ROS 2 node.
 //!
-//! Data flows one way: [`physics`] → [`data`] (bags) → `model` + `train` →
-//! model file → `kernel` + `rollout` → [`data`] → `metrics`.
+//! Data flows one way: [`physics`] → [`simulate`] → [`data`] (bags) →
+//! [`train`] (on the [`engine`], or candle via [`model`]) → model file →
+//! [`kernel`] rollouts ([`dynamics`], [`ros`]) → [`data`] → [`evaluate`] /
+//! [`replay`] → [`metrics`].
 
 pub mod alloc;
 pub mod baselines;

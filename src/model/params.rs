@@ -2,7 +2,7 @@
 //! hand-written kernel (inference).
 
 use anyhow::{bail, Context, Result};
-use candle_core::{DType, Device, Tensor, Var};
+use candle_core::{Device, Tensor, Var};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
@@ -132,12 +132,4 @@ impl ParamStore {
     pub fn count(&self) -> usize {
         self.vars.values().map(|v| v.elem_count()).sum()
     }
-}
-
-/// Checks a tensor is f64 (all models run in double precision).
-pub fn ensure_f64(t: &Tensor) -> Result<()> {
-    if t.dtype() != DType::F64 {
-        bail!("expected f64 tensor, got {:?}", t.dtype());
-    }
-    Ok(())
 }
