@@ -48,7 +48,8 @@ const Z95: f64 = 1.96;
 #[derive(Clone, Debug, Default)]
 pub struct ReplayOptions {
     /// Largest integration step, seconds. Default: the bag's simulator step
-    /// (`system_config`), else the recording node's `dt` metadata.
+    /// (`system_config`), else the recording node's `dt` metadata, else the
+    /// interval of evenly spaced header stamps.
     pub dt: Option<f64>,
     /// Longest lead time, seconds. Default: the recording node's horizon × dt
     /// (its metadata), else [`DEFAULT_HORIZON_INTERVALS`] median recorded
@@ -58,8 +59,8 @@ pub struct ReplayOptions {
     /// one per recorded interval when the stamps are regular (no binning at
     /// all), else [`DEFAULT_IRREGULAR_BINS`].
     pub bins: Option<usize>,
-    /// Field for the energy error. Default: the bag's `system_config` field,
-    /// else no field (zero gravity, drag and force).
+    /// Field for the energy error. Default: the bag's
+    /// ([`crate::evaluate::bag_field`]); refused when it cannot be known.
     pub field: Option<Field>,
     /// Replay at most this many trajectories (the first ones, by id).
     pub max_trajectories: Option<usize>,
@@ -228,9 +229,13 @@ fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> 
         (Some(dt), _, _) => (dt, "option"),
         (None, Some(s), _) => (s.dt, "bag system_config (simulator step)"),
         (None, None, Some(dt)) => (dt, "bag metadata dt (the recording node's step)"),
-        (None, None, None) => bail!(
-            "the bag does not say its integration step (no system_config or dt metadata); pass --dt"
-        ),
+        (None, None, None) => match crate::evaluate::stamp_interval(bag) {
+            Some(d) => (d, "the header stamps (their interval)"),
+            None => bail!(
+                "the bag does not say its integration step (no system_config or dt metadata, \
+                 and its stamps are not evenly spaced); pass --dt"
+            ),
+        },
     };
     let dt = positive(dt, "dt")?;
     let mut intervals: Vec<f64> = trajs
@@ -273,11 +278,9 @@ fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> 
             horizon / DEFAULT_IRREGULAR_BINS as f64,
         ),
     };
-    let (field, field_source) = match (&opts.field, &sys) {
-        (Some(f), _) => (f.clone(), "option"),
-        (None, Some(s)) => (s.field.clone(), "bag system_config"),
-        (None, None) => (Field::default(), "none given: zero field"),
-    };
+    let origin = crate::evaluate::bag_field(bag, opts.field.as_ref())?
+        .ok_or_else(|| crate::evaluate::unknown_field_error("the energy error"))?;
+    let (field, field_source) = (origin.field, origin.source);
     Ok(Plan {
         dt,
         dt_source: dt_source.into(),
@@ -287,7 +290,7 @@ fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> 
         bins,
         regular,
         field,
-        field_source: field_source.into(),
+        field_source,
     })
 }
 

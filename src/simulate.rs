@@ -2,7 +2,7 @@
 //! of a [`SystemConfig`] written as an MCAP bag whose metadata say how they
 //! were made. Used by `mcgnode simulate`, `demo` and `reproduce`.
 
-use crate::data::bag::write_trajectories;
+use crate::data::bag::write_trajectories_with_field;
 use crate::evaluate::META_SYSTEM;
 use crate::physics::{constraint_residual, SystemConfig};
 use anyhow::{bail, Context, Result};
@@ -87,6 +87,9 @@ pub fn simulate_with(
         "generator".to_string(),
         format!("mcgnode {}", env!("CARGO_PKG_VERSION")),
     );
-    write_trajectories(out, &trajs, &meta).with_context(|| format!("writing {}", out.display()))?;
+    // Every message states the field, so the bag describes its system without
+    // the metadata record.
+    write_trajectories_with_field(out, &trajs, &meta, Some(&cfg.field))
+        .with_context(|| format!("writing {}", out.display()))?;
     Ok(())
 }

@@ -732,7 +732,7 @@ fn inconsistent_bags_name_the_message() {
 }
 
 #[test]
-fn other_topics_are_skipped_and_particle_states_on_any_topic_are_read() {
+fn other_topics_are_skipped_and_several_particle_state_topics_need_a_choice() {
     let dir = tmpdir();
     let p = dir.path().join("multi.mcap");
     let a = mixed_trajectories()[0].clone();
@@ -752,11 +752,34 @@ fn other_topics_are_skipped_and_particle_states_on_any_topic_are_read() {
     }
     w.write_particle_state(cb, &msgs_of(&b)[5]).unwrap();
     w.finish().unwrap();
-    let bag = read_trajectories(&p).unwrap();
+    // Two ParticleState topics: refused without a choice, naming both.
+    let n_a = a.samples.len();
+    assert_err(
+        read_trajectories(&p),
+        &[
+            "several topics",
+            &format!("/particle_state ({n_a} messages)"),
+            &format!("/ground_truth ({} messages)", n_a + 1),
+            "--topic",
+        ],
+    );
+    let read = |topic: &str| {
+        mcgnode::data::read_bags(
+            std::slice::from_ref(&p),
+            &mcgnode::data::ReadOptions {
+                topic: Some(topic.into()),
+            },
+        )
+    };
+    let bag = read("/particle_state").unwrap();
+    assert_eq!(bag.topic, "/particle_state");
+    assert_same(&bag.trajectories, &[a]);
+    let bag = read("/ground_truth").unwrap();
     let mut b_short = b.clone();
-    b_short.samples.truncate(a.samples.len());
+    b_short.samples.truncate(n_a);
     b_short.samples.push(b.samples[5].clone());
-    assert_same(&bag.trajectories, &[a, b_short]);
+    assert_same(&bag.trajectories, &[b_short]);
+    assert_err(read("/nope"), &["no ParticleState messages on topic /nope"]);
 }
 
 // ---------------------------------------------------------------- independent decoders
@@ -852,6 +875,24 @@ fn python_decode(bag: &Path, decoder: &str) -> (Vec<(String, ParticleState)>, se
                 edge_rest_length: fs(&m["edge_rest_length"]),
                 edge_stiffness: fs(&m["edge_stiffness"]),
                 anchors,
+                field_status: u(&m["field_status"]) as u8,
+                gravity: {
+                    let g = fs(&m["gravity"]);
+                    Vector3 {
+                        x: g[0],
+                        y: g[1],
+                        z: g[2],
+                    }
+                },
+                drag: f(&m["drag"]),
+                force: {
+                    let g = fs(&m["force"]);
+                    Vector3 {
+                        x: g[0],
+                        y: g[1],
+                        z: g[2],
+                    }
+                },
             };
             (m["topic"].as_str().unwrap().to_string(), msg)
         })
