@@ -17,12 +17,15 @@ registered from the schema text stored in IN) and serialised again by rosbags.
                          compression), lz4 through the `mcap` writer as a plain file OUT
                          (no directory).
 --split                  two storage files: the first half of the messages, then the rest.
+--strip-field            set every ParticleState's field_status to FIELD_UNKNOWN (and gravity,
+                         drag, force to zero), as a tool that does not know them writes.
 --no-definitions         sqlite3 only: drop the message_definitions table, as rosbag2 bags
                          from before Iron lack it.
 Run with the project's venv: .venv/bin/python3 (scripts/setup_venv.sh creates it).
 """
 
 import argparse
+import dataclasses
 import shutil
 import sqlite3
 import sys
@@ -58,6 +61,14 @@ def typestore_for(messages):
     return store
 
 
+def strip(msg, on):
+    """The message with its field entries unknown (when `on` and it has them)."""
+    if not on or not hasattr(msg, "field_status"):
+        return msg
+    zero = dataclasses.replace(msg.gravity, x=0.0, y=0.0, z=0.0)
+    return dataclasses.replace(msg, field_status=0, gravity=zero, drag=0.0, force=zero)
+
+
 def write_dir(out, messages, store, args):
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
@@ -78,7 +89,7 @@ def write_dir(out, messages, store, args):
     for topic, typ, _, log_time, data in messages:
         if topic not in conns:
             conns[topic] = writer.add_connection(topic, typ, typestore=store)
-        msg = store.deserialize_cdr(data, typ)
+        msg = strip(store.deserialize_cdr(data, typ), args.strip_field)
         raw = bytes(store.serialize_cdr(msg, typ))
         if lz4_messages:
             import lz4.frame
@@ -94,7 +105,7 @@ def write_dir(out, messages, store, args):
         meta.write_text(text)
 
 
-def write_lz4_chunks(out, messages, store):
+def write_lz4_chunks(out, messages, store, args):
     from mcap.writer import CompressionType, Writer
 
     with open(out, "wb") as fh:
@@ -106,7 +117,7 @@ def write_lz4_chunks(out, messages, store):
                 schemas[typ] = w.register_schema(typ, "ros2msg", text.encode())
             if topic not in channels:
                 channels[topic] = w.register_channel(topic, "cdr", schemas[typ])
-            msg = store.deserialize_cdr(data, typ)
+            msg = strip(store.deserialize_cdr(data, typ), args.strip_field)
             raw = bytes(store.serialize_cdr(msg, typ))
             w.add_message(channels[topic], log_time=log_time, data=raw, publish_time=log_time)
         w.finish()
@@ -122,12 +133,13 @@ def main() -> int:
     ap.add_argument("--version", type=int, choices=[8, 9], default=9)
     ap.add_argument("--split", action="store_true")
     ap.add_argument("--no-definitions", action="store_true")
+    ap.add_argument("--strip-field", action="store_true")
     args = ap.parse_args()
 
     messages = read_input(args.input)
     store = typestore_for(messages)
     if args.compression == "chunk" and args.format == "lz4":
-        write_lz4_chunks(args.out, messages, store)
+        write_lz4_chunks(args.out, messages, store, args)
         return 0
     if not args.split:
         write_dir(args.out, messages, store, args)

@@ -517,3 +517,184 @@ fn bag_info_describes_files_topics_systems_and_field() {
     assert!(out.contains("field: gravity 10 along -y, drag 0"), "{out}");
     assert!(out.contains("duration: 0.100 s"), "{out}");
 }
+
+/// `mcgnode evaluate ... --json`, parsed.
+fn evaluate_json(d: &Path, args: &[&str]) -> serde_json::Value {
+    let mut all = vec!["evaluate", "--json"];
+    all.extend_from_slice(args);
+    serde_json::from_str(&ok(&mcgnode(&all, d))).expect("evaluate --json")
+}
+
+fn stderr_of(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn mcgnode_from_a_metadata_free_closed_bag_conserves_momentum() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (seed, name) in [("1", "train"), ("2", "test")] {
+        ok(&mcgnode(
+            &[
+                "simulate",
+                "--system",
+                "spring",
+                "--trajectories",
+                "6",
+                "--states",
+                "30",
+                "--seed",
+                seed,
+                "--out",
+                &format!("{name}.mcap"),
+            ],
+            d,
+        ));
+        // What another tool records: no mcgnode metadata, field unknown.
+        rosbags_write(
+            &d.join(format!("{name}.mcap")),
+            &d.join(name),
+            &["--strip-field"],
+        );
+        let b = read(&d.join(name));
+        assert!(b.metadata.is_empty() && b.field.is_none());
+    }
+    let train = |body: &str, out: &str| {
+        let o = mcgnode(
+            &[
+                "train", "--model", "mcgnode", "--data", "train", "--epochs", "3", "--body-force",
+                body, "--out", out,
+            ],
+            d,
+        );
+        ok(&o);
+        stderr_of(&o)
+    };
+    let log = train("auto", "closed.json");
+    assert!(
+        log.contains("body-force branch: off") && log.contains("inferred: a closed system"),
+        "{log}"
+    );
+    let e = evaluate_json(d, &["--model", "closed.json", "--bag", "test"]);
+    assert_eq!(e["dt_source"], "the header stamps");
+    assert!((e["dt"].as_f64().unwrap() - 0.1).abs() < 1e-12);
+    assert!(
+        e["field_source"].as_str().unwrap().contains("inferred"),
+        "{}",
+        e["field_source"]
+    );
+    let me = e["summary"]["me_scaled"]["gmean"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .fold(0.0, f64::max);
+    assert!(me < 1e-12, "ME scaled {me:e}: momentum must be conserved");
+    // The same model with the body-force branch on does not conserve it: the
+    // check above can fail.
+    train("on", "open.json");
+    let e = evaluate_json(d, &["--model", "open.json", "--bag", "test"]);
+    let me_open = e["averages"]["me_scaled"].as_f64().unwrap();
+    assert!(me_open > 1e-9, "ME scaled with body force {me_open:e}");
+    // Data that are not closed and say nothing: MCGNODE is refused with the flag.
+    ok(&mcgnode(
+        &[
+            "simulate", "--system", "spring", "--trajectories", "3", "--states", "20", "--gravity",
+            "2", "--out", "fall.mcap",
+        ],
+        d,
+    ));
+    rosbags_write(&d.join("fall.mcap"), &d.join("fall"), &["--strip-field"]);
+    let o = mcgnode(
+        &[
+            "train", "--model", "mcgnode", "--data", "fall", "--epochs", "1", "--out", "x.json",
+        ],
+        d,
+    );
+    assert!(!o.status.success());
+    assert!(stderr_of(&o).contains("--body-force"), "{}", stderr_of(&o));
+}
+
+#[test]
+fn a_metadata_free_pendulum_bag_gives_the_true_energy_error_or_names_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(&mcgnode(
+        &[
+            "simulate",
+            "--system",
+            "pendulum",
+            "--particles",
+            "3",
+            "--trajectories",
+            "3",
+            "--states",
+            "11",
+            "--out",
+            "pend.mcap",
+        ],
+        d,
+    ));
+    ok(&mcgnode(
+        &[
+            "train", "--model", "gnode", "--data", "pend.mcap", "--epochs", "2", "--out",
+            "m.json",
+        ],
+        d,
+    ));
+    // The truth: our own bag, whose metadata and messages both state gravity 10.
+    let truth = evaluate_json(
+        d,
+        &["--model", "m.json", "--bag", "pend.mcap", "--allow-overlap"],
+    );
+    let ee = |e: &serde_json::Value| e["averages"]["ee"].as_f64().unwrap();
+    // Written again by rosbags: no metadata, the field in the messages.
+    rosbags_write(&d.join("pend.mcap"), &d.join("pend_dir"), &[]);
+    let with_field = evaluate_json(
+        d,
+        &[
+            "--model", "m.json", "--bag", "pend_dir", "--allow-overlap", "--dt", "1e-5",
+        ],
+    );
+    assert_eq!(with_field["field_source"], "the messages' field entries");
+    assert_eq!(ee(&with_field), ee(&truth));
+    // Field unknown: refused, naming the flags.
+    rosbags_write(&d.join("pend.mcap"), &d.join("bare"), &["--strip-field"]);
+    let o = mcgnode(
+        &["evaluate", "--model", "m.json", "--bag", "bare", "--allow-overlap"],
+        d,
+    );
+    assert!(!o.status.success());
+    let err = stderr_of(&o);
+    assert!(err.contains("--gravity") && err.contains("--closed"), "{err}");
+    let o = mcgnode(
+        &[
+            "replay", "--model", "m.json", "--bag", "bare", "--horizon", "0.02",
+        ],
+        d,
+    );
+    assert!(!o.status.success());
+    assert!(stderr_of(&o).contains("--gravity"), "{}", stderr_of(&o));
+    // With the flag, the true EE; with a wrong statement, a different one.
+    let flagged = evaluate_json(
+        d,
+        &[
+            "--model", "m.json", "--bag", "bare", "--allow-overlap", "--dt", "1e-5", "--gravity",
+            "10",
+        ],
+    );
+    assert_eq!(flagged["field_source"], "flags");
+    assert_eq!(ee(&flagged), ee(&truth));
+    let wrong = evaluate_json(
+        d,
+        &[
+            "--model", "m.json", "--bag", "bare", "--allow-overlap", "--dt", "1e-5", "--closed",
+        ],
+    );
+    assert!(
+        (ee(&wrong) - ee(&truth)).abs() > 1e-3 * ee(&truth),
+        "EE without gravity {} vs {}",
+        ee(&wrong),
+        ee(&truth)
+    );
+}
