@@ -562,8 +562,17 @@ fn mcgnode_from_a_metadata_free_closed_bag_conserves_momentum() {
     let train = |body: &str, out: &str| {
         let o = mcgnode(
             &[
-                "train", "--model", "mcgnode", "--data", "train", "--epochs", "3", "--body-force",
-                body, "--out", out,
+                "train",
+                "--model",
+                "mcgnode",
+                "--data",
+                "train",
+                "--epochs",
+                "3",
+                "--body-force",
+                body,
+                "--out",
+                out,
             ],
             d,
         );
@@ -599,8 +608,17 @@ fn mcgnode_from_a_metadata_free_closed_bag_conserves_momentum() {
     // Data that are not closed and say nothing: MCGNODE is refused with the flag.
     ok(&mcgnode(
         &[
-            "simulate", "--system", "spring", "--trajectories", "3", "--states", "20", "--gravity",
-            "2", "--out", "fall.mcap",
+            "simulate",
+            "--system",
+            "spring",
+            "--trajectories",
+            "3",
+            "--states",
+            "20",
+            "--gravity",
+            "2",
+            "--out",
+            "fall.mcap",
         ],
         d,
     ));
@@ -637,7 +655,14 @@ fn a_metadata_free_pendulum_bag_gives_the_true_energy_error_or_names_the_flag() 
     ));
     ok(&mcgnode(
         &[
-            "train", "--model", "gnode", "--data", "pend.mcap", "--epochs", "2", "--out",
+            "train",
+            "--model",
+            "gnode",
+            "--data",
+            "pend.mcap",
+            "--epochs",
+            "2",
+            "--out",
             "m.json",
         ],
         d,
@@ -653,7 +678,13 @@ fn a_metadata_free_pendulum_bag_gives_the_true_energy_error_or_names_the_flag() 
     let with_field = evaluate_json(
         d,
         &[
-            "--model", "m.json", "--bag", "pend_dir", "--allow-overlap", "--dt", "1e-5",
+            "--model",
+            "m.json",
+            "--bag",
+            "pend_dir",
+            "--allow-overlap",
+            "--dt",
+            "1e-5",
         ],
     );
     assert_eq!(with_field["field_source"], "the messages' field entries");
@@ -661,15 +692,31 @@ fn a_metadata_free_pendulum_bag_gives_the_true_energy_error_or_names_the_flag() 
     // Field unknown: refused, naming the flags.
     rosbags_write(&d.join("pend.mcap"), &d.join("bare"), &["--strip-field"]);
     let o = mcgnode(
-        &["evaluate", "--model", "m.json", "--bag", "bare", "--allow-overlap"],
+        &[
+            "evaluate",
+            "--model",
+            "m.json",
+            "--bag",
+            "bare",
+            "--allow-overlap",
+        ],
         d,
     );
     assert!(!o.status.success());
     let err = stderr_of(&o);
-    assert!(err.contains("--gravity") && err.contains("--closed"), "{err}");
+    assert!(
+        err.contains("--gravity") && err.contains("--closed"),
+        "{err}"
+    );
     let o = mcgnode(
         &[
-            "replay", "--model", "m.json", "--bag", "bare", "--horizon", "0.02",
+            "replay",
+            "--model",
+            "m.json",
+            "--bag",
+            "bare",
+            "--horizon",
+            "0.02",
         ],
         d,
     );
@@ -679,7 +726,14 @@ fn a_metadata_free_pendulum_bag_gives_the_true_energy_error_or_names_the_flag() 
     let flagged = evaluate_json(
         d,
         &[
-            "--model", "m.json", "--bag", "bare", "--allow-overlap", "--dt", "1e-5", "--gravity",
+            "--model",
+            "m.json",
+            "--bag",
+            "bare",
+            "--allow-overlap",
+            "--dt",
+            "1e-5",
+            "--gravity",
             "10",
         ],
     );
@@ -688,7 +742,14 @@ fn a_metadata_free_pendulum_bag_gives_the_true_energy_error_or_names_the_flag() 
     let wrong = evaluate_json(
         d,
         &[
-            "--model", "m.json", "--bag", "bare", "--allow-overlap", "--dt", "1e-5", "--closed",
+            "--model",
+            "m.json",
+            "--bag",
+            "bare",
+            "--allow-overlap",
+            "--dt",
+            "1e-5",
+            "--closed",
         ],
     );
     assert!(

@@ -70,6 +70,39 @@ impl Dynamics for TruthModel {
     ) -> Result<Vec<crate::system::State>, String> {
         self.truth.rollout(graph, start, dt, steps)
     }
+
+    // The simulator's integrator (Verlet + SHAKE/RATTLE for bars), not the
+    // trait's unconstrained default: replay and serve call these.
+    fn rollout_every(
+        &self,
+        graph: &crate::system::Graph,
+        start: &crate::system::State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<crate::system::State>, String> {
+        self.truth.rollout_every(graph, start, dt, steps, every)
+    }
+
+    fn rollout_many(
+        &self,
+        graph: &crate::system::Graph,
+        starts: &[crate::system::State],
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<crate::dynamics::Rollout>, String> {
+        self.truth.rollout_many(graph, starts, dt, steps, every)
+    }
+
+    fn acceleration_batch(
+        &self,
+        graph: &crate::system::Graph,
+        states: &[crate::system::State],
+        out: &mut [Vec<f64>],
+    ) -> Result<(), String> {
+        self.truth.acceleration_batch(graph, states, out)
+    }
 }
 
 #[cfg(test)]
