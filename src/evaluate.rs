@@ -6,13 +6,14 @@ use crate::dynamics::Dynamics;
 use crate::metrics::{error_curves, summarize, ErrorCurves, Summary};
 use crate::physics::{Field, SystemConfig};
 use crate::system::State;
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 use std::time::Instant;
 
-/// Bag metadata key holding the simulator's [`SystemConfig`] as JSON.
-pub const META_SYSTEM: &str = "system_config";
+/// Bag metadata key holding the simulator's [`SystemConfig`] as JSON (see
+/// [`crate::data::BagMetadata`], which reads and writes every key).
+pub const META_SYSTEM: &str = crate::data::meta::KEY_SYSTEM_CONFIG;
 
 /// A fingerprint of a state (SHA-256 of its numbers, rounded to 1e-9), used to
 /// detect test trajectories that start where training ones did.
@@ -30,12 +31,7 @@ pub fn fingerprint(s: &State) -> String {
 
 /// The simulator configuration a bag was made with, if it says.
 pub fn bag_system(bag: &Bag) -> Result<Option<SystemConfig>> {
-    match bag.metadata.get(META_SYSTEM) {
-        Some(s) => Ok(Some(
-            serde_json::from_str(s).context("bag metadata system_config is not valid")?,
-        )),
-        None => Ok(None),
-    }
+    Ok(bag.meta()?.system_config)
 }
 
 /// Largest drift of total momentum, relative to Σ m|v|, for a recording to

@@ -31,10 +31,6 @@ use crate::metrics::{error_curves, Averages, Band, Summary, LOG_FLOOR};
 use crate::physics::Field;
 use crate::system::{State, Trajectory};
 
-/// Bag metadata keys the node's recorder writes (see `ros::record`).
-const META_NODE_DT: &str = "dt";
-const META_NODE_HORIZON: &str = "horizon";
-
 /// Grid points used when the bag's stamps are irregular and no `bins` is given.
 pub const DEFAULT_IRREGULAR_BINS: usize = 20;
 /// Default horizon, in recorded intervals, for bags that do not say the node's.
@@ -211,20 +207,10 @@ fn positive(x: f64, what: &str) -> Result<f64> {
     }
 }
 
-fn meta_number(bag: &Bag, key: &str) -> Result<Option<f64>> {
-    match bag.metadata.get(key) {
-        None => Ok(None),
-        Some(s) => s
-            .trim()
-            .parse::<f64>()
-            .map(Some)
-            .with_context(|| format!("bag metadata {key} = {s:?} is not a number")),
-    }
-}
-
 fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> {
     let sys = bag_system(bag)?;
-    let node_dt = meta_number(bag, META_NODE_DT)?;
+    let meta = bag.meta()?;
+    let node_dt = meta.node_dt;
     let (dt, dt_source) = match (opts.dt, &sys, node_dt) {
         (Some(dt), _, _) => (dt, "option"),
         (None, Some(s), _) => (s.dt, "bag system_config (simulator step)"),
@@ -249,7 +235,7 @@ fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> 
     let median = intervals[intervals.len() / 2];
     let (lo, hi) = (intervals[0], intervals[intervals.len() - 1]);
     let regular = hi - lo <= 1e-6 * median;
-    let node_horizon = meta_number(bag, META_NODE_HORIZON)?;
+    let node_horizon = meta.node_horizon.map(f64::from);
     let (horizon, horizon_source) = match (opts.horizon, node_horizon, node_dt) {
         (Some(h), _, _) => (h, "option".to_string()),
         (None, Some(h), Some(d)) => (h * d, "the recording node's horizon × dt".to_string()),

@@ -1093,3 +1093,43 @@ fn dataset_rejects_bad_trajectory_sets() {
         &["trajectory 8 sample 1"],
     );
 }
+
+#[test]
+fn typed_metadata_round_trips_and_names_bad_keys() {
+    use mcgnode::data::meta::BagMetadata;
+    use mcgnode::physics::{SystemConfig, SystemKind};
+    let m = BagMetadata {
+        system_config: Some(SystemConfig::new(SystemKind::Pendulum, 3)),
+        seed: Some(42),
+        integrator: Some("verlet".into()),
+        generator: Some("test".into()),
+        model: Some("truth:pendulum".into()),
+        recorder: Some("mcgnode serve".into()),
+        node_dt: Some(0.1 + 0.2),
+        node_horizon: Some(300),
+        other: meta(&[("robot", "arm 7")]),
+    };
+    let map = m.to_map().unwrap();
+    assert_eq!(map["seed"], "42");
+    assert_eq!(map["dt"], "0.30000000000000004");
+    assert_eq!(map["robot"], "arm 7");
+    assert_eq!(BagMetadata::from_map(&map).unwrap(), m);
+    // Written into a bag and read back through Bag::meta.
+    let dir = tmpdir();
+    let p = write_bag_with(dir.path(), &map);
+    assert_eq!(read_trajectories(&p).unwrap().meta().unwrap(), m);
+    let e = BagMetadata::from_map(&meta(&[("horizon", "ten")]))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("horizon") && e.contains("ten"), "{e}");
+    assert_eq!(
+        BagMetadata::from_map(&BTreeMap::new()).unwrap(),
+        BagMetadata::default()
+    );
+}
+
+fn write_bag_with(dir: &Path, m: &BTreeMap<String, String>) -> PathBuf {
+    let p = dir.join("meta.mcap");
+    write_trajectories(&p, &mixed_trajectories()[..1], m).unwrap();
+    p
+}

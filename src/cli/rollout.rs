@@ -2,11 +2,10 @@
 
 use crate::baselines::load_any_model;
 use crate::data::bag::{read_bags, write_trajectories_with_field, ReadOptions};
-use crate::evaluate::{bag_system, META_SYSTEM};
+use crate::evaluate::bag_system;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::system::{Sample, Trajectory};
 use anyhow::{bail, Context, Result};
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 /// Options of `rollout`.
@@ -123,18 +122,19 @@ pub fn run(a: Args) -> Result<()> {
         graph,
         samples,
     };
-    let mut meta = BTreeMap::new();
     if let Some(c) = cfg.as_mut() {
         c.dt = dt;
         c.save_every = every;
         c.states = n;
         c.particles = tr.graph.n();
-        meta.insert(META_SYSTEM.to_string(), serde_json::to_string(c)?);
     }
-    meta.insert(
-        "generator".into(),
-        format!("mcgnode rollout of {}", a.model.display()),
-    );
+    let meta = crate::data::BagMetadata {
+        system_config: cfg,
+        generator: Some(format!("mcgnode rollout of {}", a.model.display())),
+        model: Some(a.model.display().to_string()),
+        ..Default::default()
+    }
+    .to_map()?;
     write_trajectories_with_field(&a.out, &[tr], &meta, field.as_ref())?;
     eprintln!(
         "{steps} steps ({:.3} s simulated) in {secs:.3} s; wrote {n} states to {}",

@@ -181,6 +181,14 @@ pub struct Bag {
     pub sources: Vec<PathBuf>,
 }
 
+impl Bag {
+    /// The `mcgnode` metadata record, typed; a value that does not parse is
+    /// an error naming its key.
+    pub fn meta(&self) -> Result<super::meta::BagMetadata, DataError> {
+        super::meta::BagMetadata::from_map(&self.metadata)
+    }
+}
+
 /// Checks what must hold for a trajectory to be written and read back unchanged.
 fn check_trajectory(tr: &Trajectory) -> Result<(), DataError> {
     let bad = |m: String| Err(DataError::Trajectory(format!("trajectory {}: {m}", tr.id)));

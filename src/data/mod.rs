@@ -9,6 +9,7 @@
 pub mod bag;
 pub mod dataset;
 mod error;
+pub mod meta;
 pub mod msg;
 pub mod repair;
 pub mod source;
@@ -20,4 +21,5 @@ pub use bag::{
 };
 pub use dataset::{digest, AccSource, Dataset};
 pub use error::DataError;
+pub use meta::BagMetadata;
 pub use msg::ParticleState;

@@ -162,7 +162,7 @@ impl Shared {
     }
 
     /// Records with the recorder, if any; failures are warned about.
-    fn record(&self, what: impl FnOnce(&mut Recorder) -> Result<(), String>) {
+    pub(super) fn record(&self, what: impl FnOnce(&mut Recorder) -> Result<(), String>) {
         if let Some(r) = &self.recorder {
             let result = what(&mut r.lock().unwrap_or_else(PoisonError::into_inner));
             if let Err(e) = result {

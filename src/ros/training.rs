@@ -192,6 +192,8 @@ pub(super) fn swap(shared: &Shared, model: Arc<dyn Dynamics>, reason: &str) -> D
         model,
     );
     let locked = start.elapsed();
+    // Bags recorded from now on (and the open one) name the new model.
+    shared.record(|r| r.set_model(&new_model));
     let msg = ModelSwap {
         header: Header {
             stamp: Time::from_nanos(now_nanos()),
