@@ -9,6 +9,7 @@
 pub mod baselines;
 pub mod bench;
 pub mod cli;
+pub mod compat;
 pub mod data;
 pub mod dynamics;
 pub mod evaluate;

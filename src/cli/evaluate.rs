@@ -62,9 +62,14 @@ pub fn run(a: Args) -> Result<()> {
         },
     )
     .context("reading the test bag")?;
+    let flag_field = field_from_flags(a.gravity, a.drag, a.closed)?;
+    // Refuse data the model was not trained for (dimension, edges, field).
+    let data_field = crate::evaluate::bag_field(&bag, flag_field.as_ref())?.map(|o| o.field);
+    let trained = crate::compat::TrainedFor::from_model_file(&a.model)?;
+    crate::compat::check_bag(&trained, &bag, data_field.as_ref())?;
     let opts = EvalOptions {
         dt: a.dt,
-        field: field_from_flags(a.gravity, a.drag, a.closed)?,
+        field: flag_field,
         max_trajectories: a.trajectories,
         allow_overlap: a.allow_overlap,
     };

@@ -75,6 +75,10 @@ pub fn run(a: Args) -> Result<()> {
     )
     .context("reading the bag")?;
     let field = field_from_flags(a.gravity, a.drag, a.closed)?;
+    if let Some(t) = model.trained_for() {
+        let data_field = crate::evaluate::bag_field(&bag, field.as_ref())?.map(|o| o.field);
+        crate::compat::check_bag(t, &bag, data_field.as_ref())?;
+    }
     let opts = ReplayOptions {
         dt: a.dt,
         horizon: a.horizon,

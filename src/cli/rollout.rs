@@ -52,6 +52,7 @@ pub struct Args {
 /// Runs `rollout`.
 pub fn run(a: Args) -> Result<()> {
     let model = load_any_model(&a.model)?.dynamics;
+    let trained = crate::compat::TrainedFor::from_model_file(&a.model)?;
     let (graph, start, system, mut cfg, field, stamp_dt) = match &a.initial {
         Some(paths) => {
             let bag = read_bags(
@@ -81,6 +82,9 @@ pub fn run(a: Args) -> Result<()> {
             (g, s0, a.system.name().to_string(), Some(cfg), field, None)
         }
     };
+    trained
+        .check(&graph, field.as_ref())
+        .map_err(anyhow::Error::msg)?;
     // Without a flag or a system_config, the step is the recorded interval and
     // every step is saved.
     let (dt, default_every) = match (a.dt, &cfg, stamp_dt) {

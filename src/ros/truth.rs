@@ -23,10 +23,14 @@ pub fn load_truth(model: &str) -> Result<Arc<dyn Dynamics>, String> {
         .ok_or_else(|| format!("{model:?} is not a truth:<system> model name"))?;
     let kind: SystemKind = name.parse()?;
     let field = SystemConfig::new(kind, 1).field;
-    Ok(Arc::new(TruthModel {
-        name: model.to_string(),
-        truth: Truth { field },
-    }))
+    let trained = crate::compat::TrainedFor::truth(model, field.clone());
+    Ok(Arc::new(crate::compat::Checked::new(
+        Arc::new(TruthModel {
+            name: model.to_string(),
+            truth: Truth { field },
+        }),
+        trained,
+    )))
 }
 
 /// [`Truth`] under the name it was selected by, so diagnostics say which.
