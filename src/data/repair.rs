@@ -53,8 +53,15 @@ pub fn repair(input: &Path, output: &Path) -> Result<RepairReport, DataError> {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".mcgnode-repair-")
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".mcgnode-repair-");
+    // Temporary files are private (0600) by default; a bag is an ordinary file.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    let mut tmp = builder
         .tempfile_in(dir)
         .map_err(|e| DataError::io(dir, "creating a temporary file in", e))?;
     let werr = |e: mcap::McapError| DataError::McapWrite {
