@@ -156,6 +156,12 @@ fn info(a: InfoArgs) -> Result<()> {
             ),
         };
         println!("  field: {field}");
+        if !bag.derived_velocities.is_empty() {
+            println!(
+                "  velocities: derived from positions and stamps (position-only) in {} trajectories",
+                bag.derived_velocities.len()
+            );
+        }
         if !bag.metadata.is_empty() {
             let keys: Vec<&str> = bag.metadata.keys().map(String::as_str).collect();
             println!("  mcgnode metadata: {}", keys.join(", "));

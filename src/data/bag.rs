@@ -179,6 +179,10 @@ pub struct Bag {
     pub topic: String,
     /// The bag arguments read, in order.
     pub sources: Vec<PathBuf>,
+    /// Trajectories whose messages left `velocities` empty (position-only
+    /// recordings): their velocities were derived from the positions and
+    /// stamps ([`super::dataset::finite_difference_velocities`]).
+    pub derived_velocities: Vec<u32>,
 }
 
 impl Bag {
@@ -631,6 +635,8 @@ struct Entry {
     graph: crate::system::Graph,
     sample: Sample,
     field: Option<Field>,
+    /// The message left `velocities` empty.
+    no_v: bool,
 }
 
 /// How to read trajectories from bags.
@@ -669,6 +675,7 @@ pub fn read_bags(paths: &[PathBuf], opts: &ReadOptions) -> Result<Bag, DataError
         field: None,
         topic: String::new(),
         sources: paths.to_vec(),
+        derived_velocities: vec![],
     };
     let mut field_from: Option<(PathBuf, Option<Field>)> = None;
     let mut meta_from: BTreeMap<String, PathBuf> = BTreeMap::new();
@@ -713,6 +720,7 @@ pub fn read_bags(paths: &[PathBuf], opts: &ReadOptions) -> Result<Bag, DataError
             }
         }
         out.trajectories.extend(bag.trajectories);
+        out.derived_velocities.extend(bag.derived_velocities);
     }
     out.field = field_from.and_then(|(_, f)| f);
     Ok(out)
@@ -751,7 +759,7 @@ fn read_one(path: &Path, opts: &ReadOptions) -> Result<(Bag, String), DataError>
         };
         let msg = ParticleState::from_cdr_as(raw.data, layout)?;
         let field = msg.field()?;
-        let (graph, sample) = msg.to_parts()?;
+        let (graph, sample, no_v) = msg.to_parts_positions_only()?;
         topics
             .entry(raw.topic.to_string())
             .or_default()
@@ -765,6 +773,7 @@ fn read_one(path: &Path, opts: &ReadOptions) -> Result<(Bag, String), DataError>
                 graph,
                 sample,
                 field,
+                no_v,
             });
         Ok(())
     })?;
@@ -818,6 +827,7 @@ fn read_one(path: &Path, opts: &ReadOptions) -> Result<(Bag, String), DataError>
         groups.entry(e.id).or_default().push(e);
     }
     let mut trajectories = Vec::with_capacity(groups.len());
+    let mut derived_velocities = vec![];
     for (id, mut entries) in groups {
         entries.sort_by_key(|e| e.step);
         let first = &entries[0];
@@ -855,12 +865,23 @@ fn read_one(path: &Path, opts: &ReadOptions) -> Result<(Bag, String), DataError>
             s.t = (e.stamp_ns - t0) as f64 * 1e-9;
             samples.push(s);
         }
-        trajectories.push(Trajectory {
+        let mut tr = Trajectory {
             id,
             system,
             graph,
             samples,
-        });
+        };
+        if entries.iter().any(|e| e.no_v) {
+            let v = super::dataset::finite_difference_velocities(&tr)
+                .map_err(|e| bag_err(format!("position-only recording: {e}")))?;
+            for ((s, e), v) in tr.samples.iter_mut().zip(&entries).zip(v) {
+                if e.no_v {
+                    s.state.v = v;
+                }
+            }
+            derived_velocities.push(id);
+        }
+        trajectories.push(tr);
     }
     Ok((
         Bag {
@@ -869,6 +890,7 @@ fn read_one(path: &Path, opts: &ReadOptions) -> Result<(Bag, String), DataError>
             field: field.and_then(|(f, _, _)| f),
             topic: topic.clone(),
             sources: vec![path.to_path_buf()],
+            derived_velocities,
         },
         topic,
     ))

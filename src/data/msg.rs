@@ -436,6 +436,17 @@ impl ParticleState {
     /// Checks everything and returns the graph and the sample (`t` = stamp in
     /// seconds, absolute). The error says which field and element is wrong.
     pub fn to_parts(&self) -> Result<(Graph, Sample), DataError> {
+        self.to_parts_with(false).map(|(g, s, _)| (g, s))
+    }
+
+    /// [`ParticleState::to_parts`] for bag reading, where `velocities` may be
+    /// empty (a position-only recording): the sample's velocities are then
+    /// zeros to be replaced, and the flag is true.
+    pub fn to_parts_positions_only(&self) -> Result<(Graph, Sample, bool), DataError> {
+        self.to_parts_with(true)
+    }
+
+    fn to_parts_with(&self, allow_no_v: bool) -> Result<(Graph, Sample, bool), DataError> {
         let bad = |m: String| Err(DataError::Invalid(m));
         let dim = match self.dimension {
             2 | 3 => usize::from(self.dimension),
@@ -451,10 +462,11 @@ impl ParticleState {
         if n == 0 {
             return bad("no particles (types is empty)".into());
         }
+        let no_v = allow_no_v && self.velocities.is_empty();
         for (name, len) in [
             ("masses", self.masses.len()),
             ("positions", self.positions.len()),
-            ("velocities", self.velocities.len()),
+            ("velocities", if no_v { n } else { self.velocities.len() }),
         ] {
             if len != n {
                 return bad(format!("{name} has {len} entries for {n} particles"));
@@ -467,7 +479,11 @@ impl ParticleState {
             ));
         }
         let q = flatten("positions", &self.positions, dim)?;
-        let v = flatten("velocities", &self.velocities, dim)?;
+        let v = if no_v {
+            vec![0.0; n * dim]
+        } else {
+            flatten("velocities", &self.velocities, dim)?
+        };
         let acc = if na == 0 {
             None
         } else {
@@ -502,7 +518,7 @@ impl ParticleState {
             state,
             acc,
         };
-        Ok((graph, sample))
+        Ok((graph, sample, no_v))
     }
 
     /// Decodes the edge arrays (indices are range-checked by `Graph::validate`).
