@@ -427,10 +427,13 @@ fn a_bag_cut_by_a_crash_is_repaired_into_one_rosbags_reads() {
     let out = ok(&mcgnode(&["bag", "repair", "full.mcap", "same.mcap"], d));
     assert!(out.contains("the input was complete"), "{out}");
     assert_eq!(read(&d.join("same.mcap")).trajectories, orig.trajectories);
-    // Writing over the input is refused.
+    // Writing over the input is refused, and so is a directory.
     let o = mcgnode(&["bag", "repair", "cut.mcap", "cut.mcap"], d);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("another file"));
+    let o = mcgnode(&["bag", "repair", ".", "x.mcap"], d);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("is a directory"));
 }
 
 #[test]

@@ -41,7 +41,8 @@ pub struct Args {
     /// system_config, else the interval of its header stamps).
     #[arg(long)]
     pub dt: Option<f64>,
-    /// Save every this many steps (default: the system's).
+    /// Save every this many steps (default: the system's; with --initial from
+    /// a bag without system_config, 1).
     #[arg(long)]
     pub save_every: Option<usize>,
     /// Output bag.

@@ -4,6 +4,8 @@
 //! - [`msg`]: the message structs (CDR, shared with the ROS node) and their schema.
 //! - [`bag`]: writing MCAP bags; reading MCAP, rosbag2 directories and .db3.
 //! - [`source`]: the storage files of a bag argument and their compression.
+//! - [`meta`]: the `mcgnode` metadata record, typed.
+//! - [`repair`]: rewriting an MCAP file cut short as a complete one.
 //! - [`dataset`]: states and target accelerations for training; bag digests.
 
 pub mod bag;

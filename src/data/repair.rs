@@ -32,6 +32,12 @@ pub struct RepairReport {
 /// metadata records are kept in order; chunks are zstd-compressed. Refuses an
 /// `output` that is the input, and an input with no readable record at all.
 pub fn repair(input: &Path, output: &Path) -> Result<RepairReport, DataError> {
+    if input.is_dir() {
+        return Err(DataError::Bag {
+            path: input.to_path_buf(),
+            msg: "is a directory: bag repair rewrites one MCAP file (give the .mcap inside a rosbag2 directory)".into(),
+        });
+    }
     if output.exists() && std::fs::canonicalize(output).ok() == std::fs::canonicalize(input).ok() {
         return Err(DataError::Bag {
             path: output.to_path_buf(),
