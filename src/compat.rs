@@ -109,7 +109,7 @@ impl TrainedFor {
         TrainedFor {
             model: model.to_string(),
             dim,
-            field: cfg.as_ref().map(|c| c.field.clone()),
+            field: cfg.as_ref().map(|c| c.field.normalized()),
             edges: cfg.as_ref().map(|c| EdgeKinds::of_kind(c.kind)),
             closed,
         }
@@ -171,7 +171,7 @@ impl TrainedFor {
                 ));
             }
             if let Some(trained) = &self.field {
-                if trained != data {
+                if trained.normalized() != data.normalized() {
                     return Err(format!(
                         "model {m} was trained with {}; these data state {}",
                         describe(trained),

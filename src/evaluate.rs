@@ -130,7 +130,7 @@ pub fn looks_closed(bag: &Bag) -> bool {
 pub fn bag_field(bag: &Bag, flag: Option<&Field>) -> Result<Option<FieldOrigin>> {
     let sys = bag_system(bag)?;
     if let (Some(m), Some(s)) = (&bag.field, &sys) {
-        if *m != s.field {
+        if m.normalized() != s.field.normalized() {
             bail!(
                 "the messages state the field {m:?} but the bag's system_config says {:?}",
                 s.field
@@ -140,7 +140,9 @@ pub fn bag_field(bag: &Bag, flag: Option<&Field>) -> Result<Option<FieldOrigin>>
     let found = match (flag, &bag.field, &sys) {
         (Some(f), _, _) => Some((f.clone(), "flags".to_string())),
         (None, Some(f), _) => Some((f.clone(), "the messages' field entries".to_string())),
-        (None, None, Some(s)) => Some((s.field.clone(), "the bag's system_config".to_string())),
+        (None, None, Some(s)) => {
+            Some((s.field.normalized(), "the bag's system_config".to_string()))
+        }
         (None, None, None) if looks_closed(bag) => Some((
             Field::default(),
             "inferred: a closed system (no anchors; momentum and energy conserved in the data)"

@@ -759,3 +759,43 @@ fn a_metadata_free_pendulum_bag_gives_the_true_energy_error_or_names_the_flag() 
     let err = stderr_of(&o);
     assert!(err.contains("trained with gravity 10"), "{err}");
 }
+
+#[test]
+fn zero_force_written_either_way_is_one_field() {
+    use mcgnode::physics::SystemConfig;
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = SystemConfig::new(mcgnode::physics::SystemKind::Spring, 3);
+    cfg.field.force = vec![0.0, 0.0];
+    let meta = mcgnode::data::BagMetadata {
+        system_config: Some(cfg.clone()),
+        ..Default::default()
+    }
+    .to_map()
+    .unwrap();
+    let p = dir.path().join("zero_force.mcap");
+    let trajs: Vec<Trajectory> = trajectories()
+        .into_iter()
+        .filter(|t| t.graph.dim == 2)
+        .collect();
+    write_trajectories_with_field(&p, &trajs, &meta, Some(&cfg.field)).unwrap();
+    let bag = read(&p);
+    let origin = mcgnode::evaluate::bag_field(&bag, None)
+        .unwrap()
+        .expect("stated");
+    assert!(origin.field.is_free());
+    assert_eq!(origin.source, "the messages' field entries");
+    // A real force in the metadata that the messages do not carry is refused.
+    let mut other = cfg.clone();
+    other.field.force = vec![0.5, 0.0];
+    let meta = mcgnode::data::BagMetadata {
+        system_config: Some(other),
+        ..Default::default()
+    }
+    .to_map()
+    .unwrap();
+    write_trajectories_with_field(&p, &trajs, &meta, Some(&cfg.field)).unwrap();
+    let e = mcgnode::evaluate::bag_field(&read(&p), None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("system_config"), "{e}");
+}

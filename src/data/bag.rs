@@ -175,7 +175,8 @@ pub struct Bag {
     /// The field every message states (`None`: the messages do not say, e.g.
     /// bags of the first message layout).
     pub field: Option<Field>,
-    /// The ParticleState topic read ("" when there was none).
+    /// The ParticleState topic read ("" when there was none; several bag
+    /// arguments with differently named topics: the names, comma-separated).
     pub topic: String,
     /// The bag arguments read, in order.
     pub sources: Vec<PathBuf>,
@@ -666,9 +667,9 @@ pub fn read_trajectories(path: impl AsRef<Path>) -> Result<Bag, DataError> {
 /// field they state, and arguments whose `mcgnode` metadata disagree on a key.
 /// Everything is validated; errors name the file, the message and the problem.
 pub fn read_bags(paths: &[PathBuf], opts: &ReadOptions) -> Result<Bag, DataError> {
-    let Some(first_path) = paths.first() else {
+    if paths.is_empty() {
         return Err(DataError::Trajectory("no bag given".into()));
-    };
+    }
     let mut out = Bag {
         trajectories: vec![],
         metadata: BTreeMap::new(),
@@ -681,18 +682,19 @@ pub fn read_bags(paths: &[PathBuf], opts: &ReadOptions) -> Result<Bag, DataError
     let mut meta_from: BTreeMap<String, PathBuf> = BTreeMap::new();
     for path in paths {
         let (bag, topic) = read_one(path, opts)?;
-        if !out.topic.is_empty() && out.topic != topic {
-            return Err(DataError::Trajectory(format!(
-                "{} holds ParticleState on {topic}, {} on {}: pass --topic",
-                path.display(),
-                first_path.display(),
-                out.topic
-            )));
+        // Each argument has one ParticleState topic (or the one chosen); they
+        // may be named differently.
+        if out.topic.is_empty() {
+            out.topic = topic;
+        } else if !topic.is_empty() && !out.topic.split(',').any(|t| t == topic) {
+            out.topic = format!("{},{topic}", out.topic);
         }
-        out.topic = topic;
         match &field_from {
             None => field_from = Some((path.clone(), bag.field.clone())),
-            Some((p, f)) if *f != bag.field => {
+            Some((p, f))
+                if f.as_ref().map(Field::normalized)
+                    != bag.field.as_ref().map(Field::normalized) =>
+            {
                 return Err(DataError::Trajectory(format!(
                     "{} and {} state different fields ({}; {}): read them separately",
                     p.display(),
