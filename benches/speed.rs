@@ -1,18 +1,30 @@
-//! Criterion benches of the two hot paths: one candle training step (forward +
-//! backward, batch 100) and one kernel step of a rollout.
+//! Criterion benches of the two hot paths: one training step of the native
+//! engine (forward + backward, batch 100) and one kernel step of a rollout.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use mcgnode::bench::{random_model, rollout_seconds, train_step_seconds};
+use mcgnode::bench::{random_model, rollout_seconds, training_set};
+use mcgnode::engine::{all_cores, Engine};
 use mcgnode::model::Variant;
+use mcgnode::model::{Hyper, Net};
 use mcgnode::physics::{SystemConfig, SystemKind};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
 
 fn training_step(c: &mut Criterion) {
     for (name, kind) in [
         ("spring", SystemKind::Spring),
         ("pendulum", SystemKind::Pendulum),
     ] {
-        c.bench_function(&format!("train step 5-{name} mcgnode b100"), |b| {
-            b.iter(|| train_step_seconds(kind, Variant::Mcgnode, 100, 1).unwrap())
+        let (g, s, a) = training_set(kind, 5, 1);
+        let mut h = Hyper::new(Variant::Mcgnode, 2, 1, 5);
+        h.body_force = !g.anchors.is_empty();
+        let net = Net::new(h.clone(), &mut ChaCha8Rng::seed_from_u64(0)).unwrap();
+        let mut eng = Engine::new(&h, &g, all_cores()).unwrap();
+        let theta = eng.layout().flatten(&net.store.weights().unwrap()).unwrap();
+        let idx: Vec<usize> = (0..100).collect();
+        let mut grad = vec![0.0; theta.len()];
+        c.bench_function(&format!("engine step 5-{name} mcgnode b100"), |b| {
+            b.iter(|| eng.loss_grad(&theta, &s, &a, &idx, &mut grad))
         });
     }
 }

@@ -2,11 +2,10 @@
 //! times of training steps and rollouts, next to the authors' JAX figures
 //! measured on this same 2-core machine.
 
-use crate::model::batch::Batch;
-use crate::model::plan::GraphPlan;
 use crate::model::{Hyper, Net, TrainedModel, Variant};
 use crate::physics::{SystemConfig, SystemKind};
 use crate::system::{Graph, State};
+use crate::train::{EngineKind, TrainConfig};
 use anyhow::Result;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -72,42 +71,84 @@ pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, 
             points: None,
         },
         weights: net.store.weights()?,
+        optimizer: None,
     };
     let m = TrainedModel::from_file(file)?;
     Ok((net, m))
 }
 
-/// Median time of one training step (forward, backward, Adam-free) at batch `b`.
-pub fn train_step_seconds(
+/// What a training figure trains.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Trainee {
+    /// A model of the GNODE family on an engine, with this many threads.
+    Family(Variant, EngineKind, usize),
+    /// A baseline (candle).
+    Baseline(crate::baselines::Kind),
+}
+
+/// A data set like the paper's: `trajectories` × 100 states of `n` particles
+/// of `system` (independent seeded starts, exact accelerations). Training
+/// time depends on sizes, not on where the states lie on a trajectory.
+pub fn training_set(
     system: SystemKind,
-    variant: Variant,
-    b: usize,
-    repeats: usize,
-) -> Result<f64> {
-    let cfg = SystemConfig::new(system, 5);
+    n: usize,
+    trajectories: usize,
+) -> (Graph, Vec<State>, Vec<Vec<f64>>) {
+    let cfg = SystemConfig::new(system, n);
     let g = cfg.graph();
-    let (net, _) = random_model(variant, &g, 0)?;
-    let plan = GraphPlan::new(&g);
-    let states: Vec<State> = (0..b).map(|i| cfg.start_for(&g, 99, i)).collect();
-    let acc: Vec<Vec<f64>> = states
+    let states: Vec<State> = (0..trajectories * 100)
+        .map(|i| cfg.start_for(&g, 99, i))
+        .collect();
+    let acc = states
         .iter()
         .map(|s| crate::physics::acceleration(&g, &cfg.field, s))
         .collect();
-    let sr: Vec<&State> = states.iter().collect();
-    let ar: Vec<&[f64]> = acc.iter().map(|a| a.as_slice()).collect();
+    (g, states, acc)
+}
+
+/// Wall time of whole epochs as `train` runs them (shuffled batches of 100,
+/// Adam, validation on 25 %): the median over `epochs` epochs of the time
+/// between consecutive epoch reports (the first epoch is included, so
+/// warm-up counts once).
+pub fn epoch_seconds(
+    trainee: Trainee,
+    data: &(Graph, Vec<State>, Vec<Vec<f64>>),
+    epochs: usize,
+) -> Result<f64> {
+    let (g, states, acc) = data;
+    let mut cfg = TrainConfig {
+        epochs,
+        patience: epochs,
+        ..TrainConfig::default()
+    };
     let mut times = vec![];
-    for _ in 0..repeats {
-        let t = Instant::now();
-        let batch = Batch::new(&plan, &sr, Some(&ar), 1)?;
-        let loss = net.loss(&batch)?;
-        let grads = loss.backward()?;
-        // Read every gradient back, as the optimiser does.
-        for v in net.store.vars() {
-            if let Some(gr) = grads.get(&v) {
-                let _ = gr.flatten_all()?.to_vec1::<f64>()?;
-            }
+    let mut last = 0.0;
+    let on_epoch = |r: &crate::train::EpochReport| {
+        times.push(r.elapsed - last);
+        last = r.elapsed;
+        true
+    };
+    match trainee {
+        Trainee::Family(v, engine, threads) => {
+            cfg.engine = engine;
+            cfg.threads = threads;
+            let mut h = Hyper::new(v, g.dim, 1, g.n());
+            h.body_force = !g.anchors.is_empty();
+            crate::train::train(h, g, states, acc, &cfg, on_epoch)?;
         }
-        times.push(t.elapsed().as_secs_f64());
+        Trainee::Baseline(kind) => {
+            // LGN and HGN need second derivatives, which candle fixes per
+            // thread at its first backward pass: train on a fresh thread.
+            crate::baselines::autodiff::request_second_order();
+            std::thread::scope(|s| {
+                s.spawn(|| {
+                    let h = crate::baselines::BaselineHyper::new(kind, g.dim, 1);
+                    crate::baselines::train_baseline(h, g, states, acc, &cfg, on_epoch)
+                })
+                .join()
+                .map_err(|_| anyhow::anyhow!("{kind} training thread panicked"))?
+            })?;
+        }
     }
     Ok(median(times))
 }
@@ -135,26 +176,74 @@ pub fn rollout_seconds(
     Ok(median(times))
 }
 
-/// Runs the whole benchmark set.
+fn epoch_figure(
+    name: String,
+    trainee: Trainee,
+    data: &(Graph, Vec<State>, Vec<Vec<f64>>),
+    epochs: usize,
+    jax: Option<&str>,
+) -> Result<Figure> {
+    Ok(Figure {
+        name,
+        value: epoch_seconds(trainee, data, epochs)? * 1e3,
+        unit: "ms".into(),
+        jax: jax.map(str::to_string),
+        repeats: epochs,
+    })
+}
+
+/// Runs the whole benchmark set. `quick` uses fewer repeats, and a tenth of
+/// the data for the baselines and the candle engine on the cube.
 pub fn run_all(quick: bool) -> Result<Vec<Figure>> {
+    use crate::baselines::Kind;
     let r = if quick { 5 } else { 21 };
+    let ep = if quick { 2 } else { 7 };
+    let cores = crate::engine::all_cores();
     let mut out = vec![];
-    let step_s = train_step_seconds(SystemKind::Spring, Variant::Mcgnode, 100, r * 5)?;
-    out.push(Figure {
-        name: "5-spring MCGNODE training step, batch 100".into(),
-        value: step_s * 1e3,
-        unit: "ms".into(),
-        jax: Some("0.65-1.44".into()),
-        repeats: r * 5,
-    });
-    let step_p = train_step_seconds(SystemKind::Pendulum, Variant::Mcgnode, 100, r * 5)?;
-    out.push(Figure {
-        name: "5-pendulum MCGNODE training step, batch 100".into(),
-        value: step_p * 1e3,
-        unit: "ms".into(),
-        jax: Some("3.2".into()),
-        repeats: r * 5,
-    });
+    // The paper's data sets: 100 trajectories of 100 states (75 % trained on).
+    for (system, label, jax) in [
+        (SystemKind::Spring, "5-spring", "174-189"),
+        (SystemKind::Pendulum, "5-pendulum", "377-389"),
+    ] {
+        let data = training_set(system, 5, 100);
+        for (engine, threads, jax) in [
+            (EngineKind::Native, cores, Some(jax)),
+            (EngineKind::Native, 1, None),
+            (EngineKind::Candle, 1, None),
+        ] {
+            let name = format!(
+                "{label} MCGNODE epoch, 10,000 states, {engine:?} engine, {threads} thread(s)"
+            )
+            .to_lowercase();
+            let t = Trainee::Family(Variant::Mcgnode, engine, threads);
+            out.push(epoch_figure(name, t, &data, ep, jax)?);
+        }
+    }
+    // The 5×5×5 peridynamic cube, 10 trajectories.
+    let cube = training_set(SystemKind::Peridynamic, 125, if quick { 1 } else { 10 });
+    let states = cube.1.len();
+    for (engine, threads) in [(EngineKind::Native, cores), (EngineKind::Candle, 1)] {
+        let name = format!(
+            "125-particle cube MCGNODE epoch, {states} states, {engine:?} engine, {threads} thread(s)"
+        )
+        .to_lowercase();
+        let t = Trainee::Family(Variant::Mcgnode, engine, threads);
+        out.push(epoch_figure(name, t, &cube, ep.min(3), None)?);
+    }
+    // Baselines on the 5-spring set (a tenth of it with --quick).
+    let data = training_set(SystemKind::Spring, 5, if quick { 10 } else { 100 });
+    let states = data.1.len();
+    for (kind, jax) in [(Kind::Lgn, "960"), (Kind::Hgn, "320-410"), (Kind::Gns, "-")] {
+        let name = format!("5-spring {kind} epoch, {states} states (candle)");
+        let jax = (jax != "-" && !quick).then_some(jax);
+        out.push(epoch_figure(
+            name,
+            Trainee::Baseline(kind),
+            &data,
+            ep.min(3),
+            jax,
+        )?);
+    }
     let rs = rollout_seconds(SystemKind::Spring, 5, Variant::Mcgnode, 20_000, r)?;
     out.push(Figure {
         name: "5-spring MCGNODE rollout, 20 s (20,000 steps)".into(),

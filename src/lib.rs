@@ -6,12 +6,14 @@
 //! Data flows one way: [`physics`] → [`data`] (bags) → `model` + `train` →
 //! model file → `kernel` + `rollout` → [`data`] → `metrics`.
 
+pub mod alloc;
 pub mod baselines;
 pub mod bench;
 pub mod cli;
 pub mod compat;
 pub mod data;
 pub mod dynamics;
+pub mod engine;
 pub mod evaluate;
 pub mod kernel;
 pub mod metrics;

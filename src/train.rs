@@ -2,17 +2,20 @@
 //! early stopping on the validation loss (the best weights are kept).
 
 use crate::data::dataset::Dataset;
+use crate::engine::Engine;
 use crate::model::batch::Batch;
+use crate::model::file::AdamState;
 use crate::model::file::TrainingReport;
 use crate::model::params::{ParamStore, Weights};
 use crate::model::plan::GraphPlan;
-use crate::model::{Hyper, Net};
+use crate::model::{ArchPreset, EdgeInput, Hyper, MessageFn, Net, Variant};
 use crate::system::{Graph, State};
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use candle_core::Tensor;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 use std::time::Instant;
 
 /// Training settings.
@@ -39,6 +42,13 @@ pub struct TrainConfig {
     /// data-efficiency experiments: 100 to 10,000); `None`: all. Applied by
     /// [`apply_data_options`].
     pub points: Option<usize>,
+    /// Gradient engine of the GNODE family (the baselines always use candle).
+    pub engine: EngineKind,
+    /// Threads of the native engine; results do not depend on it.
+    pub threads: usize,
+    /// Warm start: continue from this model's weights (and its Adam state when
+    /// it has one). Its hyperparameters must be the ones trained.
+    pub init: Option<Box<crate::model::ModelFile>>,
 }
 
 impl Default for TrainConfig {
@@ -52,6 +62,9 @@ impl Default for TrainConfig {
             seed: 0,
             noise: 0.0,
             points: None,
+            engine: EngineKind::Native,
+            threads: crate::engine::all_cores(),
+            init: None,
         }
     }
 }
@@ -79,55 +92,233 @@ pub struct Trained {
     pub net: Net,
     /// Figures for the model file.
     pub report: TrainingReport,
+    /// Adam's state after the last epoch.
+    pub optimizer: crate::model::file::AdamState,
 }
 
-/// Adam (Kingma & Ba) on flat parameter vectors: cheaper than one candle op per
-/// moment update for models with a few hundred parameters.
+/// Adam (Kingma & Ba) on one flat parameter vector: the same update for
+/// both engines and every model kind.
 pub struct Adam {
     lr: f64,
-    m: Vec<Vec<f64>>,
-    v: Vec<Vec<f64>>,
+    m: Vec<f64>,
+    v: Vec<f64>,
     t: i32,
 }
 
 impl Adam {
-    /// Zero moments for the store's parameters.
-    pub fn new(lr: f64, store: &ParamStore) -> Self {
-        let sizes: Vec<usize> = store.vars().iter().map(|v| v.elem_count()).collect();
+    /// Zero moments for `len` parameters.
+    pub fn new(lr: f64, len: usize) -> Self {
         Self {
             lr,
-            m: sizes.iter().map(|&n| vec![0.0; n]).collect(),
-            v: sizes.iter().map(|&n| vec![0.0; n]).collect(),
+            m: vec![0.0; len],
+            v: vec![0.0; len],
             t: 0,
         }
     }
 
-    /// One update from the gradients of a loss (parameters without a gradient
-    /// are left alone).
-    pub fn step(
-        &mut self,
-        store: &ParamStore,
-        grads: &candle_core::backprop::GradStore,
-    ) -> Result<()> {
+    /// Continues from a saved state (moments flat, in parameter order).
+    pub fn resume(lr: f64, step: i32, m: Vec<f64>, v: Vec<f64>) -> Self {
+        Self { lr, m, v, t: step }
+    }
+
+    /// (updates taken, first moments, second moments).
+    pub fn state(&self) -> (i32, &[f64], &[f64]) {
+        (self.t, &self.m, &self.v)
+    }
+
+    /// One update of `theta` from `grad`.
+    pub fn step(&mut self, theta: &mut [f64], grad: &[f64]) {
         const B1: f64 = 0.9;
         const B2: f64 = 0.999;
         const EPS: f64 = 1e-8;
         self.t += 1;
         let c1 = 1.0 - B1.powi(self.t);
         let c2 = 1.0 - B2.powi(self.t);
-        for (k, var) in store.vars().iter().enumerate() {
-            let Some(g) = grads.get(var) else { continue };
-            let g = g.flatten_all()?.to_vec1::<f64>()?;
-            let mut p = var.as_tensor().flatten_all()?.to_vec1::<f64>()?;
-            let (m, v) = (&mut self.m[k], &mut self.v[k]);
-            for i in 0..p.len() {
-                m[i] = B1 * m[i] + (1.0 - B1) * g[i];
-                v[i] = B2 * v[i] + (1.0 - B2) * g[i] * g[i];
-                p[i] -= self.lr * (m[i] / c1) / ((v[i] / c2).sqrt() + EPS);
-            }
-            var.set(&Tensor::from_vec(p, var.shape(), var.device())?)?;
+        for (((p, g), m), v) in theta.iter_mut().zip(grad).zip(&mut self.m).zip(&mut self.v) {
+            *m = B1 * *m + (1.0 - B1) * g;
+            *v = B2 * *v + (1.0 - B2) * g * g;
+            *p -= self.lr * (*m / c1) / ((*v / c2).sqrt() + EPS);
         }
-        Ok(())
+    }
+}
+
+/// What [`fit`] minimises: a mean loss over samples, with its gradient, as a
+/// function of one flat parameter vector.
+pub trait Objective {
+    /// Mean loss over the samples `idx` at `theta`, its gradient written to `grad`.
+    fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64>;
+    /// Mean loss over the samples `idx` at `theta`.
+    fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64>;
+}
+
+/// The parameters of a candle store as one flat vector, in definition order.
+pub fn flat_params(store: &ParamStore) -> Result<Vec<f64>> {
+    let mut out = vec![];
+    for v in store.vars() {
+        out.extend(v.as_tensor().flatten_all()?.to_vec1::<f64>()?);
+    }
+    Ok(out)
+}
+
+/// Sets a candle store's parameters from a flat vector (definition order).
+pub fn set_flat_params(store: &ParamStore, theta: &[f64]) -> Result<()> {
+    let mut at = 0;
+    for v in store.vars() {
+        let n = v.elem_count();
+        v.set(&Tensor::from_vec(
+            theta[at..at + n].to_vec(),
+            v.shape(),
+            v.device(),
+        )?)?;
+        at += n;
+    }
+    if at != theta.len() {
+        bail!("{} parameters given, the model has {at}", theta.len());
+    }
+    Ok(())
+}
+
+/// A candle loss `loss(indices)` over a store, differentiated by candle's
+/// autodiff: the reference engine, and the one the baselines use. With more
+/// than one thread, a batch is cut into one chunk per thread whose gradients
+/// are summed in order (so results depend on the thread count only through
+/// rounding); candle itself runs each chunk on one thread.
+pub struct CandleObjective<'a, F> {
+    store: &'a ParamStore,
+    loss: F,
+    pool: Option<rayon::ThreadPool>,
+    threads: usize,
+}
+
+impl<'a, F: Fn(&[usize]) -> Result<Tensor> + Sync> CandleObjective<'a, F> {
+    /// The objective of `loss` on `store`'s parameters, on one thread.
+    pub fn new(store: &'a ParamStore, loss: F) -> Self {
+        Self {
+            store,
+            loss,
+            pool: None,
+            threads: 1,
+        }
+    }
+
+    /// The same, with batches cut over `threads` threads.
+    pub fn with_threads(store: &'a ParamStore, loss: F, threads: usize) -> Result<Self> {
+        let threads = threads.max(1);
+        let pool = if threads > 1 {
+            Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()?,
+            )
+        } else {
+            None
+        };
+        Ok(Self {
+            store,
+            loss,
+            pool,
+            threads,
+        })
+    }
+
+    /// Mean loss and its gradient over one chunk.
+    fn chunk(&self, idx: &[usize], with_grad: bool) -> Result<(f64, Vec<f64>)> {
+        let l = (self.loss)(idx)?;
+        let value = l.to_scalar::<f64>()?;
+        let mut out = vec![];
+        if with_grad {
+            let grads = l.backward()?;
+            for var in self.store.vars() {
+                match grads.get(&var) {
+                    Some(g) => out.extend(g.flatten_all()?.to_vec1::<f64>()?),
+                    // Parameters the loss does not read have no gradient.
+                    None => out.extend(std::iter::repeat_n(0.0, var.elem_count())),
+                }
+            }
+        }
+        Ok((value, out))
+    }
+
+    /// The chunks of `idx` (at most `max` samples each, at least one per
+    /// thread when there are enough), evaluated in order.
+    fn chunks(
+        &self,
+        idx: &[usize],
+        max: usize,
+        with_grad: bool,
+    ) -> Result<Vec<(usize, f64, Vec<f64>)>> {
+        let size = idx.len().div_ceil(self.threads).clamp(1, max);
+        let parts: Vec<&[usize]> = idx.chunks(size).collect();
+        let run = |c: &&[usize]| -> Result<(usize, f64, Vec<f64>)> {
+            let (l, g) = self.chunk(c, with_grad)?;
+            Ok((c.len(), l, g))
+        };
+        match &self.pool {
+            Some(pool) if parts.len() > 1 => pool.install(|| parts.par_iter().map(run).collect()),
+            _ => parts.iter().map(run).collect(),
+        }
+    }
+}
+
+impl<F: Fn(&[usize]) -> Result<Tensor> + Sync> Objective for CandleObjective<'_, F> {
+    fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64> {
+        set_flat_params(self.store, theta)?;
+        let n = idx.len() as f64;
+        let parts = self.chunks(idx, usize::MAX, true)?;
+        if let [(_, l, g)] = parts.as_slice() {
+            grad.copy_from_slice(g);
+            return Ok(*l);
+        }
+        grad.fill(0.0);
+        let mut total = 0.0;
+        for (len, l, g) in parts {
+            let w = len as f64 / n;
+            total += l * w;
+            for (x, y) in grad.iter_mut().zip(&g) {
+                *x += y * w;
+            }
+        }
+        Ok(total)
+    }
+
+    fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64> {
+        set_flat_params(self.store, theta)?;
+        let total: f64 = self
+            .chunks(idx, 1000, false)?
+            .iter()
+            .map(|(len, l, _)| l * *len as f64)
+            .sum();
+        Ok(total / idx.len() as f64)
+    }
+}
+
+/// The hand-written engine on one graph's states and target accelerations.
+pub struct EngineObjective<'a> {
+    engine: &'a mut Engine,
+    states: &'a [State],
+    targets: &'a [Vec<f64>],
+}
+
+impl<'a> EngineObjective<'a> {
+    /// The objective of `engine` on these states and targets.
+    pub fn new(engine: &'a mut Engine, states: &'a [State], targets: &'a [Vec<f64>]) -> Self {
+        Self {
+            engine,
+            states,
+            targets,
+        }
+    }
+}
+
+impl Objective for EngineObjective<'_> {
+    fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64> {
+        Ok(self
+            .engine
+            .loss_grad(theta, self.states, self.targets, idx, grad))
+    }
+
+    fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64> {
+        Ok(self.engine.loss(theta, self.states, self.targets, idx))
     }
 }
 
@@ -162,16 +353,17 @@ pub fn check_data(
 }
 
 /// The loop every trainable model shares: a seeded split of `n` samples
-/// (validation fraction from `cfg`), shuffled batches, Adam on `store`,
-/// validation after every epoch, early stopping; the best weights are loaded
-/// back into `store`. `loss(indices)` is the mean loss over those samples;
-/// `on_epoch` returns false to cancel.
+/// (validation fraction from `cfg`), shuffled batches, Adam on the flat
+/// parameters `theta` (from `adam`'s state, which is left as the last epoch
+/// made it), validation after every epoch, early stopping; the best parameters
+/// are left in `theta`. `on_epoch` returns false to cancel.
 pub fn fit(
-    store: &ParamStore,
+    theta: &mut [f64],
     n: usize,
     cfg: &TrainConfig,
     rng: &mut ChaCha8Rng,
-    loss: impl Fn(&[usize]) -> Result<Tensor>,
+    objective: &mut impl Objective,
+    adam: &mut Adam,
     mut on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainingReport> {
     let mut order: Vec<usize> = (0..n).collect();
@@ -179,17 +371,17 @@ pub fn fit(
     let n_val = ((n as f64 * cfg.validation).round() as usize).clamp(1, n - 1);
     let (val_idx, train_idx) = order.split_at(n_val);
     let mut train_idx = train_idx.to_vec();
-    let validation = |idx: &[usize]| -> Result<f64> {
-        let mut total = 0.0;
-        for chunk in idx.chunks(1000) {
-            total += loss(chunk)?.to_scalar::<f64>()? * chunk.len() as f64;
-        }
-        Ok(total / idx.len() as f64)
-    };
-    let mut adam = Adam::new(cfg.lr, store);
+    if adam.m.len() != theta.len() {
+        bail!(
+            "optimiser state has {} entries, the model {}",
+            adam.m.len(),
+            theta.len()
+        );
+    }
+    let mut grad = vec![0.0; theta.len()];
     let start = Instant::now();
     let mut best = f64::INFINITY;
-    let mut best_weights: Weights = store.weights()?;
+    let mut best_theta = theta.to_vec();
     let (mut best_epoch, mut best_train) = (0, f64::NAN);
     let mut epochs_run = 0;
     let mut stopped_early = false;
@@ -197,17 +389,16 @@ pub fn fit(
         train_idx.shuffle(rng);
         let (mut sum, mut count) = (0.0, 0usize);
         for chunk in train_idx.chunks(cfg.batch) {
-            let l = loss(chunk)?;
-            let lv = l.to_scalar::<f64>()?;
+            let lv = objective.loss_grad(theta, chunk, &mut grad)?;
             if !lv.is_finite() {
                 bail!("training diverged at epoch {epoch} (loss {lv})");
             }
-            adam.step(store, &l.backward()?)?;
+            adam.step(theta, &grad);
             sum += lv * chunk.len() as f64;
             count += chunk.len();
         }
         let train_loss = sum / count as f64;
-        let val = validation(val_idx)?;
+        let val = objective.loss(theta, val_idx)?;
         epochs_run = epoch;
         if !val.is_finite() {
             bail!("validation loss is not finite at epoch {epoch}");
@@ -216,7 +407,7 @@ pub fn fit(
             best = val;
             best_epoch = epoch;
             best_train = train_loss;
-            best_weights = store.weights()?;
+            best_theta.copy_from_slice(theta);
         }
         let report = EpochReport {
             epoch,
@@ -234,7 +425,7 @@ pub fn fit(
             break;
         }
     }
-    store.load(&best_weights)?;
+    theta.copy_from_slice(&best_theta);
     Ok(TrainingReport {
         seed: cfg.seed,
         epochs_requested: cfg.epochs,
@@ -294,15 +485,120 @@ pub fn train(
 ) -> Result<Trained> {
     check_data(graph, states, acc, cfg)?;
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+    // Both engines start from the same seeded initialisation (or the warm start).
     let net = Net::new(hyper, &mut rng)?;
-    let plan = GraphPlan::new(graph);
-    let loss = |idx: &[usize]| -> Result<Tensor> {
-        let s: Vec<&State> = idx.iter().map(|&i| &states[i]).collect();
-        let a: Vec<&[f64]> = idx.iter().map(|&i| acc[i].as_slice()).collect();
-        net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?)
+    if let Some(init) = &cfg.init {
+        if init.hyper != net.hyper {
+            bail!(
+                "--init model has another architecture ({:?}) than the one to train ({:?})",
+                init.hyper,
+                net.hyper
+            );
+        }
+        net.store.load(&init.weights)?;
+    }
+    // Adam's moments are stored by name; each engine reads them in its order.
+    let adam_for = |order: &dyn Fn(&Weights) -> Result<Vec<f64>>, len: usize| -> Result<Adam> {
+        Ok(match cfg.init.as_ref().and_then(|f| f.optimizer.as_ref()) {
+            Some(st) => Adam::resume(cfg.lr, st.step, order(&st.m)?, order(&st.v)?),
+            None => Adam::new(cfg.lr, len),
+        })
     };
-    let report = fit(&net.store, states.len(), cfg, &mut rng, loss, on_epoch)?;
-    Ok(Trained { net, report })
+    let (report, optimizer) = match cfg.engine {
+        EngineKind::Candle => {
+            let plan = GraphPlan::new(graph);
+            let loss = |idx: &[usize]| -> Result<Tensor> {
+                let s: Vec<&State> = idx.iter().map(|&i| &states[i]).collect();
+                let a: Vec<&[f64]> = idx.iter().map(|&i| acc[i].as_slice()).collect();
+                net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?)
+            };
+            let mut theta = flat_params(&net.store)?;
+            let order = |w: &Weights| -> Result<Vec<f64>> {
+                let mut out = vec![];
+                for name in net.store.names() {
+                    let a = w
+                        .get(name)
+                        .with_context(|| format!("optimiser state lacks {name}"))?;
+                    out.extend_from_slice(&a.data);
+                }
+                Ok(out)
+            };
+            let mut adam = adam_for(&order, theta.len())?;
+            let mut obj = CandleObjective::new(&net.store, loss);
+            let report = fit(
+                &mut theta,
+                states.len(),
+                cfg,
+                &mut rng,
+                &mut obj,
+                &mut adam,
+                on_epoch,
+            )?;
+            set_flat_params(&net.store, &theta)?;
+            // Same names and shapes as the weights, values from a flat vector.
+            let named = |x: &[f64]| -> Result<Weights> {
+                let mut w = net.store.weights()?;
+                let mut at = 0;
+                for name in net.store.names() {
+                    let a = w.get_mut(name).expect("store names its weights");
+                    let n = a.data.len();
+                    a.data.copy_from_slice(&x[at..at + n]);
+                    at += n;
+                }
+                Ok(w)
+            };
+            let (step, m, v) = adam.state();
+            (
+                report,
+                AdamState {
+                    step,
+                    m: named(m)?,
+                    v: named(v)?,
+                },
+            )
+        }
+        EngineKind::Native => {
+            let mut engine = Engine::new(&net.hyper, graph, cfg.threads)?;
+            let layout = engine.layout().clone();
+            let mut theta = layout.flatten(&net.store.weights()?)?;
+            let order = |w: &Weights| -> Result<Vec<f64>> { Ok(layout.flatten(w)?) };
+            let mut adam = adam_for(&order, theta.len())?;
+            let mut obj = EngineObjective::new(&mut engine, states, acc);
+            let report = fit(
+                &mut theta,
+                states.len(),
+                cfg,
+                &mut rng,
+                &mut obj,
+                &mut adam,
+                on_epoch,
+            )?;
+            net.store.load(&layout.weights(&theta))?;
+            let (step, m, v) = adam.state();
+            (
+                report,
+                AdamState {
+                    step,
+                    m: layout.weights(m),
+                    v: layout.weights(v),
+                },
+            )
+        }
+    };
+    Ok(Trained {
+        net,
+        report,
+        optimizer,
+    })
+}
+
+/// Which engine computes the GNODE family's gradients.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum EngineKind {
+    /// Hand-written reverse mode on the kernel's layout, over all cores (default).
+    Native,
+    /// Candle's autodiff: the reference.
+    Candle,
 }
 
 /// Whether MCGNODE learns a body-force branch.
@@ -331,6 +627,16 @@ pub struct ModelOptions {
     pub types: Option<usize>,
     /// The ParticleState topic to train on, when a bag holds several.
     pub topic: Option<String>,
+    /// Architecture preset (the authors' code by default).
+    pub arch: ArchPreset,
+    /// Hidden layers per graph MLP, overriding the preset.
+    pub hidden_layers: Option<usize>,
+    /// Message functions, overriding the preset.
+    pub message: Option<MessageFn>,
+    /// Edge-update input, overriding the preset.
+    pub edge_input: Option<EdgeInput>,
+    /// Per-block hidden sizes (block weight prefix → sizes).
+    pub block_hidden: std::collections::BTreeMap<String, Vec<usize>>,
 }
 
 impl Default for ModelOptions {
@@ -342,7 +648,48 @@ impl Default for ModelOptions {
             body_force: BodyForce::Auto,
             types: None,
             topic: None,
+            arch: ArchPreset::Authors,
+            hidden_layers: None,
+            message: None,
+            edge_input: None,
+            block_hidden: Default::default(),
         }
+    }
+}
+
+impl ModelOptions {
+    /// The hyperparameters these options give a variant on a `dim`-D graph of
+    /// `particles` particles with `types` types (body force left on).
+    pub fn hyper(
+        &self,
+        variant: Variant,
+        dim: usize,
+        types: usize,
+        particles: usize,
+    ) -> Result<Hyper> {
+        let mut h = Hyper::new(variant, dim, types, particles).with_preset(self.arch);
+        h.hidden = self.hidden;
+        h.embed = self.embed;
+        h.rounds = self.rounds;
+        h.hidden_layers = self.hidden_layers.unwrap_or(h.hidden_layers);
+        h.message = self.message.unwrap_or(h.message);
+        h.edge_input = self.edge_input.unwrap_or(h.edge_input);
+        h.block_hidden = self.block_hidden.clone();
+        let known: Vec<String> = crate::model::Arch::new(&h)
+            .mlps
+            .iter()
+            .map(|(b, _)| b.prefix())
+            .collect();
+        if let Some(bad) = h.block_hidden.keys().find(|k| !known.contains(k)) {
+            bail!(
+                "--block-hidden names block {bad:?}, which a {variant} model does not have (it has: {})",
+                known.join(", ")
+            );
+        }
+        if h.hidden == 0 || h.embed == 0 {
+            bail!("--hidden and --embed must be positive");
+        }
+        Ok(h)
     }
 }
 
@@ -489,16 +836,14 @@ pub fn train_from_bags(
             .max()
             .unwrap_or(1),
     );
-    let mut hyper = Hyper::new(variant, ds.graph.dim, types, ds.graph.n());
-    hyper.hidden = opts.hidden;
-    hyper.embed = opts.embed;
-    hyper.rounds = opts.rounds;
+    let mut hyper = opts.hyper(variant, ds.graph.dim, types, ds.graph.n())?;
     hyper.body_force = match opts.body_force {
         BodyForce::On => true,
         BodyForce::Off => false,
         BodyForce::Auto => match &data.closed {
             Some((closed, _)) => !closed,
-            None if variant == crate::model::Variant::Mcgnode => bail!(
+            // A warm start keeps its model's branch (below).
+            None if variant == crate::model::Variant::Mcgnode && cfg.init.is_none() => bail!(
                 "the training bags do not say whether the system is closed (their messages \
                  leave the field unknown, there is no system_config metadata, and the data do \
                  not show a closed system): pass --body-force off for a closed system \
@@ -507,8 +852,43 @@ pub fn train_from_bags(
             None => true,
         },
     };
+    if let Some(init) = &cfg.init {
+        // A warm start keeps the architecture it was trained with.
+        let h = &init.hyper;
+        if h.variant != variant {
+            bail!("--init model is a {} model, not {variant}", h.variant);
+        }
+        if h.dim != ds.graph.dim || ds.graph.types.iter().any(|&t| t as usize >= h.types) {
+            bail!(
+                "--init model is {}D with {} particle types; the data are {}D with types up to {}",
+                h.dim,
+                h.types,
+                ds.graph.dim,
+                types - 1
+            );
+        }
+        if !variant.biases().graph && h.particles != ds.graph.n() {
+            bail!(
+                "--init NODE model was built for {} particles, the data have {}",
+                h.particles,
+                ds.graph.n()
+            );
+        }
+        log(&format!(
+            "continuing from a model trained for {} epochs (validation MSE {:.3e}), {}",
+            init.training.epochs_run,
+            init.training.validation_loss,
+            if init.optimizer.is_some() {
+                "with its Adam state"
+            } else {
+                "with a fresh Adam state"
+            }
+        ));
+        hyper = h.clone();
+    }
     if variant == crate::model::Variant::Mcgnode {
         let why = match (&opts.body_force, &data.closed) {
+            _ if cfg.init.is_some() => ", from the --init model".to_string(),
             (BodyForce::Auto, Some((_, why))) => format!(", from {why}"),
             (BodyForce::Auto, None) => String::new(),
             _ => ", as asked".to_string(),
@@ -530,5 +910,6 @@ pub fn train_from_bags(
         trained_on: data.trained_on,
         training: trained.report,
         weights: trained.net.store.weights()?,
+        optimizer: Some(trained.optimizer),
     })
 }

@@ -298,6 +298,30 @@ fn loss_of(net: &BaselineNet, b: &Batch, g: &Graph) -> f64 {
     net.loss(b, &g.masses).unwrap().to_scalar::<f64>().unwrap()
 }
 
+/// LGN's accelerations with the Hessian taken as the learned mass (exact for
+/// its Lagrangian) equal the generic Euler–Lagrange ones, with and without bars.
+#[test]
+fn lgn_shortcut_equals_generic_euler_lagrange() {
+    for (sys, n) in [(SystemKind::Spring, 5), (SystemKind::Pendulum, 4)] {
+        let (g, s, _) = dataset(sys, n, 1, 4);
+        let plan = GraphPlan::new(&g);
+        let refs: Vec<&State> = s.iter().step_by(9).collect();
+        let b = Batch::new(&plan, &refs, None, 1).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+        let net = BaselineNet::new(BaselineHyper::new(Kind::Lgn, 2, 1), &mut rng).unwrap();
+        let lm = net.store.get("log_mass").unwrap();
+        lm.set(&Tensor::new(&[0.4f64], &Device::Cpu).unwrap())
+            .unwrap();
+        let flat = |t: Tensor| t.flatten_all().unwrap().to_vec1::<f64>().unwrap();
+        let fast = flat(mcgnode::baselines::lgn::acceleration(&net, &b).unwrap());
+        let generic = flat(mcgnode::baselines::lgn::acceleration_generic(&net, &b).unwrap());
+        let scale = generic.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(scale > 0.0);
+        let d = max_diff(&fast, &generic);
+        assert!(d <= 1e-12 * scale, "{sys:?}: shortcut vs generic {d:.2e}");
+    }
+}
+
 /// d loss/dθ by candle (through the derivative of the learned scalar) against
 /// central finite differences, for a few entries of several parameters.
 #[test]
@@ -476,58 +500,6 @@ fn baselines_train_save_load_and_roll_out() {
     let bad = dir.path().join("bad.json");
     std::fs::write(&bad, "{\"format\": \"other\"}").unwrap();
     assert!(TrainedBaseline::load(&bad).is_err());
-}
-
-/// Measurement, not a check: median training-step time (forward + backward +
-/// Adam) at batch 100 on 5-spring for each baseline and MCGNODE. Run with
-/// `cargo test --release --test baselines measure_step_times -- --ignored --nocapture`.
-#[test]
-#[ignore = "measurement; run explicitly"]
-fn measure_step_times() {
-    use mcgnode::train::Adam;
-    let (g, s, a) = dataset(SystemKind::Spring, 5, 2, 1);
-    let plan = GraphPlan::new(&g);
-    let refs: Vec<&State> = s.iter().take(100).collect();
-    let accs: Vec<&[f64]> = a.iter().take(100).map(|x| x.as_slice()).collect();
-    let b = Batch::new(&plan, &refs, Some(&accs), 1).unwrap();
-    let median = |mut t: Vec<f64>| {
-        t.sort_by(f64::total_cmp);
-        t[t.len() / 2]
-    };
-    for kind in Kind::ALL {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
-        let net = BaselineNet::new(BaselineHyper::new(kind, 2, 1), &mut rng).unwrap();
-        let mut adam = Adam::new(1e-3, &net.store);
-        let times: Vec<f64> = (0..21)
-            .map(|_| {
-                let t0 = std::time::Instant::now();
-                let l = net.loss(&b, &g.masses).unwrap();
-                adam.step(&net.store, &l.backward().unwrap()).unwrap();
-                t0.elapsed().as_secs_f64()
-            })
-            .collect();
-        println!(
-            "{kind}: median step {:.2} ms ({} parameters)",
-            1e3 * median(times),
-            net.store.count()
-        );
-    }
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
-    let mut h = mcgnode::model::Hyper::new(mcgnode::model::Variant::Mcgnode, 2, 1, 5);
-    h.body_force = false;
-    let net = mcgnode::model::Net::new(h, &mut rng).unwrap();
-    let times: Vec<f64> = (0..21)
-        .map(|_| {
-            let t0 = std::time::Instant::now();
-            let l = net.loss(&b).unwrap();
-            let _ = l.backward().unwrap();
-            t0.elapsed().as_secs_f64()
-        })
-        .collect();
-    println!(
-        "mcgnode: median forward+backward {:.2} ms (no Adam)",
-        1e3 * median(times)
-    );
 }
 
 /// MCGNODE's candle net behind `Dynamics`, for the comparison below.

@@ -461,6 +461,113 @@ fn simulate_rk4_matches_verlet() {
     );
 }
 
+/// `train` engine, architecture and warm-start options through the binary:
+/// both engines write the same architecture, `--arch paper` the paper-text one,
+/// `--init` continues (and refuses another model kind), `--block-hidden`
+/// checks its block names.
+#[test]
+fn train_engine_arch_and_warm_start_options() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let args = |extra: &[&str]| -> Vec<String> {
+        let mut v: Vec<String> = ["train", "--data", "t.mcap", "--epochs", "4", "--quiet"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        v.extend(extra.iter().map(|s| s.to_string()));
+        v
+    };
+    let run = |extra: &[&str]| {
+        let a = args(extra);
+        mcgnode(&a.iter().map(String::as_str).collect::<Vec<_>>(), d)
+    };
+    ok(&mcgnode(
+        &[
+            "simulate",
+            "--system",
+            "spring",
+            "--trajectories",
+            "4",
+            "--out",
+            "t.mcap",
+        ],
+        d,
+    ));
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(d.join(f)).unwrap()).unwrap()
+    };
+    ok(&run(&["--model", "mcgnode", "--out", "native.json"]));
+    ok(&run(&[
+        "--model",
+        "mcgnode",
+        "--engine",
+        "candle",
+        "--out",
+        "candle.json",
+    ]));
+    let (n, c) = (read("native.json"), read("candle.json"));
+    assert_eq!(n["hyper"], c["hyper"]);
+    assert_eq!(n["hyper"]["hidden_layers"], 2);
+    assert_eq!(n["hyper"]["message"], "mlp");
+    assert_eq!(n["hyper"]["edge_input"], "product");
+    let (ln, lc) = (
+        n["training"]["validation_loss"].as_f64().unwrap(),
+        c["training"]["validation_loss"].as_f64().unwrap(),
+    );
+    assert!((ln - lc).abs() <= 1e-6 * lc, "native {ln} vs candle {lc}");
+    assert!(n["optimizer"]["step"].as_i64().unwrap() > 0);
+    ok(&run(&[
+        "--model",
+        "gnode",
+        "--arch",
+        "paper",
+        "--out",
+        "paper.json",
+    ]));
+    let p = read("paper.json");
+    assert_eq!(p["hyper"]["hidden_layers"], 1);
+    assert_eq!(p["hyper"]["message"], "linear");
+    assert_eq!(
+        p["weights"]["mp0.v.l0.w"]["shape"],
+        serde_json::json!([10, 5])
+    );
+    ok(&run(&[
+        "--model",
+        "mcgnode",
+        "--init",
+        "native.json",
+        "--out",
+        "warm.json",
+    ]));
+    let w = read("warm.json");
+    assert_eq!(
+        w["optimizer"]["step"].as_i64().unwrap(),
+        2 * n["optimizer"]["step"].as_i64().unwrap()
+    );
+    fails_with(
+        &run(&[
+            "--model",
+            "gnode",
+            "--init",
+            "native.json",
+            "--out",
+            "x.json",
+        ]),
+        "--init model is a mcgnode model",
+    );
+    fails_with(
+        &run(&[
+            "--model",
+            "mcgnode",
+            "--block-hidden",
+            "node_out=8",
+            "--out",
+            "x.json",
+        ]),
+        "edge_out",
+    );
+}
+
 /// The README's peridynamic example, as written: 125 particles by default.
 #[test]
 fn readme_peridynamic_example_uses_125_particles() {

@@ -344,3 +344,55 @@ fn old_model_files_load_without_noise_and_points() {
         assert_eq!(m.training.points, None);
     }
 }
+
+/// `init` continues from a model's weights and Adam state: the first epoch
+/// starts where the earlier training ended (not where a fresh one starts),
+/// and a model of another architecture is refused.
+#[test]
+fn warm_start_continues_training() {
+    let (g, s, a) = data(SystemKind::Spring, 5, 6, 1);
+    let cfg = TrainConfig {
+        epochs: 25,
+        seed: 2,
+        ..TrainConfig::default()
+    };
+    let hy = Hyper::new(Variant::Mcgnode, 2, 1, 5);
+    let mut fresh_first = f64::NAN;
+    let first = train(hy.clone(), &g, &s, &a, &cfg, |r| {
+        if r.epoch == 1 {
+            fresh_first = r.validation_loss;
+        }
+        true
+    })
+    .unwrap();
+    let mut file = to_model(first).file;
+    let t = mcgnode::train::train(hy.clone(), &g, &s, &a, &cfg, |_| true).unwrap();
+    file.optimizer = Some(t.optimizer.clone());
+    assert!(t.optimizer.step > 0);
+    let best = file.training.validation_loss;
+    let warm = TrainConfig {
+        init: Some(Box::new(file.clone())),
+        ..cfg.clone()
+    };
+    let mut warm_first = f64::NAN;
+    let second = train(hy.clone(), &g, &s, &a, &warm, |r| {
+        if r.epoch == 1 {
+            warm_first = r.validation_loss;
+        }
+        true
+    })
+    .unwrap();
+    assert!(
+        warm_first < 0.5 * fresh_first && warm_first < 2.0 * best,
+        "warm start's first epoch {warm_first:.3e}: fresh {fresh_first:.3e}, earlier best {best:.3e}"
+    );
+    assert!(second.report.validation_loss <= warm_first);
+    assert!(
+        second.optimizer.step > t.optimizer.step,
+        "Adam's step count continues"
+    );
+    let mut other = hy.clone();
+    other.hidden = 7;
+    let err = train(other, &g, &s, &a, &warm, |_| true).err().unwrap();
+    assert!(err.to_string().contains("architecture"), "{err}");
+}

@@ -35,11 +35,19 @@ pub fn euler_lagrange(
     let vfix = v.as_tensor().detach();
     let mixed = grads(&(&gq * &vfix)?.sum_all()?, &[v])?.remove(0);
     let n = (gq - mixed)?.reshape((b, dd, 1))?;
-    let acc = match constraint {
-        None => solve(&k, &n)?,
-        Some((a, at, adq)) => constrained(&k, &n, a, at, adq)?,
-    };
-    Ok(acc.reshape(shape)?)
+    Ok(solve_constrained(&k, &n, constraint)?.reshape(shape)?)
+}
+
+/// x = K⁻¹(N − Aᵀλ) with the constraint force, or K⁻¹N without bars; all batched.
+pub fn solve_constrained(
+    k: &Tensor,
+    n: &Tensor,
+    constraint: Option<&Constraint>,
+) -> Result<Tensor> {
+    match constraint {
+        None => Ok(solve(k, n)?),
+        Some((a, at, adq)) => constrained(k, n, a, at, adq),
+    }
 }
 
 /// x = K⁻¹(N − Aᵀλ) with λ = (A K⁻¹ Aᵀ)⁻¹(A K⁻¹ N + Ȧq̇); all batched.

@@ -10,7 +10,9 @@ use super::trained::TrainedBaseline;
 use crate::model::batch::Batch;
 use crate::model::plan::GraphPlan;
 use crate::system::{Graph, State};
-use crate::train::{check_data, fit, EpochReport, TrainConfig};
+use crate::train::{
+    check_data, fit, flat_params, set_flat_params, CandleObjective, EpochReport, TrainConfig,
+};
 use anyhow::{bail, Result};
 use candle_core::Tensor;
 use rand::SeedableRng;
@@ -28,6 +30,10 @@ pub fn train_baseline(
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainedBaseline> {
     check_data(graph, states, acc, cfg)?;
+    crate::alloc::keep_freed_memory();
+    if cfg.init.is_some() {
+        bail!("--init (warm start) is for the GNODE family; baselines train from scratch");
+    }
     if graph.dim != hyper.dim {
         bail!("the model is {}D, the data {}D", hyper.dim, graph.dim);
     }
@@ -40,7 +46,19 @@ pub fn train_baseline(
         let a: Vec<&[f64]> = idx.iter().map(|&i| acc[i].as_slice()).collect();
         net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?, masses)
     };
-    let training = fit(&net.store, states.len(), cfg, &mut rng, loss, on_epoch)?;
+    let mut theta = flat_params(&net.store)?;
+    let mut obj = CandleObjective::with_threads(&net.store, loss, cfg.threads)?;
+    let mut adam = crate::train::Adam::new(cfg.lr, theta.len());
+    let training = fit(
+        &mut theta,
+        states.len(),
+        cfg,
+        &mut rng,
+        &mut obj,
+        &mut adam,
+        on_epoch,
+    )?;
+    set_flat_params(&net.store, &theta)?;
     let file = BaselineFile {
         format: FORMAT.to_string(),
         crate_version: env!("CARGO_PKG_VERSION").to_string(),

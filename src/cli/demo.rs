@@ -63,6 +63,8 @@ pub fn run(a: Args) -> Result<()> {
         epochs,
         patience: epochs,
         seed: a.seed,
+        // The two trainings run side by side.
+        threads: (crate::engine::all_cores() / 2).max(1),
         ..TrainConfig::default()
     };
     let variants = [Variant::Gnode, Variant::Mcgnode];

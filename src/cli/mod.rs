@@ -51,6 +51,7 @@ pub fn run() -> anyhow::Result<()> {
     if std::env::var_os("RAYON_NUM_THREADS").is_none() {
         std::env::set_var("RAYON_NUM_THREADS", "1");
     }
+    crate::alloc::keep_freed_memory();
     let cli = Cli::parse();
     match cli.command {
         Command::Simulate(a) => simulate::run(a),

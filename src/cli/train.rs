@@ -1,7 +1,8 @@
 //! `mcgnode train`.
 
 use crate::baselines::{train_any_from_bags, ModelKind};
-use crate::train::{BodyForce, EpochReport, ModelOptions, TrainConfig};
+use crate::model::{ArchPreset, EdgeInput, MessageFn};
+use crate::train::{BodyForce, EngineKind, EpochReport, ModelOptions, TrainConfig};
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
@@ -47,6 +48,24 @@ pub struct Args {
     /// Message-passing rounds (paper: 1).
     #[arg(long, default_value_t = 1)]
     pub rounds: usize,
+    /// Architecture: authors (their code, behind the paper's numbers: two
+    /// hidden layers per MLP, MLP messages, h_i ⊙ h_j edge updates) or paper
+    /// (the paper's text: one hidden layer, linear messages, h_i ‖ h_j).
+    #[arg(long, value_enum, default_value_t = ArchPreset::Authors)]
+    pub arch: ArchPreset,
+    /// Hidden layers per graph MLP (overrides --arch).
+    #[arg(long)]
+    pub hidden_layers: Option<usize>,
+    /// Message and edge-update functions (overrides --arch).
+    #[arg(long, value_enum)]
+    pub messages: Option<MessageFn>,
+    /// Edge-update input (overrides --arch).
+    #[arg(long, value_enum)]
+    pub edge_update: Option<EdgeInput>,
+    /// Hidden sizes of one block, e.g. `edge_out=16,16` (repeatable; blocks:
+    /// node_em, edge_em, mp0.v, mp0.e, glob_em, node_out, edge_out, body_out).
+    #[arg(long, value_name = "BLOCK=SIZES", value_parser = parse_block)]
+    pub block_hidden: Vec<(String, Vec<usize>)>,
     /// Gaussian noise added to the target accelerations, in percent of their
     /// standard deviation (the paper's noise experiments use 0, 1, 5 and 10).
     #[arg(long, default_value_t = 0.0, value_name = "PERCENT")]
@@ -60,9 +79,39 @@ pub struct Args {
     /// on, off.
     #[arg(long, value_enum, default_value_t = BodyForce::Auto)]
     pub body_force: BodyForce,
+    /// Gradient engine of the GNODE family: native (hand-written, all
+    /// cores) or candle (the autodiff reference). Baselines always use candle.
+    #[arg(long, value_enum, default_value_t = EngineKind::Native)]
+    pub engine: EngineKind,
+    /// Training threads of the native engine (default: all cores). The
+    /// trained weights do not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Warm start: continue from this model file's weights (and its Adam
+    /// state, when the file has one); its architecture is kept.
+    #[arg(long, value_name = "MODEL")]
+    pub init: Option<PathBuf>,
     /// Print nothing but errors.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// `BLOCK=SIZES`, sizes comma-separated (empty: no hidden layer).
+fn parse_block(s: &str) -> Result<(String, Vec<usize>), String> {
+    let (block, sizes) = s
+        .split_once('=')
+        .ok_or_else(|| format!("expected BLOCK=SIZES such as edge_out=16,16, got {s:?}"))?;
+    let sizes = sizes
+        .split(',')
+        .filter(|x| !x.is_empty())
+        .map(|x| match x.trim().parse::<usize>() {
+            Ok(n) if n > 0 => Ok(n),
+            _ => Err(format!(
+                "hidden size {x:?} in {s:?} is not a positive integer"
+            )),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok((block.trim().to_string(), sizes))
 }
 
 /// Progress: a bar on a terminal, plain lines otherwise.
@@ -113,6 +162,14 @@ pub fn run(a: Args) -> Result<()> {
         seed: a.seed,
         noise: a.noise,
         points: a.points,
+        engine: a.engine,
+        threads: a.threads.unwrap_or_else(crate::engine::all_cores),
+        init: a
+            .init
+            .as_deref()
+            .map(crate::model::ModelFile::load)
+            .transpose()?
+            .map(Box::new),
         ..TrainConfig::default()
     };
     let opts = ModelOptions {
@@ -122,6 +179,11 @@ pub fn run(a: Args) -> Result<()> {
         body_force: a.body_force,
         types: None,
         topic: a.topic.clone(),
+        arch: a.arch,
+        hidden_layers: a.hidden_layers,
+        message: a.messages,
+        edge_input: a.edge_update,
+        block_hidden: a.block_hidden.iter().cloned().collect(),
     };
     let quiet = a.quiet;
     let log = |m: &str| {

@@ -5,11 +5,13 @@
 
 mod dense;
 
+use crate::model::arch::{Arch, Block, LOG_MASS};
 use crate::model::mlp::squareplus_f64;
 use crate::model::params::Weights;
 use crate::model::plan::{BarEnd, GraphPlan};
 use crate::model::solve::lu_solve_in_place;
-use crate::model::variant::Hyper;
+use crate::model::variant::{EdgeInput, Hyper};
+use crate::physics::Projector;
 use crate::system::Graph;
 use anyhow::{bail, Context, Result};
 use dense::Mlp as KMlp;
@@ -28,6 +30,8 @@ pub struct Kernel {
     edge_out: Option<KMlp>,
     body_out: Option<KMlp>,
     inv_mass: Option<Vec<f64>>,
+    edge_input: EdgeInput,
+    project_bars: bool,
 }
 
 /// Buffers for one graph; reused across steps so that the loop allocates nothing.
@@ -60,6 +64,9 @@ pub struct Workspace {
     dq: Vec<f64>,
     kmat: Vec<f64>,
     lambda: Vec<f64>,
+    /// SHAKE/RATTLE onto the bars with the learned masses, for rollouts of
+    /// constrained models on graphs with bars (see [`Kernel::set_project_bars`]).
+    pub projector: Option<Projector>,
 }
 
 impl Kernel {
@@ -72,32 +79,30 @@ impl Kernel {
             &mut rand_chacha::ChaCha8Rng::seed_from_u64(0),
         )?;
         reference.store.load(w)?;
-        let ld = |n: &str| KMlp::load(w, n);
+        let arch = Arch::new(hyper);
+        let ld = |b: Block| KMlp::load(w, &b.prefix());
         let mut rounds = vec![];
-        let graph_rounds = if hyper.variant.biases().graph {
-            hyper.rounds
-        } else {
-            0
-        };
-        for l in 0..graph_rounds {
-            let v = ld(&format!("mp{l}.v"))?.with_context(|| format!("missing round {l}"))?;
-            let e = ld(&format!("mp{l}.e"))?.with_context(|| format!("missing round {l}"))?;
+        for l in 0..arch.rounds {
+            let v = ld(Block::Message(l))?.with_context(|| format!("missing round {l}"))?;
+            let e = ld(Block::EdgeUpdate(l))?.with_context(|| format!("missing round {l}"))?;
             rounds.push((v, e));
         }
         let inv_mass = w
-            .get("log_mass")
+            .get(LOG_MASS)
             .map(|a| a.data.iter().map(|x| (-x).exp()).collect());
         let k = Self {
             hyper: hyper.clone(),
-            node_mlp: ld("node")?,
-            node_em: ld("node_em")?,
-            edge_em: ld("edge_em")?,
+            node_mlp: ld(Block::Flat)?,
+            node_em: ld(Block::NodeEmbed)?,
+            edge_em: ld(Block::EdgeEmbed)?,
             rounds,
-            node_out: ld("node_out")?,
-            glob_em: ld("glob_em")?,
-            edge_out: ld("edge_out")?,
-            body_out: ld("body_out")?,
+            node_out: ld(Block::NodeDecoder)?,
+            glob_em: ld(Block::GlobalEmbed)?,
+            edge_out: ld(Block::EdgeDecoder)?,
+            body_out: ld(Block::BodyDecoder)?,
             inv_mass,
+            edge_input: arch.edge_input,
+            project_bars: true,
         };
         let b = hyper.variant.biases();
         let ok = if b.graph {
@@ -112,6 +117,20 @@ impl Kernel {
             bail!("weights do not match a {} model", hyper.variant);
         }
         Ok(k)
+    }
+
+    /// Whether rollouts project positions and velocities back onto the bars
+    /// every step (RATTLE with the learned masses; on by default). Without it
+    /// a learned rollout lets bar lengths drift by the integrator's error.
+    pub fn set_project_bars(&mut self, on: bool) {
+        self.project_bars = on;
+    }
+
+    /// Learned masses per particle type (constrained models).
+    pub fn learned_masses(&self) -> Option<Vec<f64>> {
+        self.inv_mass
+            .as_ref()
+            .map(|im| im.iter().map(|x| 1.0 / x).collect())
     }
 
     /// The hyperparameters.
@@ -186,6 +205,14 @@ impl Kernel {
             }
         }
         let k = plan.bars.len();
+        let projector = match self.learned_masses() {
+            Some(m) if self.project_bars && k > 0 => {
+                let mut g = graph.clone();
+                g.masses = g.types.iter().map(|&t| m[t as usize]).collect();
+                Some(Projector::new(&g))
+            }
+            _ => None,
+        };
         Ok(Workspace {
             x: vec![0.0; x_len],
             h: vec![0.0; em * n],
@@ -207,6 +234,7 @@ impl Kernel {
             dq: vec![0.0; k * d],
             kmat: vec![0.0; k * k],
             lambda: vec![0.0; k],
+            projector,
             plan,
         })
     }
@@ -283,7 +311,18 @@ impl Kernel {
             }
             if edges_needed {
                 // h_ij ← sqp(h_ij + W_E (h_i ‖ h_j)), from the node states before this round.
-                we.forward(&ws.hr, &ws.hs, ne, &mut ws.he_new, &mut ws.t1, &mut ws.t2);
+                match self.edge_input {
+                    EdgeInput::Concat => {
+                        we.forward(&ws.hr, &ws.hs, ne, &mut ws.he_new, &mut ws.t1, &mut ws.t2)
+                    }
+                    EdgeInput::Product => {
+                        // h_i ⊙ h_j into `msg`, free at this point of the round.
+                        for ((p, r), s) in ws.msg.iter_mut().zip(&ws.hr).zip(&ws.hs) {
+                            *p = r * s;
+                        }
+                        we.forward(&ws.msg, &[], ne, &mut ws.he_new, &mut ws.t1, &mut ws.t2)
+                    }
+                }
                 for (x, old) in ws.he_new.iter_mut().zip(&ws.he) {
                     *x = squareplus_f64(*x + old);
                 }

@@ -85,6 +85,21 @@ pub struct ModelFile {
     pub training: TrainingReport,
     /// Parameters.
     pub weights: Weights,
+    /// Adam's state at the end of training, so that `train --init` can
+    /// continue where it stopped (absent in files written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub optimizer: Option<AdamState>,
+}
+
+/// Adam's moments (named like the weights) and step count.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AdamState {
+    /// Updates taken.
+    pub step: i32,
+    /// First moments.
+    pub m: Weights,
+    /// Second moments.
+    pub v: Weights,
 }
 
 impl ModelFile {

@@ -23,6 +23,8 @@ pub struct Mlp {
     pub name: String,
     /// Layer sizes, input first, output last.
     pub sizes: Vec<usize>,
+    /// (weight, bias) names per layer, formed once (not on every forward).
+    names: Vec<(String, String)>,
 }
 
 impl Mlp {
@@ -36,18 +38,20 @@ impl Mlp {
         for (i, w) in sizes.windows(2).enumerate() {
             store.linear(&format!("{name}.l{i}"), w[0], w[1], rng)?;
         }
+        let names = (0..sizes.len().saturating_sub(1))
+            .map(|i| (format!("{name}.l{i}.w"), format!("{name}.l{i}.b")))
+            .collect();
         Ok(Self {
             name: name.to_string(),
             sizes: sizes.to_vec(),
+            names,
         })
     }
 
     /// Parameter names of layer `i`: (weight, bias).
-    pub fn layer_names(&self, i: usize) -> (String, String) {
-        (
-            format!("{}.l{i}.w", self.name),
-            format!("{}.l{i}.b", self.name),
-        )
+    pub fn layer_names(&self, i: usize) -> (&str, &str) {
+        let (w, b) = &self.names[i];
+        (w, b)
     }
 
     /// Number of linear layers.
@@ -61,8 +65,8 @@ impl Mlp {
         for i in 0..self.layers() {
             let (wn, bn) = self.layer_names(i);
             h = h
-                .matmul(store.get(&wn)?.as_tensor())?
-                .broadcast_add(store.get(&bn)?.as_tensor())?;
+                .matmul(store.get(wn)?.as_tensor())?
+                .broadcast_add(store.get(bn)?.as_tensor())?;
             if i + 1 < self.layers() {
                 h = squareplus(&h)?;
             }

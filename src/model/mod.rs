@@ -1,6 +1,7 @@
 //! Learned dynamics: the GNODE family and NODE in candle (training), and the
 //! model file that hands trained weights to the inference kernel.
 
+pub mod arch;
 pub mod batch;
 pub mod mlp;
 pub mod net;
@@ -9,8 +10,9 @@ pub mod plan;
 pub mod solve;
 pub mod variant;
 
+pub use arch::{Arch, Block};
 pub use net::Net;
-pub use variant::{Hyper, Variant};
+pub use variant::{ArchPreset, EdgeInput, Hyper, MessageFn, Variant};
 pub mod file;
 pub mod trained;
 

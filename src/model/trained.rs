@@ -28,7 +28,8 @@ impl TrainedModel {
         Ok(Self { file, kernel })
     }
 
-    /// Velocity-Verlet rollout on the kernel, calling `visit(step, q, v)` for the
+    /// Velocity-Verlet rollout on the kernel (with SHAKE/RATTLE onto the bars,
+    /// using the learned masses, for constrained models), calling `visit(step, q, v)` for the
     /// start and every `every`-th step. Nothing is allocated inside the loop.
     pub fn rollout_with(
         &self,
@@ -66,15 +67,24 @@ impl TrainedModel {
         visit(0, &q, &v);
         let every = every.max(1);
         for step in 1..=steps {
+            if let Some(p) = ws.projector.as_mut() {
+                p.begin(&q);
+            }
             for i in 0..d {
                 q[i] += v[i] * dt + 0.5 * a[i] * dt * dt;
                 v[i] += 0.5 * a[i] * dt;
+            }
+            if let Some(p) = ws.projector.as_mut() {
+                p.shake(&mut q, &mut v, dt);
             }
             self.kernel.acceleration(ws, &q, &v, &mut a);
             let mut finite = true;
             for i in 0..d {
                 v[i] += 0.5 * a[i] * dt;
                 finite &= q[i].is_finite() && v[i].is_finite();
+            }
+            if let Some(p) = ws.projector.as_mut() {
+                p.rattle(&q, &mut v);
             }
             if !finite {
                 return Some(step);
@@ -173,7 +183,9 @@ impl Dynamics for TrainedModel {
     }
 
     /// One kernel rollout per start (no batching needed: the kernel has no
-    /// per-call overhead), keeping the states of a diverged one.
+    /// per-call overhead), spread over the cores (each thread has its own
+    /// workspace; a rollout does not depend on which thread runs it), keeping
+    /// the states of a diverged one.
     fn rollout_many(
         &self,
         graph: &Graph,
@@ -182,26 +194,50 @@ impl Dynamics for TrainedModel {
         steps: usize,
         every: usize,
     ) -> Result<Vec<Rollout>, String> {
-        let mut ws = self.kernel.workspace(graph)?;
         if !(dt.is_finite() && dt > 0.0) {
             return Err(format!("time step must be positive and finite, got {dt}"));
         }
-        starts
-            .iter()
-            .map(|start| {
-                start.validate(graph)?;
-                let mut states = Vec::with_capacity(steps / every.max(1) + 1);
-                let diverged_at = self.verlet(&mut ws, start, dt, steps, every, |_, q, v| {
-                    states.push(State {
-                        q: q.to_vec(),
-                        v: v.to_vec(),
-                    })
-                });
-                Ok(Rollout {
-                    states,
-                    diverged_at,
+        let ws = self.kernel.workspace(graph)?;
+        for start in starts {
+            start.validate(graph)?;
+        }
+        let threads = crate::engine::all_cores().min(starts.len()).max(1);
+        let per = starts.len().div_ceil(threads).max(1);
+        let run = |group: &[State]| -> Vec<Rollout> {
+            let mut ws = ws.clone();
+            group
+                .iter()
+                .map(|start| {
+                    let mut states = Vec::with_capacity(steps / every.max(1) + 1);
+                    let diverged_at = self.verlet(&mut ws, start, dt, steps, every, |_, q, v| {
+                        states.push(State {
+                            q: q.to_vec(),
+                            v: v.to_vec(),
+                        })
+                    });
+                    Rollout {
+                        states,
+                        diverged_at,
+                    }
                 })
-            })
-            .collect()
+                .collect()
+        };
+        if threads == 1 {
+            return Ok(run(starts));
+        }
+        let groups: Vec<Vec<Rollout>> = std::thread::scope(|s| {
+            let handles: Vec<_> = starts
+                .chunks(per)
+                .map(|g| s.spawn(move || run(g)))
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join()
+                        .map_err(|_| "a rollout thread panicked".to_string())
+                })
+                .collect::<Result<_, String>>()
+        })?;
+        Ok(groups.into_iter().flatten().collect())
     }
 }

@@ -90,7 +90,61 @@ impl FromStr for Variant {
     }
 }
 
-/// Architecture hyperparameters (paper defaults).
+/// Message and edge-update functions of a message-passing round.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum MessageFn {
+    /// One linear map (the paper's equations).
+    Linear,
+    /// An MLP with the graph MLPs' hidden layers (the authors' code).
+    Mlp,
+}
+
+/// What the edge update W_E reads from the two end nodes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum EdgeInput {
+    /// h_i ‖ h_j (the paper's equation).
+    Concat,
+    /// h_i ⊙ h_j (the authors' code).
+    Product,
+}
+
+/// Architecture presets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ArchPreset {
+    /// What the authors' code ran, behind the paper's numbers: two hidden
+    /// layers per MLP, MLP message functions, h_i ⊙ h_j in the edge update.
+    Authors,
+    /// The paper's text: one hidden layer, linear message functions, h_i ‖ h_j.
+    Paper,
+}
+
+impl ArchPreset {
+    /// (hidden layers, message functions, edge-update input) of the preset.
+    pub fn settings(self) -> (usize, MessageFn, EdgeInput) {
+        match self {
+            ArchPreset::Authors => (2, MessageFn::Mlp, EdgeInput::Product),
+            ArchPreset::Paper => (1, MessageFn::Linear, EdgeInput::Concat),
+        }
+    }
+}
+
+fn one() -> usize {
+    1
+}
+
+fn linear() -> MessageFn {
+    MessageFn::Linear
+}
+
+fn concat() -> EdgeInput {
+    EdgeInput::Concat
+}
+
+/// Architecture hyperparameters (the authors' code by default; model files
+/// written before these settings existed load as the paper-text variant they
+/// were trained with).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Hyper {
     /// Which model.
@@ -114,11 +168,32 @@ pub struct Hyper {
     pub node_layers: usize,
     /// NODE only: the fixed particle count it was built for.
     pub particles: usize,
+    /// Hidden layers of each graph MLP (authors' code: 2; paper text: 1).
+    #[serde(default = "one")]
+    pub hidden_layers: usize,
+    /// Message and edge-update functions.
+    #[serde(default = "linear")]
+    pub message: MessageFn,
+    /// What the edge update reads from its end nodes.
+    #[serde(default = "concat")]
+    pub edge_input: EdgeInput,
+    /// Per-block hidden sizes overriding `hidden` × `hidden_layers`, keyed by
+    /// the block's weight prefix (e.g. `edge_out` → [16, 16]).
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub block_hidden: std::collections::BTreeMap<String, Vec<usize>>,
 }
 
 impl Hyper {
-    /// Paper defaults for a variant.
+    /// Applies an architecture preset.
+    pub fn with_preset(mut self, preset: ArchPreset) -> Self {
+        (self.hidden_layers, self.message, self.edge_input) = preset.settings();
+        self
+    }
+
+    /// Defaults for a variant: the paper's sizes with the authors' architecture
+    /// ([`ArchPreset::Authors`]).
     pub fn new(variant: Variant, dim: usize, types: usize, particles: usize) -> Self {
+        let (hidden_layers, message, edge_input) = ArchPreset::Authors.settings();
         Self {
             variant,
             dim,
@@ -130,6 +205,10 @@ impl Hyper {
             node_hidden: 16,
             node_layers: 2,
             particles,
+            hidden_layers,
+            message,
+            edge_input,
+            block_hidden: Default::default(),
         }
     }
 }

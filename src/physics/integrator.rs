@@ -9,8 +9,8 @@
 //!
 //! RATTLE is symplectic, so without drag the energy error stays bounded.
 
-use super::constraints::Bars;
 use super::forces::applied_forces;
+use super::projection::Projector;
 use super::Field;
 use crate::system::{Graph, State};
 
@@ -26,20 +26,16 @@ pub struct Integrator {
     /// Unconstrained acceleration M⁻¹F at the current q and the last
     /// half-step velocity (the value the next step starts from).
     acc: Vec<f64>,
-    bars: Bars,
-    dirs_old: Vec<f64>,
-    dirs_new: Vec<f64>,
+    projector: Projector,
     steps: u64,
-    shake_failures: u64,
-    shake_iterations: u64,
 }
 
 impl Integrator {
     /// Relative bar-length tolerance of the SHAKE iteration.
-    pub const TOL: f64 = 1e-13;
+    pub const TOL: f64 = Projector::TOL;
     /// Newton iterations allowed per step before giving up (counted in
     /// [`Integrator::shake_failures`]).
-    pub const MAX_ITER: usize = 50;
+    pub const MAX_ITER: usize = Projector::MAX_ITER;
 
     /// Checks the inputs and computes the starting acceleration.
     pub fn new(graph: &Graph, field: &Field, dt: f64, start: State) -> Result<Self, String> {
@@ -54,20 +50,14 @@ impl Integrator {
         if let Some(e) = graph.bars().find(|e| e.rest_length <= 0.0) {
             return Err(format!("bar from particle {} has non-positive length", e.a));
         }
-        let bars = Bars::new(graph);
-        let kd = bars.k() * graph.dim;
         let mut it = Integrator {
             graph: graph.clone(),
             field: field.clone(),
             dt,
             state: start,
             acc: vec![0.0; graph.ndof()],
-            bars,
-            dirs_old: vec![0.0; kd],
-            dirs_new: vec![0.0; kd],
+            projector: Projector::new(graph),
             steps: 0,
-            shake_failures: 0,
-            shake_iterations: 0,
         };
         it.update_acc();
         Ok(it)
@@ -93,73 +83,20 @@ impl Integrator {
     /// One step of length dt.
     pub fn step(&mut self) {
         let dt = self.dt;
-        let k = self.bars.k();
-        if k > 0 {
-            self.bars
-                .dirs(&self.graph, &self.state.q, &mut self.dirs_old);
-        }
+        self.projector.begin(&self.state.q);
         let s = &mut self.state;
         for i in 0..s.q.len() {
             s.q[i] += s.v[i] * dt + 0.5 * self.acc[i] * dt * dt;
             s.v[i] += 0.5 * self.acc[i] * dt;
         }
-        if k > 0 {
-            self.shake();
-        }
+        self.projector.shake(&mut s.q, &mut s.v, dt);
         self.update_acc();
         let s = &mut self.state;
         for i in 0..s.v.len() {
             s.v[i] += 0.5 * self.acc[i] * dt;
         }
-        if k > 0 {
-            self.rattle();
-        }
+        self.projector.rattle(&s.q, &mut s.v);
         self.steps += 1;
-    }
-
-    /// Newton iterations on γ so that every bar has its length at the new q.
-    fn shake(&mut self) {
-        let (g, k) = (&self.graph, self.bars.k());
-        for _ in 0..Self::MAX_ITER {
-            self.bars.dirs(g, &self.state.q, &mut self.dirs_new);
-            let d = g.dim;
-            let mut worst = 0.0_f64;
-            for j in 0..k {
-                let r2: f64 = self.dirs_new[j * d..(j + 1) * d]
-                    .iter()
-                    .map(|x| x * x)
-                    .sum();
-                let l = self.bars.len[j];
-                worst = worst.max((r2.sqrt() - l).abs() / l);
-                self.bars.rhs[j] = 0.5 * (r2 - l * l);
-            }
-            if worst <= Self::TOL {
-                return;
-            }
-            // dφ/dγ = −A(q') M⁻¹ A(q)ᵀ; solve for the Newton update.
-            self.shake_iterations += 1;
-            if !self.bars.solve(g, &self.dirs_new, &self.dirs_old) {
-                break;
-            }
-            self.bars.apply_t(g, &self.dirs_old, 1.0, &mut self.state.q);
-            self.bars
-                .apply_t(g, &self.dirs_old, 1.0 / self.dt, &mut self.state.v);
-        }
-        self.shake_failures += 1;
-    }
-
-    /// Removes the velocity components along the bars at the new q.
-    fn rattle(&mut self) {
-        let g = &self.graph;
-        self.bars.dirs(g, &self.state.q, &mut self.dirs_new);
-        for j in 0..self.bars.k() {
-            self.bars.rhs[j] = self.bars.mul(g, &self.dirs_new, &self.state.v, j);
-        }
-        if self.bars.solve(g, &self.dirs_new, &self.dirs_new) {
-            self.bars.apply_t(g, &self.dirs_new, 1.0, &mut self.state.v);
-        } else {
-            self.shake_failures += 1;
-        }
     }
 
     /// `n` steps.
@@ -201,13 +138,13 @@ impl Integrator {
 
     /// Newton iterations SHAKE has taken in total (a cost diagnostic).
     pub fn shake_iterations(&self) -> u64 {
-        self.shake_iterations
+        self.projector.iterations()
     }
 
     /// Steps whose SHAKE iteration did not reach [`Integrator::TOL`] within
     /// [`Integrator::MAX_ITER`] iterations, or whose constraint matrix could
     /// not be solved (degenerate bars). 0 for a healthy run.
     pub fn shake_failures(&self) -> u64 {
-        self.shake_failures
+        self.projector.failures()
     }
 }

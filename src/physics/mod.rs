@@ -13,6 +13,7 @@ pub mod constraints;
 pub mod forces;
 pub mod integrator;
 mod linalg;
+pub mod projection;
 pub mod truth;
 
 use std::fmt;
@@ -24,6 +25,7 @@ pub use config::SystemConfig;
 pub use constraints::{acceleration, bar_jacobian, constraint_residual};
 pub use forces::{applied_forces, hamiltonian, kinetic_energy, potential_energy};
 pub use integrator::Integrator;
+pub use projection::Projector;
 pub use truth::Truth;
 
 #[cfg(doc)]

@@ -45,6 +45,8 @@ fn cfg(epochs: usize) -> TrainConfig {
         epochs,
         patience: epochs,
         seed: 0,
+        // Trainings already run side by side, one per core.
+        threads: 1,
         ..TrainConfig::default()
     }
 }

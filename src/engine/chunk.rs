@@ -1,0 +1,900 @@
+//! One chunk of a batch: the forward pass of the GNODE family over several
+//! states of one graph at once (the states side by side as one disjoint
+//! graph, feature-major), the squared error against the targets, and the
+//! hand-written reverse pass. Every buffer lives here and is reused.
+
+use super::dense::{squareplus_in_place, times_squareplus_grad, Mlp, Tape};
+use super::layout::Layout;
+use crate::model::arch::{Arch, Block, Decoder, NodeInput};
+use crate::model::plan::{BarEnd, GraphPlan};
+use crate::model::solve::lu_solve_in_place;
+use crate::model::variant::EdgeInput;
+use crate::system::State;
+
+/// The read-only part: architecture, parameter offsets, graph.
+#[derive(Clone, Debug)]
+pub(crate) struct Model {
+    pub(crate) arch: Arch,
+    pub(crate) layout: Layout,
+    mlps: Vec<(Block, Mlp)>,
+    log_mass: Option<usize>,
+    pub(crate) plan: GraphPlan,
+    /// Bars at each particle with their sign in A: (bar, ±1).
+    incid: Vec<Vec<(usize, f64)>>,
+}
+
+impl Model {
+    pub(crate) fn new(arch: Arch, plan: GraphPlan) -> Self {
+        let layout = Layout::new(&arch);
+        let mlps = arch
+            .mlps
+            .iter()
+            .map(|(b, _)| (*b, layout.mlp(&arch, *b).expect("block is in arch")))
+            .collect();
+        let mut incid = vec![vec![]; plan.n];
+        for (r, bar) in plan.bars.iter().enumerate() {
+            incid[bar.a].push((r, 1.0));
+            if let BarEnd::Particle(b) = bar.b {
+                incid[b].push((r, -1.0));
+            }
+        }
+        Self {
+            log_mass: layout.log_mass(),
+            arch,
+            layout,
+            mlps,
+            plan,
+            incid,
+        }
+    }
+
+    /// Index of a block's MLP (and tape).
+    fn ix(&self, b: Block) -> Option<usize> {
+        self.mlps.iter().position(|(x, _)| *x == b)
+    }
+
+    fn mlp(&self, i: usize) -> &Mlp {
+        &self.mlps[i].1
+    }
+
+    /// (particles, dimension, graph model): what reading outputs needs.
+    pub(crate) fn shape(&self) -> (usize, usize, bool) {
+        (self.plan.n, self.plan.dim, self.arch.biases.graph)
+    }
+
+    /// Rows one state adds: NODE has one row per state, graph models one per
+    /// particle and one per directed edge.
+    pub(crate) fn rows_per_state(&self) -> usize {
+        if self.arch.biases.graph {
+            self.plan.n + self.plan.recv.len()
+        } else {
+            1
+        }
+    }
+}
+
+/// Buffers for up to `cap` states, and this chunk's results.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Chunk {
+    cap: usize,
+    /// States the edge index arrays are laid out for.
+    laid: usize,
+    recv: Vec<usize>,
+    send: Vec<usize>,
+    x: Vec<f64>,
+    w_in: Vec<f64>,
+    h: Vec<Vec<f64>>,
+    he: Vec<Vec<f64>>,
+    hs: Vec<Vec<f64>>,
+    hr: Vec<Vec<f64>>,
+    /// h_i ⊙ h_j per round (product edge updates).
+    hp: Vec<Vec<f64>>,
+    msg: Vec<f64>,
+    agg: Vec<f64>,
+    glob: Vec<f64>,
+    f_edge: Vec<f64>,
+    f_body: Vec<f64>,
+    /// Decoder output: forces (constrained) or accelerations, `d × rows`.
+    out: Vec<f64>,
+    /// N − Aᵀλ, `d × rows` (constrained).
+    geq: Vec<f64>,
+    acc: Vec<f64>,
+    tgt: Vec<f64>,
+    tapes: Vec<Tape>,
+    dq: Vec<f64>,
+    kmat: Vec<f64>,
+    lam: Vec<f64>,
+    lu: Vec<f64>,
+    rhs: Vec<f64>,
+    solved: Vec<bool>,
+    gacc: Vec<f64>,
+    gout: Vec<f64>,
+    gh: Vec<f64>,
+    gh_prev: Vec<f64>,
+    ghe: Vec<f64>,
+    ghe_prev: Vec<f64>,
+    gs: Vec<f64>,
+    gr: Vec<f64>,
+    gp: Vec<f64>,
+    gz: Vec<f64>,
+    gmsg: Vec<f64>,
+    gglob: Vec<f64>,
+    gf_edge: Vec<f64>,
+    gminv: Vec<f64>,
+    s1: Vec<f64>,
+    s2: Vec<f64>,
+    /// ∂(Σ squared errors · scale)/∂θ of the last [`Chunk::run`] with gradients.
+    pub(crate) grad: Vec<f64>,
+    /// Σ squared errors of the last run.
+    pub(crate) sse: f64,
+}
+
+impl Chunk {
+    /// Makes room for `bs` states (allocates only when growing).
+    fn reserve(&mut self, m: &Model, bs: usize) {
+        if bs <= self.cap {
+            return;
+        }
+        let a = &m.arch;
+        let (n, d, em) = (m.plan.n, m.plan.dim, a.embed);
+        let nodes = bs * n;
+        let edges = bs * m.plan.recv.len();
+        let rmax = nodes.max(edges).max(bs).max(1);
+        let width = m.mlps.iter().map(|(_, x)| x.width()).max().unwrap_or(1);
+        let z = |len: usize| vec![0.0; len];
+        let outs = if a.biases.graph {
+            d * nodes
+        } else {
+            d * n * bs
+        };
+        *self = Chunk {
+            cap: bs,
+            laid: 0,
+            recv: vec![0; edges],
+            send: vec![0; edges],
+            x: z(if a.biases.graph {
+                a.node_features() * nodes
+            } else {
+                2 * n * d * bs
+            }),
+            w_in: z(d * edges),
+            h: (0..=a.rounds).map(|_| z(em * nodes)).collect(),
+            he: (0..=a.rounds).map(|_| z(em * edges)).collect(),
+            hs: (0..a.rounds).map(|_| z(em * edges)).collect(),
+            hr: (0..a.rounds).map(|_| z(em * edges)).collect(),
+            hp: (0..a.rounds).map(|_| z(em * edges)).collect(),
+            gp: z(em * edges),
+            msg: z(em * edges),
+            agg: z(em * nodes),
+            glob: z(em * nodes),
+            f_edge: z(d * edges),
+            f_body: z(d * nodes),
+            out: z(outs),
+            geq: z(outs),
+            acc: z(outs),
+            tgt: z(outs),
+            tapes: m.mlps.iter().map(|(_, x)| x.tape(rmax)).collect(),
+            dq: z(bs * m.plan.bars.len() * d),
+            kmat: z(bs * m.plan.bars.len().pow(2)),
+            lam: z(bs * m.plan.bars.len()),
+            lu: z(m.plan.bars.len().pow(2)),
+            rhs: z(m.plan.bars.len()),
+            solved: vec![false; bs],
+            gacc: z(outs),
+            gout: z(outs),
+            gh: z(em * nodes),
+            gh_prev: z(em * nodes),
+            ghe: z(em * edges),
+            ghe_prev: z(em * edges),
+            gs: z(em * edges),
+            gr: z(em * edges),
+            gz: z(em * rmax),
+            gmsg: z(em * edges),
+            gglob: z(em * nodes),
+            gf_edge: z(d * edges),
+            gminv: z(nodes),
+            s1: z(width * rmax),
+            s2: z(width * rmax),
+            grad: z(m.layout.len()),
+            sse: 0.0,
+        };
+    }
+
+    /// Directed edges of `bs` copies of the graph: first every copy's forward
+    /// edges, then every copy's reversed ones, so edge `e` and `e + half` are
+    /// the two directions of one bar or spring.
+    fn lay_out(&mut self, m: &Model, bs: usize) {
+        if self.laid == bs {
+            return;
+        }
+        let (n, e) = (m.plan.n, m.plan.n_edges());
+        let mut k = 0;
+        for half in 0..2 {
+            for s in 0..bs {
+                for j in half * e..(half + 1) * e {
+                    self.recv[k] = s * n + m.plan.recv[j];
+                    self.send[k] = s * n + m.plan.send[j];
+                    k += 1;
+                }
+            }
+        }
+        self.laid = bs;
+    }
+
+    /// Forward pass and squared error over the states `idx`, then (when `scale`
+    /// is given) the reverse pass of `scale · Σ squared errors` into `grad`.
+    pub(crate) fn run(
+        &mut self,
+        m: &Model,
+        th: &[f64],
+        states: &[State],
+        targets: &[Vec<f64>],
+        idx: &[usize],
+        scale: Option<f64>,
+    ) {
+        let bs = idx.len();
+        self.reserve(m, bs);
+        self.lay_out(m, bs);
+        if m.arch.biases.graph {
+            self.fill_graph_inputs(m, states, targets, idx);
+            self.forward_graph(m, th);
+        } else {
+            self.fill_flat_inputs(m, states, targets, idx);
+            self.forward_flat(m, th, bs);
+        }
+        let len = self.rows_out(m, bs);
+        let mut sse = 0.0;
+        for i in 0..len {
+            let e = self.acc[i] - self.tgt[i];
+            sse += e * e;
+            if let Some(s) = scale {
+                self.gacc[i] = 2.0 * s * e;
+            }
+        }
+        self.sse = sse;
+        if scale.is_some() {
+            self.grad.fill(0.0);
+            if m.arch.biases.graph {
+                self.backward_graph(m, th, bs);
+            } else {
+                self.backward_flat(m, th, bs);
+            }
+        }
+    }
+
+    /// Accelerations of the last run for state `s` of the chunk, node-major.
+    pub(crate) fn acceleration(
+        &self,
+        shape: (usize, usize, bool),
+        bs: usize,
+        s: usize,
+        out: &mut [f64],
+    ) {
+        let (n, d, graph) = shape;
+        for i in 0..n {
+            for c in 0..d {
+                out[i * d + c] = if graph {
+                    self.acc[c * bs * n + s * n + i]
+                } else {
+                    self.acc[(i * d + c) * bs + s]
+                };
+            }
+        }
+    }
+
+    fn rows_out(&self, m: &Model, bs: usize) -> usize {
+        m.plan.dim * m.plan.n * bs
+    }
+
+    fn fill_flat_inputs(
+        &mut self,
+        m: &Model,
+        states: &[State],
+        targets: &[Vec<f64>],
+        idx: &[usize],
+    ) {
+        let bs = idx.len();
+        let nd = m.plan.n * m.plan.dim;
+        for (s, &k) in idx.iter().enumerate() {
+            let st = &states[k];
+            for f in 0..nd {
+                self.x[f * bs + s] = st.q[f];
+                self.x[(nd + f) * bs + s] = st.v[f];
+                if let Some(t) = targets.get(k) {
+                    self.tgt[f * bs + s] = t[f];
+                }
+            }
+        }
+    }
+
+    fn forward_flat(&mut self, m: &Model, th: &[f64], bs: usize) {
+        let i = m.ix(Block::Flat).expect("NODE has a flat MLP");
+        let nd = m.plan.n * m.plan.dim;
+        m.mlp(i).forward(
+            th,
+            &self.x[..2 * nd * bs],
+            &[],
+            bs,
+            &mut self.tapes[i],
+            &mut self.acc[..nd * bs],
+        );
+    }
+
+    fn backward_flat(&mut self, m: &Model, th: &[f64], bs: usize) {
+        let i = m.ix(Block::Flat).expect("NODE has a flat MLP");
+        let nd = m.plan.n * m.plan.dim;
+        m.mlp(i).backward(
+            th,
+            &mut self.grad,
+            &self.x[..2 * nd * bs],
+            &[],
+            bs,
+            &self.tapes[i],
+            &self.gacc[..nd * bs],
+            None,
+            &mut self.s1,
+            &mut self.s2,
+        );
+    }
+
+    fn fill_graph_inputs(
+        &mut self,
+        m: &Model,
+        states: &[State],
+        targets: &[Vec<f64>],
+        idx: &[usize],
+    ) {
+        let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
+        let nodes = idx.len() * n;
+        self.x[..t * nodes].fill(0.0);
+        for (s, &k) in idx.iter().enumerate() {
+            let st = &states[k];
+            for (i, &ty) in m.plan.types.iter().enumerate() {
+                let row = s * n + i;
+                self.x[ty * nodes + row] = 1.0;
+                for c in 0..d {
+                    self.x[(t + c) * nodes + row] = st.q[i * d + c];
+                    self.x[(t + d + c) * nodes + row] = st.v[i * d + c];
+                    if let Some(a) = targets.get(k) {
+                        self.tgt[c * nodes + row] = a[i * d + c];
+                    }
+                }
+            }
+        }
+    }
+
+    fn forward_graph(&mut self, m: &Model, th: &[f64]) {
+        let a = &m.arch;
+        let (d, t, em) = (m.plan.dim, a.types, a.embed);
+        let bs = self.laid;
+        let nodes = bs * m.plan.n;
+        let edges = bs * m.plan.recv.len();
+        let nf = a.node_features();
+        // Encode: nodes from (one-hot[, q, q̇]), edges from w_ij = q_i − q_j.
+        let node_in = match a.node_input {
+            NodeInput::TypeOnly => t,
+            NodeInput::Full => nf,
+        };
+        let i = m.ix(Block::NodeEmbed).expect("graph model");
+        let h0 = &mut self.h[0][..em * nodes];
+        m.mlp(i).forward(
+            th,
+            &self.x[..node_in * nodes],
+            &[],
+            nodes,
+            &mut self.tapes[i],
+            h0,
+        );
+        squareplus_in_place(h0);
+        for c in 0..d {
+            let q = &self.x[(t + c) * nodes..(t + c + 1) * nodes];
+            let w = &mut self.w_in[c * edges..(c + 1) * edges];
+            for ((wv, &r), &s) in w.iter_mut().zip(&self.recv).zip(&self.send) {
+                *wv = q[r] - q[s];
+            }
+        }
+        let i = m.ix(Block::EdgeEmbed).expect("graph model");
+        let he0 = &mut self.he[0][..em * edges];
+        m.mlp(i).forward(
+            th,
+            &self.w_in[..d * edges],
+            &[],
+            edges,
+            &mut self.tapes[i],
+            he0,
+        );
+        squareplus_in_place(he0);
+        // Message passing.
+        for l in 0..a.rounds {
+            let (hl, hn) = self.h.split_at_mut(l + 1);
+            let (hl, hn) = (&hl[l][..em * nodes], &mut hn[0][..em * nodes]);
+            let (hel, hen) = self.he.split_at_mut(l + 1);
+            let (hel, hen) = (&hel[l][..em * edges], &mut hen[0][..em * edges]);
+            let (hs, hr) = (&mut self.hs[l][..em * edges], &mut self.hr[l][..em * edges]);
+            for k in 0..em {
+                let hk = &hl[k * nodes..(k + 1) * nodes];
+                for e in 0..edges {
+                    hs[k * edges + e] = hk[self.send[e]];
+                    hr[k * edges + e] = hk[self.recv[e]];
+                }
+            }
+            if a.updates_nodes(l) {
+                // h_i ← sqp(h_i + Σ_j W_V(h_j ‖ h_ij)).
+                let i = m.ix(Block::Message(l)).expect("round");
+                let msg = &mut self.msg[..em * edges];
+                m.mlp(i)
+                    .forward(th, hs, hel, edges, &mut self.tapes[i], msg);
+                let agg = &mut self.agg[..em * nodes];
+                agg.fill(0.0);
+                for k in 0..em {
+                    for e in 0..edges {
+                        agg[k * nodes + self.recv[e]] += msg[k * edges + e];
+                    }
+                }
+                for ((x, h), g) in hn.iter_mut().zip(hl).zip(agg.iter()) {
+                    *x = h + g;
+                }
+                squareplus_in_place(hn);
+            } else {
+                hn.copy_from_slice(hl);
+            }
+            if a.updates_edges(l) {
+                // h_ij ← sqp(h_ij + W_E(h_i ‖ h_j)), from the node states before the round.
+                let i = m.ix(Block::EdgeUpdate(l)).expect("round");
+                let tape = &mut self.tapes[i];
+                match a.edge_input {
+                    EdgeInput::Concat => m.mlp(i).forward(th, hr, hs, edges, tape, hen),
+                    EdgeInput::Product => {
+                        let hp = &mut self.hp[l][..em * edges];
+                        for ((p, r), s) in hp.iter_mut().zip(hr.iter()).zip(hs.iter()) {
+                            *p = r * s;
+                        }
+                        m.mlp(i).forward(th, hp, &[], edges, tape, hen);
+                    }
+                }
+                for (x, old) in hen.iter_mut().zip(hel) {
+                    *x += old;
+                }
+                squareplus_in_place(hen);
+            } else {
+                hen.copy_from_slice(hel);
+            }
+        }
+        // Global (body) embedding of (one-hot, q, q̇).
+        if let Some(i) = m.ix(Block::GlobalEmbed) {
+            let g = &mut self.glob[..em * nodes];
+            m.mlp(i)
+                .forward(th, &self.x[..nf * nodes], &[], nodes, &mut self.tapes[i], g);
+            squareplus_in_place(g);
+        }
+        // Decode.
+        let (hr_, her_) = (
+            &self.h[a.rounds][..em * nodes],
+            &self.he[a.rounds][..em * edges],
+        );
+        let out = &mut self.out[..d * nodes];
+        match a.decoder {
+            Decoder::Pairwise { body } => {
+                // Newton's third law: F_ab = (f_ab − f_ba)/2 on a, −F_ab on b.
+                out.fill(0.0);
+                let i = m.ix(Block::EdgeDecoder).expect("pairwise decoder");
+                let fe = &mut self.f_edge[..d * edges];
+                m.mlp(i)
+                    .forward(th, her_, &[], edges, &mut self.tapes[i], fe);
+                let half = edges / 2;
+                for c in 0..d {
+                    let (oc, fc) = (&mut out[c * nodes..(c + 1) * nodes], &fe[c * edges..]);
+                    for e in 0..half {
+                        let f = (fc[e] - fc[e + half]) * 0.5;
+                        oc[self.recv[e]] += f;
+                        oc[self.send[e]] -= f;
+                    }
+                }
+                if body {
+                    let i = m.ix(Block::BodyDecoder).expect("body decoder");
+                    let fb = &mut self.f_body[..d * nodes];
+                    let g = &self.glob[..em * nodes];
+                    m.mlp(i).forward(th, g, &[], nodes, &mut self.tapes[i], fb);
+                    for (o, f) in out.iter_mut().zip(fb.iter()) {
+                        *o += f;
+                    }
+                }
+            }
+            Decoder::Node { global } => {
+                let i = m.ix(Block::NodeDecoder).expect("node decoder");
+                let g: &[f64] = if global {
+                    &self.glob[..em * nodes]
+                } else {
+                    &[]
+                };
+                m.mlp(i).forward(th, hr_, g, nodes, &mut self.tapes[i], out);
+            }
+        }
+        // Constrain.
+        if a.constrained {
+            self.constrain(m, th, bs);
+        } else {
+            self.acc[..d * nodes].copy_from_slice(&self.out[..d * nodes]);
+        }
+    }
+
+    /// q̈ = M⁻¹(N − Aᵀλ), λ = (A M⁻¹ Aᵀ)⁻¹(A M⁻¹ N + Ȧq̇), per state, on the
+    /// sparse bar incidence. K and λ are kept for the reverse pass.
+    fn constrain(&mut self, m: &Model, th: &[f64], bs: usize) {
+        let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
+        let nodes = bs * n;
+        let k = m.plan.bars.len();
+        let lm = m.log_mass.expect("constrained model has masses");
+        let minv = |p: usize| (-th[lm + m.plan.types[p]]).exp();
+        let (x, out) = (&self.x, &self.out);
+        let q = |row: usize, c: usize| x[(t + c) * nodes + row];
+        let v = |row: usize, c: usize| x[(t + d + c) * nodes + row];
+        let f = |row: usize, c: usize| out[c * nodes + row];
+        for s in 0..bs {
+            let base = s * n;
+            let (dq, lam) = (
+                &mut self.dq[s * k * d..(s + 1) * k * d],
+                &mut self.lam[s * k..(s + 1) * k],
+            );
+            let kmat = &mut self.kmat[s * k * k..(s + 1) * k * k];
+            let mut ok = true;
+            if k > 0 {
+                for (r, bar) in m.plan.bars.iter().enumerate() {
+                    let (mut vv, mut rhs) = (0.0, 0.0);
+                    let a = base + bar.a;
+                    for c in 0..d {
+                        let (qb, vb, fb) = match &bar.b {
+                            BarEnd::Particle(bp) => {
+                                let b = base + bp;
+                                (q(b, c), v(b, c), minv(*bp) * f(b, c))
+                            }
+                            BarEnd::Fixed(p) => (p[c], 0.0, 0.0),
+                        };
+                        let (dqc, dvc) = (q(a, c) - qb, v(a, c) - vb);
+                        dq[r * d + c] = dqc;
+                        vv += dvc * dvc;
+                        rhs += dqc * (minv(bar.a) * f(a, c) - fb);
+                    }
+                    lam[r] = rhs + vv;
+                }
+                kmat.fill(0.0);
+                for p in 0..n {
+                    let mi = minv(p);
+                    for &(r, sr) in &m.incid[p] {
+                        for &(r2, s2) in &m.incid[p] {
+                            let dot: f64 = (0..d).map(|c| dq[r * d + c] * dq[r2 * d + c]).sum();
+                            kmat[r * k + r2] += mi * sr * s2 * dot;
+                        }
+                    }
+                }
+                self.lu[..k * k].copy_from_slice(kmat);
+                ok = lu_solve_in_place(&mut self.lu[..k * k], lam, k, 1).is_ok();
+            }
+            self.solved[s] = ok;
+            for p in 0..n {
+                let mi = minv(p);
+                for c in 0..d {
+                    let mut g = f(base + p, c);
+                    if ok {
+                        for &(r, sr) in &m.incid[p] {
+                            g -= sr * dq[r * d + c] * lam[r];
+                        }
+                    } else {
+                        g = f64::NAN;
+                    }
+                    self.geq[c * nodes + base + p] = g;
+                    self.acc[c * nodes + base + p] = mi * g;
+                }
+            }
+        }
+    }
+
+    /// Reverse pass of [`Chunk::constrain`]: ∂L/∂N into `gout`, ∂L/∂log m into `grad`.
+    fn constrain_backward(&mut self, m: &Model, th: &[f64], bs: usize) {
+        let (n, d) = (m.plan.n, m.plan.dim);
+        let nodes = bs * n;
+        let k = m.plan.bars.len();
+        let lm = m.log_mass.expect("constrained model has masses");
+        let minv = |p: usize| (-th[lm + m.plan.types[p]]).exp();
+        for s in 0..bs {
+            let base = s * n;
+            for p in 0..n {
+                let (mi, row) = (minv(p), base + p);
+                let mut gm = 0.0;
+                for c in 0..d {
+                    let ga = self.gacc[c * nodes + row];
+                    self.gout[c * nodes + row] = mi * ga;
+                    gm += self.geq[c * nodes + row] * ga;
+                }
+                self.gminv[row] = gm;
+            }
+            if k > 0 && self.solved[s] {
+                let dq = &self.dq[s * k * d..(s + 1) * k * d];
+                let lam = &self.lam[s * k..(s + 1) * k];
+                // λ̄ = −A ḡ_G; r̄hs = K⁻ᵀ λ̄ (K is symmetric); K̄ = −r̄hs λᵀ.
+                let rbar = &mut self.rhs[..k];
+                for (r, bar) in m.plan.bars.iter().enumerate() {
+                    let mut x = 0.0;
+                    for c in 0..d {
+                        let mut gg = self.gout[c * nodes + base + bar.a];
+                        if let BarEnd::Particle(b) = bar.b {
+                            gg -= self.gout[c * nodes + base + b];
+                        }
+                        x -= dq[r * d + c] * gg;
+                    }
+                    rbar[r] = x;
+                }
+                self.lu[..k * k].copy_from_slice(&self.kmat[s * k * k..(s + 1) * k * k]);
+                if lu_solve_in_place(&mut self.lu[..k * k], rbar, k, 1).is_err() {
+                    rbar.fill(f64::NAN);
+                }
+                for p in 0..n {
+                    let (mi, row) = (minv(p), base + p);
+                    let mut gm = 0.0;
+                    for &(r, sr) in &m.incid[p] {
+                        let mut dot_f = 0.0;
+                        for c in 0..d {
+                            let dqc = dq[r * d + c];
+                            self.gout[c * nodes + row] += rbar[r] * sr * mi * dqc;
+                            dot_f += dqc * self.out[c * nodes + row];
+                        }
+                        gm += rbar[r] * sr * dot_f;
+                        for &(r2, s2) in &m.incid[p] {
+                            let dot: f64 = (0..d).map(|c| dq[r * d + c] * dq[r2 * d + c]).sum();
+                            gm -= rbar[r] * lam[r2] * sr * s2 * dot;
+                        }
+                    }
+                    self.gminv[row] += gm;
+                }
+            }
+            for p in 0..n {
+                let mi = minv(p);
+                self.grad[lm + m.plan.types[p]] -= self.gminv[base + p] * mi;
+            }
+        }
+    }
+
+    fn backward_graph(&mut self, m: &Model, th: &[f64], bs: usize) {
+        let a = &m.arch;
+        let (d, t, em) = (m.plan.dim, a.types, a.embed);
+        let nodes = bs * m.plan.n;
+        let edges = bs * m.plan.recv.len();
+        let nf = a.node_features();
+        if a.constrained {
+            self.constrain_backward(m, th, bs);
+        } else {
+            self.gout[..d * nodes].copy_from_slice(&self.gacc[..d * nodes]);
+        }
+        let (gh, ghe, gglob) = (
+            &mut self.gh[..em * nodes],
+            &mut self.ghe[..em * edges],
+            &mut self.gglob[..em * nodes],
+        );
+        gh.fill(0.0);
+        ghe.fill(0.0);
+        gglob.fill(0.0);
+        let gout = &self.gout[..d * nodes];
+        let (hr_, her_) = (
+            &self.h[a.rounds][..em * nodes],
+            &self.he[a.rounds][..em * edges],
+        );
+        let glob = &self.glob[..em * nodes];
+        let (s1, s2) = (&mut self.s1, &mut self.s2);
+        match a.decoder {
+            Decoder::Pairwise { body } => {
+                let half = edges / 2;
+                let gfe = &mut self.gf_edge[..d * edges];
+                for c in 0..d {
+                    let go = &gout[c * nodes..(c + 1) * nodes];
+                    for e in 0..half {
+                        let g = 0.5 * (go[self.recv[e]] - go[self.send[e]]);
+                        gfe[c * edges + e] = g;
+                        gfe[c * edges + e + half] = -g;
+                    }
+                }
+                let i = m.ix(Block::EdgeDecoder).expect("pairwise decoder");
+                let gx = Some((&mut ghe[..], &mut [][..]));
+                m.mlp(i).backward(
+                    th,
+                    &mut self.grad,
+                    her_,
+                    &[],
+                    edges,
+                    &self.tapes[i],
+                    gfe,
+                    gx,
+                    s1,
+                    s2,
+                );
+                if body {
+                    let i = m.ix(Block::BodyDecoder).expect("body decoder");
+                    let gx = Some((&mut gglob[..], &mut [][..]));
+                    m.mlp(i).backward(
+                        th,
+                        &mut self.grad,
+                        glob,
+                        &[],
+                        nodes,
+                        &self.tapes[i],
+                        gout,
+                        gx,
+                        s1,
+                        s2,
+                    );
+                }
+            }
+            Decoder::Node { global } => {
+                let i = m.ix(Block::NodeDecoder).expect("node decoder");
+                let (g, gg): (&[f64], &mut [f64]) = if global {
+                    (glob, &mut gglob[..])
+                } else {
+                    (&[], &mut [])
+                };
+                let gx = Some((&mut gh[..], gg));
+                m.mlp(i).backward(
+                    th,
+                    &mut self.grad,
+                    hr_,
+                    g,
+                    nodes,
+                    &self.tapes[i],
+                    gout,
+                    gx,
+                    s1,
+                    s2,
+                );
+            }
+        }
+        if let Some(i) = m.ix(Block::GlobalEmbed) {
+            times_squareplus_grad(gglob, glob);
+            let x = &self.x[..nf * nodes];
+            m.mlp(i).backward(
+                th,
+                &mut self.grad,
+                x,
+                &[],
+                nodes,
+                &self.tapes[i],
+                gglob,
+                None,
+                s1,
+                s2,
+            );
+        }
+        // Message passing, last round first.
+        for l in (0..a.rounds).rev() {
+            let (gh, ghe) = (&mut self.gh[..em * nodes], &mut self.ghe[..em * edges]);
+            let (ghp, ghep) = (
+                &mut self.gh_prev[..em * nodes],
+                &mut self.ghe_prev[..em * edges],
+            );
+            let (hs, hr) = (&self.hs[l][..em * edges], &self.hr[l][..em * edges]);
+            let (hl1, hel, hel1) = (
+                &self.h[l + 1][..em * nodes],
+                &self.he[l][..em * edges],
+                &self.he[l + 1][..em * edges],
+            );
+            ghp.fill(0.0);
+            ghep.fill(0.0);
+            let (gs, gr) = (&mut self.gs[..em * edges], &mut self.gr[..em * edges]);
+            if a.updates_edges(l) {
+                let gz = &mut self.gz[..em * edges];
+                gz.copy_from_slice(ghe);
+                times_squareplus_grad(gz, hel1);
+                for (x, g) in ghep.iter_mut().zip(gz.iter()) {
+                    *x += g;
+                }
+                gs.fill(0.0);
+                gr.fill(0.0);
+                let i = m.ix(Block::EdgeUpdate(l)).expect("round");
+                let (tape, grad) = (&self.tapes[i], &mut self.grad);
+                match a.edge_input {
+                    EdgeInput::Concat => {
+                        let gx = Some((&mut gr[..], &mut gs[..]));
+                        m.mlp(i)
+                            .backward(th, grad, hr, hs, edges, tape, gz, gx, s1, s2);
+                    }
+                    EdgeInput::Product => {
+                        // ∂(h_i ⊙ h_j): ḡ_i = ḡ ⊙ h_j, ḡ_j = ḡ ⊙ h_i.
+                        let (hp, gp) = (&self.hp[l][..em * edges], &mut self.gp[..em * edges]);
+                        gp.fill(0.0);
+                        let gx = Some((&mut gp[..], &mut [][..]));
+                        m.mlp(i)
+                            .backward(th, grad, hp, &[], edges, tape, gz, gx, s1, s2);
+                        for (k, g) in gp.iter().enumerate() {
+                            gr[k] = g * hs[k];
+                            gs[k] = g * hr[k];
+                        }
+                    }
+                }
+                for k in 0..em {
+                    for e in 0..edges {
+                        ghp[k * nodes + self.recv[e]] += gr[k * edges + e];
+                        ghp[k * nodes + self.send[e]] += gs[k * edges + e];
+                    }
+                }
+            } else {
+                for (x, g) in ghep.iter_mut().zip(ghe.iter()) {
+                    *x += g;
+                }
+            }
+            if a.updates_nodes(l) {
+                let gz = &mut self.gz[..em * nodes];
+                gz.copy_from_slice(gh);
+                times_squareplus_grad(gz, hl1);
+                for (x, g) in ghp.iter_mut().zip(gz.iter()) {
+                    *x += g;
+                }
+                let gmsg = &mut self.gmsg[..em * edges];
+                for k in 0..em {
+                    for e in 0..edges {
+                        gmsg[k * edges + e] = gz[k * nodes + self.recv[e]];
+                    }
+                }
+                gs.fill(0.0);
+                let i = m.ix(Block::Message(l)).expect("round");
+                let gx = Some((&mut gs[..], &mut ghep[..]));
+                m.mlp(i).backward(
+                    th,
+                    &mut self.grad,
+                    hs,
+                    hel,
+                    edges,
+                    &self.tapes[i],
+                    gmsg,
+                    gx,
+                    s1,
+                    s2,
+                );
+                for k in 0..em {
+                    for e in 0..edges {
+                        ghp[k * nodes + self.send[e]] += gs[k * edges + e];
+                    }
+                }
+            } else {
+                for (x, g) in ghp.iter_mut().zip(gh.iter()) {
+                    *x += g;
+                }
+            }
+            std::mem::swap(&mut self.gh, &mut self.gh_prev);
+            std::mem::swap(&mut self.ghe, &mut self.ghe_prev);
+        }
+        // Embeddings.
+        let node_in = match a.node_input {
+            NodeInput::TypeOnly => t,
+            NodeInput::Full => nf,
+        };
+        let gh = &mut self.gh[..em * nodes];
+        times_squareplus_grad(gh, &self.h[0][..em * nodes]);
+        let i = m.ix(Block::NodeEmbed).expect("graph model");
+        let x = &self.x[..node_in * nodes];
+        m.mlp(i).backward(
+            th,
+            &mut self.grad,
+            x,
+            &[],
+            nodes,
+            &self.tapes[i],
+            gh,
+            None,
+            s1,
+            s2,
+        );
+        let ghe = &mut self.ghe[..em * edges];
+        times_squareplus_grad(ghe, &self.he[0][..em * edges]);
+        let i = m.ix(Block::EdgeEmbed).expect("graph model");
+        let w = &self.w_in[..d * edges];
+        m.mlp(i).backward(
+            th,
+            &mut self.grad,
+            w,
+            &[],
+            edges,
+            &self.tapes[i],
+            ghe,
+            None,
+            s1,
+            s2,
+        );
+    }
+}

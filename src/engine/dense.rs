@@ -1,0 +1,247 @@
+//! Dense layers and MLPs on a flat parameter vector, feature-major
+//! (`x[f·r + row]`, rows innermost), with the forward pass recording the
+//! hidden activations it needs and a hand-written reverse pass.
+
+use crate::model::mlp::squareplus_f64;
+
+/// squareplus'(z) from the activation y = squareplus(z): since
+/// z = y − 1/y and √(z² + 4) = y + 1/y, the derivative ½(1 + z/√(z²+4)) is
+/// y²/(1 + y²). Saves storing pre-activations.
+#[inline]
+pub(crate) fn squareplus_grad_from_output(y: f64) -> f64 {
+    let y2 = y * y;
+    y2 / (1.0 + y2)
+}
+
+/// Applies squareplus in place.
+pub(crate) fn squareplus_in_place(x: &mut [f64]) {
+    x.iter_mut().for_each(|v| *v = squareplus_f64(*v));
+}
+
+/// `g ← g ⊙ squareplus'` given the activations `y` of the same shape.
+pub(crate) fn times_squareplus_grad(g: &mut [f64], y: &[f64]) {
+    for (gv, yv) in g.iter_mut().zip(y) {
+        *gv *= squareplus_grad_from_output(*yv);
+    }
+}
+
+/// Σ a_i b_i with four partial sums, so the loop vectorises (a fixed order:
+/// results are reproducible).
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for k in 0..4 {
+            acc[k] += x[k] * y[k];
+        }
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
+/// Σ a_i, as [`dot`].
+#[inline]
+fn sum(a: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let ca = a.chunks_exact(4);
+    let tail: f64 = ca.remainder().iter().sum();
+    for x in ca {
+        for k in 0..4 {
+            acc[k] += x[k];
+        }
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
+/// One linear layer: offsets of its weight `[inp, out]` (row-major) and bias
+/// in the flat parameter vector.
+#[derive(Clone, Debug)]
+pub(crate) struct Linear {
+    pub(crate) w: usize,
+    pub(crate) b: usize,
+    pub(crate) inp: usize,
+    pub(crate) out: usize,
+}
+
+impl Linear {
+    /// `y = Wᵀ [a; c] + b` over `r` rows; the first `a.len() / r` input
+    /// features come from `a`, the rest from `c` (a concatenation without a copy).
+    fn forward(&self, th: &[f64], a: &[f64], c: &[f64], r: usize, y: &mut [f64]) {
+        let na = a.len() / r;
+        let w = &th[self.w..self.w + self.inp * self.out];
+        for (j, &bj) in th[self.b..self.b + self.out].iter().enumerate() {
+            y[j * r..(j + 1) * r].fill(bj);
+        }
+        for (i, wrow) in w.chunks_exact(self.out).enumerate() {
+            let xi = if i < na {
+                &a[i * r..(i + 1) * r]
+            } else {
+                &c[(i - na) * r..(i - na + 1) * r]
+            };
+            for (j, &wv) in wrow.iter().enumerate() {
+                for (yv, xv) in y[j * r..(j + 1) * r].iter_mut().zip(xi) {
+                    *yv += wv * xv;
+                }
+            }
+        }
+    }
+
+    /// Reverse pass: accumulates ∂L/∂W and ∂L/∂b into `g` from `gy` (`out × r`)
+    /// and the inputs `[a; c]`; when `gx` is given, accumulates ∂L/∂[a; c]
+    /// into its two parts.
+    #[allow(clippy::too_many_arguments)]
+    fn backward(
+        &self,
+        th: &[f64],
+        g: &mut [f64],
+        a: &[f64],
+        c: &[f64],
+        r: usize,
+        gy: &[f64],
+        mut gx: Option<(&mut [f64], &mut [f64])>,
+    ) {
+        let na = a.len() / r;
+        for j in 0..self.out {
+            g[self.b + j] += sum(&gy[j * r..(j + 1) * r]);
+        }
+        for i in 0..self.inp {
+            let xi = if i < na {
+                &a[i * r..(i + 1) * r]
+            } else {
+                &c[(i - na) * r..(i - na + 1) * r]
+            };
+            for j in 0..self.out {
+                g[self.w + i * self.out + j] += dot(xi, &gy[j * r..(j + 1) * r]);
+            }
+            if let Some((ga, gc)) = gx.as_mut() {
+                let gxi = if i < na {
+                    &mut ga[i * r..(i + 1) * r]
+                } else {
+                    &mut gc[(i - na) * r..(i - na + 1) * r]
+                };
+                for j in 0..self.out {
+                    let wv = th[self.w + i * self.out + j];
+                    for (gv, yv) in gxi.iter_mut().zip(&gy[j * r..(j + 1) * r]) {
+                        *gv += wv * yv;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// An MLP with squareplus between layers and a linear output.
+#[derive(Clone, Debug)]
+pub(crate) struct Mlp {
+    pub(crate) layers: Vec<Linear>,
+}
+
+/// The hidden activations of one MLP application (one buffer per hidden layer).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Tape {
+    hidden: Vec<Vec<f64>>,
+}
+
+impl Mlp {
+    /// Widest layer.
+    pub(crate) fn width(&self) -> usize {
+        self.layers
+            .iter()
+            .map(|l| l.inp.max(l.out))
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// A tape for up to `rows` rows.
+    pub(crate) fn tape(&self, rows: usize) -> Tape {
+        let n = self.layers.len().saturating_sub(1);
+        Tape {
+            hidden: self.layers[..n]
+                .iter()
+                .map(|l| vec![0.0; l.out * rows])
+                .collect(),
+        }
+    }
+
+    /// `y = mlp([a; c])` over `r` rows, recording hidden activations in `tape`.
+    pub(crate) fn forward(
+        &self,
+        th: &[f64],
+        a: &[f64],
+        c: &[f64],
+        r: usize,
+        tape: &mut Tape,
+        y: &mut [f64],
+    ) {
+        if r == 0 {
+            return;
+        }
+        let nl = self.layers.len();
+        for (li, l) in self.layers.iter().enumerate() {
+            let (done, rest) = tape.hidden.split_at_mut(li);
+            let dst: &mut [f64] = if li + 1 == nl {
+                &mut y[..l.out * r]
+            } else {
+                &mut rest[0][..l.out * r]
+            };
+            if li == 0 {
+                l.forward(th, a, c, r, dst);
+            } else {
+                l.forward(th, &done[li - 1][..l.inp * r], &[], r, dst);
+            }
+            if li + 1 < nl {
+                squareplus_in_place(dst);
+            }
+        }
+    }
+
+    /// Reverse pass of [`Mlp::forward`]: `gy` (`out × r`) is ∂L/∂y; accumulates
+    /// parameter gradients into `g` and, when `gx` is given, ∂L/∂[a; c] into its
+    /// two parts. `s1`, `s2` are scratch of at least `width() · r`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn backward(
+        &self,
+        th: &[f64],
+        g: &mut [f64],
+        a: &[f64],
+        c: &[f64],
+        r: usize,
+        tape: &Tape,
+        gy: &[f64],
+        gx: Option<(&mut [f64], &mut [f64])>,
+        s1: &mut [f64],
+        s2: &mut [f64],
+    ) {
+        if r == 0 {
+            return;
+        }
+        let nl = self.layers.len();
+        // `cur` holds ∂L/∂(output of layer li); the last layer's is `gy`.
+        let (mut cur, mut next) = (s1, s2);
+        let mut gx = gx;
+        for li in (0..nl).rev() {
+            let l = &self.layers[li];
+            let gyl: &[f64] = if li + 1 == nl {
+                &gy[..l.out * r]
+            } else {
+                &cur[..l.out * r]
+            };
+            if li == 0 {
+                l.backward(th, g, a, c, r, gyl, gx.take());
+            } else {
+                let x = &tape.hidden[li - 1][..l.inp * r];
+                let gxl = &mut next[..l.inp * r];
+                gxl.fill(0.0);
+                l.backward(th, g, x, &[], r, gyl, Some((gxl, &mut [])));
+                times_squareplus_grad(gxl, x);
+                std::mem::swap(&mut cur, &mut next);
+            }
+        }
+    }
+}

@@ -1,0 +1,250 @@
+//! The one typed description of a model's architecture: which blocks (MLPs)
+//! exist, their layer sizes and weight names, how node inputs are built and
+//! how forces are decoded. The candle model ([`super::net`]), the inference
+//! kernel ([`crate::kernel`]) and the training engine ([`crate::engine`]) all
+//! read it, so adding a bias means changing this description and one stage in
+//! each executor, and no weight name is spelled twice.
+
+use super::variant::{Biases, EdgeInput, Hyper, MessageFn};
+use std::fmt;
+
+/// The parameter holding learnable log-masses, one per particle type.
+pub const LOG_MASS: &str = "log_mass";
+
+/// One MLP of the architecture.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Block {
+    /// NODE: the one MLP over the flattened state (q, q̇).
+    Flat,
+    /// Node embedding of (one-hot, q, q̇), or of the one-hot alone when decoupled.
+    NodeEmbed,
+    /// Edge embedding of w_ij = q_i − q_j.
+    EdgeEmbed,
+    /// Message function W_V over (h_j ‖ h_ij) of a message-passing round.
+    Message(usize),
+    /// Edge update W_E over (h_i ‖ h_j) of a message-passing round.
+    EdgeUpdate(usize),
+    /// Global (body) embedding of (one-hot, q, q̇), when decoupled.
+    GlobalEmbed,
+    /// Node decoder: acceleration or force from h_i (‖ g_i when decoupled).
+    NodeDecoder,
+    /// Pairwise edge-force decoder (MCGNODE).
+    EdgeDecoder,
+    /// Body-force decoder of the global embedding (MCGNODE with external fields).
+    BodyDecoder,
+}
+
+impl Block {
+    /// The weight-name prefix of the block, as model files store it.
+    pub fn prefix(self) -> String {
+        match self {
+            Block::Flat => "node".into(),
+            Block::NodeEmbed => "node_em".into(),
+            Block::EdgeEmbed => "edge_em".into(),
+            Block::Message(l) => format!("mp{l}.v"),
+            Block::EdgeUpdate(l) => format!("mp{l}.e"),
+            Block::GlobalEmbed => "glob_em".into(),
+            Block::NodeDecoder => "node_out".into(),
+            Block::EdgeDecoder => "edge_out".into(),
+            Block::BodyDecoder => "body_out".into(),
+        }
+    }
+
+    /// Names of the weight matrix and bias of linear layer `i`.
+    pub fn layer_names(self, i: usize) -> (String, String) {
+        let p = self.prefix();
+        (format!("{p}.l{i}.w"), format!("{p}.l{i}.b"))
+    }
+}
+
+impl fmt::Display for Block {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.prefix())
+    }
+}
+
+/// What the node embedding reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NodeInput {
+    /// (one-hot type, q, q̇).
+    Full,
+    /// The one-hot type alone (decoupled variants: q and q̇ go to the body branch).
+    TypeOnly,
+}
+
+/// How the network's output is formed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Decoder {
+    /// Per node, from h_i (and the global embedding g_i when `global`).
+    Node {
+        /// The decoder also reads the global embedding.
+        global: bool,
+    },
+    /// Per edge pair, antisymmetrised (Newton's third law), plus a body-force
+    /// decoder of the global embedding when `body`.
+    Pairwise {
+        /// A body-force branch exists.
+        body: bool,
+    },
+}
+
+/// The architecture of one model: every executor is driven by this.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Arch {
+    /// Spatial dimension.
+    pub dim: usize,
+    /// One-hot width.
+    pub types: usize,
+    /// Node and edge embedding width.
+    pub embed: usize,
+    /// Message-passing rounds (0 for NODE).
+    pub rounds: usize,
+    /// The MLPs with their layer sizes (input first), in definition order.
+    pub mlps: Vec<(Block, Vec<usize>)>,
+    /// Graph variants: what the node embedding reads.
+    pub node_input: NodeInput,
+    /// Graph variants: how outputs are decoded.
+    pub decoder: Decoder,
+    /// Outputs are forces, turned into accelerations by the constrained
+    /// equation of motion with learnable masses ([`LOG_MASS`]).
+    pub constrained: bool,
+    /// NODE: the particle count it was built for.
+    pub particles: usize,
+    /// What the edge update reads from its end nodes.
+    pub edge_input: EdgeInput,
+    /// The biases it was derived from.
+    pub biases: Biases,
+}
+
+impl Arch {
+    /// The architecture a set of hyperparameters defines.
+    pub fn new(h: &Hyper) -> Self {
+        let (d, t, hid, em) = (h.dim, h.types.max(1), h.hidden, h.embed);
+        let b = h.variant.biases();
+        let mut mlps = vec![];
+        let body = b.decoupled && (!b.pairwise || h.body_force);
+        let node_input = if b.decoupled {
+            NodeInput::TypeOnly
+        } else {
+            NodeInput::Full
+        };
+        let decoder = if b.pairwise {
+            Decoder::Pairwise { body }
+        } else {
+            Decoder::Node { global: body }
+        };
+        let rounds = if b.graph { h.rounds } else { 0 };
+        // Layer sizes of a block: its override, or `hidden` × `hidden_layers`.
+        let mlp = |block: Block, inp: usize, out: usize, hidden: bool| {
+            let mut sizes = vec![inp];
+            match h.block_hidden.get(&block.prefix()) {
+                Some(hs) => sizes.extend(hs),
+                None if hidden => sizes.extend(std::iter::repeat_n(hid, h.hidden_layers)),
+                None => {}
+            }
+            sizes.push(out);
+            (block, sizes)
+        };
+        let msg_hidden = h.message == MessageFn::Mlp;
+        let edge_in = match h.edge_input {
+            EdgeInput::Concat => 2 * em,
+            EdgeInput::Product => em,
+        };
+        if !b.graph {
+            let io = h.particles * d;
+            let mut sizes = vec![2 * io];
+            sizes.extend(std::iter::repeat_n(h.node_hidden, h.node_layers));
+            sizes.push(io);
+            mlps.push((Block::Flat, sizes));
+        } else {
+            let node_in = match node_input {
+                NodeInput::TypeOnly => t,
+                NodeInput::Full => t + 2 * d,
+            };
+            mlps.push(mlp(Block::NodeEmbed, node_in, em, true));
+            mlps.push(mlp(Block::EdgeEmbed, d, em, true));
+            for l in 0..rounds {
+                mlps.push(mlp(Block::Message(l), 2 * em, em, msg_hidden));
+                mlps.push(mlp(Block::EdgeUpdate(l), edge_in, em, msg_hidden));
+            }
+            if body {
+                mlps.push(mlp(Block::GlobalEmbed, t + 2 * d, em, true));
+            }
+            match decoder {
+                Decoder::Pairwise { body } => {
+                    mlps.push(mlp(Block::EdgeDecoder, em, d, true));
+                    if body {
+                        mlps.push(mlp(Block::BodyDecoder, em, d, true));
+                    }
+                }
+                Decoder::Node { global } => {
+                    let inp = if global { 2 * em } else { em };
+                    mlps.push(mlp(Block::NodeDecoder, inp, d, true));
+                }
+            }
+        }
+        Self {
+            dim: d,
+            types: t,
+            embed: em,
+            rounds,
+            mlps,
+            node_input,
+            decoder,
+            constrained: b.constrained,
+            particles: h.particles,
+            edge_input: h.edge_input,
+            biases: b,
+        }
+    }
+
+    /// Layer sizes of a block, if the architecture has it.
+    pub fn sizes(&self, block: Block) -> Option<&[usize]> {
+        self.mlps
+            .iter()
+            .find(|(b, _)| *b == block)
+            .map(|(_, s)| s.as_slice())
+    }
+
+    /// Whether the global (body) embedding exists.
+    pub fn has_global(&self) -> bool {
+        matches!(
+            self.decoder,
+            Decoder::Node { global: true } | Decoder::Pairwise { body: true }
+        )
+    }
+
+    /// Every parameter's name and shape, in definition order (the order the
+    /// candle store declares them and seeded initialisation draws them).
+    pub fn params(&self) -> Vec<(String, Vec<usize>)> {
+        let mut out = vec![];
+        for (block, sizes) in &self.mlps {
+            for (i, w) in sizes.windows(2).enumerate() {
+                let (wn, bn) = block.layer_names(i);
+                out.push((wn, vec![w[0], w[1]]));
+                out.push((bn, vec![w[1]]));
+            }
+        }
+        if self.constrained {
+            out.push((LOG_MASS.to_string(), vec![self.types]));
+        }
+        out
+    }
+
+    /// The node features the inputs buffer holds: one-hot, then q and q̇.
+    pub fn node_features(&self) -> usize {
+        self.types + 2 * self.dim
+    }
+
+    /// Whether round `l` must update node states: in the last round a
+    /// pairwise decoder reads only edges.
+    pub fn updates_nodes(&self, l: usize) -> bool {
+        !(l + 1 == self.rounds && matches!(self.decoder, Decoder::Pairwise { .. }))
+    }
+
+    /// Whether round `l` must update edge states: in the last round a node
+    /// decoder reads only nodes.
+    pub fn updates_edges(&self, l: usize) -> bool {
+        l + 1 < self.rounds || matches!(self.decoder, Decoder::Pairwise { .. })
+    }
+}
