@@ -66,6 +66,11 @@ def main() -> int:
             "edge_rest_length": floats(m.edge_rest_length),
             "edge_stiffness": floats(m.edge_stiffness),
             "anchors": vecs(m.anchors),
+            # Messages of the first layout have no field entries: unknown (0).
+            "field_status": int(getattr(m, "field_status", 0)),
+            "gravity": vecs([m.gravity])[0] if hasattr(m, "gravity") else [f(0), f(0), f(0)],
+            "drag": f(getattr(m, "drag", 0.0)),
+            "force": vecs([m.force])[0] if hasattr(m, "force") else [f(0), f(0), f(0)],
         }
 
     from mcap.reader import make_reader

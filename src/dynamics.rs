@@ -123,6 +123,12 @@ pub trait Dynamics: Send + Sync {
     /// Whether this graph can be handled (particle types known, dimension, ...).
     fn supports(&self, graph: &Graph) -> Result<(), String>;
 
+    /// What the model was trained on, when a caller wrapped it with that
+    /// knowledge ([`crate::compat::Checked`]); `None` otherwise.
+    fn trained_for(&self) -> Option<&crate::compat::TrainedFor> {
+        None
+    }
+
     /// Accelerations at a state, written to `out` (`n * dim`).
     fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String>;
 

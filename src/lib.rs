@@ -12,6 +12,7 @@ pub mod alloc;
 pub mod baselines;
 pub mod bench;
 pub mod cli;
+pub mod compat;
 pub mod data;
 pub mod dynamics;
 pub mod engine;

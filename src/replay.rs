@@ -31,10 +31,6 @@ use crate::metrics::{error_curves, Averages, Band, Summary, LOG_FLOOR};
 use crate::physics::Field;
 use crate::system::{State, Trajectory};
 
-/// Bag metadata keys the node's recorder writes (see `ros::record`).
-const META_NODE_DT: &str = "dt";
-const META_NODE_HORIZON: &str = "horizon";
-
 /// Grid points used when the bag's stamps are irregular and no `bins` is given.
 pub const DEFAULT_IRREGULAR_BINS: usize = 20;
 /// Default horizon, in recorded intervals, for bags that do not say the node's.
@@ -48,7 +44,8 @@ const Z95: f64 = 1.96;
 #[derive(Clone, Debug, Default)]
 pub struct ReplayOptions {
     /// Largest integration step, seconds. Default: the bag's simulator step
-    /// (`system_config`), else the recording node's `dt` metadata.
+    /// (`system_config`), else the recording node's `dt` metadata, else the
+    /// interval of evenly spaced header stamps.
     pub dt: Option<f64>,
     /// Longest lead time, seconds. Default: the recording node's horizon × dt
     /// (its metadata), else [`DEFAULT_HORIZON_INTERVALS`] median recorded
@@ -58,8 +55,8 @@ pub struct ReplayOptions {
     /// one per recorded interval when the stamps are regular (no binning at
     /// all), else [`DEFAULT_IRREGULAR_BINS`].
     pub bins: Option<usize>,
-    /// Field for the energy error. Default: the bag's `system_config` field,
-    /// else no field (zero gravity, drag and force).
+    /// Field for the energy error. Default: the bag's
+    /// ([`crate::evaluate::bag_field`]); refused when it cannot be known.
     pub field: Option<Field>,
     /// Replay at most this many trajectories (the first ones, by id).
     pub max_trajectories: Option<usize>,
@@ -210,27 +207,21 @@ fn positive(x: f64, what: &str) -> Result<f64> {
     }
 }
 
-fn meta_number(bag: &Bag, key: &str) -> Result<Option<f64>> {
-    match bag.metadata.get(key) {
-        None => Ok(None),
-        Some(s) => s
-            .trim()
-            .parse::<f64>()
-            .map(Some)
-            .with_context(|| format!("bag metadata {key} = {s:?} is not a number")),
-    }
-}
-
 fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> {
     let sys = bag_system(bag)?;
-    let node_dt = meta_number(bag, META_NODE_DT)?;
+    let meta = bag.meta()?;
+    let node_dt = meta.node_dt;
     let (dt, dt_source) = match (opts.dt, &sys, node_dt) {
         (Some(dt), _, _) => (dt, "option"),
         (None, Some(s), _) => (s.dt, "bag system_config (simulator step)"),
         (None, None, Some(dt)) => (dt, "bag metadata dt (the recording node's step)"),
-        (None, None, None) => bail!(
-            "the bag does not say its integration step (no system_config or dt metadata); pass --dt"
-        ),
+        (None, None, None) => match crate::evaluate::stamp_interval(bag) {
+            Some(d) => (d, "the header stamps (their interval)"),
+            None => bail!(
+                "the bag does not say its integration step (no system_config or dt metadata, \
+                 and its stamps are not evenly spaced); pass --dt"
+            ),
+        },
     };
     let dt = positive(dt, "dt")?;
     let mut intervals: Vec<f64> = trajs
@@ -244,7 +235,7 @@ fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> 
     let median = intervals[intervals.len() / 2];
     let (lo, hi) = (intervals[0], intervals[intervals.len() - 1]);
     let regular = hi - lo <= 1e-6 * median;
-    let node_horizon = meta_number(bag, META_NODE_HORIZON)?;
+    let node_horizon = meta.node_horizon.map(f64::from);
     let (horizon, horizon_source) = match (opts.horizon, node_horizon, node_dt) {
         (Some(h), _, _) => (h, "option".to_string()),
         (None, Some(h), Some(d)) => (h * d, "the recording node's horizon × dt".to_string()),
@@ -273,11 +264,9 @@ fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> 
             horizon / DEFAULT_IRREGULAR_BINS as f64,
         ),
     };
-    let (field, field_source) = match (&opts.field, &sys) {
-        (Some(f), _) => (f.clone(), "option"),
-        (None, Some(s)) => (s.field.clone(), "bag system_config"),
-        (None, None) => (Field::default(), "none given: zero field"),
-    };
+    let origin = crate::evaluate::bag_field(bag, opts.field.as_ref())?
+        .ok_or_else(|| crate::evaluate::unknown_field_error("the energy error"))?;
+    let (field, field_source) = (origin.field, origin.source);
     Ok(Plan {
         dt,
         dt_source: dt_source.into(),
@@ -287,7 +276,7 @@ fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> 
         bins,
         regular,
         field,
-        field_source: field_source.into(),
+        field_source,
     })
 }
 

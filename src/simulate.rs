@@ -2,15 +2,13 @@
 //! of a [`SystemConfig`] written as an MCAP bag whose metadata say how they
 //! were made. Used by `mcgnode simulate`, `demo` and `reproduce`.
 
-use crate::data::bag::write_trajectories;
-use crate::evaluate::META_SYSTEM;
+use crate::data::bag::write_trajectories_with_field;
 use crate::physics::{constraint_residual, SystemConfig};
 use anyhow::{bail, Context, Result};
-use std::collections::BTreeMap;
 use std::path::Path;
 
 /// Bag metadata key naming the integrator that produced the data.
-pub const META_INTEGRATOR: &str = "integrator";
+pub const META_INTEGRATOR: &str = crate::data::meta::KEY_INTEGRATOR;
 
 /// Largest bar-length residual |r − l| accepted in RK4 data. RK4 integrates the
 /// constrained flow without projecting back onto the bars, so the bars drift
@@ -79,14 +77,17 @@ pub fn simulate_with(
             trajs
         }
     };
-    let mut meta = BTreeMap::new();
-    meta.insert(META_SYSTEM.to_string(), serde_json::to_string(cfg)?);
-    meta.insert("seed".to_string(), seed.to_string());
-    meta.insert(META_INTEGRATOR.to_string(), integrator.name().to_string());
-    meta.insert(
-        "generator".to_string(),
-        format!("mcgnode {}", env!("CARGO_PKG_VERSION")),
-    );
-    write_trajectories(out, &trajs, &meta).with_context(|| format!("writing {}", out.display()))?;
+    let meta = crate::data::BagMetadata {
+        system_config: Some(cfg.clone()),
+        seed: Some(seed),
+        integrator: Some(integrator.name().to_string()),
+        generator: Some(format!("mcgnode {}", env!("CARGO_PKG_VERSION"))),
+        ..Default::default()
+    }
+    .to_map()?;
+    // Every message states the field, so the bag describes its system without
+    // the metadata record.
+    write_trajectories_with_field(out, &trajs, &meta, Some(&cfg.field))
+        .with_context(|| format!("writing {}", out.display()))?;
     Ok(())
 }

@@ -656,6 +656,8 @@ pub struct ModelOptions {
     pub body_force: BodyForce,
     /// One-hot width; default: largest type in the data + 1.
     pub types: Option<usize>,
+    /// The ParticleState topic to train on, when a bag holds several.
+    pub topic: Option<String>,
     /// Architecture preset (the authors' code by default).
     pub arch: ArchPreset,
     /// Hidden layers per graph MLP, overriding the preset.
@@ -676,6 +678,7 @@ impl Default for ModelOptions {
             rounds: 1,
             body_force: BodyForce::Auto,
             types: None,
+            topic: None,
             arch: ArchPreset::Authors,
             hidden_layers: None,
             message: None,
@@ -729,29 +732,62 @@ pub struct TrainingData {
     pub trained_on: crate::model::file::TrainedOn,
     /// The simulator configuration from the first bag's metadata, if any.
     pub system_config: Option<crate::physics::SystemConfig>,
+    /// Whether the data are a closed system (no anchors, no field), and why:
+    /// `None` when the bags neither say nor show it.
+    pub closed: Option<(bool, String)>,
+}
+
+/// Reads training bags (each an MCAP file, a rosbag2 directory or a .db3
+/// file) into a dataset ([`load_training_data_from`] on the only
+/// ParticleState topic).
+pub fn load_training_data(
+    bags: &[std::path::PathBuf],
+    log: impl FnMut(&str),
+) -> Result<TrainingData> {
+    load_training_data_from(bags, None, log)
 }
 
 /// Reads training bags into a dataset (recorded accelerations, else finite
-/// differences; `log` says which) with fingerprints of every trajectory's start.
-pub fn load_training_data(
+/// differences; `log` says which) with fingerprints of every trajectory's
+/// start, reading `topic` (needed when a bag holds several ParticleState
+/// topics).
+pub fn load_training_data_from(
     bags: &[std::path::PathBuf],
+    topic: Option<&str>,
     mut log: impl FnMut(&str),
 ) -> Result<TrainingData> {
-    use crate::data::bag::read_trajectories;
-    use crate::data::dataset::{digest, AccSource};
-    use crate::evaluate::{bag_system, fingerprint};
+    use crate::data::bag::{read_bags, ReadOptions};
+    use crate::data::dataset::AccSource;
+    use crate::evaluate::{bag_field, bag_system, fingerprint};
     if bags.is_empty() {
         bail!("no training bags given");
     }
     let mut trajectories = vec![];
     let mut digests = vec![];
     let mut system_config = None;
+    let mut closed: Option<(bool, String)> = None;
+    let read = ReadOptions {
+        topic: topic.map(str::to_string),
+    };
     for p in bags {
-        let bag = read_trajectories(p)?;
+        let bag = read_bags(std::slice::from_ref(p), &read)?;
         if system_config.is_none() {
             system_config = bag_system(&bag)?;
         }
-        digests.push(digest(p)?);
+        // Closed: no anchors and no field, as the bag states or its data show.
+        let this = match bag_field(&bag, None)? {
+            _ if bag.trajectories.iter().any(|t| !t.graph.anchors.is_empty()) => {
+                Some((false, "anchors".to_string()))
+            }
+            Some(o) => Some((o.field.is_free(), o.source)),
+            None => None,
+        };
+        closed = match (closed, this) {
+            (None, t) if trajectories.is_empty() => t,
+            (Some((a, why)), Some((b, _))) if a == b => Some((a, why)),
+            _ => None,
+        };
+        digests.push(bag_digest(p)?);
         trajectories.extend(bag.trajectories);
     }
     let ds = Dataset::from_trajectories(&trajectories)?;
@@ -794,7 +830,19 @@ pub fn load_training_data(
         dataset: ds,
         trained_on,
         system_config,
+        closed,
     })
+}
+
+/// SHA-256 of a bag argument: of its file, or of each storage file of a
+/// rosbag2 directory joined by `+`.
+fn bag_digest(p: &std::path::Path) -> Result<String> {
+    let parts = crate::data::source::bag_parts(p)?;
+    Ok(parts
+        .iter()
+        .map(|part| crate::data::dataset::digest(&part.path))
+        .collect::<Result<Vec<_>, _>>()?
+        .join("+"))
 }
 
 /// Trains a model from trajectory bags and returns the model file (not yet saved).
@@ -807,7 +855,7 @@ pub fn train_from_bags(
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<crate::model::ModelFile> {
     log(&format!("training {variant}"));
-    let mut data = load_training_data(bags, &mut log)?;
+    let mut data = load_training_data_from(bags, opts.topic.as_deref(), &mut log)?;
     apply_data_options(&mut data.dataset, cfg, &mut log)?;
     data.trained_on.states = data.dataset.len();
     let ds = &data.dataset;
@@ -823,14 +871,17 @@ pub fn train_from_bags(
     hyper.body_force = match opts.body_force {
         BodyForce::On => true,
         BodyForce::Off => false,
-        BodyForce::Auto => {
-            let closed = ds.graph.anchors.is_empty()
-                && data
-                    .system_config
-                    .as_ref()
-                    .is_some_and(|s| s.field.is_free());
-            !closed
-        }
+        BodyForce::Auto => match &data.closed {
+            Some((closed, _)) => !closed,
+            // A warm start keeps its model's branch (below).
+            None if variant == crate::model::Variant::Mcgnode && cfg.init.is_none() => bail!(
+                "the training bags do not say whether the system is closed (their messages \
+                 leave the field unknown, there is no system_config metadata, and the data do \
+                 not show a closed system): pass --body-force off for a closed system \
+                 (momentum conserved exactly) or --body-force on"
+            ),
+            None => true,
+        },
     };
     if let Some(init) = &cfg.init {
         // A warm start keeps the architecture it was trained with.
@@ -867,8 +918,14 @@ pub fn train_from_bags(
         hyper = h.clone();
     }
     if variant == crate::model::Variant::Mcgnode {
+        let why = match (&opts.body_force, &data.closed) {
+            _ if cfg.init.is_some() => ", from the --init model".to_string(),
+            (BodyForce::Auto, Some((_, why))) => format!(", from {why}"),
+            (BodyForce::Auto, None) => String::new(),
+            _ => ", as asked".to_string(),
+        };
         log(&format!(
-            "body-force branch: {}",
+            "body-force branch: {}{why}",
             if hyper.body_force {
                 "on"
             } else {

@@ -732,7 +732,7 @@ fn inconsistent_bags_name_the_message() {
 }
 
 #[test]
-fn other_topics_are_skipped_and_particle_states_on_any_topic_are_read() {
+fn other_topics_are_skipped_and_several_particle_state_topics_need_a_choice() {
     let dir = tmpdir();
     let p = dir.path().join("multi.mcap");
     let a = mixed_trajectories()[0].clone();
@@ -752,11 +752,34 @@ fn other_topics_are_skipped_and_particle_states_on_any_topic_are_read() {
     }
     w.write_particle_state(cb, &msgs_of(&b)[5]).unwrap();
     w.finish().unwrap();
-    let bag = read_trajectories(&p).unwrap();
+    // Two ParticleState topics: refused without a choice, naming both.
+    let n_a = a.samples.len();
+    assert_err(
+        read_trajectories(&p),
+        &[
+            "several topics",
+            &format!("/particle_state ({n_a} messages)"),
+            &format!("/ground_truth ({} messages)", n_a + 1),
+            "--topic",
+        ],
+    );
+    let read = |topic: &str| {
+        mcgnode::data::read_bags(
+            std::slice::from_ref(&p),
+            &mcgnode::data::ReadOptions {
+                topic: Some(topic.into()),
+            },
+        )
+    };
+    let bag = read("/particle_state").unwrap();
+    assert_eq!(bag.topic, "/particle_state");
+    assert_same(&bag.trajectories, &[a]);
+    let bag = read("/ground_truth").unwrap();
     let mut b_short = b.clone();
-    b_short.samples.truncate(a.samples.len());
+    b_short.samples.truncate(n_a);
     b_short.samples.push(b.samples[5].clone());
-    assert_same(&bag.trajectories, &[a, b_short]);
+    assert_same(&bag.trajectories, &[b_short]);
+    assert_err(read("/nope"), &["no ParticleState messages on topic /nope"]);
 }
 
 // ---------------------------------------------------------------- independent decoders
@@ -852,6 +875,24 @@ fn python_decode(bag: &Path, decoder: &str) -> (Vec<(String, ParticleState)>, se
                 edge_rest_length: fs(&m["edge_rest_length"]),
                 edge_stiffness: fs(&m["edge_stiffness"]),
                 anchors,
+                field_status: u(&m["field_status"]) as u8,
+                gravity: {
+                    let g = fs(&m["gravity"]);
+                    Vector3 {
+                        x: g[0],
+                        y: g[1],
+                        z: g[2],
+                    }
+                },
+                drag: f(&m["drag"]),
+                force: {
+                    let g = fs(&m["force"]);
+                    Vector3 {
+                        x: g[0],
+                        y: g[1],
+                        z: g[2],
+                    }
+                },
             };
             (m["topic"].as_str().unwrap().to_string(), msg)
         })
@@ -1033,12 +1074,22 @@ fn dataset_rejects_bad_trajectory_sets() {
         Dataset::from_trajectories(&short),
         &["trajectory 4", "at least 3"],
     );
+    // Uneven stamps: the three-point difference, exact for a parabola.
     let mut uneven = trajectory(5, "spring", chain_2d(), 6, 0.0, false);
-    uneven.samples[3].t += 0.002;
-    assert_err(
-        Dataset::from_trajectories(&[uneven]),
-        &["trajectory 5", "uniform"],
-    );
+    let times = [0.0, 0.1, 0.25, 0.3, 0.5, 0.52];
+    for (s, t) in uneven.samples.iter_mut().zip(times) {
+        s.t = t;
+        for (i, q) in s.state.q.iter_mut().enumerate() {
+            *q = (i as f64 + 1.0) * t * t - 0.5 * t;
+        }
+    }
+    let ds = Dataset::from_trajectories(&[uneven]).unwrap();
+    assert_eq!(ds.len(), 4);
+    for a in &ds.acc {
+        for (i, x) in a.iter().enumerate() {
+            assert!((x - 2.0 * (i as f64 + 1.0)).abs() < 1e-9, "{a:?}");
+        }
+    }
     let mut nan = trajectory(6, "spring", chain_2d(), 6, 0.0, true);
     nan.samples[2].acc.as_mut().unwrap()[1] = f64::NAN;
     assert_err(
@@ -1051,4 +1102,117 @@ fn dataset_rejects_bad_trajectory_sets() {
         Dataset::from_trajectories(&[bad_state]),
         &["trajectory 8 sample 1"],
     );
+}
+
+#[test]
+fn typed_metadata_round_trips_and_names_bad_keys() {
+    use mcgnode::data::meta::BagMetadata;
+    use mcgnode::physics::{SystemConfig, SystemKind};
+    let m = BagMetadata {
+        system_config: Some(SystemConfig::new(SystemKind::Pendulum, 3)),
+        seed: Some(42),
+        integrator: Some("verlet".into()),
+        generator: Some("test".into()),
+        model: Some("truth:pendulum".into()),
+        recorder: Some("mcgnode serve".into()),
+        node_dt: Some(0.1 + 0.2),
+        node_horizon: Some(300),
+        other: meta(&[("robot", "arm 7")]),
+    };
+    let map = m.to_map().unwrap();
+    assert_eq!(map["seed"], "42");
+    assert_eq!(map["dt"], "0.30000000000000004");
+    assert_eq!(map["robot"], "arm 7");
+    assert_eq!(BagMetadata::from_map(&map).unwrap(), m);
+    // Written into a bag and read back through Bag::meta.
+    let dir = tmpdir();
+    let p = write_bag_with(dir.path(), &map);
+    assert_eq!(read_trajectories(&p).unwrap().meta().unwrap(), m);
+    let e = BagMetadata::from_map(&meta(&[("horizon", "ten")]))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("horizon") && e.contains("ten"), "{e}");
+    assert_eq!(
+        BagMetadata::from_map(&BTreeMap::new()).unwrap(),
+        BagMetadata::default()
+    );
+}
+
+fn write_bag_with(dir: &Path, m: &BTreeMap<String, String>) -> PathBuf {
+    let p = dir.join("meta.mcap");
+    write_trajectories(&p, &mixed_trajectories()[..1], m).unwrap();
+    p
+}
+
+/// q_i(t) = A_i sin(ω t + φ_i) at irregular times (steps h·(1 ± 0.3)),
+/// as ParticleState messages without velocities or accelerations.
+fn position_only_bag(dir: &Path, name: &str, h: f64, omega: f64) -> (PathBuf, Vec<f64>) {
+    let graph = chain_2d();
+    let d = graph.ndof();
+    let mut times = vec![0.0];
+    for k in 1..60 {
+        let last = times[k - 1];
+        times.push(last + h * (1.0 + 0.3 * (k as f64 * 1.7).sin()));
+    }
+    let q = |i: usize, t: f64| (1.0 + 0.1 * i as f64) * (omega * t + 0.3 * i as f64).sin();
+    let msgs: Vec<ParticleState> = times
+        .iter()
+        .enumerate()
+        .map(|(k, &t)| {
+            let s = Sample {
+                t,
+                state: State {
+                    q: (0..d).map(|i| q(i, t)).collect(),
+                    v: vec![0.0; d],
+                },
+                acc: None,
+            };
+            let mut m = ParticleState::from_sample(2, k as u32, "mocap", &graph, &s);
+            m.velocities.clear();
+            m
+        })
+        .collect();
+    let p = dir.join(name);
+    raw_bag(&p, &msgs);
+    (p, times)
+}
+
+#[test]
+fn position_only_recordings_get_second_order_velocities() {
+    let dir = tmpdir();
+    let omega = 2.0 * std::f64::consts::PI;
+    let mut errors = vec![];
+    for (name, h) in [("coarse.mcap", 0.02), ("fine.mcap", 0.01)] {
+        let (p, times) = position_only_bag(dir.path(), name, h, omega);
+        let bag = read_trajectories(&p).unwrap();
+        assert_eq!(bag.derived_velocities, vec![2]);
+        let tr = &bag.trajectories[0];
+        let mut worst: f64 = 0.0;
+        for (s, t) in tr.samples.iter().zip(&times) {
+            for (i, v) in s.state.v.iter().enumerate() {
+                let want = (1.0 + 0.1 * i as f64) * omega * (omega * t + 0.3 * i as f64).cos();
+                worst = worst.max((v - want).abs());
+            }
+        }
+        errors.push(worst);
+        // Accelerations from the uneven stamps too (a training set).
+        let ds = Dataset::from_trajectories(&bag.trajectories).unwrap();
+        assert_eq!(ds.source, AccSource::FiniteDifference);
+        assert_eq!(ds.len(), times.len() - 2);
+    }
+    // Second order: halving the step divides the error by about 4.
+    assert!(errors[0] < 0.05 * omega, "{errors:?}");
+    let ratio = errors[0] / errors[1];
+    assert!(
+        (3.0..5.5).contains(&ratio),
+        "error ratio {ratio} ({errors:?})"
+    );
+    // One lone position-only state cannot be differentiated.
+    let single = position_only_bag(dir.path(), "x.mcap", 0.01, omega).0;
+    let one = read_trajectories(&single).unwrap().trajectories[0].samples[..1].to_vec();
+    let lone = dir.path().join("lone.mcap");
+    let mut m = ParticleState::from_sample(1, 0, "mocap", &chain_2d(), &one[0]);
+    m.velocities.clear();
+    raw_bag(&lone, &[m]);
+    assert_err(read_trajectories(&lone), &["position-only", "at least two"]);
 }

@@ -567,3 +567,58 @@ fn train_engine_arch_and_warm_start_options() {
         "edge_out",
     );
 }
+
+/// The README's peridynamic example, as written: 125 particles by default.
+#[test]
+fn readme_peridynamic_example_uses_125_particles() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(&mcgnode(
+        &[
+            "simulate",
+            "--system",
+            "peridynamic",
+            "--trajectories",
+            "10",
+            "--out",
+            "solid.mcap",
+        ],
+        d,
+    ));
+    let bag = mcgnode::data::read_trajectories(d.join("solid.mcap")).unwrap();
+    assert_eq!(bag.trajectories.len(), 10);
+    assert!(bag
+        .trajectories
+        .iter()
+        .all(|t| t.graph.n() == 125 && t.graph.dim == 3));
+    // A closed solid: the messages say so, and `bag info` prints it.
+    assert_eq!(bag.field, Some(Default::default()));
+    let info = ok(&mcgnode(&["bag", "info", "solid.mcap"], d));
+    assert!(
+        info.contains("peridynamic: 10 trajectories, 125 particles, 3D, 1000 states"),
+        "{info}"
+    );
+    assert!(info.contains("field: none"), "{info}");
+    // Other systems keep 5 particles, and a non-cube count is still refused.
+    ok(&mcgnode(
+        &["simulate", "--trajectories", "1", "--out", "s.mcap"],
+        d,
+    ));
+    let bag = mcgnode::data::read_trajectories(d.join("s.mcap")).unwrap();
+    assert_eq!(bag.trajectories[0].graph.n(), 5);
+    fails_with(
+        &mcgnode(
+            &[
+                "simulate",
+                "--system",
+                "peridynamic",
+                "--particles",
+                "5",
+                "--out",
+                "bad.mcap",
+            ],
+            d,
+        ),
+        "cube",
+    );
+}

@@ -319,6 +319,10 @@ fn diverged_rollouts_are_scored_not_fatal() {
         )]
         .into_iter()
         .collect(),
+        field: None,
+        topic: "/particle_state".into(),
+        sources: vec![],
+        derived_velocities: vec![],
     };
     let e = mcgnode::evaluate::evaluate(&Exploding, &[], &bag, &Default::default()).unwrap();
     assert_eq!(e.diverged, 2);

@@ -318,3 +318,61 @@ fn stand_ins_play_echo_and_call() {
         "the stretched spring should pull particle 1 back: x = {x1}"
     );
 }
+
+/// A shipped bag of the first message layout is played through rclpy (field
+/// unknown), and the node, serving the spring model, refuses the pendulum
+/// states it was not trained for: counted as rejected, with the reason.
+#[test]
+fn node_refuses_states_its_model_was_not_trained_for() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let params = dir.path().join("params.yaml");
+    fs::write(
+        &params,
+        "mcgnode:\n  ros__parameters:\n    model: bags/models/spring5-mcgnode.json\n    horizon: 5\n    \
+         dt: 0.01\n    diagnostics_period: 0.25\n    warn_period: 1.0\n",
+    )
+    .expect("writing params");
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$PARAMS" 2>"$DIR/node.log" &
+        node=$!
+        python3 scripts/ros/play_bag.py bags/pendulum5-sample.mcap --rate 50 --limit 6 \
+            --timeout 30 2>"$DIR/play.err" || { cat "$DIR/play.err"; exit 3; }
+        sleep 0.5
+        python3 scripts/ros/echo.py /mcgnode/diagnostics --json --count 1 --timeout 30 \
+            >"$DIR/diag.out" || exit 5
+        kill -INT $node; wait $node
+    "#;
+    let o = run_bounded(
+        in_netns(script, &params, &env_sh).env("DIR", dir.path()),
+        Duration::from_secs(120),
+        dir.path(),
+    );
+    let read = |name: &str| fs::read_to_string(dir.path().join(name)).unwrap_or_default();
+    assert!(
+        o.status.success(),
+        "status {}\n{}\n{}\n--- node log\n{}",
+        o.status,
+        o.stdout,
+        o.stderr,
+        read("node.log")
+    );
+    assert!(
+        read("play.err").contains("published 6 messages"),
+        "{}",
+        read("play.err")
+    );
+    let diag: serde_json::Value = serde_json::from_str(read("diag.out").trim()).expect("diag");
+    assert_eq!(diag["received"], 6, "{diag}");
+    assert_eq!(diag["rejected"], 6, "{diag}");
+    assert_eq!(diag["predicted"], 0, "{diag}");
+    let last = diag["last_error"].as_str().unwrap_or_default();
+    assert!(
+        last.contains("trained on a system with springs") && last.contains("rigid bars"),
+        "{last}"
+    );
+    let log = read("node.log");
+    assert!(log.contains("rejected input"), "{log}");
+}

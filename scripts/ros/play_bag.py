@@ -9,7 +9,9 @@ Reads every mcgnode_msgs/msg/ParticleState message of an MCAP bag (or only
 those of --bag-topic) and publishes it, at the recorded pace (log times,
 scaled by --speed) or at a fixed --rate in Hz. The output topic defaults to
 the recorded topic. It first waits (up to --timeout s) for --wait-subscribers
-subscribers, since messages sent before a subscriber matches are lost.
+subscribers, since messages sent before a subscriber matches are lost. Bags of
+the first ParticleState layout (no field entries) are played with the field
+unknown.
 """
 
 import argparse
@@ -21,6 +23,30 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _rosutil as ru  # noqa: E402
 
 STATE_TYPE = "mcgnode_msgs/msg/ParticleState"
+
+
+def old_decoder(schema):
+    """A decoder for messages of `schema` as stored in the bag (mcap_ros2)."""
+    from mcap_ros2.decoder import DecoderFactory
+
+    return DecoderFactory().decoder_for("cdr", schema)
+
+
+def plain_from(obj, cls):
+    """The fields of `cls` that a decoded message `obj` has, as nested dicts/lists."""
+    out = {}
+    for key, ftype in cls.get_fields_and_field_types().items():
+        if not hasattr(obj, key):
+            continue
+        value = getattr(obj, key)
+        m = ru._SEQ.match(ftype)
+        if m:
+            elem = ru._element_class(m.group(1) or m.group(2))
+            value = [plain_from(x, elem) for x in value] if elem else list(value)
+        elif ru._element_class(ftype) is not None:
+            value = plain_from(value, ru._element_class(ftype))
+        out[key] = value
+    return out
 
 
 def main():
@@ -79,6 +105,7 @@ def main():
         ):
             sys.exit(f"error: fewer than {args.wait_subscribers} subscribers on {out_topic} after {args.timeout} s")
 
+        decoders = {}
         sent = 0
         first_log = None
         t0 = time.monotonic()
@@ -93,7 +120,13 @@ def main():
             if delay > 0:
                 time.sleep(delay)
             try:
-                msg = deserialize_message(message.data, cls)
+                if b"field_status" in _schema.data:
+                    msg = deserialize_message(message.data, cls)
+                else:
+                    # The first ParticleState layout (no field entries): decode it
+                    # with the bag's own schema; the field stays FIELD_UNKNOWN.
+                    old = decoders.setdefault(_schema.id, old_decoder(_schema))(message.data)
+                    msg = ru.fill(cls(), plain_from(old, cls))
             except Exception as e:  # noqa: BLE001 - report which message and go on
                 print(f"play_bag: skipping message {sent} on {channel.topic}: {e}", file=sys.stderr)
                 continue

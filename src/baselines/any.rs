@@ -110,7 +110,14 @@ pub fn train_any_from_bags(
             f.training
         }
         ModelKind::Baseline(k) => {
-            let f = super::train_baseline_from_bags(k, bags, cfg, log, on_epoch)?;
+            let f = super::train_baseline_from_bags(
+                k,
+                bags,
+                opts.topic.as_deref(),
+                cfg,
+                log,
+                on_epoch,
+            )?;
             f.save(out).with_context(saving)?;
             f.training
         }

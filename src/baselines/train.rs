@@ -63,17 +63,19 @@ pub fn train_baseline(
     Ok(TrainedBaseline { file, net })
 }
 
-/// Trains a baseline from trajectory bags, as [`crate::train::train_from_bags`]
-/// does for the GNODE family (same data, split and loop); returns the file.
+/// Trains a baseline from trajectory bags (on ParticleState topic `topic`
+/// when they hold several), as [`crate::train::train_from_bags`] does for the
+/// GNODE family (same data, split and loop); returns the file.
 pub fn train_baseline_from_bags(
     kind: super::Kind,
     bags: &[std::path::PathBuf],
+    topic: Option<&str>,
     cfg: &TrainConfig,
     mut log: impl FnMut(&str),
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<BaselineFile> {
     log(&format!("training {kind}"));
-    let mut data = crate::train::load_training_data(bags, &mut log)?;
+    let mut data = crate::train::load_training_data_from(bags, topic, &mut log)?;
     crate::train::apply_data_options(&mut data.dataset, cfg, &mut log)?;
     data.trained_on.states = data.dataset.len();
     let ds = &data.dataset;

@@ -1,7 +1,7 @@
 //! `mcgnode evaluate`.
 
-use crate::data::bag::read_trajectories;
-use crate::evaluate::{evaluate, table, EvalOptions};
+use crate::data::bag::{read_bags, ReadOptions};
+use crate::evaluate::{evaluate, field_from_flags, table, EvalOptions};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 
@@ -11,16 +11,34 @@ pub struct Args {
     /// Trained model file (GNODE family or baseline).
     #[arg(long)]
     pub model: PathBuf,
-    /// Test bag: each trajectory's first state is the rollout's start, the rest the truth.
+    /// Test bag(s): each an MCAP file, a rosbag2 directory or a .db3 file
+    /// (several: `--bag A B` or repeated). Each trajectory's first state is the
+    /// rollout's start, the rest the truth.
+    #[arg(long, required = true, num_args = 1..)]
+    pub bag: Vec<PathBuf>,
+    /// The ParticleState topic to read, when a bag holds several.
     #[arg(long)]
-    pub bag: PathBuf,
+    pub topic: Option<String>,
+    /// Gravity g along −y for the energy error, when the bag does not state
+    /// its field (with --drag; the one not given is 0).
+    #[arg(long)]
+    pub gravity: Option<f64>,
+    /// Linear drag for the energy error, when the bag does not state its field
+    /// (see --gravity).
+    #[arg(long)]
+    pub drag: Option<f64>,
+    /// The system is closed (no gravity, drag or force), when the bag does not
+    /// state its field and its data do not show it.
+    #[arg(long)]
+    pub closed: bool,
     /// Print one JSON document on stdout instead of the table.
     #[arg(long)]
     pub json: bool,
     /// Write a PNG of RE, EE and ME against time (geometric mean, 95% band).
     #[arg(long)]
     pub plot: Option<PathBuf>,
-    /// Integration step (default: the bag's simulator step).
+    /// Integration step (default: the bag's simulator step, else the interval
+    /// of its header stamps).
     #[arg(long)]
     pub dt: Option<f64>,
     /// Evaluate at most this many trajectories.
@@ -37,10 +55,21 @@ pub struct Args {
 /// Runs `evaluate`.
 pub fn run(a: Args) -> Result<()> {
     let model = crate::baselines::load_any_model(&a.model)?;
-    let bag = read_trajectories(&a.bag).with_context(|| format!("reading {}", a.bag.display()))?;
+    let bag = read_bags(
+        &a.bag,
+        &ReadOptions {
+            topic: a.topic.clone(),
+        },
+    )
+    .context("reading the test bag")?;
+    let flag_field = field_from_flags(a.gravity, a.drag, a.closed)?;
+    // Refuse data the model was not trained for (dimension, edges, field).
+    let data_field = crate::evaluate::bag_field(&bag, flag_field.as_ref())?.map(|o| o.field);
+    let trained = crate::compat::TrainedFor::from_model_file(&a.model)?;
+    crate::compat::check_bag(&trained, &bag, data_field.as_ref())?;
     let opts = EvalOptions {
         dt: a.dt,
-        field: None,
+        field: flag_field,
         max_trajectories: a.trajectories,
         allow_overlap: a.allow_overlap,
     };

@@ -1,5 +1,6 @@
 //! The `mcgnode` command line: one subcommand per step of the pipeline.
 
+mod bag;
 mod bench;
 mod demo;
 mod evaluate;
@@ -40,6 +41,8 @@ enum Command {
     Reproduce(reproduce::Args),
     /// Run the ROS 2 node.
     Serve(crate::ros::ServeArgs),
+    /// Inspect bags (`bag info`) and repair one cut short by a crash (`bag repair`).
+    Bag(bag::Args),
 }
 
 /// Parses the command line and runs the subcommand.
@@ -60,6 +63,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Replay(a) => replay::run(a),
         Command::Reproduce(a) => reproduce::run(a),
         Command::Serve(a) => crate::ros::run_serve(a),
+        Command::Bag(a) => bag::run(a),
     }
 }
 

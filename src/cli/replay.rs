@@ -4,17 +4,21 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
-use crate::data::bag::read_trajectories;
-use crate::physics::Field;
+use crate::data::bag::{read_bags, ReadOptions};
+use crate::evaluate::field_from_flags;
 use crate::replay::{replay, table, ReplayOptions};
 
 /// Options of `replay`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct Args {
-    /// Bag of ParticleState messages: simulated, or recorded by the node (its
+    /// Bag(s) of ParticleState messages, each an MCAP file, a rosbag2
+    /// directory or a .db3 file: simulated, or recorded by the node (its
     /// prediction topics are ignored).
+    #[arg(long, required = true, num_args = 1..)]
+    pub bag: Vec<PathBuf>,
+    /// The ParticleState topic to read, when a bag holds several.
     #[arg(long)]
-    pub bag: PathBuf,
+    pub topic: Option<String>,
     /// Model: a trained model file, or truth:spring / truth:pendulum.
     #[arg(long)]
     pub model: String,
@@ -29,7 +33,7 @@ pub struct Args {
     #[arg(long)]
     pub horizon: Option<f64>,
     /// Largest integration step, seconds (default: the bag's simulator step,
-    /// else the recording node's dt).
+    /// else the recording node's dt, else the interval of the header stamps).
     #[arg(long)]
     pub dt: Option<f64>,
     /// Lead-time grid points (default: one per recorded interval when stamps
@@ -37,12 +41,18 @@ pub struct Args {
     #[arg(long)]
     pub bins: Option<usize>,
     /// Gravity for the energy error (with --drag, replaces the bag's field;
-    /// default: the bag's system_config, else 0).
+    /// the one not given is 0). Default: what the bag's messages or
+    /// system_config state, else a closed system when the data show one, else
+    /// refused.
     #[arg(long)]
     pub gravity: Option<f64>,
     /// Linear drag for the energy error (see --gravity).
     #[arg(long)]
     pub drag: Option<f64>,
+    /// The system is closed (no gravity, drag or force): for bags that do
+    /// not state their field.
+    #[arg(long)]
+    pub closed: bool,
     /// Replay at most this many trajectories.
     #[arg(long)]
     pub trajectories: Option<usize>,
@@ -57,12 +67,18 @@ pub struct Args {
 /// Runs `replay`.
 pub fn run(a: Args) -> Result<()> {
     let model = crate::ros::load_model(&a.model)?;
-    let bag = read_trajectories(&a.bag).with_context(|| format!("reading {}", a.bag.display()))?;
-    let field = (a.gravity.is_some() || a.drag.is_some()).then(|| Field {
-        gravity: a.gravity.unwrap_or(0.0),
-        drag: a.drag.unwrap_or(0.0),
-        force: vec![],
-    });
+    let bag = read_bags(
+        &a.bag,
+        &ReadOptions {
+            topic: a.topic.clone(),
+        },
+    )
+    .context("reading the bag")?;
+    let field = field_from_flags(a.gravity, a.drag, a.closed)?;
+    if let Some(t) = model.trained_for() {
+        let data_field = crate::evaluate::bag_field(&bag, field.as_ref())?.map(|o| o.field);
+        crate::compat::check_bag(t, &bag, data_field.as_ref())?;
+    }
     let opts = ReplayOptions {
         dt: a.dt,
         horizon: a.horizon,

@@ -1,12 +1,11 @@
 //! `mcgnode rollout`.
 
 use crate::baselines::load_any_model;
-use crate::data::bag::{read_trajectories, write_trajectories};
-use crate::evaluate::{bag_system, META_SYSTEM};
+use crate::data::bag::{read_bags, write_trajectories_with_field, ReadOptions};
+use crate::evaluate::bag_system;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::system::{Sample, Trajectory};
 use anyhow::{bail, Context, Result};
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 /// Options of `rollout`.
@@ -24,19 +23,26 @@ pub struct Args {
     /// Seed of the drawn initial state.
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
-    /// Start from the first state of this bag instead (its trajectory `--trajectory`).
+    /// Start from the first state of this bag instead (its trajectory
+    /// `--trajectory`): an MCAP file, a rosbag2 directory or a .db3 file
+    /// (several: the first trajectory with that id).
+    #[arg(long, num_args = 1..)]
+    pub initial: Option<Vec<PathBuf>>,
+    /// The ParticleState topic of `--initial`, when it holds several.
     #[arg(long)]
-    pub initial: Option<PathBuf>,
+    pub topic: Option<String>,
     /// Trajectory id within `--initial`.
     #[arg(long, default_value_t = 0)]
     pub trajectory: u32,
     /// Simulated time [s].
     #[arg(long, default_value_t = 20.0)]
     pub duration: f64,
-    /// Integration step [s] (default: the system's).
+    /// Integration step [s] (default: the system's; with --initial, the bag's
+    /// system_config, else the interval of its header stamps).
     #[arg(long)]
     pub dt: Option<f64>,
-    /// Save every this many steps (default: the system's).
+    /// Save every this many steps (default: the system's; with --initial from
+    /// a bag without system_config, 1).
     #[arg(long)]
     pub save_every: Option<usize>,
     /// Output bag.
@@ -47,32 +53,51 @@ pub struct Args {
 /// Runs `rollout`.
 pub fn run(a: Args) -> Result<()> {
     let model = load_any_model(&a.model)?.dynamics;
-    let (graph, start, system, mut cfg) = match &a.initial {
-        Some(p) => {
-            let bag = read_trajectories(p).with_context(|| format!("reading {}", p.display()))?;
+    let trained = crate::compat::TrainedFor::from_model_file(&a.model)?;
+    let (graph, start, system, mut cfg, field, stamp_dt) = match &a.initial {
+        Some(paths) => {
+            let bag = read_bags(
+                paths,
+                &ReadOptions {
+                    topic: a.topic.clone(),
+                },
+            )
+            .context("reading --initial")?;
             let cfg = bag_system(&bag)?;
+            let field = bag.field.clone().or(cfg.as_ref().map(|c| c.field.clone()));
             let tr = bag
                 .trajectories
                 .into_iter()
                 .find(|t| t.id == a.trajectory)
-                .with_context(|| format!("{} has no trajectory {}", p.display(), a.trajectory))?;
+                .with_context(|| format!("--initial has no trajectory {}", a.trajectory))?;
+            let stamp_dt = tr.samples.get(1).map(|s| s.t - tr.samples[0].t);
             let s0 = tr.samples[0].state.clone();
-            (tr.graph, s0, tr.system, cfg)
+            (tr.graph, s0, tr.system, cfg, field, stamp_dt)
         }
         None => {
             let cfg = SystemConfig::new(a.system, a.particles);
             cfg.validate().map_err(anyhow::Error::msg)?;
             let g = cfg.graph();
             let s0 = cfg.start_for(&g, a.seed, 0);
-            (g, s0, a.system.name().to_string(), Some(cfg))
+            let field = Some(cfg.field.clone());
+            (g, s0, a.system.name().to_string(), Some(cfg), field, None)
         }
     };
-    let dt = a.dt.or(cfg.as_ref().map(|c| c.dt)).context("pass --dt")?;
-    let every = a
-        .save_every
-        .or(cfg.as_ref().map(|c| c.save_every))
-        .unwrap_or(1)
-        .max(1);
+    trained
+        .check(&graph, field.as_ref())
+        .map_err(anyhow::Error::msg)?;
+    // Without a flag or a system_config, the step is the recorded interval and
+    // every step is saved.
+    let (dt, default_every) = match (a.dt, &cfg, stamp_dt) {
+        (Some(dt), Some(c), _) => (dt, c.save_every),
+        (Some(dt), None, _) => (dt, 1),
+        (None, Some(c), _) => (c.dt, c.save_every),
+        (None, None, Some(d)) => (d, 1),
+        (None, None, None) => {
+            bail!("--initial does not say its step (no system_config, one state): pass --dt")
+        }
+    };
+    let every = a.save_every.unwrap_or(default_every).max(1);
     if !(a.duration.is_finite() && a.duration > 0.0 && dt > 0.0) {
         bail!("duration and dt must be positive");
     }
@@ -102,19 +127,20 @@ pub fn run(a: Args) -> Result<()> {
         graph,
         samples,
     };
-    let mut meta = BTreeMap::new();
     if let Some(c) = cfg.as_mut() {
         c.dt = dt;
         c.save_every = every;
         c.states = n;
         c.particles = tr.graph.n();
-        meta.insert(META_SYSTEM.to_string(), serde_json::to_string(c)?);
     }
-    meta.insert(
-        "generator".into(),
-        format!("mcgnode rollout of {}", a.model.display()),
-    );
-    write_trajectories(&a.out, &[tr], &meta)?;
+    let meta = crate::data::BagMetadata {
+        system_config: cfg,
+        generator: Some(format!("mcgnode rollout of {}", a.model.display())),
+        model: Some(a.model.display().to_string()),
+        ..Default::default()
+    }
+    .to_map()?;
+    write_trajectories_with_field(&a.out, &[tr], &meta, field.as_ref())?;
     eprintln!(
         "{steps} steps ({:.3} s simulated) in {secs:.3} s; wrote {n} states to {}",
         steps as f64 * dt,

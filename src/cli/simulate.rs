@@ -12,9 +12,10 @@ pub struct Args {
     /// peridynamic (3D elastic cube of k³ particles, e.g. 125, compressed and released).
     #[arg(long, default_value = "spring")]
     pub system: SystemKind,
-    /// Number of particles (peridynamic: a cube number, 8, 27, 64, 125, ...).
-    #[arg(long, default_value_t = 5)]
-    pub particles: usize,
+    /// Number of particles (default: 125 for peridynamic, which needs a cube
+    /// number such as 8, 27, 64, 125; 5 otherwise).
+    #[arg(long)]
+    pub particles: Option<usize>,
     /// Number of trajectories (random initial conditions).
     #[arg(long, default_value_t = 100)]
     pub trajectories: usize,
@@ -53,7 +54,11 @@ pub struct Args {
 
 /// Builds the simulator configuration from the options.
 pub fn config(a: &Args) -> Result<SystemConfig> {
-    let mut c = SystemConfig::new(a.system, a.particles);
+    let particles = a.particles.unwrap_or(match a.system {
+        SystemKind::Peridynamic => 125,
+        _ => 5,
+    });
+    let mut c = SystemConfig::new(a.system, particles);
     if let Some(d) = a.dim {
         c.dim = d;
     }

@@ -14,9 +14,13 @@ pub struct Args {
     /// Model: node, gnode, cgnode, cdgnode, mcgnode, or a baseline: lgn, hgn, gns.
     #[arg(long)]
     pub model: ModelKind,
-    /// Training bag(s) of ParticleState messages (repeat or comma-separate).
+    /// Training bag(s) of ParticleState messages, each an MCAP file, a rosbag2
+    /// directory or a .db3 file (repeat or comma-separate).
     #[arg(long, required = true, value_delimiter = ',')]
     pub data: Vec<PathBuf>,
+    /// The ParticleState topic to train on, when a bag holds several.
+    #[arg(long)]
+    pub topic: Option<String>,
     /// Maximum epochs (paper: 10000).
     #[arg(long, default_value_t = 10_000)]
     pub epochs: usize,
@@ -70,7 +74,9 @@ pub struct Args {
     /// of all of them (the paper's data-efficiency experiments use 100 to 10000).
     #[arg(long, value_name = "N")]
     pub points: Option<usize>,
-    /// MCGNODE body-force branch: auto (off for closed systems), on, off.
+    /// MCGNODE body-force branch: auto (off for a closed system, as the bag's
+    /// messages or metadata state or its data show; refused when none tells),
+    /// on, off.
     #[arg(long, value_enum, default_value_t = BodyForce::Auto)]
     pub body_force: BodyForce,
     /// Gradient engine of the GNODE family: native (hand-written, all
@@ -177,6 +183,7 @@ pub fn run(a: Args) -> Result<()> {
         rounds: a.rounds,
         body_force: a.body_force,
         types: None,
+        topic: a.topic.clone(),
         arch: a.arch,
         hidden_layers: a.hidden_layers,
         message: a.messages,

@@ -11,9 +11,12 @@ use mcap::records::{MessageHeader, Metadata, Record};
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
 use super::msg::{
-    particle_state_schema, ParticleState, Time, PARTICLE_STATE_MSG, PARTICLE_STATE_TYPE,
+    particle_state_schema, Layout, ParticleState, Time, PARTICLE_STATE_MSG, PARTICLE_STATE_MSG_V1,
+    PARTICLE_STATE_TYPE,
 };
+use super::source::{bag_parts, decompress_file, scan_sqlite, Codec, Storage};
 use super::DataError;
+use crate::physics::Field;
 use crate::system::{Sample, Trajectory};
 
 /// Topic the trajectories are written on.
@@ -167,8 +170,28 @@ impl<W: Write + Seek> BagWriter<W> {
 pub struct Bag {
     /// Trajectories, sorted by id; samples sorted by step, `t` from the first stamp.
     pub trajectories: Vec<Trajectory>,
-    /// The `mcgnode` metadata record (empty if absent).
+    /// The `mcgnode` metadata record (empty if absent): provenance only.
     pub metadata: BTreeMap<String, String>,
+    /// The field every message states (`None`: the messages do not say, e.g.
+    /// bags of the first message layout).
+    pub field: Option<Field>,
+    /// The ParticleState topic read ("" when there was none; several bag
+    /// arguments with differently named topics: the names, comma-separated).
+    pub topic: String,
+    /// The bag arguments read, in order.
+    pub sources: Vec<PathBuf>,
+    /// Trajectories whose messages left `velocities` empty (position-only
+    /// recordings): their velocities were derived from the positions and
+    /// stamps ([`super::dataset::finite_difference_velocities`]).
+    pub derived_velocities: Vec<u32>,
+}
+
+impl Bag {
+    /// The `mcgnode` metadata record, typed; a value that does not parse is
+    /// an error naming its key.
+    pub fn meta(&self) -> Result<super::meta::BagMetadata, DataError> {
+        super::meta::BagMetadata::from_map(&self.metadata)
+    }
 }
 
 /// Checks what must hold for a trajectory to be written and read back unchanged.
@@ -217,13 +240,29 @@ fn check_trajectory(tr: &Trajectory) -> Result<(), DataError> {
 /// Writes trajectories as `ParticleState` messages on [`PARTICLE_STATE_TOPIC`]
 /// (step = sample index, stamp = sample time) plus the metadata record
 /// [`METADATA_NAME`]. Written to a temporary file beside `path`, then renamed, so
-/// `path` is either the old file or the complete new one.
+/// `path` is either the old file or the complete new one. The messages leave
+/// the field unknown: use [`write_trajectories_with_field`] when it is known.
 pub fn write_trajectories(
     path: impl AsRef<Path>,
     trajectories: &[Trajectory],
     metadata: &BTreeMap<String, String>,
 ) -> Result<(), DataError> {
+    write_trajectories_with_field(path, trajectories, metadata, None)
+}
+
+/// [`write_trajectories`], with every message stating `field` (the uniform
+/// field, drag and force acting; `None`: unknown).
+pub fn write_trajectories_with_field(
+    path: impl AsRef<Path>,
+    trajectories: &[Trajectory],
+    metadata: &BTreeMap<String, String>,
+    field: Option<&Field>,
+) -> Result<(), DataError> {
     let path = path.as_ref();
+    if let (Some(f), Some(tr)) = (field, trajectories.first()) {
+        f.validate(tr.graph.dim)
+            .map_err(|e| DataError::Trajectory(format!("field: {e}")))?;
+    }
     let mut ids = std::collections::BTreeSet::new();
     for tr in trajectories {
         check_trajectory(tr)?;
@@ -254,7 +293,8 @@ pub fn write_trajectories(
     let ch = w.add_particle_state_channel(PARTICLE_STATE_TOPIC)?;
     for tr in trajectories {
         for (k, s) in tr.samples.iter().enumerate() {
-            let msg = ParticleState::from_sample(tr.id, k as u32, &tr.system, &tr.graph, s);
+            let msg = ParticleState::from_sample(tr.id, k as u32, &tr.system, &tr.graph, s)
+                .with_field(field);
             w.write_particle_state(ch, &msg)?;
         }
     }
@@ -270,16 +310,16 @@ pub fn write_trajectories(
 /// Metadata records of a bag: (name, key/values), in file order.
 pub type MetadataRecords = Vec<(String, BTreeMap<String, String>)>;
 
-/// One message as found in a bag, for [`scan_bag`].
+/// One message as found in a bag, for [`scan_bag`] and [`scan_input`].
 #[derive(Debug)]
 pub struct RawMessage<'a> {
-    /// 0-based index among all messages of the file.
+    /// 0-based index among all messages of its file.
     pub index: usize,
     /// Channel topic.
     pub topic: &'a str,
     /// Schema name, e.g. `mcgnode_msgs/msg/ParticleState` ("" if none).
     pub schema_name: &'a str,
-    /// Schema encoding, e.g. `ros2msg`.
+    /// Schema encoding, e.g. `ros2msg` ("" when the bag stores no definition).
     pub schema_encoding: &'a str,
     /// Schema text.
     pub schema_text: &'a [u8],
@@ -287,8 +327,10 @@ pub struct RawMessage<'a> {
     pub message_encoding: &'a str,
     /// Log time, ns.
     pub log_time: u64,
-    /// The message bytes.
+    /// The message bytes (as stored: [`scan_input`] decompresses them first).
     pub data: &'a [u8],
+    /// The storage file the message is in.
+    pub file: &'a Path,
 }
 
 struct SchemaInfo {
@@ -304,15 +346,92 @@ struct ChannelInfo {
 }
 
 /// Reads a whole MCAP file in order, checking every CRC, the end magic and that
-/// nothing follows it. Calls `on_message` for each message; an error from it is
-/// reported with the file, the message index and the topic. Returns the metadata
-/// records (name, key/values) in file order.
+/// nothing follows it. Calls `on_message` for each message (bytes as stored);
+/// an error from it is reported with the file, the message index and the topic.
+/// Returns the metadata records (name, key/values) in file order.
 pub fn scan_bag(
     path: impl AsRef<Path>,
     mut on_message: impl FnMut(&RawMessage) -> Result<(), DataError>,
 ) -> Result<MetadataRecords, DataError> {
     let path = path.as_ref();
-    let mut file = File::open(path).map_err(|e| DataError::io(path, "opening", e))?;
+    scan_mcap(path, path, &mut on_message)
+}
+
+/// Reads every message of one bag argument in order: an MCAP file, a rosbag2
+/// sqlite3 file, or a rosbag2 directory (its files in the order metadata.yaml
+/// lists them), see [`super::source`]. Compressed messages and files are
+/// decompressed first, so `data` is always the CDR bytes. Returns the MCAP
+/// metadata records of all files.
+pub fn scan_input(
+    path: impl AsRef<Path>,
+    mut on_message: impl FnMut(&RawMessage) -> Result<(), DataError>,
+) -> Result<MetadataRecords, DataError> {
+    let mut records = Vec::new();
+    for part in bag_parts(path.as_ref())? {
+        let tmp = match part.file_compression {
+            Some(c) => Some(decompress_file(&part.path, c)?),
+            None => None,
+        };
+        let read_path = tmp.as_ref().map_or(part.path.as_path(), |t| t.path());
+        let declared = part.message_compression;
+        let mut inner = |raw: &RawMessage| -> Result<(), DataError> {
+            match payload(raw.data, declared)? {
+                None => on_message(raw),
+                Some(bytes) => on_message(&RawMessage {
+                    data: &bytes,
+                    ..*raw
+                }),
+            }
+        };
+        match part.storage {
+            Storage::Mcap => records.extend(scan_mcap(read_path, &part.path, &mut inner)?),
+            Storage::Sqlite3 => scan_sqlite(read_path, |index, m| {
+                let raw = RawMessage {
+                    index,
+                    topic: &m.topic,
+                    schema_name: &m.msg_type,
+                    schema_encoding: &m.definition.0,
+                    schema_text: m.definition.1.as_bytes(),
+                    message_encoding: &m.serialization,
+                    log_time: u64::try_from(m.timestamp).unwrap_or(0),
+                    data: &m.data,
+                    file: &part.path,
+                };
+                inner(&raw).map_err(|e| DataError::Message {
+                    path: part.path.clone(),
+                    index,
+                    topic: m.topic.clone(),
+                    reason: Box::new(e),
+                })
+            })?,
+        }
+    }
+    Ok(records)
+}
+
+/// The decompressed bytes of a per-message-compressed message (`None`: not
+/// compressed). `declared` is the codec metadata.yaml names: then every
+/// message must be compressed with it.
+fn payload(data: &[u8], declared: Option<Codec>) -> Result<Option<Vec<u8>>, DataError> {
+    match (Codec::sniff(data), declared) {
+        (None, None) => Ok(None),
+        (Some(found), d) if d.is_none_or(|d| d == found) => {
+            found.decompress(data).map(Some).map_err(DataError::Cdr)
+        }
+        (found, d) => Err(DataError::Cdr(format!(
+            "metadata.yaml declares {} message compression, but the message is {}",
+            d.map_or("no", Codec::name),
+            found.map_or("not compressed", Codec::name)
+        ))),
+    }
+}
+
+fn scan_mcap(
+    read_path: &Path,
+    path: &Path,
+    on_message: &mut dyn FnMut(&RawMessage) -> Result<(), DataError>,
+) -> Result<MetadataRecords, DataError> {
+    let mut file = File::open(read_path).map_err(|e| DataError::io(path, "opening", e))?;
     let len = file
         .metadata()
         .map_err(|e| DataError::io(path, "reading the size of", e))?
@@ -407,6 +526,7 @@ pub fn scan_bag(
                     message_encoding: &ch.message_encoding,
                     log_time: header.log_time,
                     data: &data,
+                    file: path,
                 };
                 on_message(&raw).map_err(|e| DataError::Message {
                     path: path.to_path_buf(),
@@ -443,23 +563,48 @@ fn describe_mcap_error(e: &mcap::McapError) -> String {
     }
 }
 
-/// Keeps the field and constant declarations of a .msg text, normalised, so that
-/// comments and spacing do not matter when comparing definitions.
+/// The field declarations of a .msg text in order, then its constants sorted,
+/// normalised (comments, spacing and `pkg/msg/Type` vs `pkg/Type` do not
+/// matter; tools such as rosbags write constants first).
 fn declarations(msg: &str) -> Vec<String> {
-    msg.lines()
+    let lines: Vec<String> = msg
+        .lines()
         .map(|l| l.split('#').next().unwrap_or(""))
-        .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "))
+        .map(|l| {
+            l.split_whitespace()
+                .map(|w| w.replace("/msg/", "/"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        })
+        .map(|l| l.replace(" = ", "=").replace(" =", "=").replace("= ", "="))
         .filter(|l| !l.is_empty())
-        .collect()
+        .collect();
+    let (mut constants, fields): (Vec<String>, Vec<String>) =
+        lines.into_iter().partition(|l| l.contains('='));
+    constants.sort();
+    let mut out = fields;
+    out.push("--".into());
+    out.extend(constants);
+    out
 }
 
-/// Checks that a bag's ParticleState schema declares what this build's does
-/// (otherwise CDR would decode into the wrong fields).
-fn check_schema(raw: &RawMessage) -> Result<(), DataError> {
-    if raw.schema_encoding != "ros2msg" || raw.message_encoding != "cdr" {
+/// Which layout a bag's ParticleState schema declares (otherwise CDR would
+/// decode into the wrong fields): this build's, the first one, or unknown when
+/// the bag stores no definition (old sqlite3 bags).
+fn check_schema(raw: &RawMessage) -> Result<Layout, DataError> {
+    if raw.message_encoding != "cdr" {
         return Err(DataError::Invalid(format!(
-            "schema encoding {:?} / message encoding {:?}, expected \"ros2msg\" / \"cdr\"",
-            raw.schema_encoding, raw.message_encoding
+            "message encoding {:?}, expected \"cdr\"",
+            raw.message_encoding
+        )));
+    }
+    if raw.schema_text.is_empty() && raw.schema_encoding.is_empty() {
+        return Ok(Layout::Unknown);
+    }
+    if raw.schema_encoding != "ros2msg" {
+        return Err(DataError::Invalid(format!(
+            "schema encoding {:?}, expected \"ros2msg\"",
+            raw.schema_encoding
         )));
     }
     let text = String::from_utf8_lossy(raw.schema_text);
@@ -468,50 +613,170 @@ fn check_schema(raw: &RawMessage) -> Result<(), DataError> {
         .next()
         .unwrap_or_default()
         .to_string();
-    if declarations(&main) != declarations(PARTICLE_STATE_MSG) {
-        return Err(DataError::Invalid(
-            "its ParticleState schema differs from this build's msg/ParticleState.msg".into(),
-        ));
+    let decl = declarations(&main);
+    if decl == declarations(PARTICLE_STATE_MSG) {
+        Ok(Layout::Current)
+    } else if decl == declarations(PARTICLE_STATE_MSG_V1) {
+        Ok(Layout::V1)
+    } else {
+        Err(DataError::Invalid(
+            "its ParticleState schema differs from this build's msg/ParticleState.msg (and from its first layout)".into(),
+        ))
     }
-    Ok(())
 }
 
 /// One decoded message kept for grouping.
 struct Entry {
+    id: u32,
     index: usize,
+    file: PathBuf,
     step: u32,
     stamp_ns: i64,
     system: String,
     graph: crate::system::Graph,
     sample: Sample,
+    field: Option<Field>,
+    /// The message left `velocities` empty.
+    no_v: bool,
 }
 
-/// Reads every `ParticleState` message of a bag (any topic with that schema) into
-/// trajectories grouped by `trajectory_id`, sorted by step, with `t` measured from
-/// the trajectory's first stamp, and the `mcgnode` metadata record. Everything is
-/// validated; the error names the file, the message index and the problem.
+/// How to read trajectories from bags.
+#[derive(Clone, Debug, Default)]
+pub struct ReadOptions {
+    /// The ParticleState topic to read; `None` reads the only one there is
+    /// and refuses (listing them) when there are several.
+    pub topic: Option<String>,
+}
+
+/// Reads every `ParticleState` message of one bag argument (an MCAP file, a
+/// .db3 file or a rosbag2 directory; see [`read_bags`]) on its only
+/// ParticleState topic.
 pub fn read_trajectories(path: impl AsRef<Path>) -> Result<Bag, DataError> {
-    let path = path.as_ref();
-    let mut groups: BTreeMap<u32, Vec<Entry>> = BTreeMap::new();
-    let mut checked_schemas: Vec<Vec<u8>> = Vec::new();
-    let records = scan_bag(path, |raw| {
+    read_bags(&[path.as_ref().to_path_buf()], &ReadOptions::default())
+}
+
+/// Reads the `ParticleState` messages of one or more bag arguments (each an
+/// MCAP file, a rosbag2 sqlite3 file, or a rosbag2 directory) into
+/// trajectories: grouped by `trajectory_id` within each argument (a rosbag2
+/// directory split into several files is one argument), sorted by step, `t`
+/// measured from the trajectory's first stamp. Trajectories of different
+/// arguments are concatenated in argument order (their ids may repeat).
+///
+/// Refuses: several ParticleState topics without [`ReadOptions::topic`] (the
+/// error lists them), a topic that is not there, messages that disagree on the
+/// field they state, and arguments whose `mcgnode` metadata disagree on a key.
+/// Everything is validated; errors name the file, the message and the problem.
+pub fn read_bags(paths: &[PathBuf], opts: &ReadOptions) -> Result<Bag, DataError> {
+    if paths.is_empty() {
+        return Err(DataError::Trajectory("no bag given".into()));
+    }
+    let mut out = Bag {
+        trajectories: vec![],
+        metadata: BTreeMap::new(),
+        field: None,
+        topic: String::new(),
+        sources: paths.to_vec(),
+        derived_velocities: vec![],
+    };
+    let mut field_from: Option<(PathBuf, Option<Field>)> = None;
+    let mut meta_from: BTreeMap<String, PathBuf> = BTreeMap::new();
+    for path in paths {
+        let (bag, topic) = read_one(path, opts)?;
+        // Each argument has one ParticleState topic (or the one chosen); they
+        // may be named differently.
+        if out.topic.is_empty() {
+            out.topic = topic;
+        } else if !topic.is_empty() && !out.topic.split(',').any(|t| t == topic) {
+            out.topic = format!("{},{topic}", out.topic);
+        }
+        match &field_from {
+            None => field_from = Some((path.clone(), bag.field.clone())),
+            Some((p, f))
+                if f.as_ref().map(Field::normalized)
+                    != bag.field.as_ref().map(Field::normalized) =>
+            {
+                return Err(DataError::Trajectory(format!(
+                    "{} and {} state different fields ({}; {}): read them separately",
+                    p.display(),
+                    path.display(),
+                    describe_field(f.as_ref()),
+                    describe_field(bag.field.as_ref())
+                )))
+            }
+            Some(_) => {}
+        }
+        for (k, v) in bag.metadata {
+            match out.metadata.get(&k) {
+                Some(old) if *old != v => {
+                    return Err(DataError::Trajectory(format!(
+                        "{} and {} disagree on their mcgnode metadata {k:?}: read them separately",
+                        meta_from[&k].display(),
+                        path.display()
+                    )))
+                }
+                Some(_) => {}
+                None => {
+                    meta_from.insert(k.clone(), path.clone());
+                    out.metadata.insert(k, v);
+                }
+            }
+        }
+        out.trajectories.extend(bag.trajectories);
+        out.derived_velocities.extend(bag.derived_velocities);
+    }
+    out.field = field_from.and_then(|(_, f)| f);
+    Ok(out)
+}
+
+/// The field in words, for messages.
+fn describe_field(f: Option<&Field>) -> String {
+    match f {
+        None => "field unknown".into(),
+        Some(f) if f.is_free() => "no field".into(),
+        Some(f) => format!(
+            "gravity {}, drag {}, force {:?}",
+            f.gravity, f.drag, f.force
+        ),
+    }
+}
+
+/// Reads one bag argument; returns it and the ParticleState topic read.
+fn read_one(path: &Path, opts: &ReadOptions) -> Result<(Bag, String), DataError> {
+    let mut topics: BTreeMap<String, Vec<Entry>> = BTreeMap::new();
+    let mut checked_schemas: Vec<(Vec<u8>, Layout)> = Vec::new();
+    let records = scan_input(path, |raw| {
         if raw.schema_name != PARTICLE_STATE_TYPE {
             return Ok(());
         }
-        if !checked_schemas.iter().any(|s| s == raw.schema_text) {
-            check_schema(raw)?;
-            checked_schemas.push(raw.schema_text.to_vec());
+        if opts.topic.as_deref().is_some_and(|t| t != raw.topic) {
+            return Ok(());
         }
-        let msg = ParticleState::from_cdr(raw.data)?;
-        let (graph, sample) = msg.to_parts()?;
-        groups.entry(msg.trajectory_id).or_default().push(Entry {
-            index: raw.index,
-            step: msg.step,
-            stamp_ns: msg.header.stamp.as_nanos(),
-            system: msg.system,
-            graph,
-            sample,
-        });
+        let layout = match checked_schemas.iter().find(|(s, _)| s == raw.schema_text) {
+            Some((_, l)) => *l,
+            None => {
+                let l = check_schema(raw)?;
+                checked_schemas.push((raw.schema_text.to_vec(), l));
+                l
+            }
+        };
+        let msg = ParticleState::from_cdr_as(raw.data, layout)?;
+        let field = msg.field()?;
+        let (graph, sample, no_v) = msg.to_parts_positions_only()?;
+        topics
+            .entry(raw.topic.to_string())
+            .or_default()
+            .push(Entry {
+                id: msg.trajectory_id,
+                index: raw.index,
+                file: raw.file.to_path_buf(),
+                step: msg.step,
+                stamp_ns: msg.header.stamp.as_nanos(),
+                system: msg.system,
+                graph,
+                sample,
+                field,
+                no_v,
+            });
         Ok(())
     })?;
     let mut metadata = BTreeMap::new();
@@ -524,7 +789,47 @@ pub fn read_trajectories(path: impl AsRef<Path>) -> Result<Bag, DataError> {
         path: path.to_path_buf(),
         msg,
     };
+    let (topic, entries) = match (topics.len(), &opts.topic) {
+        (0, Some(t)) => {
+            return Err(bag_err(format!(
+                "has no ParticleState messages on topic {t}"
+            )))
+        }
+        (0, None) => (String::new(), vec![]),
+        (1, _) => topics.pop_first().expect("one topic"),
+        _ => {
+            let list: Vec<String> = topics
+                .iter()
+                .map(|(t, e)| format!("{t} ({} messages)", e.len()))
+                .collect();
+            return Err(bag_err(format!(
+                "has ParticleState messages on several topics: {}; choose one with --topic",
+                list.join(", ")
+            )));
+        }
+    };
+    let mut field: Option<(Option<Field>, usize, PathBuf)> = None;
+    let mut groups: BTreeMap<u32, Vec<Entry>> = BTreeMap::new();
+    for e in entries {
+        match &field {
+            None => field = Some((e.field.clone(), e.index, e.file.clone())),
+            Some((f, i, file)) if *f != e.field => {
+                return Err(bag_err(format!(
+                    "message {} of {} states {}, message {} of {} states {}: one bag must describe one field",
+                    i,
+                    file.display(),
+                    describe_field(f.as_ref()),
+                    e.index,
+                    e.file.display(),
+                    describe_field(e.field.as_ref())
+                )))
+            }
+            Some(_) => {}
+        }
+        groups.entry(e.id).or_default().push(e);
+    }
     let mut trajectories = Vec::with_capacity(groups.len());
+    let mut derived_velocities = vec![];
     for (id, mut entries) in groups {
         entries.sort_by_key(|e| e.step);
         let first = &entries[0];
@@ -562,15 +867,33 @@ pub fn read_trajectories(path: impl AsRef<Path>) -> Result<Bag, DataError> {
             s.t = (e.stamp_ns - t0) as f64 * 1e-9;
             samples.push(s);
         }
-        trajectories.push(Trajectory {
+        let mut tr = Trajectory {
             id,
             system,
             graph,
             samples,
-        });
+        };
+        if entries.iter().any(|e| e.no_v) {
+            let v = super::dataset::finite_difference_velocities(&tr)
+                .map_err(|e| bag_err(format!("position-only recording: {e}")))?;
+            for ((s, e), v) in tr.samples.iter_mut().zip(&entries).zip(v) {
+                if e.no_v {
+                    s.state.v = v;
+                }
+            }
+            derived_velocities.push(id);
+        }
+        trajectories.push(tr);
     }
-    Ok(Bag {
-        trajectories,
-        metadata,
-    })
+    Ok((
+        Bag {
+            trajectories,
+            metadata,
+            field: field.and_then(|(f, _, _)| f),
+            topic: topic.clone(),
+            sources: vec![path.to_path_buf()],
+            derived_velocities,
+        },
+        topic,
+    ))
 }

@@ -2,18 +2,26 @@
 //! bags, and turning trajectories into training samples.
 //!
 //! - [`msg`]: the message structs (CDR, shared with the ROS node) and their schema.
-//! - [`bag`]: writing and reading MCAP bags.
+//! - [`bag`]: writing MCAP bags; reading MCAP, rosbag2 directories and .db3.
+//! - [`source`]: the storage files of a bag argument and their compression.
+//! - [`meta`]: the `mcgnode` metadata record, typed.
+//! - [`repair`]: rewriting an MCAP file cut short as a complete one.
 //! - [`dataset`]: states and target accelerations for training; bag digests.
 
 pub mod bag;
 pub mod dataset;
 mod error;
+pub mod meta;
 pub mod msg;
+pub mod repair;
+pub mod source;
 
 pub use bag::{
-    read_trajectories, scan_bag, write_trajectories, Bag, BagWriter, ChannelId, MetadataRecords,
-    RawMessage, METADATA_NAME, PARTICLE_STATE_TOPIC,
+    read_bags, read_trajectories, scan_bag, scan_input, write_trajectories,
+    write_trajectories_with_field, Bag, BagWriter, ChannelId, MetadataRecords, RawMessage,
+    ReadOptions, METADATA_NAME, PARTICLE_STATE_TOPIC,
 };
 pub use dataset::{digest, AccSource, Dataset};
 pub use error::DataError;
+pub use meta::BagMetadata;
 pub use msg::ParticleState;

@@ -7,6 +7,7 @@
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
 use super::DataError;
+use crate::physics::Field;
 use crate::system::{Edge, EdgeKind, Endpoint, Graph, Sample, State};
 
 /// ROS type name of [`ParticleState`].
@@ -14,6 +15,15 @@ pub const PARTICLE_STATE_TYPE: &str = "mcgnode_msgs/msg/ParticleState";
 
 /// The one copy of the .msg definition.
 pub const PARTICLE_STATE_MSG: &str = include_str!("../../msg/ParticleState.msg");
+
+/// The first layout of the message (before `field_status`, `gravity`, `drag` and
+/// `force`), kept so that bags written with it stay readable.
+pub const PARTICLE_STATE_MSG_V1: &str = include_str!("particle_state_v1.msg");
+
+/// `field_status` value: gravity, drag and force are not known (`FIELD_UNKNOWN`).
+pub const FIELD_UNKNOWN: u8 = 0;
+/// `field_status` value: exactly gravity, drag and force act (`FIELD_KNOWN`).
+pub const FIELD_KNOWN: u8 = 1;
 
 /// `frame_id` written in headers: all vectors are in the world frame.
 pub const FRAME_ID: &str = "world";
@@ -182,6 +192,89 @@ pub struct ParticleState {
     pub edge_stiffness: Vec<f64>,
     /// Fixed points.
     pub anchors: Vec<Point>,
+    /// [`FIELD_UNKNOWN`] or [`FIELD_KNOWN`] (whether the next three fields are known).
+    pub field_status: u8,
+    /// Uniform gravitational acceleration (force m·g per particle).
+    pub gravity: Vector3,
+    /// Linear drag coefficient (force −c·v per particle).
+    pub drag: f64,
+    /// Constant force on every particle.
+    pub force: Vector3,
+}
+
+/// The message in its first layout ([`PARTICLE_STATE_MSG_V1`]): what bags
+/// written before the field entries hold. Decodes into a [`ParticleState`]
+/// with `field_status` = [`FIELD_UNKNOWN`].
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ParticleStateV1 {
+    /// See [`ParticleState::header`].
+    pub header: Header,
+    /// See [`ParticleState::trajectory_id`].
+    pub trajectory_id: u32,
+    /// See [`ParticleState::step`].
+    pub step: u32,
+    /// See [`ParticleState::system`].
+    pub system: String,
+    /// See [`ParticleState::dimension`].
+    pub dimension: u8,
+    /// See [`ParticleState::types`].
+    pub types: Vec<u32>,
+    /// See [`ParticleState::masses`].
+    pub masses: Vec<f64>,
+    /// See [`ParticleState::positions`].
+    pub positions: Vec<Vector3>,
+    /// See [`ParticleState::velocities`].
+    pub velocities: Vec<Vector3>,
+    /// See [`ParticleState::accelerations`].
+    pub accelerations: Vec<Vector3>,
+    /// See [`ParticleState::edge_a`].
+    pub edge_a: Vec<u32>,
+    /// See [`ParticleState::edge_b`].
+    pub edge_b: Vec<u32>,
+    /// See [`ParticleState::edge_kind`].
+    pub edge_kind: Vec<u8>,
+    /// See [`ParticleState::edge_rest_length`].
+    pub edge_rest_length: Vec<f64>,
+    /// See [`ParticleState::edge_stiffness`].
+    pub edge_stiffness: Vec<f64>,
+    /// See [`ParticleState::anchors`].
+    pub anchors: Vec<Point>,
+}
+
+impl From<ParticleStateV1> for ParticleState {
+    fn from(m: ParticleStateV1) -> Self {
+        ParticleState {
+            header: m.header,
+            trajectory_id: m.trajectory_id,
+            step: m.step,
+            system: m.system,
+            dimension: m.dimension,
+            types: m.types,
+            masses: m.masses,
+            positions: m.positions,
+            velocities: m.velocities,
+            accelerations: m.accelerations,
+            edge_a: m.edge_a,
+            edge_b: m.edge_b,
+            edge_kind: m.edge_kind,
+            edge_rest_length: m.edge_rest_length,
+            edge_stiffness: m.edge_stiffness,
+            anchors: m.anchors,
+            field_status: FIELD_UNKNOWN,
+            ..ParticleState::default()
+        }
+    }
+}
+
+/// Which layout a bag's `ParticleState` schema declares.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layout {
+    /// This build's msg/ParticleState.msg.
+    Current,
+    /// [`PARTICLE_STATE_MSG_V1`].
+    V1,
+    /// No schema text to tell (e.g. an old sqlite3 bag): try both.
+    Unknown,
 }
 
 /// Flat `dim`-vectors to 3-vectors (z = 0 in 2D). Tolerates a bad `dim`: the
@@ -266,12 +359,94 @@ impl ParticleState {
                     }
                 })
                 .collect(),
+            ..ParticleState::default()
         }
+    }
+
+    /// The same message saying that exactly `field` acts on the particles
+    /// (`field_status` = [`FIELD_KNOWN`]); `None` leaves it [`FIELD_UNKNOWN`].
+    /// The simulator's gravity g points along −y: `gravity` = (0, −g, 0).
+    pub fn with_field(mut self, field: Option<&Field>) -> ParticleState {
+        match field {
+            None => {
+                self.field_status = FIELD_UNKNOWN;
+                self.gravity = Vector3::default();
+                self.drag = 0.0;
+                self.force = Vector3::default();
+            }
+            Some(f) => {
+                self.field_status = FIELD_KNOWN;
+                self.gravity = Vector3 {
+                    x: 0.0,
+                    y: if f.gravity == 0.0 { 0.0 } else { -f.gravity },
+                    z: 0.0,
+                };
+                self.drag = f.drag;
+                let dim = usize::from(self.dimension).max(1);
+                self.force = to_vec3(&f.force, dim).first().copied().unwrap_or_default();
+            }
+        }
+        self
+    }
+
+    /// The field the message states: `None` for [`FIELD_UNKNOWN`]. Refuses what
+    /// mcgnode cannot represent (gravity off the −y axis, negative drag, a
+    /// z component in 2D) and unknown status values.
+    pub fn field(&self) -> Result<Option<Field>, DataError> {
+        let bad = |m: String| Err(DataError::Invalid(m));
+        match self.field_status {
+            FIELD_UNKNOWN => return Ok(None),
+            FIELD_KNOWN => {}
+            other => {
+                return bad(format!(
+                    "field_status = {other} is neither FIELD_UNKNOWN (0) nor FIELD_KNOWN (1)"
+                ))
+            }
+        }
+        let dim = match self.dimension {
+            2 | 3 => usize::from(self.dimension),
+            d => return bad(format!("dimension must be 2 or 3, got {d}")),
+        };
+        check_vec3("gravity", 0, &self.gravity, dim)?;
+        check_vec3("force", 0, &self.force, dim)?;
+        let g = self.gravity;
+        if g.x != 0.0 || g.z != 0.0 {
+            return bad(format!(
+                "gravity ({}, {}, {}) does not point along -y: mcgnode models gravity as (0, -g, 0)",
+                g.x, g.y, g.z
+            ));
+        }
+        if !(self.drag.is_finite() && self.drag >= 0.0) {
+            return bad(format!("drag = {} is not a finite number >= 0", self.drag));
+        }
+        let f = [self.force.x, self.force.y, self.force.z];
+        let field = Field {
+            gravity: if g.y == 0.0 { 0.0 } else { -g.y },
+            drag: self.drag,
+            force: if f.iter().all(|x| *x == 0.0) {
+                vec![]
+            } else {
+                f[..dim].to_vec()
+            },
+        };
+        field.validate(dim).map_err(DataError::Invalid)?;
+        Ok(Some(field))
     }
 
     /// Checks everything and returns the graph and the sample (`t` = stamp in
     /// seconds, absolute). The error says which field and element is wrong.
     pub fn to_parts(&self) -> Result<(Graph, Sample), DataError> {
+        self.to_parts_with(false).map(|(g, s, _)| (g, s))
+    }
+
+    /// [`ParticleState::to_parts`] for bag reading, where `velocities` may be
+    /// empty (a position-only recording): the sample's velocities are then
+    /// zeros to be replaced, and the flag is true.
+    pub fn to_parts_positions_only(&self) -> Result<(Graph, Sample, bool), DataError> {
+        self.to_parts_with(true)
+    }
+
+    fn to_parts_with(&self, allow_no_v: bool) -> Result<(Graph, Sample, bool), DataError> {
         let bad = |m: String| Err(DataError::Invalid(m));
         let dim = match self.dimension {
             2 | 3 => usize::from(self.dimension),
@@ -287,10 +462,11 @@ impl ParticleState {
         if n == 0 {
             return bad("no particles (types is empty)".into());
         }
+        let no_v = allow_no_v && self.velocities.is_empty();
         for (name, len) in [
             ("masses", self.masses.len()),
             ("positions", self.positions.len()),
-            ("velocities", self.velocities.len()),
+            ("velocities", if no_v { n } else { self.velocities.len() }),
         ] {
             if len != n {
                 return bad(format!("{name} has {len} entries for {n} particles"));
@@ -303,7 +479,11 @@ impl ParticleState {
             ));
         }
         let q = flatten("positions", &self.positions, dim)?;
-        let v = flatten("velocities", &self.velocities, dim)?;
+        let v = if no_v {
+            vec![0.0; n * dim]
+        } else {
+            flatten("velocities", &self.velocities, dim)?
+        };
         let acc = if na == 0 {
             None
         } else {
@@ -338,7 +518,7 @@ impl ParticleState {
             state,
             acc,
         };
-        Ok((graph, sample))
+        Ok((graph, sample, no_v))
     }
 
     /// Decodes the edge arrays (indices are range-checked by `Graph::validate`).
@@ -388,9 +568,29 @@ impl ParticleState {
         encode_cdr(self)
     }
 
-    /// Decodes CDR bytes (with encapsulation header); garbage gives an error.
+    /// Decodes CDR bytes (with encapsulation header) in this build's layout;
+    /// garbage and truncated bytes give an error.
     pub fn from_cdr(bytes: &[u8]) -> Result<ParticleState, DataError> {
-        decode_cdr(bytes)
+        Self::from_cdr_as(bytes, Layout::Current)
+    }
+
+    /// Decodes CDR bytes in the given layout. [`Layout::Unknown`] (a bag that
+    /// stores no definition) tries this build's layout, then the first one
+    /// ([`ParticleStateV1`], field unknown): whole messages of either cannot
+    /// pass for the other (one is short of bytes, the other has bytes over),
+    /// but a current message cut exactly after `anchors` would read as V1, so
+    /// this is used only when the bag cannot say.
+    pub fn from_cdr_as(bytes: &[u8], layout: Layout) -> Result<ParticleState, DataError> {
+        match layout {
+            Layout::Current => decode_cdr(bytes),
+            Layout::V1 => decode_cdr::<ParticleStateV1>(bytes).map(ParticleState::from),
+            Layout::Unknown => match decode_cdr::<ParticleState>(bytes) {
+                Ok(m) => Ok(m),
+                Err(e) => decode_cdr::<ParticleStateV1>(bytes)
+                    .map(ParticleState::from)
+                    .map_err(|_| e),
+            },
+        }
     }
 }
 

@@ -129,6 +129,20 @@ impl Field {
         Ok(())
     }
 
+    /// The same field with an all-zero `force` written as empty, so that two
+    /// descriptions of one field compare equal.
+    pub fn normalized(&self) -> Field {
+        Field {
+            gravity: self.gravity,
+            drag: self.drag,
+            force: if self.force.iter().all(|x| *x == 0.0) {
+                vec![]
+            } else {
+                self.force.clone()
+            },
+        }
+    }
+
     /// True when nothing but internal forces act: no gravity, drag or force,
     /// so total momentum is conserved (for graphs without anchors).
     pub fn is_free(&self) -> bool {

@@ -82,7 +82,8 @@ pub fn load_model(model: &str) -> anyhow::Result<Arc<dyn Dynamics>> {
     }
     let m = crate::baselines::load_any_model(Path::new(model))
         .with_context(|| format!("loading model {model}"))?;
-    Ok(m.dynamics)
+    let trained = crate::compat::TrainedFor::from_model_file(Path::new(model))?;
+    Ok(Arc::new(crate::compat::Checked::new(m.dynamics, trained)))
 }
 
 /// The DDS domain from `ROS_DOMAIN_ID` (0 when unset), which ros2-client does

@@ -162,7 +162,7 @@ impl Shared {
     }
 
     /// Records with the recorder, if any; failures are warned about.
-    fn record(&self, what: impl FnOnce(&mut Recorder) -> Result<(), String>) {
+    pub(super) fn record(&self, what: impl FnOnce(&mut Recorder) -> Result<(), String>) {
         if let Some(r) = &self.recorder {
             let result = what(&mut r.lock().unwrap_or_else(PoisonError::into_inner));
             if let Err(e) = result {
@@ -175,6 +175,13 @@ impl Shared {
     fn handle_state(&self, msg: ParticleState, received_ns: u64) -> Result<Prediction, String> {
         self.record(|r| r.state(received_ns, &msg));
         let model = self.model();
+        // A state the model was not trained for (another dimension, edge kinds
+        // or field) is refused with the reason, not predicted.
+        if let Some(t) = model.trained_for() {
+            let (graph, _) = msg.to_parts().map_err(|e| e.to_string())?;
+            let field = msg.field().map_err(|e| e.to_string())?;
+            t.check(&graph, field.as_ref())?;
+        }
         let p = predict::predict(
             model.as_ref(),
             &msg,

@@ -73,6 +73,11 @@ pub fn trajectory(
                 stamp: Time::from_nanos(t0.saturating_add(offset)),
                 frame_id: input.header.frame_id.clone(),
             };
+            // The predicted states move in the field the input states.
+            msg.field_status = input.field_status;
+            msg.gravity = input.gravity;
+            msg.drag = input.drag;
+            msg.force = input.force;
             msg
         })
         .collect();
@@ -202,6 +207,20 @@ mod tests {
         // Newton's third law: internal spring forces sum to zero.
         let sx: f64 = p.forces.total.iter().map(|v| v.x).sum();
         assert!(sx.abs() < 1e-9, "{sx}");
+    }
+
+    #[test]
+    fn predicted_states_carry_the_inputs_field() {
+        let model = load_truth("truth:spring").unwrap();
+        let input = spring_state().with_field(Some(&crate::physics::Field::default()));
+        let p = predict(model.as_ref(), &input, 0.001, 3, 1).unwrap();
+        for s in &p.trajectory.states {
+            assert_eq!(s.field_status, crate::data::msg::FIELD_KNOWN);
+            assert_eq!(s.field().unwrap(), Some(crate::physics::Field::default()));
+        }
+        // Without a field stated, the predictions do not invent one.
+        let p = predict(model.as_ref(), &spring_state(), 0.001, 3, 1).unwrap();
+        assert!(p.trajectory.states.iter().all(|s| s.field_status == 0));
     }
 
     #[test]

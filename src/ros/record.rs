@@ -6,7 +6,6 @@
 //! on disk: a SIGKILL loses at most the chunk in memory (≤ 1 MiB of messages).
 //! Bags split by size or duration; [`Recorder::finish`] closes the open one.
 
-use std::collections::BTreeMap;
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -14,7 +13,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use crate::data::msg::{
     encode_cdr, ros2msg_schema, DEP_HEADER, DEP_POINT, DEP_TIME, DEP_VECTOR3, PARTICLE_STATE_MSG,
 };
-use crate::data::{BagWriter, ChannelId, ParticleState, METADATA_NAME};
+use crate::data::{BagMetadata, BagWriter, ChannelId, ParticleState, METADATA_NAME};
 
 use super::msgs::{ParticleForces, PredictedTrajectory, PACKAGE};
 use super::params::NodeParams;
@@ -59,7 +58,7 @@ pub struct Recorder {
     topics: [String; 3],
     split_bytes: u64,
     split_after: Option<Duration>,
-    metadata: BTreeMap<String, String>,
+    metadata: BagMetadata,
     /// Distinguishes this run's bags from earlier runs' in the same folder.
     run: u64,
     index: u32,
@@ -79,12 +78,14 @@ impl Recorder {
             .duration_since(UNIX_EPOCH)
             .map(|d| d.as_secs())
             .unwrap_or(0);
-        let metadata = BTreeMap::from([
-            ("model".to_string(), model.to_string()),
-            ("recorder".to_string(), "mcgnode serve".to_string()),
-            ("horizon".to_string(), params.horizon.to_string()),
-            ("dt".to_string(), format!("{:?}", params.dt)),
-        ]);
+        let metadata = BagMetadata {
+            model: Some(model.to_string()),
+            recorder: Some("mcgnode serve".to_string()),
+            generator: Some(format!("mcgnode {}", env!("CARGO_PKG_VERSION"))),
+            node_dt: Some(params.dt),
+            node_horizon: Some(params.horizon),
+            ..BagMetadata::default()
+        };
         Ok(Recorder {
             dir,
             topics: [
@@ -129,8 +130,9 @@ impl Recorder {
             &predicted_trajectory_schema(),
         )?;
         let forces = channel(&self.topics[2], "ParticleForces", &particle_forces_schema())?;
+        let metadata = self.metadata.to_map().map_err(|e| ctx(e.to_string()))?;
         writer
-            .add_metadata(METADATA_NAME, &self.metadata)
+            .add_metadata(METADATA_NAME, &metadata)
             .map_err(|e| ctx(e.to_string()))?;
         Ok(self.open.insert(OpenBag {
             writer,
@@ -167,6 +169,20 @@ impl Recorder {
         bag.writer
             .write(channel, log_time_ns, cdr)
             .map_err(|e| format!("recording to {}: {e}", bag.path.display()))
+    }
+
+    /// The served model changed: later bags name `model`, and the open bag gets
+    /// a further metadata record saying so (readers take the last value of a
+    /// key).
+    pub fn set_model(&mut self, model: &str) -> Result<(), String> {
+        self.metadata.model = Some(model.to_string());
+        if let Some(bag) = &mut self.open {
+            let map = self.metadata.to_map().map_err(|e| e.to_string())?;
+            bag.writer
+                .add_metadata(METADATA_NAME, &map)
+                .map_err(|e| format!("recording to {}: {e}", bag.path.display()))?;
+        }
+        Ok(())
     }
 
     /// Records an incoming state, received at `log_time_ns` (ns since the epoch).
@@ -258,6 +274,44 @@ mod tests {
         );
     }
 
+    /// The metadata record is the typed one, and a model swap reaches both the
+    /// open bag and the next ones.
+    #[test]
+    fn metadata_names_the_current_model_after_a_swap() {
+        let dir = tempfile::tempdir().unwrap();
+        let params = NodeParams {
+            record_dir: dir.path().to_string_lossy().into_owned(),
+            ..NodeParams::default()
+        };
+        let mut r = Recorder::new(&params, "truth:spring").unwrap();
+        let state = ParticleState {
+            dimension: 2,
+            ..ParticleState::default()
+        };
+        r.state(1, &state).unwrap();
+        r.set_model("mcgnode trained on 5-spring").unwrap();
+        r.state(2, &state).unwrap();
+        r.finish().unwrap();
+        r.set_model("gnode v2").unwrap();
+        r.state(3, &state).unwrap();
+        r.finish().unwrap();
+        let meta = |p: &std::path::Path| {
+            let mut map = std::collections::BTreeMap::new();
+            for (name, m) in scan_bag(p, |_| Ok(())).unwrap() {
+                if name == METADATA_NAME {
+                    map.extend(m);
+                }
+            }
+            BagMetadata::from_map(&map).unwrap()
+        };
+        let first = meta(&r.finished[0]);
+        assert_eq!(first.model.as_deref(), Some("mcgnode trained on 5-spring"));
+        assert_eq!(first.node_dt, Some(params.dt));
+        assert_eq!(first.node_horizon, Some(params.horizon));
+        assert_eq!(first.recorder.as_deref(), Some("mcgnode serve"));
+        assert_eq!(meta(&r.finished[1]).model.as_deref(), Some("gnode v2"));
+    }
+
     #[test]
     fn schemas_carry_their_dependencies() {
         let s = predicted_trajectory_schema();
@@ -292,7 +346,9 @@ mod tests {
             ..PredictedTrajectory::default()
         };
         let size = encode_cdr(&traj).unwrap().len();
-        let total = 3 * (1 << 20) / size; // about three 1 MiB chunks
+        // Three and a half 1 MiB chunks: the last one is never complete, whatever
+        // the message size.
+        let total = (7 << 19) / size;
         let forces = ParticleForces::default();
         for i in 0..total {
             r.prediction(i as u64, &traj, &forces).unwrap();

@@ -192,6 +192,8 @@ pub(super) fn swap(shared: &Shared, model: Arc<dyn Dynamics>, reason: &str) -> D
         model,
     );
     let locked = start.elapsed();
+    // Bags recorded from now on (and the open one) name the new model.
+    shared.record(|r| r.set_model(&new_model));
     let msg = ModelSwap {
         header: Header {
             stamp: Time::from_nanos(now_nanos()),
@@ -368,8 +370,12 @@ pub(super) fn run_training(
     }
     let (train_loss, validation_loss) = (file.training.train_loss, file.training.validation_loss);
     let epochs_run = file.training.epochs_run;
-    let model = match TrainedModel::from_file(file) {
-        Ok(m) => Arc::new(m),
+    let trained_for = match serde_json::to_value(&file) {
+        Ok(v) => crate::compat::TrainedFor::from_model_json(&path.display().to_string(), &v),
+        Err(e) => return fail(format!("the trained model does not serialise: {e}")),
+    };
+    let model: Arc<dyn crate::dynamics::Dynamics> = match TrainedModel::from_file(file) {
+        Ok(m) => Arc::new(crate::compat::Checked::new(Arc::new(m), trained_for)),
         Err(e) => return fail(format!("the trained model does not load: {e:#}")),
     };
     let took = trained_at.duration_since(start).as_secs_f64();

@@ -23,10 +23,14 @@ pub fn load_truth(model: &str) -> Result<Arc<dyn Dynamics>, String> {
         .ok_or_else(|| format!("{model:?} is not a truth:<system> model name"))?;
     let kind: SystemKind = name.parse()?;
     let field = SystemConfig::new(kind, 1).field;
-    Ok(Arc::new(TruthModel {
-        name: model.to_string(),
-        truth: Truth { field },
-    }))
+    let trained = crate::compat::TrainedFor::truth(model, field.clone());
+    Ok(Arc::new(crate::compat::Checked::new(
+        Arc::new(TruthModel {
+            name: model.to_string(),
+            truth: Truth { field },
+        }),
+        trained,
+    )))
 }
 
 /// [`Truth`] under the name it was selected by, so diagnostics say which.
@@ -69,6 +73,39 @@ impl Dynamics for TruthModel {
         steps: usize,
     ) -> Result<Vec<crate::system::State>, String> {
         self.truth.rollout(graph, start, dt, steps)
+    }
+
+    // The simulator's integrator (Verlet + SHAKE/RATTLE for bars), not the
+    // trait's unconstrained default: replay and serve call these.
+    fn rollout_every(
+        &self,
+        graph: &crate::system::Graph,
+        start: &crate::system::State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<crate::system::State>, String> {
+        self.truth.rollout_every(graph, start, dt, steps, every)
+    }
+
+    fn rollout_many(
+        &self,
+        graph: &crate::system::Graph,
+        starts: &[crate::system::State],
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<crate::dynamics::Rollout>, String> {
+        self.truth.rollout_many(graph, starts, dt, steps, every)
+    }
+
+    fn acceleration_batch(
+        &self,
+        graph: &crate::system::Graph,
+        states: &[crate::system::State],
+        out: &mut [Vec<f64>],
+    ) -> Result<(), String> {
+        self.truth.acceleration_batch(graph, states, out)
     }
 }
 

@@ -1,9 +1,12 @@
-//! The small YAML subset that ROS 2 parameter files use: nested block mappings
-//! of scalars, comments, quoted strings. No YAML crate is among our
-//! dependencies, and parameter files need no more than this; anything outside
-//! the subset (lists, anchors, multi-line strings) is an error naming the line.
+//! ROS 2 parameter files (nested mappings of scalars), read with the YAML 1.2
+//! crate `yaml-rust2` and handed to [`super::params`] as [`Value`]s. Scalars are
+//! typed by YAML 1.2's core schema (as rcl types them); what parameter files do
+//! not use here (lists, non-string keys) is an error naming the key; anchors
+//! and aliases are resolved by the crate.
 
 use std::fmt;
+
+use yaml_rust2::{Yaml, YamlLoader};
 
 /// A parsed YAML scalar, typed the way YAML 1.2's core schema (and rcl) types it.
 #[derive(Clone, Debug, PartialEq)]
@@ -32,38 +35,13 @@ impl Scalar {
         }
     }
 
-    /// Types an unquoted scalar (quoted ones are always strings).
+    /// Types an unquoted scalar (a `--set` value) as the YAML crate types a
+    /// plain scalar.
     pub fn parse_plain(text: &str) -> Scalar {
-        let t = text.trim();
-        match t {
-            "" | "~" | "null" | "Null" | "NULL" => return Scalar::Null,
-            "true" | "True" | "TRUE" => return Scalar::Bool(true),
-            "false" | "False" | "FALSE" => return Scalar::Bool(false),
-            ".inf" | ".Inf" | ".INF" | "+.inf" | "+.Inf" | "+.INF" => {
-                return Scalar::Float(f64::INFINITY)
-            }
-            "-.inf" | "-.Inf" | "-.INF" => return Scalar::Float(f64::NEG_INFINITY),
-            ".nan" | ".NaN" | ".NAN" => return Scalar::Float(f64::NAN),
-            _ => {}
+        match scalar(&Yaml::from_str(text.trim())) {
+            Some(s) => s,
+            None => Scalar::Str(text.trim().to_string()),
         }
-        let digits = t.strip_prefix(['+', '-']).unwrap_or(t);
-        if !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()) {
-            if let Ok(i) = t.parse::<i64>() {
-                return Scalar::Int(i);
-            }
-        }
-        // Only things that look like numbers: Rust also parses "inf" and "NaN",
-        // which YAML treats as strings.
-        let numeric = digits
-            .bytes()
-            .all(|b| b.is_ascii_digit() || matches!(b, b'.' | b'e' | b'E' | b'+' | b'-'))
-            && digits.bytes().any(|b| b.is_ascii_digit());
-        if numeric {
-            if let Ok(f) = t.parse::<f64>() {
-                return Scalar::Float(f);
-            }
-        }
-        Scalar::Str(t.to_string())
     }
 }
 
@@ -79,170 +57,78 @@ impl fmt::Display for Scalar {
     }
 }
 
-/// A YAML node in the subset: a scalar or a mapping (keys kept in file order).
+/// A YAML node of a parameter file: a scalar or a mapping (keys in file order).
 #[derive(Clone, Debug, PartialEq)]
 pub enum Value {
     /// A leaf.
     Scalar(Scalar),
-    /// A block mapping.
+    /// A mapping.
     Map(Vec<(String, Value)>),
 }
 
-/// One meaningful line: indentation, key, and the text after the colon.
-struct Line<'a> {
-    no: usize,
-    indent: usize,
-    key: String,
-    rest: &'a str,
+/// The scalar a YAML node is, if it is one.
+fn scalar(y: &Yaml) -> Option<Scalar> {
+    Some(match y {
+        Yaml::Boolean(b) => Scalar::Bool(*b),
+        Yaml::Integer(i) => Scalar::Int(*i),
+        Yaml::Real(_) => Scalar::Float(y.as_f64()?),
+        Yaml::String(s) => Scalar::Str(s.clone()),
+        Yaml::Null => Scalar::Null,
+        _ => return None,
+    })
 }
 
-/// Parses a document of nested block mappings of scalars.
+/// Parses a parameter file: one document of nested mappings of scalars (an
+/// empty document is an empty mapping). Syntax errors name the line; lists,
+/// aliases and non-string keys name the key.
 pub fn parse(text: &str) -> Result<Value, String> {
-    let mut lines = Vec::new();
-    for (i, raw) in text.lines().enumerate() {
-        let no = i + 1;
-        let content = strip_comment(raw);
-        if content.trim().is_empty() || content.trim() == "---" {
-            continue;
-        }
-        if content.trim() == "..." {
-            break;
-        }
-        let lead = &raw[..raw.len() - raw.trim_start().len()];
-        if lead.contains('\t') {
-            return Err(format!("line {no}: tabs are not allowed for indentation"));
-        }
-        let indent = content.len() - content.trim_start().len();
-        let body = content.trim();
-        if body.starts_with("- ") || body == "-" {
-            return Err(format!(
-                "line {no}: lists are not supported in parameter files"
-            ));
-        }
-        let (key, rest) = split_key(body)
-            .ok_or_else(|| format!("line {no}: expected `key: value`, found {:?}", body.trim()))?;
-        lines.push(Line {
-            no,
-            indent,
-            key,
-            rest,
-        });
+    let docs = YamlLoader::load_from_str(text)
+        .map_err(|e| format!("line {}: {}", e.marker().line(), e.info()))?;
+    match docs.as_slice() {
+        [] => Ok(Value::Map(vec![])),
+        [doc] => convert(doc, ""),
+        _ => Err(format!(
+            "{} YAML documents; a parameter file has one",
+            docs.len()
+        )),
     }
-    let mut pos = 0;
-    let root = parse_map(&lines, &mut pos, 0)?;
-    if let Some(l) = lines.get(pos) {
-        return Err(format!("line {}: unexpected indentation", l.no));
-    }
-    Ok(root)
 }
 
-/// Parses consecutive lines at exactly `indent` into a mapping.
-fn parse_map(lines: &[Line], pos: &mut usize, indent: usize) -> Result<Value, String> {
-    let mut entries: Vec<(String, Value)> = Vec::new();
-    while let Some(l) = lines.get(*pos) {
-        if l.indent < indent {
-            break;
-        }
-        if l.indent > indent {
-            return Err(format!("line {}: unexpected indentation", l.no));
-        }
-        if entries.iter().any(|(k, _)| *k == l.key) {
-            return Err(format!("line {}: duplicate key {:?}", l.no, l.key));
-        }
-        *pos += 1;
-        let value = if l.rest.trim().is_empty() {
-            match lines.get(*pos) {
-                Some(next) if next.indent > indent => parse_map(lines, pos, next.indent)?,
-                _ => Value::Scalar(Scalar::Null),
-            }
+fn convert(y: &Yaml, path: &str) -> Result<Value, String> {
+    let at = |what: &str| {
+        if path.is_empty() {
+            format!("the top level: {what}")
         } else {
-            Value::Scalar(parse_scalar(l.rest, l.no)?)
-        };
-        entries.push((l.key.clone(), value));
-    }
-    Ok(Value::Map(entries))
-}
-
-/// Parses the text after `key:` (a plain or quoted scalar).
-fn parse_scalar(text: &str, no: usize) -> Result<Scalar, String> {
-    let t = text.trim();
-    if let Some(inner) = t.strip_prefix('"') {
-        let inner = inner
-            .strip_suffix('"')
-            .ok_or_else(|| format!("line {no}: unterminated double-quoted string"))?;
-        return unescape_double(inner).map_err(|e| format!("line {no}: {e}"));
-    }
-    if let Some(inner) = t.strip_prefix('\'') {
-        let inner = inner
-            .strip_suffix('\'')
-            .ok_or_else(|| format!("line {no}: unterminated single-quoted string"))?;
-        return Ok(Scalar::Str(inner.replace("''", "'")));
-    }
-    if t.starts_with(['[', '{', '&', '*', '!', '|', '>']) {
-        return Err(format!(
-            "line {no}: {t:?}: lists, maps in flow style, anchors, tags and block strings \
-             are not supported in parameter files"
-        ));
-    }
-    Ok(Scalar::parse_plain(t))
-}
-
-fn unescape_double(s: &str) -> Result<Scalar, String> {
-    let mut out = String::with_capacity(s.len());
-    let mut chars = s.chars();
-    while let Some(c) = chars.next() {
-        if c != '\\' {
-            out.push(c);
-            continue;
+            format!("{path}: {what}")
         }
-        match chars.next() {
-            Some('n') => out.push('\n'),
-            Some('t') => out.push('\t'),
-            Some('\\') => out.push('\\'),
-            Some('"') => out.push('"'),
-            Some('/') => out.push('/'),
-            Some('0') => out.push('\0'),
-            other => return Err(format!("unsupported escape \\{}", other.unwrap_or(' '))),
-        }
-    }
-    Ok(Scalar::Str(out))
-}
-
-/// Drops a `#` comment that is outside quotes and starts a word.
-fn strip_comment(line: &str) -> &str {
-    let mut quote: Option<char> = None;
-    let mut prev = ' ';
-    for (i, c) in line.char_indices() {
-        match quote {
-            Some(q) if c == q => quote = None,
-            Some(_) => {}
-            None if c == '"' || c == '\'' => quote = Some(c),
-            None if c == '#' && prev.is_whitespace() => return &line[..i],
-            None => {}
-        }
-        prev = c;
-    }
-    line
-}
-
-/// Splits `key: rest` at the first `: ` (or trailing `:`) outside quotes.
-fn split_key(body: &str) -> Option<(String, &str)> {
-    let (key, rest) = if let Some(q) = body.chars().next().filter(|c| *c == '"' || *c == '\'') {
-        let end = body[1..].find(q)? + 1;
-        let after = body[end + 1..].trim_start();
-        let rest = after.strip_prefix(':')?;
-        (body[1..end].to_string(), rest)
-    } else {
-        let i = body
-            .match_indices(':')
-            .map(|(i, _)| i)
-            .find(|&i| body[i + 1..].is_empty() || body[i + 1..].starts_with(' '))?;
-        (body[..i].trim().to_string(), &body[i + 1..])
     };
-    if key.is_empty() || !(rest.is_empty() || rest.starts_with(' ')) {
-        return None;
+    match y {
+        Yaml::Hash(h) => {
+            let mut out = Vec::with_capacity(h.len());
+            for (k, v) in h {
+                let key = match k {
+                    Yaml::String(s) => s.clone(),
+                    other => match scalar(other) {
+                        Some(s) => return Err(at(&format!("key {s} is not a string"))),
+                        None => return Err(at("a key is not a string")),
+                    },
+                };
+                let sub = if path.is_empty() {
+                    key.clone()
+                } else {
+                    format!("{path}.{key}")
+                };
+                out.push((key, convert(v, &sub)?));
+            }
+            Ok(Value::Map(out))
+        }
+        Yaml::Array(_) => Err(at("lists are not supported in parameter files")),
+        Yaml::Alias(_) => Err(at("aliases are not supported in parameter files")),
+        Yaml::BadValue => Err(at("not a YAML value")),
+        other => Ok(Value::Scalar(
+            scalar(other).ok_or_else(|| at("not a scalar"))?,
+        )),
     }
-    Some((key, rest))
 }
 
 #[cfg(test)]
@@ -295,13 +181,13 @@ mod tests {
     #[test]
     fn rejects_what_it_does_not_support_with_the_line() {
         for (text, want) in [
-            ("a:\n  - 1\n", "line 2: lists"),
-            ("a: [1, 2]\n", "line 1"),
-            ("a: 1\na: 2\n", "line 2: duplicate key"),
-            ("a:\n    b: 1\n  c: 2\n", "line 3: unexpected indentation"),
-            ("just text\n", "line 1: expected `key: value`"),
-            ("a: \"open\n", "line 1: unterminated"),
-            ("a:\n\tb: 1\n", "line 2: tabs"),
+            ("a:\n  - 1\n", "a: lists"),
+            ("a:\n  b: [1, 2]\n", "a.b: lists"),
+            ("a: 1\na: 2\n", "duplicated key"),
+            ("a:\n    b: 1\n  c: 2\n", "line 3"),
+            ("a: \"open\n", "quoted scalar"),
+            ("a:\n\tb: 1\n", "line 2"),
+            ("1: x\n", "key 1 is not a string"),
         ] {
             let e = parse(text).unwrap_err();
             assert!(e.contains(want), "{text:?}: {e}");

@@ -1,0 +1,302 @@
+//! Does a model fit the data? What a model was trained on (dimension, field,
+//! edge kinds, closed or not), compared with a graph and the field its data
+//! state. `train`, `evaluate`, `replay`, `rollout` and the node refuse a
+//! mismatch with the reason instead of predicting nonsense (a pendulum state
+//! sent to a spring model, a 3D state to a 2D model, a closed-system model on
+//! data under gravity).
+
+use std::path::Path;
+use std::sync::Arc;
+
+use crate::dynamics::{Dynamics, Forces, Rollout};
+use crate::physics::{Field, SystemConfig, SystemKind};
+use crate::system::{EdgeKind, Graph, State};
+
+/// What a model was trained on, as far as its file tells (`None`: unknown,
+/// not checked).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TrainedFor {
+    /// The model, for messages.
+    pub model: String,
+    /// Spatial dimension.
+    pub dim: Option<usize>,
+    /// The field of the training data.
+    pub field: Option<Field>,
+    /// Whether the training data had springs, bars and anchors.
+    pub edges: Option<EdgeKinds>,
+    /// Whether the model assumes a closed system (no anchors, no field):
+    /// MCGNODE without its body-force branch conserves momentum exactly.
+    pub closed: Option<bool>,
+}
+
+/// The kinds of edge in a graph.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct EdgeKinds {
+    /// Springs between particles.
+    pub springs: bool,
+    /// Rigid bars (between particles or to anchors).
+    pub bars: bool,
+    /// Anchors (fixed points).
+    pub anchors: bool,
+}
+
+impl EdgeKinds {
+    /// The kinds present in `graph`.
+    pub fn of(graph: &Graph) -> EdgeKinds {
+        EdgeKinds {
+            springs: graph.edges.iter().any(|e| e.kind == EdgeKind::Spring),
+            bars: graph.edges.iter().any(|e| e.kind == EdgeKind::Bar),
+            anchors: !graph.anchors.is_empty(),
+        }
+    }
+
+    /// The kinds the simulator's system has.
+    pub fn of_kind(kind: SystemKind) -> EdgeKinds {
+        match kind {
+            SystemKind::Spring | SystemKind::Peridynamic => EdgeKinds {
+                springs: true,
+                bars: false,
+                anchors: false,
+            },
+            SystemKind::Pendulum => EdgeKinds {
+                springs: false,
+                bars: true,
+                anchors: true,
+            },
+        }
+    }
+
+    fn words(self) -> String {
+        let mut w = vec![];
+        if self.springs {
+            w.push("springs");
+        }
+        if self.bars {
+            w.push("rigid bars");
+        }
+        if self.anchors {
+            w.push("anchors");
+        }
+        if w.is_empty() {
+            "no edges".into()
+        } else {
+            w.join(", ")
+        }
+    }
+}
+
+impl TrainedFor {
+    /// What a model file (GNODE family or baseline, JSON) says: `hyper.dim`
+    /// or `trained_on.dim`, `trained_on.system_config` (its field and system
+    /// kind), and an MCGNODE's `hyper.body_force`.
+    pub fn from_model_json(model: &str, v: &serde_json::Value) -> TrainedFor {
+        let t = &v["trained_on"];
+        let dim = t["dim"]
+            .as_u64()
+            .or(v["hyper"]["dim"].as_u64())
+            .map(|d| d as usize);
+        let cfg: Option<SystemConfig> = t
+            .get("system_config")
+            .filter(|c| !c.is_null())
+            .and_then(|c| serde_json::from_value(c.clone()).ok());
+        let closed = match (
+            v["hyper"]["variant"].as_str(),
+            v["hyper"]["body_force"].as_bool(),
+        ) {
+            (Some("mcgnode"), Some(false)) => Some(true),
+            _ => None,
+        };
+        TrainedFor {
+            model: model.to_string(),
+            dim,
+            field: cfg.as_ref().map(|c| c.field.normalized()),
+            edges: cfg.as_ref().map(|c| EdgeKinds::of_kind(c.kind)),
+            closed,
+        }
+    }
+
+    /// Reads a model file's training description.
+    pub fn from_model_file(path: &Path) -> anyhow::Result<TrainedFor> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| anyhow::anyhow!("cannot read model file {}: {e}", path.display()))?;
+        let v: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| anyhow::anyhow!("model file {} is not JSON: {e}", path.display()))?;
+        Ok(Self::from_model_json(&path.display().to_string(), &v))
+    }
+
+    /// The ground truth of a system kind: any graph, the system's field.
+    pub fn truth(model: &str, field: Field) -> TrainedFor {
+        TrainedFor {
+            model: model.to_string(),
+            field: Some(field),
+            ..TrainedFor::default()
+        }
+    }
+
+    /// Refuses a graph (and the field its data state, when known) the model
+    /// was not trained for; the error says what differs.
+    pub fn check(&self, graph: &Graph, field: Option<&Field>) -> Result<(), String> {
+        let m = &self.model;
+        if let Some(d) = self.dim {
+            if d != graph.dim {
+                return Err(format!(
+                    "model {m} was trained on {d}D data; these are {}D",
+                    graph.dim
+                ));
+            }
+        }
+        let have = EdgeKinds::of(graph);
+        if let Some(e) = self.edges {
+            let new_kind = (have.springs && !e.springs) || (have.bars && !e.bars);
+            if new_kind || have.anchors != e.anchors {
+                return Err(format!(
+                    "model {m} was trained on a system with {}; these data have {}",
+                    e.words(),
+                    have.words()
+                ));
+            }
+        }
+        if self.closed == Some(true) && have.anchors {
+            return Err(format!(
+                "model {m} assumes a closed system (MCGNODE without its body-force branch); \
+                 these data have anchors"
+            ));
+        }
+        if let Some(data) = field {
+            if self.closed == Some(true) && !data.is_free() {
+                return Err(format!(
+                    "model {m} assumes a closed system (MCGNODE without its body-force branch); \
+                     these data state {}",
+                    describe(data)
+                ));
+            }
+            if let Some(trained) = &self.field {
+                if trained.normalized() != data.normalized() {
+                    return Err(format!(
+                        "model {m} was trained with {}; these data state {}",
+                        describe(trained),
+                        describe(data)
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A field in words.
+fn describe(f: &Field) -> String {
+    if f.is_free() {
+        "no field (gravity, drag and force all 0)".into()
+    } else {
+        format!(
+            "gravity {}, drag {}, force {:?}",
+            f.gravity, f.drag, f.force
+        )
+    }
+}
+
+/// A model with what it was trained on: [`Dynamics::supports`] also refuses
+/// graphs the model was not trained for, and
+/// [`Dynamics::trained_for`] lets a caller check the data's field.
+pub struct Checked {
+    inner: Arc<dyn Dynamics>,
+    trained: TrainedFor,
+}
+
+impl Checked {
+    /// Wraps `inner`.
+    pub fn new(inner: Arc<dyn Dynamics>, trained: TrainedFor) -> Checked {
+        Checked { inner, trained }
+    }
+}
+
+impl Dynamics for Checked {
+    fn describe(&self) -> String {
+        self.inner.describe()
+    }
+
+    fn supports(&self, graph: &Graph) -> Result<(), String> {
+        self.trained.check(graph, None)?;
+        self.inner.supports(graph)
+    }
+
+    fn trained_for(&self) -> Option<&TrainedFor> {
+        Some(&self.trained)
+    }
+
+    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
+        self.trained.check(graph, None)?;
+        self.inner.acceleration(graph, state, out)
+    }
+
+    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String> {
+        self.trained.check(graph, None)?;
+        self.inner.forces(graph, state)
+    }
+
+    fn rollout_every(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<State>, String> {
+        self.trained.check(graph, None)?;
+        self.inner.rollout_every(graph, start, dt, steps, every)
+    }
+
+    fn acceleration_batch(
+        &self,
+        graph: &Graph,
+        states: &[State],
+        out: &mut [Vec<f64>],
+    ) -> Result<(), String> {
+        self.trained.check(graph, None)?;
+        self.inner.acceleration_batch(graph, states, out)
+    }
+
+    fn rollout_many(
+        &self,
+        graph: &Graph,
+        starts: &[State],
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<Rollout>, String> {
+        self.trained.check(graph, None)?;
+        self.inner.rollout_many(graph, starts, dt, steps, every)
+    }
+
+    fn rollout(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+    ) -> Result<Vec<State>, String> {
+        self.trained.check(graph, None)?;
+        self.inner.rollout(graph, start, dt, steps)
+    }
+}
+
+/// Checks every distinct graph of a bag (and the field its data state, when
+/// known) against what a model was trained on; the error names the trajectory.
+pub fn check_bag(
+    trained: &TrainedFor,
+    bag: &crate::data::Bag,
+    field: Option<&Field>,
+) -> anyhow::Result<()> {
+    let mut seen: Vec<&Graph> = vec![];
+    for tr in &bag.trajectories {
+        if seen.contains(&&tr.graph) {
+            continue;
+        }
+        trained
+            .check(&tr.graph, field)
+            .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", tr.id))?;
+        seen.push(&tr.graph);
+    }
+    Ok(())
+}

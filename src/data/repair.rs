@@ -1,0 +1,193 @@
+//! Repairing an MCAP file cut short (a recorder killed mid-run): everything up
+//! to the last whole record is rewritten as a complete, indexed MCAP file
+//! (summary, footer and end magic), which readers that need the index
+//! (rosbags' AnyReader, `mcap info`) accept.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::{BufWriter, Read};
+use std::path::Path;
+
+use mcap::records::{MessageHeader, Record};
+use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
+
+use super::DataError;
+
+/// What [`repair`] kept.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RepairReport {
+    /// Messages kept (all of those in whole records).
+    pub messages: usize,
+    /// Channels kept.
+    pub channels: usize,
+    /// Metadata records kept.
+    pub metadata: usize,
+    /// Why reading stopped before the end magic ("" when the input was complete).
+    pub stopped: String,
+}
+
+/// Rewrites the readable part of `input` as a complete MCAP file `output`
+/// (written to a temporary file beside it, then renamed). Schemas, channels
+/// (with their metadata), messages (with sequence, log and publish times) and
+/// metadata records are kept in order; chunks are zstd-compressed. Refuses an
+/// `output` that is the input, and an input with no readable record at all.
+pub fn repair(input: &Path, output: &Path) -> Result<RepairReport, DataError> {
+    if input.is_dir() {
+        return Err(DataError::Bag {
+            path: input.to_path_buf(),
+            msg: "is a directory: bag repair rewrites one MCAP file (give the .mcap inside a rosbag2 directory)".into(),
+        });
+    }
+    if output.exists() && std::fs::canonicalize(output).ok() == std::fs::canonicalize(input).ok() {
+        return Err(DataError::Bag {
+            path: output.to_path_buf(),
+            msg: "the repaired bag must be written to another file than the input".into(),
+        });
+    }
+    let mut file = File::open(input).map_err(|e| DataError::io(input, "opening", e))?;
+    let len = file
+        .metadata()
+        .map_err(|e| DataError::io(input, "reading the size of", e))?
+        .len();
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_skip_end_magic(true)
+            .with_prevalidate_chunk_crcs(true)
+            .with_record_length_limit(usize::try_from(len.max(256 << 20)).unwrap_or(usize::MAX)),
+    );
+    let dir = match output.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".mcgnode-repair-");
+    // Temporary files are private (0600) by default; a bag is an ordinary file.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    let mut tmp = builder
+        .tempfile_in(dir)
+        .map_err(|e| DataError::io(dir, "creating a temporary file in", e))?;
+    let werr = |e: mcap::McapError| DataError::McapWrite {
+        path: output.to_path_buf(),
+        msg: e.to_string(),
+    };
+    let mut w = mcap::WriteOptions::new()
+        .profile("ros2")
+        .library(format!("mcgnode {} bag repair", env!("CARGO_PKG_VERSION")))
+        .compression(Some(mcap::Compression::Zstd))
+        .compression_threads(0)
+        .create(BufWriter::new(tmp.as_file_mut()))
+        .map_err(werr)?;
+    let mut schema_ids: HashMap<u16, u16> = HashMap::new();
+    let mut channel_ids: HashMap<u16, u16> = HashMap::new();
+    let mut report = RepairReport {
+        messages: 0,
+        channels: 0,
+        metadata: 0,
+        stopped: String::new(),
+    };
+    let mut records = 0usize;
+    while let Some(event) = reader.next_event() {
+        let (opcode, data) = match event {
+            Err(e) => {
+                report.stopped = format!("after {records} records: {e}");
+                break;
+            }
+            Ok(LinearReadEvent::ReadRequest(need)) => {
+                let buf = reader.insert(need);
+                let got = loop {
+                    match file.read(buf) {
+                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                        r => break r,
+                    }
+                }
+                .map_err(|e| DataError::io(input, "reading", e))?;
+                reader.notify_read(got);
+                continue;
+            }
+            Ok(LinearReadEvent::Record { opcode, data }) => (opcode, data),
+        };
+        records += 1;
+        let record = match mcap::parse_record(opcode, data) {
+            Ok(r) => r,
+            Err(e) => {
+                report.stopped = format!("record {records} does not parse: {e}");
+                break;
+            }
+        };
+        match record {
+            Record::Schema { header, data } => {
+                let id = w
+                    .add_schema(&header.name, &header.encoding, &data)
+                    .map_err(werr)?;
+                schema_ids.insert(header.id, id);
+            }
+            Record::Channel(c) => {
+                let schema = if c.schema_id == 0 {
+                    0
+                } else {
+                    match schema_ids.get(&c.schema_id) {
+                        Some(s) => *s,
+                        None => {
+                            report.stopped = format!(
+                                "channel {} refers to unknown schema {}",
+                                c.topic, c.schema_id
+                            );
+                            break;
+                        }
+                    }
+                };
+                let metadata: BTreeMap<String, String> = c.metadata.clone();
+                let id = w
+                    .add_channel(schema, &c.topic, &c.message_encoding, &metadata)
+                    .map_err(werr)?;
+                if channel_ids.insert(c.id, id).is_none() {
+                    report.channels += 1;
+                }
+            }
+            Record::Message { header, data } => {
+                let Some(&channel_id) = channel_ids.get(&header.channel_id) else {
+                    report.stopped = format!(
+                        "message {} refers to unknown channel {}",
+                        report.messages, header.channel_id
+                    );
+                    break;
+                };
+                w.write_to_known_channel(
+                    &MessageHeader {
+                        channel_id,
+                        ..header
+                    },
+                    &data,
+                )
+                .map_err(werr)?;
+                report.messages += 1;
+            }
+            Record::Metadata(m) => {
+                w.write_metadata(&m).map_err(werr)?;
+                report.metadata += 1;
+            }
+            Record::DataEnd(_) => break,
+            _ => {}
+        }
+    }
+    if records == 0 {
+        return Err(DataError::Mcap {
+            path: input.to_path_buf(),
+            msg: format!("no readable record ({})", report.stopped),
+        });
+    }
+    w.finish().map_err(werr)?;
+    let mut out = w.into_inner();
+    std::io::Write::flush(&mut out).map_err(|e| DataError::io(output, "flushing", e))?;
+    drop(out);
+    tmp.as_file()
+        .sync_all()
+        .map_err(|e| DataError::io(output, "syncing", e))?;
+    tmp.persist(output)
+        .map_err(|e| DataError::io(output, "renaming the temporary file to", e.error))?;
+    Ok(report)
+}
