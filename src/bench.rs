@@ -54,6 +54,7 @@ pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, 
             states: 0,
             start_fingerprints: vec![],
             system_config: None,
+            edge_params: vec![],
         },
         training: crate::model::file::TrainingReport {
             seed,

@@ -27,6 +27,9 @@ pub struct TrainedFor {
     /// Whether the model assumes a closed system (no anchors, no field):
     /// MCGNODE without its body-force branch conserves momentum exactly.
     pub closed: Option<bool>,
+    /// The edge kinds (rest length, stiffness) it was trained on, when it
+    /// cannot read them as inputs (no edge physics): other edges are refused.
+    pub edge_params: Option<Vec<crate::model::file::EdgeParams>>,
 }
 
 /// The kinds of edge in a graph.
@@ -106,12 +109,18 @@ impl TrainedFor {
             (Some("mcgnode"), Some(false)) => Some(true),
             _ => None,
         };
+        let edge_params: Option<Vec<crate::model::file::EdgeParams>> = t
+            .get("edge_params")
+            .and_then(|e| serde_json::from_value(e.clone()).ok())
+            .filter(|e: &Vec<_>| !e.is_empty())
+            .filter(|_| !v["hyper"]["edge_physics"].as_bool().unwrap_or(false));
         TrainedFor {
             model: model.to_string(),
             dim,
             field: cfg.as_ref().map(|c| c.field.normalized()),
             edges: cfg.as_ref().map(|c| EdgeKinds::of_kind(c.kind)),
             closed,
+            edge_params,
         }
     }
 
@@ -153,6 +162,25 @@ impl TrainedFor {
                     "model {m} was trained on a system with {}; these data have {}",
                     e.words(),
                     have.words()
+                ));
+            }
+        }
+        if let Some(known) = &self.edge_params {
+            let words = |p: &crate::model::file::EdgeParams| {
+                format!(
+                    "{:?} (rest length {}, stiffness {})",
+                    p.kind, p.rest_length, p.stiffness
+                )
+            };
+            if let Some(p) = crate::model::file::EdgeParams::of(graph)
+                .iter()
+                .find(|p| !known.iter().any(|k| k.same(p)))
+            {
+                return Err(format!(
+                    "model {m} was trained on edges {}; these data have a {}; a model trained \
+                     with --edge-physics reads each edge's rest length and stiffness",
+                    known.iter().map(words).collect::<Vec<_>>().join(", "),
+                    words(p)
                 ));
             }
         }

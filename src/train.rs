@@ -668,6 +668,8 @@ pub struct ModelOptions {
     pub edge_input: Option<EdgeInput>,
     /// Per-block hidden sizes (block weight prefix → sizes).
     pub block_hidden: std::collections::BTreeMap<String, Vec<usize>>,
+    /// Edges read their rest length and stiffness.
+    pub edge_physics: bool,
 }
 
 impl Default for ModelOptions {
@@ -684,6 +686,7 @@ impl Default for ModelOptions {
             message: None,
             edge_input: None,
             block_hidden: Default::default(),
+            edge_physics: false,
         }
     }
 }
@@ -706,6 +709,7 @@ impl ModelOptions {
         h.message = self.message.unwrap_or(h.message);
         h.edge_input = self.edge_input.unwrap_or(h.edge_input);
         h.block_hidden = self.block_hidden.clone();
+        h.edge_physics = self.edge_physics;
         let known: Vec<String> = crate::model::Arch::new(&h)
             .mlps
             .iter()
@@ -825,6 +829,7 @@ pub fn load_training_data_from(
             .as_ref()
             .map(serde_json::to_value)
             .transpose()?,
+        edge_params: crate::model::file::EdgeParams::of(&ds.graph),
     };
     Ok(TrainingData {
         dataset: ds,

@@ -464,3 +464,59 @@ fn normalisation_is_recorded_and_applied() {
     other.acceleration(&g, &s[7], &mut y).unwrap();
     assert!(x.iter().zip(&y).any(|(p, q)| (p - q).abs() > 1e-6));
 }
+
+/// With `edge_physics` a model reads each edge's stiffness (a stiffer ring
+/// gets other accelerations); without it, a model refuses edges it was not
+/// trained on and names the flag.
+#[test]
+fn edge_physics_reads_stiffness_and_plain_models_refuse_other_edges() {
+    use mcgnode::compat::TrainedFor;
+    use mcgnode::model::file::EdgeParams;
+    let (g, s, a) = data(SystemKind::Spring, 5, 3, 1);
+    let mut stiff = g.clone();
+    stiff.edges.iter_mut().for_each(|e| e.stiffness = 5.0);
+    let cfg = TrainConfig {
+        epochs: 2,
+        ..TrainConfig::default()
+    };
+    let trained_for = |m: &TrainedModel| {
+        let mut f = m.file.clone();
+        f.trained_on.edge_params = EdgeParams::of(&g);
+        TrainedFor::from_model_json("m", &serde_json::to_value(&f).unwrap())
+    };
+    let plain = to_model(
+        train(
+            Hyper::new(Variant::Mcgnode, 2, 1, 5),
+            &g,
+            &s,
+            &a,
+            &cfg,
+            |_| true,
+        )
+        .unwrap(),
+    );
+    let tf = trained_for(&plain);
+    assert!(tf.check(&g, None).is_ok());
+    let err = tf.check(&stiff, None).unwrap_err();
+    assert!(
+        err.contains("--edge-physics") && err.contains("stiffness 5"),
+        "{err}"
+    );
+    let mut h = Hyper::new(Variant::Mcgnode, 2, 1, 5);
+    h.edge_physics = true;
+    let phys = to_model(train(h, &g, &s, &a, &cfg, |_| true).unwrap());
+    assert!(trained_for(&phys).check(&stiff, None).is_ok());
+    let (mut x, mut y) = (vec![0.0; 10], vec![0.0; 10]);
+    phys.acceleration(&g, &s[5], &mut x).unwrap();
+    phys.acceleration(&stiff, &s[5], &mut y).unwrap();
+    assert!(
+        x.iter().zip(&y).any(|(p, q)| (p - q).abs() > 1e-9),
+        "stiffness is read"
+    );
+    plain.acceleration(&g, &s[5], &mut x).unwrap();
+    plain.acceleration(&stiff, &s[5], &mut y).unwrap();
+    assert_eq!(
+        x, y,
+        "a plain model cannot see stiffness (hence the refusal)"
+    );
+}

@@ -87,6 +87,11 @@ pub struct Args {
     /// trained weights do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Edges also read their rest length and stiffness, so one model serves
+    /// springs of several kinds (without it, a model refuses graphs whose
+    /// edges differ from those it was trained on).
+    #[arg(long)]
+    pub edge_physics: bool,
     /// Train on unscaled inputs and outputs (by default they are scaled by
     /// statistics of the training split, stored in the model file).
     #[arg(long)]
@@ -189,6 +194,7 @@ pub fn run(a: Args) -> Result<()> {
         message: a.messages,
         edge_input: a.edge_update,
         block_hidden: a.block_hidden.iter().cloned().collect(),
+        edge_physics: a.edge_physics,
     };
     let quiet = a.quiet;
     let log = |m: &str| {

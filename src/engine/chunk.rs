@@ -165,7 +165,7 @@ impl Chunk {
             } else {
                 0
             }),
-            w_in: z(d * edges),
+            w_in: z(a.edge_features() * edges),
             h: (0..=a.rounds).map(|_| z(em * nodes)).collect(),
             he: (0..=a.rounds).map(|_| z(em * edges)).collect(),
             hs: (0..a.rounds).map(|_| z(em * edges)).collect(),
@@ -222,6 +222,13 @@ impl Chunk {
                 for j in half * e..(half + 1) * e {
                     self.recv[k] = s * n + m.plan.recv[j];
                     self.send[k] = s * n + m.plan.send[j];
+                    if m.arch.edge_physics {
+                        // Constant inputs after q_i − q_j: rest length, stiffness.
+                        let edges = bs * m.plan.recv.len();
+                        for (f, x) in m.arch.edge_physics_of(&m.plan, j).iter().enumerate() {
+                            self.w_in[(m.plan.dim + f) * edges + k] = *x;
+                        }
+                    }
                     k += 1;
                 }
             }
@@ -417,7 +424,7 @@ impl Chunk {
         let he0 = &mut self.he[0][..em * edges];
         m.mlp(i).forward(
             th,
-            &self.w_in[..d * edges],
+            &self.w_in[..a.edge_features() * edges],
             &[],
             edges,
             &mut self.tapes[i],
@@ -913,7 +920,7 @@ impl Chunk {
         let ghe = &mut self.ghe[..em * edges];
         times_squareplus_grad(ghe, &self.he[0][..em * edges]);
         let i = m.ix(Block::EdgeEmbed).expect("graph model");
-        let w = &self.w_in[..d * edges];
+        let w = &self.w_in[..a.edge_features() * edges];
         m.mlp(i).backward(
             th,
             &mut self.grad,

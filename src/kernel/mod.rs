@@ -207,6 +207,16 @@ impl Kernel {
             }
         }
         let k = plan.bars.len();
+        // Edge inputs: q_i − q_j (filled each step), then constant edge physics.
+        let arch = Arch::new(&self.hyper);
+        let mut w_in_init = vec![0.0; arch.edge_features() * ne];
+        if arch.edge_physics {
+            for e in 0..ne {
+                for (f, x) in arch.edge_physics_of(&plan, e).iter().enumerate() {
+                    w_in_init[(d + f) * ne + e] = *x;
+                }
+            }
+        }
         let projector = match self.learned_masses() {
             Some(m) if self.project_bars && k > 0 => {
                 let mut g = graph.clone();
@@ -220,7 +230,7 @@ impl Kernel {
             h: vec![0.0; em * n],
             agg: vec![0.0; em * n],
             glob: vec![0.0; em * n],
-            w_in: vec![0.0; d * ne],
+            w_in: w_in_init,
             he: vec![0.0; em * ne],
             he_new: vec![0.0; em * ne],
             hs: vec![0.0; em * ne],

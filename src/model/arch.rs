@@ -8,6 +8,9 @@
 use super::variant::{Biases, EdgeInput, Hyper, MessageFn, Norm};
 use std::fmt;
 
+/// Edge-physics input features: rest length and stiffness.
+pub const EDGE_PHYSICS: usize = 2;
+
 /// The parameter holding learnable log-masses, one per particle type.
 pub const LOG_MASS: &str = "log_mass";
 
@@ -114,6 +117,8 @@ pub struct Arch {
     pub edge_input: EdgeInput,
     /// Input and output scales (identity when the model has none).
     pub norm: Norm,
+    /// Edges read (rest length, stiffness) after q_i − q_j.
+    pub edge_physics: bool,
     /// The biases it was derived from.
     pub biases: Biases,
 }
@@ -148,6 +153,7 @@ impl Arch {
             (block, sizes)
         };
         let msg_hidden = h.message == MessageFn::Mlp;
+        let edge_extra = if h.edge_physics { EDGE_PHYSICS } else { 0 };
         let edge_in = match h.edge_input {
             EdgeInput::Concat => 2 * em,
             EdgeInput::Product => em,
@@ -164,7 +170,7 @@ impl Arch {
                 NodeInput::Full => t + 2 * d,
             };
             mlps.push(mlp(Block::NodeEmbed, node_in, em, true));
-            mlps.push(mlp(Block::EdgeEmbed, d, em, true));
+            mlps.push(mlp(Block::EdgeEmbed, d + edge_extra, em, true));
             for l in 0..rounds {
                 mlps.push(mlp(Block::Message(l), 2 * em, em, msg_hidden));
                 mlps.push(mlp(Block::EdgeUpdate(l), edge_in, em, msg_hidden));
@@ -197,6 +203,7 @@ impl Arch {
             particles: h.particles,
             edge_input: h.edge_input,
             norm: h.norm.clone().unwrap_or_else(|| Norm::identity(d)),
+            edge_physics: h.edge_physics,
             biases: b,
         }
     }
@@ -207,6 +214,20 @@ impl Arch {
             .iter()
             .find(|(b, _)| *b == block)
             .map(|(_, s)| s.as_slice())
+    }
+
+    /// Edge input features: q_i − q_j, then (rest, stiffness) with edge physics.
+    pub fn edge_features(&self) -> usize {
+        self.dim + if self.edge_physics { EDGE_PHYSICS } else { 0 }
+    }
+
+    /// The scaled edge-physics features (rest length, stiffness) of directed
+    /// edge `e` of a plan.
+    pub fn edge_physics_of(&self, plan: &super::plan::GraphPlan, e: usize) -> [f64; EDGE_PHYSICS] {
+        [
+            plan.rest[e] / self.norm.w_scale,
+            plan.stiffness[e] / self.norm.k_scale,
+        ]
     }
 
     /// Whether the global (body) embedding exists.

@@ -28,6 +28,8 @@ pub struct Batch {
     pub send: Tensor,
     /// Number of directed edges, 2·B·E.
     pub n_directed: usize,
+    /// Rest length and stiffness of each directed edge, `(2·B·E, 2)`.
+    pub edge_params: Tensor,
     /// Constraint rows when the graph has bars: A `(B, k, D)`, Aᵀ `(B, D, k)`, Ȧq̇ `(B, k, 1)`.
     pub constraint: Option<(Tensor, Tensor, Tensor)>,
     /// Target accelerations `(B·n, d)`, when training.
@@ -69,11 +71,13 @@ impl Batch {
         let e = plan.n_edges();
         let mut recv = Vec::with_capacity(2 * b * e);
         let mut send = Vec::with_capacity(2 * b * e);
+        let mut params = Vec::with_capacity(4 * b * e);
         for half in 0..2 {
             for s in 0..b {
                 for k in half * e..(half + 1) * e {
                     recv.push((s * n + plan.recv[k]) as u32);
                     send.push((s * n + plan.send[k]) as u32);
+                    params.extend([plan.rest[k], plan.stiffness[k]]);
                 }
             }
         }
@@ -131,6 +135,7 @@ impl Batch {
             recv: Tensor::from_vec(recv, n_directed, dev)?,
             send: Tensor::from_vec(send, n_directed, dev)?,
             n_directed,
+            edge_params: Tensor::from_vec(params, (n_directed, 2), dev)?,
             constraint,
             target,
         })

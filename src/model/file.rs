@@ -2,6 +2,7 @@
 
 use super::params::Weights;
 use super::variant::Hyper;
+use crate::system::{EdgeKind, Graph};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -33,6 +34,53 @@ pub struct TrainedOn {
     pub start_fingerprints: Vec<String>,
     /// The bag's system metadata (JSON), if it had any.
     pub system_config: Option<serde_json::Value>,
+    /// The distinct kinds of particle edge of the training graph (absent in
+    /// files written before it existed): a model without edge-physics inputs
+    /// refuses graphs whose edges differ from these.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub edge_params: Vec<EdgeParams>,
+}
+
+/// One kind of edge: what it is, its rest length and stiffness.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EdgeParams {
+    /// Spring or bar.
+    pub kind: EdgeKind,
+    /// Rest length (a bar's length).
+    pub rest_length: f64,
+    /// Stiffness (0 for bars).
+    pub stiffness: f64,
+}
+
+impl EdgeParams {
+    /// Whether two kinds are the same (lengths and stiffnesses to 1e-9 relative).
+    pub fn same(&self, o: &EdgeParams) -> bool {
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1e-300);
+        self.kind == o.kind
+            && close(self.rest_length, o.rest_length)
+            && (close(self.stiffness, o.stiffness) || self.kind == EdgeKind::Bar)
+    }
+
+    /// The distinct kinds of a graph's particle edges (edges to anchors are
+    /// not seen by the network), in first-seen order.
+    pub fn of(graph: &Graph) -> Vec<EdgeParams> {
+        let mut out: Vec<EdgeParams> = vec![];
+        for (_, _, e) in graph.particle_edges() {
+            let p = EdgeParams {
+                kind: e.kind,
+                rest_length: e.rest_length,
+                stiffness: if e.kind == EdgeKind::Bar {
+                    0.0
+                } else {
+                    e.stiffness
+                },
+            };
+            if !out.iter().any(|x| x.same(&p)) {
+                out.push(p);
+            }
+        }
+        out
+    }
 }
 
 /// How training went.

@@ -118,7 +118,12 @@ impl Net {
         let mut h = squareplus(&p.need(Block::NodeEmbed)?.forward(s, &node_in)?)?;
         let nodes = b.b * b.n;
         let mut he = if b.n_directed > 0 {
-            let w = ((gather(&b.q, &b.recv)? - gather(&b.q, &b.send)?)? / arch.norm.w_scale)?;
+            let mut w = ((gather(&b.q, &b.recv)? - gather(&b.q, &b.send)?)? / arch.norm.w_scale)?;
+            if arch.edge_physics {
+                let (n, k) = (arch.norm.w_scale, arch.norm.k_scale);
+                let scale = Tensor::from_slice(&[1.0 / n, 1.0 / k], (1, 2), &Device::Cpu)?;
+                w = Tensor::cat(&[&w, &b.edge_params.broadcast_mul(&scale)?], 1)?;
+            }
             Some(squareplus(&p.need(Block::EdgeEmbed)?.forward(s, &w)?)?)
         } else {
             None

@@ -50,12 +50,25 @@ pub struct GraphPlan {
     pub send: Vec<usize>,
     /// Rigid bars (rows of A).
     pub bars: Vec<Bar>,
+    /// Rest length of each directed edge's spring or bar (both directions alike).
+    pub rest: Vec<f64>,
+    /// Stiffness of each directed edge (0 for bars).
+    pub stiffness: Vec<f64>,
 }
 
 impl GraphPlan {
     /// Prepares a (validated) graph.
     pub fn new(graph: &Graph) -> Self {
         let pairs: Vec<(usize, usize)> = graph.particle_edges().map(|(a, b, _)| (a, b)).collect();
+        let params: Vec<(f64, f64)> = graph
+            .particle_edges()
+            .map(|(_, _, e)| match e.kind {
+                EdgeKind::Spring => (e.rest_length, e.stiffness),
+                EdgeKind::Bar => (e.rest_length, 0.0),
+            })
+            .collect();
+        let rest = params.iter().chain(&params).map(|p| p.0).collect();
+        let stiffness = params.iter().chain(&params).map(|p| p.1).collect();
         let mut recv: Vec<usize> = pairs.iter().map(|p| p.0).collect();
         let mut send: Vec<usize> = pairs.iter().map(|p| p.1).collect();
         recv.extend(pairs.iter().map(|p| p.1));
@@ -79,6 +92,8 @@ impl GraphPlan {
             recv,
             send,
             bars,
+            rest,
+            stiffness,
         }
     }
 

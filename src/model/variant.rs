@@ -147,6 +147,13 @@ pub struct Norm {
     pub w_scale: f64,
     /// Output scale (accelerations; forces for constrained variants).
     pub out_scale: f64,
+    /// Edge-stiffness scale (edge-physics inputs; rest lengths use `w_scale`).
+    #[serde(default = "one_f64")]
+    pub k_scale: f64,
+}
+
+fn one_f64() -> f64 {
+    1.0
 }
 
 impl Norm {
@@ -158,6 +165,7 @@ impl Norm {
             v_scale: 1.0,
             w_scale: 1.0,
             out_scale: 1.0,
+            k_scale: 1.0,
         }
     }
 
@@ -210,6 +218,13 @@ impl Norm {
             v_scale: scale(v2, n),
             w_scale: scale(w2, edges * d),
             out_scale: scale(a2, targets.iter().map(|t| t.len()).sum()),
+            k_scale: scale(
+                graph
+                    .particle_edges()
+                    .map(|(_, _, e)| e.stiffness.powi(2))
+                    .sum(),
+                graph.particle_edges().count(),
+            ),
         }
     }
 }
@@ -265,6 +280,11 @@ pub struct Hyper {
     /// the block's weight prefix (e.g. `edge_out` → [16, 16]).
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub block_hidden: std::collections::BTreeMap<String, Vec<usize>>,
+    /// Edges read their rest length and stiffness besides q_i − q_j, so one
+    /// model serves springs of several kinds (off: a model refuses graphs whose
+    /// edges differ from those it was trained on).
+    #[serde(default)]
+    pub edge_physics: bool,
     /// Input and output scales (none: unscaled, as in files written before
     /// normalisation existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -297,6 +317,7 @@ impl Hyper {
             message,
             edge_input,
             block_hidden: Default::default(),
+            edge_physics: false,
             norm: None,
         }
     }
