@@ -6,11 +6,11 @@ use crate::engine::Engine;
 use crate::model::batch::Batch;
 use crate::model::file::AdamState;
 use crate::model::file::TrainingReport;
-use crate::model::params::{ParamStore, Weights};
+use crate::model::params::ParamStore;
 use crate::model::plan::GraphPlan;
 use crate::model::{ArchPreset, EdgeInput, Hyper, MessageFn, Net, Variant};
 use crate::system::{Graph, State};
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use candle_core::Tensor;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
@@ -387,7 +387,7 @@ pub fn fit(
     split: Split,
     cfg: &TrainConfig,
     rng: &mut ChaCha8Rng,
-    objective: &mut impl Objective,
+    objective: &mut dyn Objective,
     adam: &mut Adam,
     mut on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainingReport> {
@@ -528,93 +528,53 @@ pub fn train(
         }
         net.store.load(&init.weights)?;
     }
-    // Adam's moments are stored by name; each engine reads them in its order.
-    let adam_for = |order: &dyn Fn(&Weights) -> Result<Vec<f64>>, len: usize| -> Result<Adam> {
-        Ok(match cfg.init.as_ref().and_then(|f| f.optimizer.as_ref()) {
-            Some(st) => Adam::resume(cfg.lr, st.step, order(&st.m)?, order(&st.v)?),
-            None => Adam::new(cfg.lr, len),
-        })
+    // One flat parameter order for both engines (the architecture's), in
+    // which Adam's moments are stored by name too.
+    let layout = crate::engine::Layout::new(&net.parts.arch);
+    if !layout
+        .names()
+        .into_iter()
+        .eq(net.store.names().iter().map(String::as_str))
+    {
+        bail!("internal error: the candle store and the engine order parameters differently");
+    }
+    let mut theta = layout.flatten(&net.store.weights()?)?;
+    let mut adam = match cfg.init.as_ref().and_then(|f| f.optimizer.as_ref()) {
+        Some(st) => Adam::resume(
+            cfg.lr,
+            st.step,
+            layout.flatten(&st.m)?,
+            layout.flatten(&st.v)?,
+        ),
+        None => Adam::new(cfg.lr, theta.len()),
     };
-    let (report, optimizer) = match cfg.engine {
+    let plan = GraphPlan::new(graph);
+    let loss = |idx: &[usize]| -> Result<Tensor> {
+        let s: Vec<&State> = idx.iter().map(|&i| &states[i]).collect();
+        let a: Vec<&[f64]> = idx.iter().map(|&i| acc[i].as_slice()).collect();
+        net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?)
+    };
+    let (mut engine, mut native, mut candle);
+    let objective: &mut dyn Objective = match cfg.engine {
         EngineKind::Candle => {
-            let plan = GraphPlan::new(graph);
-            let loss = |idx: &[usize]| -> Result<Tensor> {
-                let s: Vec<&State> = idx.iter().map(|&i| &states[i]).collect();
-                let a: Vec<&[f64]> = idx.iter().map(|&i| acc[i].as_slice()).collect();
-                net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?)
-            };
-            let mut theta = flat_params(&net.store)?;
-            let order = |w: &Weights| -> Result<Vec<f64>> {
-                let mut out = vec![];
-                for name in net.store.names() {
-                    let a = w
-                        .get(name)
-                        .with_context(|| format!("optimiser state lacks {name}"))?;
-                    out.extend_from_slice(&a.data);
-                }
-                Ok(out)
-            };
-            let mut adam = adam_for(&order, theta.len())?;
-            let mut obj = CandleObjective::new(&net.store, loss);
-            let report = fit(
-                &mut theta,
-                sp.clone(),
-                cfg,
-                &mut rng,
-                &mut obj,
-                &mut adam,
-                on_epoch,
-            )?;
-            set_flat_params(&net.store, &theta)?;
-            // Same names and shapes as the weights, values from a flat vector.
-            let named = |x: &[f64]| -> Result<Weights> {
-                let mut w = net.store.weights()?;
-                let mut at = 0;
-                for name in net.store.names() {
-                    let a = w.get_mut(name).expect("store names its weights");
-                    let n = a.data.len();
-                    a.data.copy_from_slice(&x[at..at + n]);
-                    at += n;
-                }
-                Ok(w)
-            };
-            let (step, m, v) = adam.state();
-            (
-                report,
-                AdamState {
-                    step,
-                    m: named(m)?,
-                    v: named(v)?,
-                },
-            )
+            candle = CandleObjective::new(&net.store, loss);
+            &mut candle
         }
         EngineKind::Native => {
-            let mut engine = Engine::new(&net.hyper, graph, cfg.threads)?;
-            let layout = engine.layout().clone();
-            let mut theta = layout.flatten(&net.store.weights()?)?;
-            let order = |w: &Weights| -> Result<Vec<f64>> { Ok(layout.flatten(w)?) };
-            let mut adam = adam_for(&order, theta.len())?;
-            let mut obj = EngineObjective::new(&mut engine, states, acc);
-            let report = fit(
-                &mut theta,
-                sp.clone(),
-                cfg,
-                &mut rng,
-                &mut obj,
-                &mut adam,
-                on_epoch,
-            )?;
-            net.store.load(&layout.weights(&theta))?;
-            let (step, m, v) = adam.state();
-            (
-                report,
-                AdamState {
-                    step,
-                    m: layout.weights(m),
-                    v: layout.weights(v),
-                },
-            )
+            engine = Engine::new(&net.hyper, graph, cfg.threads)?;
+            native = EngineObjective::new(&mut engine, states, acc);
+            &mut native
         }
+    };
+    let report = fit(
+        &mut theta, sp, cfg, &mut rng, objective, &mut adam, on_epoch,
+    )?;
+    net.store.load(&layout.weights(&theta))?;
+    let (step, m, v) = adam.state();
+    let optimizer = AdamState {
+        step,
+        m: layout.weights(m),
+        v: layout.weights(v),
     };
     Ok(Trained {
         net,

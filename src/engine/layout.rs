@@ -64,6 +64,11 @@ impl Layout {
         self.len == 0
     }
 
+    /// Parameter names in order.
+    pub fn names(&self) -> Vec<&str> {
+        self.entries.iter().map(|(n, _, _)| n.as_str()).collect()
+    }
+
     /// Offset of a named parameter.
     pub fn offset(&self, name: &str) -> Option<usize> {
         self.entries
