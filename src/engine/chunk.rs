@@ -785,18 +785,8 @@ impl Chunk {
         if let Some(i) = m.ix(Block::GlobalEmbed) {
             times_squareplus_grad(gglob, glob);
             let x = &self.xn[..nf * nodes];
-            m.mlp(i).backward(
-                th,
-                &mut self.grad,
-                x,
-                &[],
-                nodes,
-                &self.tapes[i],
-                gglob,
-                None,
-                s1,
-                s2,
-            );
+            m.mlp(i)
+                .backward_params(th, &mut self.grad, x, nodes, &self.tapes[i], gglob, s1, s2);
         }
         // Message passing, last round first.
         for l in (0..a.rounds).rev() {
@@ -905,33 +895,13 @@ impl Chunk {
         times_squareplus_grad(gh, &self.h[0][..em * nodes]);
         let i = m.ix(Block::NodeEmbed).expect("graph model");
         let x = &self.xn[..node_in * nodes];
-        m.mlp(i).backward(
-            th,
-            &mut self.grad,
-            x,
-            &[],
-            nodes,
-            &self.tapes[i],
-            gh,
-            None,
-            s1,
-            s2,
-        );
+        m.mlp(i)
+            .backward_params(th, &mut self.grad, x, nodes, &self.tapes[i], gh, s1, s2);
         let ghe = &mut self.ghe[..em * edges];
         times_squareplus_grad(ghe, &self.he[0][..em * edges]);
         let i = m.ix(Block::EdgeEmbed).expect("graph model");
         let w = &self.w_in[..a.edge_features() * edges];
-        m.mlp(i).backward(
-            th,
-            &mut self.grad,
-            w,
-            &[],
-            edges,
-            &self.tapes[i],
-            ghe,
-            None,
-            s1,
-            s2,
-        );
+        m.mlp(i)
+            .backward_params(th, &mut self.grad, w, edges, &self.tapes[i], ghe, s1, s2);
     }
 }
