@@ -67,8 +67,13 @@ pub fn run() -> anyhow::Result<()> {
     }
 }
 
+/// A vector given as one argument, "x,y[,z]" (a newtype, so that clap takes
+/// it as one value rather than a list of numbers).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Vector(pub Vec<f64>);
+
 /// Parses "x,y[,z]".
-pub(crate) fn parse_vector(s: &str) -> Result<Vec<f64>, String> {
+pub(crate) fn parse_vector(s: &str) -> Result<Vector, String> {
     s.split(',')
         .map(|x| {
             x.trim()
@@ -82,5 +87,6 @@ pub(crate) fn parse_vector(s: &str) -> Result<Vec<f64>, String> {
                     }
                 })
         })
-        .collect()
+        .collect::<Result<Vec<f64>, String>>()
+        .map(Vector)
 }

@@ -30,7 +30,7 @@ pub struct Args {
     pub drag: Option<f64>,
     /// Constant external force on every particle, "fx,fy[,fz]".
     #[arg(long, value_parser = super::parse_vector)]
-    pub force: Option<Vec<f64>>,
+    pub force: Option<super::Vector>,
     /// Integration step [s] (default: pendulum 1e-5, spring and peridynamic 1e-3).
     #[arg(long)]
     pub dt: Option<f64>,
@@ -66,7 +66,7 @@ pub fn config(a: &Args) -> Result<SystemConfig> {
         c.field.drag = d;
     }
     if let Some(f) = &a.force {
-        c.field.force = f.clone();
+        c.field.force = f.0.clone();
     }
     if let Some(g) = a.gravity {
         c.field.gravity = g;
