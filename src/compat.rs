@@ -126,6 +126,13 @@ impl TrainedFor {
 
     /// Reads a model file's training description.
     pub fn from_model_file(path: &Path) -> anyhow::Result<TrainedFor> {
+        if path == Path::new(crate::dynamics::STILL) {
+            // The reference fits any data.
+            return Ok(TrainedFor {
+                model: crate::dynamics::STILL.into(),
+                ..TrainedFor::default()
+            });
+        }
         let text = std::fs::read_to_string(path)
             .map_err(|e| anyhow::anyhow!("cannot read model file {}: {e}", path.display()))?;
         let v: serde_json::Value = serde_json::from_str(&text)

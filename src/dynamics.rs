@@ -223,3 +223,76 @@ pub trait Dynamics: Send + Sync {
         self.rollout_every(graph, start, dt, steps, 1)
     }
 }
+
+/// The name under which [`Still`] is loaded (`--model still`).
+pub const STILL: &str = "still";
+
+/// The "nothing moves" reference: every predicted state is the start's
+/// positions at rest, q̂(t) = q(0). What a learned model must beat on systems
+/// that move little, such as a solid vibrating about its rest shape.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Still;
+
+impl Still {
+    fn at_rest(start: &State) -> State {
+        State {
+            q: start.q.clone(),
+            v: vec![0.0; start.v.len()],
+        }
+    }
+}
+
+impl Dynamics for Still {
+    fn describe(&self) -> String {
+        "nothing moves (q̂(t) = q(0), at rest): the reference".into()
+    }
+
+    fn supports(&self, graph: &Graph) -> Result<(), String> {
+        graph.validate()
+    }
+
+    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
+        state.validate(graph)?;
+        out.fill(0.0);
+        Ok(())
+    }
+
+    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String> {
+        state.validate(graph)?;
+        Ok(Forces {
+            total: vec![0.0; graph.ndof()],
+            edges: vec![],
+        })
+    }
+
+    fn rollout_every(
+        &self,
+        graph: &Graph,
+        start: &State,
+        _dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<State>, String> {
+        start.validate(graph)?;
+        Ok(vec![Self::at_rest(start); steps / every.max(1) + 1])
+    }
+
+    fn rollout_many(
+        &self,
+        graph: &Graph,
+        starts: &[State],
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<Rollout>, String> {
+        starts
+            .iter()
+            .map(|s| {
+                Ok(Rollout {
+                    states: self.rollout_every(graph, s, dt, steps, every)?,
+                    diverged_at: None,
+                })
+            })
+            .collect()
+    }
+}

@@ -622,3 +622,56 @@ fn readme_peridynamic_example_uses_125_particles() {
         "cube",
     );
 }
+
+/// `evaluate --model still` scores the "nothing moves" reference: its RE(t)
+/// equals a direct computation of ‖q(0) − q(t)‖/(‖q(0)‖ + ‖q(t)‖) from the
+/// bag (geometric mean over trajectories).
+#[test]
+fn evaluate_still_is_the_standing_still_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(&mcgnode(
+        &[
+            "simulate",
+            "--system",
+            "spring",
+            "--trajectories",
+            "3",
+            "--states",
+            "21",
+            "--out",
+            "t.mcap",
+        ],
+        d,
+    ));
+    let e: serde_json::Value = serde_json::from_str(&ok(&mcgnode(
+        &["evaluate", "--model", "still", "--bag", "t.mcap", "--json"],
+        d,
+    )))
+    .unwrap();
+    let re: Vec<f64> = e["summary"]["re"]["gmean"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    let bag = mcgnode::data::bag::read_trajectories(d.join("t.mcap")).unwrap();
+    let norm = |x: &[f64]| x.iter().map(|v| v * v).sum::<f64>().sqrt();
+    for k in [1, 10, 20] {
+        let logs: Vec<f64> = bag
+            .trajectories
+            .iter()
+            .map(|t| {
+                let (q0, q) = (&t.samples[0].state.q, &t.samples[k].state.q);
+                let diff: Vec<f64> = q0.iter().zip(q).map(|(a, b)| a - b).collect();
+                (norm(&diff) / (norm(q0) + norm(q))).ln()
+            })
+            .collect();
+        let want = (logs.iter().sum::<f64>() / logs.len() as f64).exp();
+        assert!(
+            (re[k] - want).abs() <= 1e-12 * want,
+            "RE at sample {k}: evaluate {} vs direct {want}",
+            re[k]
+        );
+    }
+}

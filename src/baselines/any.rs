@@ -18,8 +18,16 @@ pub struct LoadedModel {
     pub start_fingerprints: Vec<String>,
 }
 
-/// Loads a model file of the GNODE family or a baseline, by its `format` field.
+/// Loads a model file of the GNODE family or a baseline, by its `format` field
+/// (or, for the path `still`, the "nothing moves" reference [`crate::dynamics::Still`]).
 pub fn load_any_model(path: &Path) -> Result<LoadedModel> {
+    if path == Path::new(crate::dynamics::STILL) {
+        return Ok(LoadedModel {
+            name: crate::dynamics::STILL.to_string(),
+            start_fingerprints: vec![],
+            dynamics: Arc::new(crate::dynamics::Still),
+        });
+    }
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read model file {}", path.display()))?;
     let format = serde_json::from_str::<serde_json::Value>(&text)

@@ -54,31 +54,6 @@ fn peri_cfg(epochs: usize) -> TrainConfig {
     }
 }
 
-/// RE(t) of "nothing moves" (q̂(t) = q(0)) on a test bag, summarised like a
-/// model's: the reference a learned solid must beat.
-fn standing_still(bag: &std::path::Path) -> Result<crate::metrics::Summary> {
-    use crate::system::State;
-    let b = crate::data::bag::read_trajectories(bag)?;
-    let mut curves = vec![];
-    for tr in &b.trajectories {
-        let truth: Vec<State> = tr.samples.iter().map(|s| s.state.clone()).collect();
-        let Some(first) = truth.first() else { continue };
-        let still = State {
-            q: first.q.clone(),
-            v: vec![0.0; first.v.len()],
-        };
-        let pred = vec![still; truth.len()];
-        let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
-        // Only RE is read from these curves, and the field does not enter it.
-        let field = b.field.clone().unwrap_or_default();
-        curves.push(
-            crate::metrics::error_curves(&tr.graph, &field, &truth, &pred, &times)
-                .map_err(anyhow::Error::msg)?,
-        );
-    }
-    crate::metrics::summarize(&curves).map_err(anyhow::Error::msg)
-}
-
 fn cfg(epochs: usize) -> TrainConfig {
     TrainConfig {
         epochs,
@@ -541,9 +516,15 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
         sc.peri_test_trajectories,
         (sc.peri_states - 1) as f64 * base.dt * base.save_every as f64
     );
-    if let Ok(still) = standing_still(&test_bag) {
-        let avg = still.time_average();
-        let (re1, _, _) = still.at(1.0);
+    let still = crate::evaluate::evaluate(
+        &crate::dynamics::Still,
+        &[],
+        &crate::data::bag::read_trajectories(&test_bag)?,
+        &crate::evaluate::EvalOptions::default(),
+    );
+    if let Ok(still) = still {
+        let avg = still.averages;
+        let (re1, _, _) = still.summary.at(1.0);
         md += &format!(
             "Reference: predicting that nothing moves (q̂(t) = q(0)) scores RE {} at 1 s and {} \
              on average over the rollout; the models' RE below should be far smaller. Trained \
