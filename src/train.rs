@@ -52,6 +52,20 @@ pub struct TrainConfig {
     /// Scale inputs and outputs by statistics of the training split (stored
     /// in the model file; see [`crate::model::Norm`]).
     pub normalize: bool,
+    /// Step schedule: after epoch `e`, learning rate `lr` (pairs in any order;
+    /// the latest passed applies).
+    pub lr_drops: Vec<(usize, f64)>,
+}
+
+impl TrainConfig {
+    /// The learning rate of epoch `epoch` (from 1).
+    pub fn lr_at(&self, epoch: usize) -> f64 {
+        self.lr_drops
+            .iter()
+            .filter(|(e, _)| epoch > *e)
+            .max_by_key(|(e, _)| *e)
+            .map_or(self.lr, |(_, lr)| *lr)
+    }
 }
 
 impl Default for TrainConfig {
@@ -69,6 +83,7 @@ impl Default for TrainConfig {
             threads: crate::engine::all_cores(),
             init: None,
             normalize: true,
+            lr_drops: vec![],
         }
     }
 }
@@ -123,6 +138,11 @@ impl Adam {
     /// Continues from a saved state (moments flat, in parameter order).
     pub fn resume(lr: f64, step: i32, m: Vec<f64>, v: Vec<f64>) -> Self {
         Self { lr, m, v, t: step }
+    }
+
+    /// Sets the learning rate (a schedule's step).
+    pub fn set_lr(&mut self, lr: f64) {
+        self.lr = lr;
     }
 
     /// (updates taken, first moments, second moments).
@@ -411,6 +431,7 @@ pub fn fit(
     let mut epochs_run = 0;
     let mut stopped_early = false;
     for epoch in 1..=cfg.epochs {
+        adam.set_lr(cfg.lr_at(epoch));
         train_idx.shuffle(rng);
         let (mut sum, mut count) = (0.0, 0usize);
         for chunk in train_idx.chunks(cfg.batch) {
@@ -465,6 +486,7 @@ pub fn fit(
         patience: cfg.patience,
         noise: cfg.noise,
         points: cfg.points,
+        lr_drops: cfg.lr_drops.clone(),
     })
 }
 

@@ -520,3 +520,33 @@ fn edge_physics_reads_stiffness_and_plain_models_refuse_other_edges() {
         "a plain model cannot see stiffness (hence the refusal)"
     );
 }
+
+/// A learning-rate step applies from the epoch after it (a step to a
+/// vanishing rate freezes the weights) and is recorded in the report.
+#[test]
+fn learning_rate_steps_apply_and_are_recorded() {
+    let cfg = TrainConfig {
+        lr: 1e-2,
+        lr_drops: vec![(300, 1e-4), (200, 1e-3)],
+        ..TrainConfig::default()
+    };
+    assert_eq!(
+        [cfg.lr_at(1), cfg.lr_at(200), cfg.lr_at(201), cfg.lr_at(301)],
+        [1e-2, 1e-2, 1e-3, 1e-4]
+    );
+    let (g, s, a) = data(SystemKind::Spring, 5, 3, 1);
+    let cfg = TrainConfig {
+        epochs: 4,
+        lr_drops: vec![(2, 1e-300)],
+        ..TrainConfig::default()
+    };
+    let mut val = vec![];
+    let t = train(Hyper::new(Variant::Gnode, 2, 1, 5), &g, &s, &a, &cfg, |r| {
+        val.push(r.validation_loss);
+        true
+    })
+    .unwrap();
+    assert_ne!(val[0], val[1], "epochs 1-2 train at the base rate");
+    assert_eq!(val[2], val[3], "after the step nothing moves");
+    assert_eq!(t.report.lr_drops, vec![(2, 1e-300)]);
+}

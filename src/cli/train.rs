@@ -33,6 +33,9 @@ pub struct Args {
     /// Adam learning rate.
     #[arg(long, default_value_t = 1e-3)]
     pub lr: f64,
+    /// Learning-rate step: after EPOCH, use LR (repeatable), e.g. `300:1e-3`.
+    #[arg(long, value_name = "EPOCH:LR", value_parser = parse_drop)]
+    pub lr_drop: Vec<(usize, f64)>,
     /// Batch size.
     #[arg(long, default_value_t = 100)]
     pub batch: usize,
@@ -105,6 +108,17 @@ pub struct Args {
     pub quiet: bool,
 }
 
+/// `EPOCH:LR`.
+fn parse_drop(s: &str) -> Result<(usize, f64), String> {
+    let bad = || format!("expected EPOCH:LR such as 300:1e-3, got {s:?}");
+    let (e, lr) = s.split_once(':').ok_or_else(bad)?;
+    let e = e.trim().parse::<usize>().map_err(|_| bad())?;
+    match lr.trim().parse::<f64>() {
+        Ok(lr) if lr.is_finite() && lr > 0.0 => Ok((e, lr)),
+        _ => Err(bad()),
+    }
+}
+
 /// `BLOCK=SIZES`, sizes comma-separated (empty: no hidden layer).
 fn parse_block(s: &str) -> Result<(String, Vec<usize>), String> {
     let (block, sizes) = s
@@ -172,6 +186,7 @@ pub fn run(a: Args) -> Result<()> {
         noise: a.noise,
         points: a.points,
         engine: a.engine,
+        lr_drops: a.lr_drop.clone(),
         threads: a.threads.unwrap_or_else(crate::engine::all_cores),
         normalize: !a.no_normalize,
         init: a

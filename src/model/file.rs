@@ -116,6 +116,9 @@ pub struct TrainingReport {
     /// written before this field existed).
     #[serde(default)]
     pub points: Option<usize>,
+    /// Learning-rate steps (after epoch, rate), if the schedule had any.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lr_drops: Vec<(usize, f64)>,
 }
 
 /// A trained model on disk.

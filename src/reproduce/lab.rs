@@ -52,6 +52,8 @@ pub struct TrainSpec {
     pub bags: Vec<PathBuf>,
     /// Training settings.
     pub cfg: TrainConfig,
+    /// Architecture options (GNODE family).
+    pub opts: ModelOptions,
 }
 
 impl<'a> Lab<'a> {
@@ -91,7 +93,7 @@ impl<'a> Lab<'a> {
         let report = train_any_from_bags(
             spec.kind,
             &spec.bags,
-            &ModelOptions::default(),
+            &spec.opts,
             &spec.cfg,
             |_| {},
             |r| {
