@@ -173,6 +173,9 @@ impl Shared {
 
     /// Checks, records and predicts one incoming state (blocking work).
     fn handle_state(&self, msg: ParticleState, received_ns: u64) -> Result<Prediction, String> {
+        // Refused before anything is recorded or predicted: an oversized state
+        // would hold memory and its prediction could not be delivered promptly.
+        predict::check_size(&msg, self.params.max_particles)?;
         self.record(|r| r.state(received_ns, &msg));
         let model = self.model();
         // A state the model was not trained for (another dimension, edge kinds
@@ -255,35 +258,24 @@ fn ros_name(s: &str) -> anyhow::Result<Name> {
     Name::parse(s).map_err(|e| anyhow!("invalid ROS name {s:?}: {e:?}"))
 }
 
-/// The parameters as read-only ROS parameters, so rclpy can list and get them.
+/// Every parameter of [`SPECS`](super::params::SPECS) as a read-only ROS
+/// parameter, so rclpy can list and get them all.
 fn declare_parameters(p: &NodeParams) -> NodeOptions {
-    let s = |x: &str| ParameterValue::String(x.to_string());
-    let i = |x: u32| ParameterValue::Integer(i64::from(x));
-    let values = [
-        ("model", s(&p.model)),
-        ("input_topic", s(&p.input_topic)),
-        ("trajectory_topic", s(&p.trajectory_topic)),
-        ("forces_topic", s(&p.forces_topic)),
-        ("diagnostics_topic", s(&p.diagnostics_topic)),
-        ("rollout_service", s(&p.rollout_service)),
-        ("horizon", i(p.horizon)),
-        ("dt", ParameterValue::Double(p.dt)),
-        ("qos_reliable", ParameterValue::Boolean(p.qos_reliable)),
-        ("qos_depth", i(p.qos_depth)),
-        (
-            "diagnostics_period",
-            ParameterValue::Double(p.diagnostics_period),
-        ),
-        ("warn_period", ParameterValue::Double(p.warn_period)),
-        ("max_rollout_steps", i(p.max_rollout_steps)),
-        ("record_dir", s(&p.record_dir)),
-        ("record_split_mb", i(p.record_split_mb)),
-        (
-            "record_split_seconds",
-            ParameterValue::Double(p.record_split_seconds),
-        ),
-    ];
-    let initial: Vec<(&'static str, ParameterValue)> = values.to_vec();
+    use super::params::{Kind, SPECS};
+    let values: Vec<(&'static str, ParameterValue)> = SPECS
+        .iter()
+        .map(|(key, kind, _)| {
+            let text = p.raw_value(key);
+            let v = match kind {
+                Kind::Str | Kind::Topic => ParameterValue::String(text),
+                Kind::Bool => ParameterValue::Boolean(text == "true"),
+                Kind::Int(..) => ParameterValue::Integer(text.parse().unwrap_or_default()),
+                Kind::Double(_) => ParameterValue::Double(text.parse().unwrap_or_default()),
+            };
+            (*key, v)
+        })
+        .collect();
+    let initial = values.clone();
     values
         .into_iter()
         .fold(NodeOptions::new().enable_rosout(true), |o, (k, v)| {
@@ -536,11 +528,15 @@ async fn rollout_loop(shared: Arc<Shared>, server: Server<RolloutRequest, Rollou
             }
         };
         let model = shared.model();
-        let (default_dt, max_steps) = (shared.params.dt, shared.params.max_rollout_steps);
-        let fine_dt = default_dt / f64::from(shared.params.substeps.max(1));
-        let job = tokio::task::spawn_blocking(move || {
-            rollout_response(model.as_ref(), &req, default_dt, fine_dt, max_steps)
-        });
+        let p = &shared.params;
+        let limits = RolloutLimits {
+            default_dt: p.dt,
+            fine_dt: p.dt / f64::from(p.substeps.max(1)),
+            max_steps: p.max_rollout_steps,
+            max_particles: p.max_particles,
+        };
+        let job =
+            tokio::task::spawn_blocking(move || rollout_response(model.as_ref(), &req, &limits));
         let resp = job.await.unwrap_or_else(|join| RolloutResponse {
             success: false,
             message: format!("rollout task failed: {join}"),
@@ -561,26 +557,47 @@ async fn rollout_loop(shared: Arc<Shared>, server: Server<RolloutRequest, Rollou
     }
 }
 
-/// The Rollout service's work: checks the request, then predicts. `dt = 0` in the request means `default_dt`;
-/// the model is integrated with steps no longer than `fine_dt` (the node's
-/// `dt / substeps`) and sampled every `dt`.
+/// What the Rollout service accepts and how it integrates, from the node's
+/// parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RolloutLimits {
+    /// Step of a request with `dt = 0` (the `dt` parameter).
+    pub default_dt: f64,
+    /// Longest integration step (`dt / substeps`).
+    pub fine_dt: f64,
+    /// `max_rollout_steps`.
+    pub max_steps: u32,
+    /// `max_particles`.
+    pub max_particles: u32,
+}
+
+/// The Rollout service's work: checks the request, then predicts. `dt = 0` in
+/// the request means `default_dt`; the model is integrated with steps no
+/// longer than `fine_dt` and sampled every `dt`.
 pub fn rollout_response(
     model: &dyn Dynamics,
     req: &RolloutRequest,
-    default_dt: f64,
-    fine_dt: f64,
-    max_steps: u32,
+    limits: &RolloutLimits,
 ) -> RolloutResponse {
     let fail = |message: String| RolloutResponse {
         success: false,
         message,
         ..RolloutResponse::default()
     };
+    let RolloutLimits {
+        default_dt,
+        fine_dt,
+        max_steps,
+        max_particles,
+    } = *limits;
     if req.steps > max_steps {
         return fail(format!(
             "steps = {} exceeds max_rollout_steps = {max_steps}",
             req.steps
         ));
+    }
+    if let Err(e) = predict::check_size(&req.initial, max_particles) {
+        return fail(e);
     }
     let dt = if req.dt == 0.0 { default_dt } else { req.dt };
     let (graph, start) = match predict::accept(model, &req.initial) {
@@ -693,15 +710,29 @@ mod tests {
             steps: 50,
             ..RolloutRequest::default()
         };
-        let r = rollout_response(model.as_ref(), &req, 0.01, 0.01, 10);
+        let limits = |max_steps| RolloutLimits {
+            default_dt: 0.01,
+            fine_dt: 0.01,
+            max_steps,
+            max_particles: 100,
+        };
+        let r = rollout_response(model.as_ref(), &req, &limits(10));
         assert!(
             !r.success && r.message.contains("max_rollout_steps"),
             "{}",
             r.message
         );
-        let r = rollout_response(model.as_ref(), &req, 0.01, 0.01, 100);
+        let r = rollout_response(model.as_ref(), &req, &limits(100));
         assert!(
             !r.success && r.message.contains("malformed"),
+            "{}",
+            r.message
+        );
+        let mut big = req.clone();
+        big.initial.masses = vec![1.0; 101];
+        let r = rollout_response(model.as_ref(), &big, &limits(100));
+        assert!(
+            !r.success && r.message.contains("max_particles = 100") && r.message.contains("101"),
             "{}",
             r.message
         );

@@ -43,6 +43,9 @@ pub struct NodeParams {
     pub warn_period: f64,
     /// Largest `steps` the Rollout service accepts.
     pub max_rollout_steps: u32,
+    /// Largest state (particles) the node accepts on its input topic and in
+    /// Rollout calls; larger ones are rejected with the reason.
+    pub max_particles: u32,
     /// Folder to record MCAP bags into; empty disables recording.
     pub record_dir: String,
     /// Start a new bag after this many megabytes (0 = no size limit).
@@ -71,6 +74,7 @@ impl Default for NodeParams {
             diagnostics_period: 1.0,
             warn_period: 5.0,
             max_rollout_steps: 10_000,
+            max_particles: 10_000,
             record_dir: String::new(),
             record_split_mb: 0,
             record_split_seconds: 0.0,
@@ -81,9 +85,12 @@ impl Default for NodeParams {
 
 /// What a parameter holds, for type checking and messages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Kind {
+pub enum Kind {
+    /// Any text.
     Str,
+    /// An absolute ROS 2 name.
     Topic,
+    /// `true` or `false`.
     Bool,
     /// An integer in `lo..=hi`.
     Int(u32, u32),
@@ -91,8 +98,10 @@ enum Kind {
     Double(bool),
 }
 
-/// Name, kind and documentation of every parameter, in file order.
-const SPECS: &[(&str, Kind, &str)] = &[
+/// Name, kind and documentation of every parameter, in file order: the one
+/// table the parameter file, `--set`, `--print-params` and the node's declared
+/// ROS parameters (with descriptions and ranges) all come from.
+pub const SPECS: &[(&str, Kind, &str)] = &[
     (
         "model",
         Kind::Str,
@@ -163,6 +172,11 @@ const SPECS: &[(&str, Kind, &str)] = &[
         "max_rollout_steps",
         Kind::Int(1, 1_000_000),
         "largest steps of a Rollout call",
+    ),
+    (
+        "max_particles",
+        Kind::Int(1, 10_000_000),
+        "largest state accepted (particles); larger states are rejected with the reason",
     ),
     (
         "record_dir",
@@ -327,6 +341,7 @@ impl NodeParams {
             "substeps" => self.substeps = v,
             "qos_depth" => self.qos_depth = v,
             "max_rollout_steps" => self.max_rollout_steps = v,
+            "max_particles" => self.max_particles = v,
             "record_split_mb" => self.record_split_mb = v,
             _ => unreachable_key(key),
         }
@@ -354,21 +369,30 @@ impl NodeParams {
         s
     }
 
-    fn value_text(&self, key: &str) -> String {
-        let q = |s: &str| format!("{s:?}");
+    /// The value of `key` as parameter-file text (strings quoted).
+    pub fn value_text(&self, key: &str) -> String {
+        match SPECS.iter().find(|(k, _, _)| *k == key) {
+            Some((_, Kind::Str | Kind::Topic, _)) => format!("{:?}", self.raw_value(key)),
+            _ => self.raw_value(key),
+        }
+    }
+
+    /// The value of `key` as text, strings unquoted ("" for an unknown key).
+    pub fn raw_value(&self, key: &str) -> String {
         match key {
-            "model" => q(&self.model),
-            "input_topic" => q(&self.input_topic),
-            "trajectory_topic" => q(&self.trajectory_topic),
-            "forces_topic" => q(&self.forces_topic),
-            "diagnostics_topic" => q(&self.diagnostics_topic),
-            "rollout_service" => q(&self.rollout_service),
-            "record_dir" => q(&self.record_dir),
-            "model_dir" => q(&self.model_dir),
+            "model" => self.model.clone(),
+            "input_topic" => self.input_topic.clone(),
+            "trajectory_topic" => self.trajectory_topic.clone(),
+            "forces_topic" => self.forces_topic.clone(),
+            "diagnostics_topic" => self.diagnostics_topic.clone(),
+            "rollout_service" => self.rollout_service.clone(),
+            "record_dir" => self.record_dir.clone(),
+            "model_dir" => self.model_dir.clone(),
             "substeps" => self.substeps.to_string(),
             "horizon" => self.horizon.to_string(),
             "qos_depth" => self.qos_depth.to_string(),
             "max_rollout_steps" => self.max_rollout_steps.to_string(),
+            "max_particles" => self.max_particles.to_string(),
             "record_split_mb" => self.record_split_mb.to_string(),
             "qos_reliable" => self.qos_reliable.to_string(),
             "dt" => format!("{:?}", self.dt),
