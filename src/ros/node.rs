@@ -25,9 +25,10 @@ use super::msgs::{
     NodeDiagnostics, ParticleForces, PredictedTrajectory, ReplayRequest, ReplayResponse,
     RolloutRequest, RolloutResponse, PACKAGE,
 };
-use super::params::{NodeParams, NODE_NAME};
+use super::params::{NodeParams, NODE_NAME, RUNTIME_SETTABLE};
 use super::predict::{self, Prediction};
 use super::record::{now_ns, Recorder};
+use super::yaml::Scalar;
 
 /// Counters reported in `NodeDiagnostics`.
 #[derive(Debug, Default)]
@@ -106,7 +107,8 @@ impl Logger {
 
 /// What the tasks share.
 pub(super) struct Shared {
-    pub(super) params: NodeParams,
+    /// The parameters now: those in [`RUNTIME_SETTABLE`] change at run time.
+    params: Arc<RwLock<NodeParams>>,
     /// Behind a lock so a model swap (Train, LoadModel) can replace it.
     pub(super) model: RwLock<Arc<dyn Dynamics>>,
     stats: Stats,
@@ -124,6 +126,14 @@ pub(super) struct Shared {
 }
 
 impl Shared {
+    /// A copy of the parameters now.
+    pub(super) fn params(&self) -> NodeParams {
+        self.params
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
     /// The model served now.
     pub(super) fn model(&self) -> Arc<dyn Dynamics> {
         self.model
@@ -147,10 +157,12 @@ impl Shared {
                 .lock()
                 .unwrap_or_else(PoisonError::into_inner),
         );
-        let allowed = limiter
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .allow(Instant::now());
+        let period = Duration::from_secs_f64(self.params().warn_period);
+        let allowed = {
+            let mut l = limiter.lock().unwrap_or_else(PoisonError::into_inner);
+            l.period = period;
+            l.allow(Instant::now())
+        };
         if let Some(suppressed) = allowed {
             let more = if suppressed > 0 {
                 format!(" ({suppressed} similar warnings suppressed)")
@@ -175,7 +187,8 @@ impl Shared {
     fn handle_state(&self, msg: ParticleState, received_ns: u64) -> Result<Prediction, String> {
         // Refused before anything is recorded or predicted: an oversized state
         // would hold memory and its prediction could not be delivered promptly.
-        predict::check_size(&msg, self.params.max_particles)?;
+        let params = self.params();
+        predict::check_size(&msg, params.max_particles)?;
         self.record(|r| r.state(received_ns, &msg));
         let model = self.model();
         // A state the model was not trained for (another dimension, edge kinds
@@ -188,9 +201,9 @@ impl Shared {
         let p = predict::predict(
             model.as_ref(),
             &msg,
-            self.params.dt,
-            self.params.horizon,
-            self.params.substeps,
+            params.dt,
+            params.horizon,
+            params.substeps,
         )?;
         self.record(|r| r.prediction(now_ns(), &p.trajectory, &p.forces));
         Ok(p)
@@ -258,9 +271,41 @@ fn ros_name(s: &str) -> anyhow::Result<Name> {
     Name::parse(s).map_err(|e| anyhow!("invalid ROS name {s:?}: {e:?}"))
 }
 
-/// Every parameter of [`SPECS`](super::params::SPECS) as a read-only ROS
-/// parameter, so rclpy can list and get them all.
-fn declare_parameters(p: &NodeParams) -> NodeOptions {
+/// A ROS parameter value as parameter-file text, for [`NodeParams::set`].
+fn scalar(value: &ParameterValue) -> Scalar {
+    match value {
+        ParameterValue::Boolean(b) => Scalar::Bool(*b),
+        ParameterValue::Integer(i) => Scalar::Int(*i),
+        ParameterValue::Double(x) => Scalar::Float(*x),
+        ParameterValue::String(s) => Scalar::Str(s.clone()),
+        other => Scalar::Str(format!("{other:?}")),
+    }
+}
+
+/// Checks a run-time change of parameter `name` against `current`: only
+/// [`RUNTIME_SETTABLE`] parameters, with the same type and range checks as at
+/// start. The refusal says why and what to do instead.
+pub fn check_runtime_change(
+    current: &NodeParams,
+    name: &str,
+    value: &ParameterValue,
+) -> Result<NodeParams, String> {
+    if !RUNTIME_SETTABLE.contains(&name) {
+        return Err(format!(
+            "parameter {name} cannot change at run time (it shapes topics, services, QoS, \
+             files or the model); restart the node with --set {name}=...; settable now: {}",
+            RUNTIME_SETTABLE.join(", ")
+        ));
+    }
+    let mut p = current.clone();
+    p.set(name, &scalar(value), false)?;
+    Ok(p)
+}
+
+/// Every parameter of [`SPECS`](super::params::SPECS) as a ROS parameter, so
+/// rclpy can list and get them all; those in [`RUNTIME_SETTABLE`] can be set
+/// (validated, then applied to `live`), the others refuse with the reason.
+fn declare_parameters(p: &NodeParams, live: Arc<RwLock<NodeParams>>) -> NodeOptions {
     use super::params::{Kind, SPECS};
     let values: Vec<(&'static str, ParameterValue)> = SPECS
         .iter()
@@ -276,21 +321,30 @@ fn declare_parameters(p: &NodeParams) -> NodeOptions {
         })
         .collect();
     let initial = values.clone();
+    let (check, apply) = (live.clone(), live);
     values
         .into_iter()
         .fold(NodeOptions::new().enable_rosout(true), |o, (k, v)| {
             o.declare_parameter(k, v)
         })
-        // Declaring goes through the validator too: accept only the values the
-        // node started with.
+        // Declaring goes through the validator too: the start values pass.
         .parameter_validator(Box::new(move |name, value| {
             if initial.iter().any(|(k, v)| *k == name && v == value) {
-                Ok(())
-            } else {
-                Err(format!(
-                    "parameter {name} is read-only at run time; restart the node with --set"
-                ))
+                return Ok(());
             }
+            let current = check.read().unwrap_or_else(PoisonError::into_inner);
+            check_runtime_change(&current, name, value).map(|_| ())
+        }))
+        // Runs after the validator, and for every declared value at start.
+        // Other parameters (read-only ones, ros2-client's use_sim_time) need
+        // nothing here: the validator refuses changes to the read-only ones.
+        .parameter_set_action(Box::new(move |name, value| {
+            if !RUNTIME_SETTABLE.contains(&name) {
+                return Ok(());
+            }
+            let mut current = apply.write().unwrap_or_else(PoisonError::into_inner);
+            *current = check_runtime_change(&current, name, value)?;
+            Ok(())
         }))
 }
 
@@ -310,12 +364,13 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         .enable_all()
         .build()
         .context("starting the async runtime")?;
+    let live = Arc::new(RwLock::new(params.clone()));
     let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
         .map_err(|e| anyhow!("creating the DDS participant in domain {domain_id}: {e:?}"))?;
     let mut node = context
         .new_node(
             NodeName::new("/", NODE_NAME).map_err(|e| anyhow!("node name: {e:?}"))?,
-            declare_parameters(&params),
+            declare_parameters(&params, live.clone()),
         )
         .map_err(|e| anyhow!("creating the node: {e:?}"))?;
 
@@ -390,9 +445,9 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         log: Logger {
             rosout: node.logging_handle(),
         },
-        params,
+        params: live,
     });
-    let p = &shared.params;
+    let p = shared.params();
     shared.log.log(
         LogLevel::Info,
         &format!(
@@ -528,7 +583,7 @@ async fn rollout_loop(shared: Arc<Shared>, server: Server<RolloutRequest, Rollou
             }
         };
         let model = shared.model();
-        let p = &shared.params;
+        let p = shared.params();
         let limits = RolloutLimits {
             default_dt: p.dt,
             fine_dt: p.dt / f64::from(p.substeps.max(1)),
@@ -638,7 +693,7 @@ async fn replay_loop(shared: Arc<Shared>, server: Server<ReplayRequest, ReplayRe
             }
         };
         let model = shared.model();
-        let p = &shared.params;
+        let p = shared.params();
         let (dt, substeps, horizon) = (p.dt, p.substeps, p.horizon);
         let job = tokio::task::spawn_blocking(move || {
             crate::replay::replay_as_node(model.as_ref(), &req.bag, dt, substeps, horizon)
@@ -678,7 +733,8 @@ async fn replay_loop(shared: Arc<Shared>, server: Server<ReplayRequest, ReplayRe
 
 /// Publishes `NodeDiagnostics` every `diagnostics_period`.
 async fn diagnostics_loop(shared: Arc<Shared>, publisher: Publisher<NodeDiagnostics>) {
-    let mut tick = tokio::time::interval(Duration::from_secs_f64(shared.params.diagnostics_period));
+    let period = shared.params().diagnostics_period;
+    let mut tick = tokio::time::interval(Duration::from_secs_f64(period));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         tick.tick().await;

@@ -195,6 +195,19 @@ pub const SPECS: &[(&str, Kind, &str)] = &[
     ),
 ];
 
+/// Parameters that can be changed while the node runs (through the ROS
+/// parameter services, e.g. rclpy's `set_parameters`): they take effect from
+/// the next incoming state or call. The others shape DDS endpoints, files or
+/// the loaded model and need a restart.
+pub const RUNTIME_SETTABLE: &[&str] = &[
+    "horizon",
+    "dt",
+    "substeps",
+    "warn_period",
+    "max_rollout_steps",
+    "max_particles",
+];
+
 /// Keys of the node's section that are accepted as node names.
 fn is_our_section(key: &str) -> bool {
     matches!(key, "/**" | "**") || key.trim_start_matches('/') == NODE_NAME
