@@ -2,7 +2,8 @@
 //! (scripts/netns.sh): every parameter is listed and readable (substeps,
 //! model_dir and max_particles included), a run-time parameter set through
 //! rclpy changes the next prediction, and read-only, out-of-range and
-//! ill-typed changes are refused with the reason.
+//! ill-typed changes are refused with the reason; the standard `/diagnostics`
+//! (diagnostic_msgs/DiagnosticArray) reports OK, then WARN after a rejection.
 //!
 //! Needs the rclpy venv (`scripts/setup_venv.sh`).
 
@@ -64,4 +65,18 @@ fn rclpy_lists_gets_and_sets_parameters() {
     refused("dt=-1", "must be finite and > 0");
     refused("max_particles=0", "outside 1..=");
     assert_eq!(s["qos_depth_after"], 10, "{report}");
+    // The standard /diagnostics beside NodeDiagnostics.
+    let ok = &s["ok_diag"];
+    assert_eq!(ok["level"], 0, "{report}");
+    assert_eq!(ok["name"], "mcgnode: predictions", "{report}");
+    assert_eq!(ok["values"]["dropped"], "0", "{report}");
+    assert_eq!(ok["values"]["rejected"], "0", "{report}");
+    let warn = &s["warn_diag"];
+    assert_eq!(warn["level"], 1, "{report}");
+    assert_eq!(warn["values"]["rejected"], "1", "{report}");
+    let msg = warn["message"].as_str().unwrap_or_default();
+    assert!(
+        msg.contains("1 states rejected") && msg.contains("masses"),
+        "{msg}\n{report}"
+    );
 }

@@ -22,8 +22,9 @@ use crate::data::msg::{Header, ParticleState, Time, PARTICLE_STATE_TYPE};
 use crate::dynamics::Dynamics;
 
 use super::msgs::{
-    NodeDiagnostics, ParticleForces, PredictedTrajectory, ReplayRequest, ReplayResponse,
-    RolloutRequest, RolloutResponse, PACKAGE,
+    DiagnosticArray, DiagnosticStatus, KeyValue, NodeDiagnostics, ParticleForces,
+    PredictedTrajectory, ReplayRequest, ReplayResponse, RolloutRequest, RolloutResponse,
+    DIAGNOSTIC_OK, DIAGNOSTIC_WARN, PACKAGE,
 };
 use super::params::{NodeParams, NODE_NAME, RUNTIME_SETTABLE};
 use super::predict::{self, Prediction};
@@ -39,6 +40,9 @@ pub struct Stats {
     pub rejected: AtomicU64,
     /// Predictions published.
     pub predicted: AtomicU64,
+    /// States lost before the node took them: gaps in a publisher's sequence
+    /// numbers (e.g. the input queue overflowed while the node was busy).
+    pub dropped: AtomicU64,
     /// Latest failure reason.
     pub last_error: Mutex<String>,
 }
@@ -354,6 +358,7 @@ struct Endpoints {
     trajectory: Publisher<PredictedTrajectory>,
     forces: Publisher<ParticleForces>,
     diagnostics: Publisher<NodeDiagnostics>,
+    standard_diagnostics: Publisher<DiagnosticArray>,
     rollout: Server<RolloutRequest, RolloutResponse>,
 }
 
@@ -387,6 +392,13 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
     let traj_topic = topic(&params.trajectory_topic, PACKAGE, "PredictedTrajectory")?;
     let forces_topic = topic(&params.forces_topic, PACKAGE, "ParticleForces")?;
     let diag_topic = topic(&params.diagnostics_topic, PACKAGE, "NodeDiagnostics")?;
+    let std_diag_topic = node
+        .create_topic(
+            &ros_name(STANDARD_DIAGNOSTICS_TOPIC)?,
+            MessageTypeName::new("diagnostic_msgs", "DiagnosticArray"),
+            &service_qos(),
+        )
+        .map_err(|e| anyhow!("creating topic {STANDARD_DIAGNOSTICS_TOPIC}: {e:?}"))?;
     let e = |what: &'static str| move |err| anyhow!("creating {what}: {err:?}");
     let endpoints = Endpoints {
         input: node
@@ -401,6 +413,9 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         diagnostics: node
             .create_publisher(&diag_topic, Some(qos.clone()))
             .map_err(e("the diagnostics publisher"))?,
+        standard_diagnostics: node
+            .create_publisher(&std_diag_topic, Some(service_qos()))
+            .map_err(e("the /diagnostics publisher"))?,
         rollout: node
             .create_server(
                 ServiceMapping::Enhanced,
@@ -473,12 +488,17 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
             trajectory,
             forces,
             diagnostics,
+            standard_diagnostics,
             rollout,
         } = endpoints;
         tokio::spawn(input_loop(shared.clone(), input, trajectory, forces));
         tokio::spawn(rollout_loop(shared.clone(), rollout));
         tokio::spawn(replay_loop(shared.clone(), replay));
-        tokio::spawn(diagnostics_loop(shared.clone(), diagnostics));
+        tokio::spawn(diagnostics_loop(
+            shared.clone(),
+            diagnostics,
+            standard_diagnostics,
+        ));
         super::training::spawn(shared.clone(), training_endpoints);
         wait_for_shutdown().await
     });
@@ -526,9 +546,22 @@ async fn input_loop(
     trajectory: Publisher<PredictedTrajectory>,
     forces: Publisher<ParticleForces>,
 ) {
+    // Last sequence number seen from each publisher.
+    let mut last_seen: std::collections::HashMap<String, i64> = Default::default();
     loop {
         let msg = match input.async_take().await {
-            Ok((msg, _info)) => msg,
+            Ok((msg, info)) => {
+                let publisher = format!("{:?}", info.publisher_gid());
+                let sn = info.sequence_number();
+                if let Some(prev) = last_seen.insert(publisher, sn) {
+                    let gap = sn.saturating_sub(prev).saturating_sub(1);
+                    if gap > 0 {
+                        let gap = u64::try_from(gap).unwrap_or(0);
+                        shared.stats.dropped.fetch_add(gap, Ordering::Relaxed);
+                    }
+                }
+                msg
+            }
             Err(e) => {
                 // A sample that does not decode as a ParticleState.
                 shared.stats.received.fetch_add(1, Ordering::Relaxed);
@@ -731,15 +764,78 @@ async fn replay_loop(shared: Arc<Shared>, server: Server<ReplayRequest, ReplayRe
     }
 }
 
-/// Publishes `NodeDiagnostics` every `diagnostics_period`.
-async fn diagnostics_loop(shared: Arc<Shared>, publisher: Publisher<NodeDiagnostics>) {
+/// The standard diagnostics topic (`diagnostic_msgs/msg/DiagnosticArray`).
+pub const STANDARD_DIAGNOSTICS_TOPIC: &str = "/diagnostics";
+
+/// The counters as a standard `DiagnosticArray` with one status, `mcgnode:
+/// predictions`: WARN when states were rejected or dropped since the previous
+/// report (`before`), OK otherwise.
+pub fn standard_diagnostics(
+    d: &NodeDiagnostics,
+    dropped: u64,
+    before: (u64, u64),
+) -> DiagnosticArray {
+    let (rejected_now, dropped_now) = (
+        d.rejected.saturating_sub(before.0),
+        dropped.saturating_sub(before.1),
+    );
+    let (level, message) = if rejected_now > 0 || dropped_now > 0 {
+        (
+            DIAGNOSTIC_WARN,
+            format!(
+                "{rejected_now} states rejected, {dropped_now} dropped since the last report; \
+                 last error: {}",
+                d.last_error
+            ),
+        )
+    } else {
+        (DIAGNOSTIC_OK, format!("serving {}", d.model))
+    };
+    let kv = |key: &str, value: String| KeyValue {
+        key: key.into(),
+        value,
+    };
+    DiagnosticArray {
+        header: d.header.clone(),
+        status: vec![DiagnosticStatus {
+            level,
+            name: format!("{NODE_NAME}: predictions"),
+            message,
+            hardware_id: NODE_NAME.into(),
+            values: vec![
+                kv("received", d.received.to_string()),
+                kv("rejected", d.rejected.to_string()),
+                kv("predicted", d.predicted.to_string()),
+                kv("dropped", dropped.to_string()),
+                kv("last_error", d.last_error.clone()),
+                kv("model", d.model.clone()),
+            ],
+        }],
+    }
+}
+
+/// Publishes `NodeDiagnostics` and the standard `/diagnostics` every
+/// `diagnostics_period`.
+async fn diagnostics_loop(
+    shared: Arc<Shared>,
+    publisher: Publisher<NodeDiagnostics>,
+    standard: Publisher<DiagnosticArray>,
+) {
     let period = shared.params().diagnostics_period;
     let mut tick = tokio::time::interval(Duration::from_secs_f64(period));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut before = (0, 0);
     loop {
         tick.tick().await;
-        if let Err(e) = publisher.async_publish(shared.diagnostics()).await {
+        let d = shared.diagnostics();
+        let dropped = shared.stats.dropped.load(Ordering::Relaxed);
+        let array = standard_diagnostics(&d, dropped, before);
+        before = (d.rejected, dropped);
+        if let Err(e) = publisher.async_publish(d).await {
             eprintln!("[WARN] [{NODE_NAME}]: publishing diagnostics failed: {e:?}");
+        }
+        if let Err(e) = standard.async_publish(array).await {
+            eprintln!("[WARN] [{NODE_NAME}]: publishing /diagnostics failed: {e:?}");
         }
     }
 }
@@ -757,6 +853,37 @@ mod tests {
         assert_eq!(r.allow(t0 + Duration::from_secs(4)), None);
         assert_eq!(r.allow(t0 + Duration::from_secs(6)), Some(2));
         assert_eq!(r.allow(t0 + Duration::from_secs(7)), None);
+    }
+
+    #[test]
+    fn standard_diagnostics_warn_on_new_rejections_only() {
+        let d = NodeDiagnostics {
+            received: 10,
+            rejected: 3,
+            predicted: 7,
+            last_error: "state too large".into(),
+            model: "truth:spring".into(),
+            ..NodeDiagnostics::default()
+        };
+        let a = standard_diagnostics(&d, 2, (1, 2));
+        let s = &a.status[0];
+        assert_eq!(s.level, DIAGNOSTIC_WARN);
+        assert!(
+            s.message.contains("2 states rejected, 0 dropped"),
+            "{}",
+            s.message
+        );
+        assert!(s.message.contains("state too large"), "{}", s.message);
+        let value = |k: &str| {
+            s.values
+                .iter()
+                .find(|v| v.key == k)
+                .map(|v| v.value.clone())
+        };
+        assert_eq!(value("dropped").as_deref(), Some("2"));
+        assert_eq!(value("predicted").as_deref(), Some("7"));
+        let quiet = standard_diagnostics(&d, 2, (3, 2));
+        assert_eq!(quiet.status[0].level, DIAGNOSTIC_OK);
     }
 
     #[test]

@@ -22,6 +22,11 @@ import bench_large  # noqa: E402
 rclpy = ru.require_rclpy()
 from builtin_interfaces.msg import Time  # noqa: E402
 from mcgnode_msgs.msg import ParticleState, PredictedTrajectory  # noqa: E402
+try:
+    from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+except ImportError:
+    print("FAIL: diagnostic_msgs is not installed in the venv; run scripts/setup_venv.sh", flush=True)
+    sys.exit(1)
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
 
@@ -41,6 +46,8 @@ def main():
     node.create_subscription(PredictedTrajectory, "/mcgnode/predicted_trajectory",
                              lambda m: trajs.__setitem__(m.header.stamp.sec, m), 10)
     pub = node.create_publisher(ParticleState, "/particle_state", 10)
+    diags = []
+    node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
     client = AsyncParameterClient(node, "mcgnode")
     if not client.wait_for_services(timeout_sec=a.timeout):
         fail("the node's parameter services are not available")
@@ -83,7 +90,25 @@ def main():
             break
     if states is None:
         fail("no prediction after setting horizon")
-    summary = {"listed": len(names), "before": before,
+    # /diagnostics: OK while all is well; WARN after a rejected (malformed) state.
+    def next_diag():
+        n = len(diags)
+        if not ru.spin_until(rclpy, node, lambda: len(diags) > n, a.timeout):
+            fail("no DiagnosticArray on /diagnostics")
+        s = diags[-1].status[0]
+        return {"level": int.from_bytes(s.level, "little") if isinstance(s.level, bytes) else int(s.level),
+                "name": s.name, "message": s.message, "values": {kv.key: kv.value for kv in s.values}}
+
+    next_diag()
+    ok_diag = next_diag()
+    bad = bench_large.ring(random.Random(4), 5)
+    bad.masses = bad.masses[:3]
+    bad.header.stamp = Time(sec=999, nanosec=0)
+    pub.publish(bad)
+    warn_diag = next_diag()
+    if warn_diag["level"] == 0:
+        warn_diag = next_diag()
+    summary = {"ok_diag": ok_diag, "warn_diag": warn_diag, "listed": len(names), "before": before,
                "results": {k: {"successful": s, "reason": r} for k, (s, r) in results.items()},
                "horizon_after": after[0].integer_value, "qos_depth_after": after[1].integer_value,
                "predicted_states": states}
