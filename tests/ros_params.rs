@@ -80,3 +80,40 @@ fn rclpy_lists_gets_and_sets_parameters() {
         "{msg}\n{report}"
     );
 }
+
+/// With `use_sim_time: true` diagnostics are stamped from `/clock` (as during
+/// bag playback), not from the system clock.
+#[test]
+fn use_sim_time_stamps_diagnostics_from_clock() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let params = dir.path().join("params.yaml");
+    fs::write(
+        &params,
+        "mcgnode:\n  ros__parameters:\n    model: truth:spring\n    use_sim_time: true\n    \
+         diagnostics_period: 0.2\n",
+    )
+    .expect("writing params");
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$PARAMS" 2>"$LOG" &
+        node=$!
+        timeout 60 python3 tests/ros/clock_drive.py --sec 4242 --timeout 20
+        rc=$?
+        kill -INT $node; wait $node; node_rc=$?
+        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
+    "#;
+    let log = dir.path().join("node.log");
+    let o = run_bounded(
+        in_netns(script, &params, &env_sh).env("LOG", &log),
+        Duration::from_secs(90),
+        dir.path(),
+    );
+    let (summary, _log, report) = driver_outcome(&o, &log, "CLOCK_SUMMARY ");
+    let s: serde_json::Value = serde_json::from_str(&summary).expect("CLOCK_SUMMARY is JSON");
+    for key in ["node_diagnostics_sec", "diagnostics_sec"] {
+        let last = s[key].as_array().and_then(|v| v.last()).cloned();
+        assert_eq!(last, Some(serde_json::json!(4242)), "{key}\n{report}");
+    }
+}

@@ -11,9 +11,11 @@
 //! - [`node`]: the DDS entities and the event loop.
 //! - [`training`]: the Train and LoadModel services, training in the
 //!   background and atomic model swaps announced on `/mcgnode/model_swap`;
-//! - [`action`]: the Train action (per-epoch feedback, cancel).
+//! - [`action`]: the Train action (per-epoch feedback, cancel);
+//! - [`clock`]: system or simulated (`/clock`) time.
 
 pub mod action;
+pub mod clock;
 pub mod msgs;
 pub mod node;
 pub mod params;

@@ -18,7 +18,7 @@ use ros2_client::{
     Publisher, QosProfile, Server, ServiceMapping, ServiceTypeName, Subscription,
 };
 
-use crate::data::msg::{Header, ParticleState, Time, PARTICLE_STATE_TYPE};
+use crate::data::msg::{ParticleState, PARTICLE_STATE_TYPE};
 use crate::dynamics::Dynamics;
 
 use super::msgs::{
@@ -28,7 +28,7 @@ use super::msgs::{
 };
 use super::params::{NodeParams, NODE_NAME, RUNTIME_SETTABLE};
 use super::predict::{self, Prediction};
-use super::record::{now_ns, Recorder};
+use super::record::Recorder;
 use super::yaml::Scalar;
 
 /// Counters reported in `NodeDiagnostics`.
@@ -123,6 +123,8 @@ pub(super) struct Shared {
     /// Limits warnings about recording failures.
     warn_record: Mutex<RateLimiter>,
     pub(super) log: Logger,
+    /// System time, or `/clock` with `use_sim_time`.
+    pub(super) clock: super::clock::Clock,
     /// MCAP recording, when `record_dir` is set.
     pub(super) recorder: Option<Mutex<Recorder>>,
     /// Train/LoadModel state and the swap announcer.
@@ -209,13 +211,13 @@ impl Shared {
             params.horizon,
             params.substeps,
         )?;
-        self.record(|r| r.prediction(now_ns(), &p.trajectory, &p.forces));
+        self.record(|r| r.prediction(self.clock.now_log_ns(), &p.trajectory, &p.forces));
         Ok(p)
     }
 
     fn diagnostics(&self) -> NodeDiagnostics {
         NodeDiagnostics {
-            header: now_header(),
+            header: self.clock.header(),
             received: self.stats.received.load(Ordering::Relaxed),
             rejected: self.stats.rejected.load(Ordering::Relaxed),
             predicted: self.stats.predicted.load(Ordering::Relaxed),
@@ -238,17 +240,6 @@ fn wall_secs() -> f64 {
         .unwrap_or(0.0)
 }
 
-fn now_header() -> Header {
-    let ns = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
-        .unwrap_or(0);
-    Header {
-        stamp: Time::from_nanos(ns),
-        frame_id: String::new(),
-    }
-}
-
 /// Topic QoS from the parameters: volatile, keep-last `qos_depth`.
 fn topic_qos(p: &NodeParams) -> QosProfile {
     let q = QosProfile::publisher_default()
@@ -260,6 +251,28 @@ fn topic_qos(p: &NodeParams) -> QosProfile {
         q.reliability_reliable(WhenFull::DEFAULT)
     } else {
         q.reliability_best_effort()
+    }
+}
+
+/// `/clock` QoS: best-effort keep-last 1 (as rclpy's time source), which
+/// matches reliable and best-effort publishers.
+fn clock_qos() -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability_best_effort()
+        .durability(Durability::Volatile)
+        .history(History::KeepLast { depth: 1 })
+}
+
+/// Follows `/clock` (with `use_sim_time`).
+async fn clock_loop(shared: Arc<Shared>, sub: Subscription<super::clock::ClockMsg>) {
+    loop {
+        match sub.async_take().await {
+            Ok((msg, _)) => shared.clock.set(&msg),
+            Err(e) => shared.log.log(
+                LogLevel::Warn,
+                &format!("undecodable /clock message: {e:?}"),
+            ),
+        }
     }
 }
 
@@ -370,6 +383,7 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         .build()
         .context("starting the async runtime")?;
     let live = Arc::new(RwLock::new(params.clone()));
+    let p_sim = params.use_sim_time;
     let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
         .map_err(|e| anyhow!("creating the DDS participant in domain {domain_id}: {e:?}"))?;
     let mut node = context
@@ -436,6 +450,21 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
             service_qos(),
         )
         .map_err(e("the Replay service"))?;
+    let clock_sub = if params.use_sim_time {
+        let clock_topic = node
+            .create_topic(
+                &ros_name(super::clock::CLOCK_TOPIC)?,
+                MessageTypeName::new("rosgraph_msgs", "Clock"),
+                &clock_qos(),
+            )
+            .map_err(|e| anyhow!("creating topic /clock: {e:?}"))?;
+        Some(
+            node.create_subscription::<super::clock::ClockMsg>(&clock_topic, Some(clock_qos()))
+                .map_err(e("the /clock subscription"))?,
+        )
+    } else {
+        None
+    };
     let spinner = node.spinner().map_err(e("the node spinner"))?;
     let recorder = if params.record_dir.is_empty() {
         None
@@ -461,6 +490,7 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
             rosout: node.logging_handle(),
         },
         params: live,
+        clock: super::clock::Clock::new(p_sim),
     });
     let p = shared.params();
     shared.log.log(
@@ -493,6 +523,9 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         } = endpoints;
         tokio::spawn(input_loop(shared.clone(), input, trajectory, forces));
         tokio::spawn(rollout_loop(shared.clone(), rollout));
+        if let Some(sub) = clock_sub {
+            tokio::spawn(clock_loop(shared.clone(), sub));
+        }
         tokio::spawn(replay_loop(shared.clone(), replay));
         tokio::spawn(diagnostics_loop(
             shared.clone(),
@@ -570,7 +603,7 @@ async fn input_loop(
             }
         };
         shared.stats.received.fetch_add(1, Ordering::Relaxed);
-        let received_ns = now_ns();
+        let received_ns = shared.clock.now_log_ns();
         let worker = shared.clone();
         let job = tokio::task::spawn_blocking(move || worker.handle_state(msg, received_ns));
         let prediction = match job.await {

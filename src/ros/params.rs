@@ -35,6 +35,9 @@ pub struct NodeParams {
     pub substeps: u32,
     /// Reliable (true) or best-effort (false) QoS on the topics.
     pub qos_reliable: bool,
+    /// Stamp diagnostics, swaps and recordings with `/clock` (bag playback)
+    /// instead of the system clock; read at start.
+    pub use_sim_time: bool,
     /// Keep-last history depth of the topics.
     pub qos_depth: u32,
     /// Seconds between diagnostics messages.
@@ -70,6 +73,7 @@ impl Default for NodeParams {
             dt: 0.001,
             substeps: 1,
             qos_reliable: true,
+            use_sim_time: false,
             qos_depth: 10,
             diagnostics_period: 1.0,
             warn_period: 5.0,
@@ -158,6 +162,11 @@ pub const SPECS: &[(&str, Kind, &str)] = &[
         "reliable (true) or best-effort (false) topics",
     ),
     ("qos_depth", Kind::Int(1, 10_000), "keep-last history depth"),
+    (
+        "use_sim_time",
+        Kind::Bool,
+        "stamp diagnostics, swaps and recordings with /clock (bag playback); read at start",
+    ),
     (
         "diagnostics_period",
         Kind::Double(true),
@@ -304,6 +313,7 @@ impl NodeParams {
                 self.set_str(key, s);
             }
             Kind::Bool => match value {
+                Scalar::Bool(b) if key == "use_sim_time" => self.use_sim_time = *b,
                 Scalar::Bool(b) => self.qos_reliable = *b,
                 _ => return Err(ill("true or false")),
             },
@@ -408,6 +418,7 @@ impl NodeParams {
             "max_particles" => self.max_particles.to_string(),
             "record_split_mb" => self.record_split_mb.to_string(),
             "qos_reliable" => self.qos_reliable.to_string(),
+            "use_sim_time" => self.use_sim_time.to_string(),
             "dt" => format!("{:?}", self.dt),
             "diagnostics_period" => format!("{:?}", self.diagnostics_period),
             "warn_period" => format!("{:?}", self.warn_period),

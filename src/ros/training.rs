@@ -196,7 +196,7 @@ pub(super) fn swap(shared: &Shared, model: Arc<dyn Dynamics>, reason: &str) -> D
     shared.record(|r| r.set_model(&new_model));
     let msg = ModelSwap {
         header: Header {
-            stamp: Time::from_nanos(now_nanos()),
+            stamp: Time::from_nanos(shared.clock.now_ns()),
             frame_id: String::new(),
         },
         old_model: old.describe(),
@@ -219,13 +219,6 @@ pub(super) fn swap(shared: &Shared, model: Arc<dyn Dynamics>, reason: &str) -> D
         );
     }
     locked
-}
-
-fn now_nanos() -> i64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
-        .unwrap_or(0)
 }
 
 /// The variant of a request: empty means [`DEFAULT_VARIANT`].
