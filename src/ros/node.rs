@@ -29,6 +29,7 @@ use super::msgs::{
 use super::params::{NodeParams, NODE_NAME, RUNTIME_SETTABLE};
 use super::predict::{self, Prediction};
 use super::record::Recorder;
+use super::service::{self, OnFailure::Warn};
 use super::yaml::Scalar;
 
 /// Counters reported in `NodeDiagnostics`.
@@ -146,6 +147,11 @@ impl Shared {
             .read()
             .unwrap_or_else(PoisonError::into_inner)
             .clone()
+    }
+
+    /// A failed service call: last error and a rate-limited warning.
+    pub(super) fn service_failed(&self, why: &str) {
+        self.failed(why, &self.warn_service);
     }
 
     /// Counts a rejected input and warns, rate-limited.
@@ -522,11 +528,23 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
             rollout,
         } = endpoints;
         tokio::spawn(input_loop(shared.clone(), input, trajectory, forces));
-        tokio::spawn(rollout_loop(shared.clone(), rollout));
+        tokio::spawn(service::serve(
+            shared.clone(),
+            rollout,
+            "Rollout",
+            Warn,
+            rollout_call,
+        ));
         if let Some(sub) = clock_sub {
             tokio::spawn(clock_loop(shared.clone(), sub));
         }
-        tokio::spawn(replay_loop(shared.clone(), replay));
+        tokio::spawn(service::serve(
+            shared.clone(),
+            replay,
+            "Replay",
+            Warn,
+            replay_call,
+        ));
         tokio::spawn(diagnostics_loop(
             shared.clone(),
             diagnostics,
@@ -635,47 +653,16 @@ async fn input_loop(
     }
 }
 
-/// Answers Rollout calls; failures go back in the response.
-async fn rollout_loop(shared: Arc<Shared>, server: Server<RolloutRequest, RolloutResponse>) {
-    loop {
-        let (id, req) = match server.async_receive_request().await {
-            Ok(r) => r,
-            Err(e) => {
-                shared.log.log(
-                    LogLevel::Warn,
-                    &format!("undecodable Rollout request: {e:?}"),
-                );
-                continue;
-            }
-        };
-        let model = shared.model();
-        let p = shared.params();
-        let limits = RolloutLimits {
-            default_dt: p.dt,
-            fine_dt: p.dt / f64::from(p.substeps.max(1)),
-            max_steps: p.max_rollout_steps,
-            max_particles: p.max_particles,
-        };
-        let job =
-            tokio::task::spawn_blocking(move || rollout_response(model.as_ref(), &req, &limits));
-        let resp = job.await.unwrap_or_else(|join| RolloutResponse {
-            success: false,
-            message: format!("rollout task failed: {join}"),
-            ..RolloutResponse::default()
-        });
-        if !resp.success {
-            shared.failed(
-                &format!("Rollout call failed: {}", resp.message),
-                &shared.warn_service,
-            );
-        }
-        if let Err(e) = server.async_send_response(id, resp).await {
-            shared.log.log(
-                LogLevel::Warn,
-                &format!("sending a Rollout response failed: {e:?}"),
-            );
-        }
-    }
+/// The Rollout service's work with the node's current parameters.
+fn rollout_call(shared: &Arc<Shared>, req: RolloutRequest) -> RolloutResponse {
+    let p = shared.params();
+    let limits = RolloutLimits {
+        default_dt: p.dt,
+        fine_dt: p.dt / f64::from(p.substeps.max(1)),
+        max_steps: p.max_rollout_steps,
+        max_particles: p.max_particles,
+    };
+    rollout_response(shared.model().as_ref(), &req, &limits)
 }
 
 /// What the Rollout service accepts and how it integrates, from the node's
@@ -743,57 +730,29 @@ pub fn rollout_response(
 /// Name of the Replay service (`mcgnode_msgs/srv/Replay`).
 pub const REPLAY_SERVICE: &str = "/mcgnode/replay";
 
-/// Answers Replay calls: the bag through the model served now, with the
-/// node's dt and horizon (see [`crate::replay::replay_as_node`]); failures go
-/// back in the response.
-async fn replay_loop(shared: Arc<Shared>, server: Server<ReplayRequest, ReplayResponse>) {
-    loop {
-        let (id, req) = match server.async_receive_request().await {
-            Ok(r) => r,
-            Err(e) => {
-                shared.log.log(
-                    LogLevel::Warn,
-                    &format!("undecodable Replay request: {e:?}"),
-                );
-                continue;
-            }
-        };
-        let model = shared.model();
-        let p = shared.params();
-        let (dt, substeps, horizon) = (p.dt, p.substeps, p.horizon);
-        let job = tokio::task::spawn_blocking(move || {
-            crate::replay::replay_as_node(model.as_ref(), &req.bag, dt, substeps, horizon)
-        });
-        let resp = match job.await {
-            Ok(Ok((r, json))) => ReplayResponse {
-                success: true,
-                message: format!(
-                    "{} starts, {} comparisons, mean RE {:.3e}",
-                    r.starts, r.comparisons, r.averages.re
-                ),
-                report_json: json,
-            },
-            Ok(Err(e)) => ReplayResponse {
-                message: format!("{e:#}"),
-                ..ReplayResponse::default()
-            },
-            Err(join) => ReplayResponse {
-                message: format!("replay task failed: {join}"),
-                ..ReplayResponse::default()
-            },
-        };
-        if !resp.success {
-            shared.failed(
-                &format!("Replay call failed: {}", resp.message),
-                &shared.warn_service,
-            );
-        }
-        if let Err(e) = server.async_send_response(id, resp).await {
-            shared.log.log(
-                LogLevel::Warn,
-                &format!("sending a Replay response failed: {e:?}"),
-            );
-        }
+/// The Replay service's work: the bag through the model served now, with the
+/// node's dt and horizon (see [`crate::replay::replay_as_node`]).
+fn replay_call(shared: &Arc<Shared>, req: ReplayRequest) -> ReplayResponse {
+    let p = shared.params();
+    match crate::replay::replay_as_node(
+        shared.model().as_ref(),
+        &req.bag,
+        p.dt,
+        p.substeps,
+        p.horizon,
+    ) {
+        Ok((r, json)) => ReplayResponse {
+            success: true,
+            message: format!(
+                "{} starts, {} comparisons, mean RE {:.3e}",
+                r.starts, r.comparisons, r.averages.re
+            ),
+            report_json: json,
+        },
+        Err(e) => ReplayResponse {
+            message: format!("{e:#}"),
+            ..ReplayResponse::default()
+        },
     }
 }
 
