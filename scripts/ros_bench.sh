@@ -12,7 +12,8 @@
 #                          [--model bags/models/spring5-mcgnode.json] [--horizon 100]
 #                          [--keep-trajectory-subscriber] [--out report.json]
 #
-# Needs the release binary (cargo build --release) and the rclpy venv
+# Needs the release binary (cargo build --release; $CARGO_TARGET_DIR is honoured,
+# BIN=path overrides) and the rclpy venv
 # (scripts/setup_venv.sh; the interface package is built here).
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
@@ -34,7 +35,7 @@ while [ $# -gt 0 ]; do
     esac
 done
 
-BIN="$ROOT/target/release/mcgnode"
+BIN="${BIN:-${CARGO_TARGET_DIR:-$ROOT/target}/release/mcgnode}"
 [ -x "$BIN" ] || { echo "error: $BIN missing; run: cargo build --release" >&2; exit 1; }
 [ -e "$model" ] || [[ "$model" == truth:* ]] || { echo "error: model $model not found" >&2; exit 1; }
 scripts/build_msgs.sh >/dev/null

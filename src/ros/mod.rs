@@ -11,14 +11,18 @@
 //! - [`node`]: the DDS entities and the event loop.
 //! - [`training`]: the Train and LoadModel services, training in the
 //!   background and atomic model swaps announced on `/mcgnode/model_swap`;
-//! - [`action`]: the Train action (per-epoch feedback, cancel).
+//! - [`action`]: the Train action (per-epoch feedback, cancel);
+//! - [`clock`]: system or simulated (`/clock`) time;
+//! - [`service`]: the one loop serving every service.
 
 pub mod action;
+pub mod clock;
 pub mod msgs;
 pub mod node;
 pub mod params;
 pub mod predict;
 pub mod record;
+pub mod service;
 pub mod training;
 pub mod truth;
 pub mod yaml;

@@ -18,16 +18,19 @@ use ros2_client::{
     Publisher, QosProfile, Server, ServiceMapping, ServiceTypeName, Subscription,
 };
 
-use crate::data::msg::{Header, ParticleState, Time, PARTICLE_STATE_TYPE};
+use crate::data::msg::{ParticleState, PARTICLE_STATE_TYPE};
 use crate::dynamics::Dynamics;
 
 use super::msgs::{
-    NodeDiagnostics, ParticleForces, PredictedTrajectory, ReplayRequest, ReplayResponse,
-    RolloutRequest, RolloutResponse, PACKAGE,
+    DiagnosticArray, DiagnosticStatus, KeyValue, NodeDiagnostics, ParticleForces,
+    PredictedTrajectory, ReplayRequest, ReplayResponse, RolloutRequest, RolloutResponse,
+    DIAGNOSTIC_OK, DIAGNOSTIC_WARN, PACKAGE,
 };
-use super::params::{NodeParams, NODE_NAME};
+use super::params::{NodeParams, NODE_NAME, RUNTIME_SETTABLE};
 use super::predict::{self, Prediction};
-use super::record::{now_ns, Recorder};
+use super::record::Recorder;
+use super::service::{self, OnFailure::Warn};
+use super::yaml::Scalar;
 
 /// Counters reported in `NodeDiagnostics`.
 #[derive(Debug, Default)]
@@ -38,6 +41,9 @@ pub struct Stats {
     pub rejected: AtomicU64,
     /// Predictions published.
     pub predicted: AtomicU64,
+    /// States lost before the node took them: gaps in a publisher's sequence
+    /// numbers (e.g. the input queue overflowed while the node was busy).
+    pub dropped: AtomicU64,
     /// Latest failure reason.
     pub last_error: Mutex<String>,
 }
@@ -106,7 +112,8 @@ impl Logger {
 
 /// What the tasks share.
 pub(super) struct Shared {
-    pub(super) params: NodeParams,
+    /// The parameters now: those in [`RUNTIME_SETTABLE`] change at run time.
+    params: Arc<RwLock<NodeParams>>,
     /// Behind a lock so a model swap (Train, LoadModel) can replace it.
     pub(super) model: RwLock<Arc<dyn Dynamics>>,
     stats: Stats,
@@ -117,6 +124,8 @@ pub(super) struct Shared {
     /// Limits warnings about recording failures.
     warn_record: Mutex<RateLimiter>,
     pub(super) log: Logger,
+    /// System time, or `/clock` with `use_sim_time`.
+    pub(super) clock: super::clock::Clock,
     /// MCAP recording, when `record_dir` is set.
     pub(super) recorder: Option<Mutex<Recorder>>,
     /// Train/LoadModel state and the swap announcer.
@@ -124,12 +133,25 @@ pub(super) struct Shared {
 }
 
 impl Shared {
+    /// A copy of the parameters now.
+    pub(super) fn params(&self) -> NodeParams {
+        self.params
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
     /// The model served now.
     pub(super) fn model(&self) -> Arc<dyn Dynamics> {
         self.model
             .read()
             .unwrap_or_else(PoisonError::into_inner)
             .clone()
+    }
+
+    /// A failed service call: last error and a rate-limited warning.
+    pub(super) fn service_failed(&self, why: &str) {
+        self.failed(why, &self.warn_service);
     }
 
     /// Counts a rejected input and warns, rate-limited.
@@ -147,10 +169,12 @@ impl Shared {
                 .lock()
                 .unwrap_or_else(PoisonError::into_inner),
         );
-        let allowed = limiter
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .allow(Instant::now());
+        let period = Duration::from_secs_f64(self.params().warn_period);
+        let allowed = {
+            let mut l = limiter.lock().unwrap_or_else(PoisonError::into_inner);
+            l.period = period;
+            l.allow(Instant::now())
+        };
         if let Some(suppressed) = allowed {
             let more = if suppressed > 0 {
                 format!(" ({suppressed} similar warnings suppressed)")
@@ -173,6 +197,10 @@ impl Shared {
 
     /// Checks, records and predicts one incoming state (blocking work).
     fn handle_state(&self, msg: ParticleState, received_ns: u64) -> Result<Prediction, String> {
+        // Refused before anything is recorded or predicted: an oversized state
+        // would hold memory and its prediction could not be delivered promptly.
+        let params = self.params();
+        predict::check_size(&msg, params.max_particles)?;
         self.record(|r| r.state(received_ns, &msg));
         let model = self.model();
         // A state the model was not trained for (another dimension, edge kinds
@@ -185,17 +213,17 @@ impl Shared {
         let p = predict::predict(
             model.as_ref(),
             &msg,
-            self.params.dt,
-            self.params.horizon,
-            self.params.substeps,
+            params.dt,
+            params.horizon,
+            params.substeps,
         )?;
-        self.record(|r| r.prediction(now_ns(), &p.trajectory, &p.forces));
+        self.record(|r| r.prediction(self.clock.now_log_ns(), &p.trajectory, &p.forces));
         Ok(p)
     }
 
     fn diagnostics(&self) -> NodeDiagnostics {
         NodeDiagnostics {
-            header: now_header(),
+            header: self.clock.header(),
             received: self.stats.received.load(Ordering::Relaxed),
             rejected: self.stats.rejected.load(Ordering::Relaxed),
             predicted: self.stats.predicted.load(Ordering::Relaxed),
@@ -218,17 +246,6 @@ fn wall_secs() -> f64 {
         .unwrap_or(0.0)
 }
 
-fn now_header() -> Header {
-    let ns = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
-        .unwrap_or(0);
-    Header {
-        stamp: Time::from_nanos(ns),
-        frame_id: String::new(),
-    }
-}
-
 /// Topic QoS from the parameters: volatile, keep-last `qos_depth`.
 fn topic_qos(p: &NodeParams) -> QosProfile {
     let q = QosProfile::publisher_default()
@@ -240,6 +257,28 @@ fn topic_qos(p: &NodeParams) -> QosProfile {
         q.reliability_reliable(WhenFull::DEFAULT)
     } else {
         q.reliability_best_effort()
+    }
+}
+
+/// `/clock` QoS: best-effort keep-last 1 (as rclpy's time source), which
+/// matches reliable and best-effort publishers.
+fn clock_qos() -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability_best_effort()
+        .durability(Durability::Volatile)
+        .history(History::KeepLast { depth: 1 })
+}
+
+/// Follows `/clock` (with `use_sim_time`).
+async fn clock_loop(shared: Arc<Shared>, sub: Subscription<super::clock::ClockMsg>) {
+    loop {
+        match sub.async_take().await {
+            Ok((msg, _)) => shared.clock.set(&msg),
+            Err(e) => shared.log.log(
+                LogLevel::Warn,
+                &format!("undecodable /clock message: {e:?}"),
+            ),
+        }
     }
 }
 
@@ -255,50 +294,80 @@ fn ros_name(s: &str) -> anyhow::Result<Name> {
     Name::parse(s).map_err(|e| anyhow!("invalid ROS name {s:?}: {e:?}"))
 }
 
-/// The parameters as read-only ROS parameters, so rclpy can list and get them.
-fn declare_parameters(p: &NodeParams) -> NodeOptions {
-    let s = |x: &str| ParameterValue::String(x.to_string());
-    let i = |x: u32| ParameterValue::Integer(i64::from(x));
-    let values = [
-        ("model", s(&p.model)),
-        ("input_topic", s(&p.input_topic)),
-        ("trajectory_topic", s(&p.trajectory_topic)),
-        ("forces_topic", s(&p.forces_topic)),
-        ("diagnostics_topic", s(&p.diagnostics_topic)),
-        ("rollout_service", s(&p.rollout_service)),
-        ("horizon", i(p.horizon)),
-        ("dt", ParameterValue::Double(p.dt)),
-        ("qos_reliable", ParameterValue::Boolean(p.qos_reliable)),
-        ("qos_depth", i(p.qos_depth)),
-        (
-            "diagnostics_period",
-            ParameterValue::Double(p.diagnostics_period),
-        ),
-        ("warn_period", ParameterValue::Double(p.warn_period)),
-        ("max_rollout_steps", i(p.max_rollout_steps)),
-        ("record_dir", s(&p.record_dir)),
-        ("record_split_mb", i(p.record_split_mb)),
-        (
-            "record_split_seconds",
-            ParameterValue::Double(p.record_split_seconds),
-        ),
-    ];
-    let initial: Vec<(&'static str, ParameterValue)> = values.to_vec();
+/// A ROS parameter value as parameter-file text, for [`NodeParams::set`].
+fn scalar(value: &ParameterValue) -> Scalar {
+    match value {
+        ParameterValue::Boolean(b) => Scalar::Bool(*b),
+        ParameterValue::Integer(i) => Scalar::Int(*i),
+        ParameterValue::Double(x) => Scalar::Float(*x),
+        ParameterValue::String(s) => Scalar::Str(s.clone()),
+        other => Scalar::Str(format!("{other:?}")),
+    }
+}
+
+/// Checks a run-time change of parameter `name` against `current`: only
+/// [`RUNTIME_SETTABLE`] parameters, with the same type and range checks as at
+/// start. The refusal says why and what to do instead.
+pub fn check_runtime_change(
+    current: &NodeParams,
+    name: &str,
+    value: &ParameterValue,
+) -> Result<NodeParams, String> {
+    if !RUNTIME_SETTABLE.contains(&name) {
+        return Err(format!(
+            "parameter {name} cannot change at run time (it shapes topics, services, QoS, \
+             files or the model); restart the node with --set {name}=...; settable now: {}",
+            RUNTIME_SETTABLE.join(", ")
+        ));
+    }
+    let mut p = current.clone();
+    p.set(name, &scalar(value), false)?;
+    Ok(p)
+}
+
+/// Every parameter of [`SPECS`](super::params::SPECS) as a ROS parameter, so
+/// rclpy can list and get them all; those in [`RUNTIME_SETTABLE`] can be set
+/// (validated, then applied to `live`), the others refuse with the reason.
+fn declare_parameters(p: &NodeParams, live: Arc<RwLock<NodeParams>>) -> NodeOptions {
+    use super::params::{Kind, SPECS};
+    let values: Vec<(&'static str, ParameterValue)> = SPECS
+        .iter()
+        .map(|(key, kind, _)| {
+            let text = p.raw_value(key);
+            let v = match kind {
+                Kind::Str | Kind::Topic => ParameterValue::String(text),
+                Kind::Bool => ParameterValue::Boolean(text == "true"),
+                Kind::Int(..) => ParameterValue::Integer(text.parse().unwrap_or_default()),
+                Kind::Double(_) => ParameterValue::Double(text.parse().unwrap_or_default()),
+            };
+            (*key, v)
+        })
+        .collect();
+    let initial = values.clone();
+    let (check, apply) = (live.clone(), live);
     values
         .into_iter()
         .fold(NodeOptions::new().enable_rosout(true), |o, (k, v)| {
             o.declare_parameter(k, v)
         })
-        // Declaring goes through the validator too: accept only the values the
-        // node started with.
+        // Declaring goes through the validator too: the start values pass.
         .parameter_validator(Box::new(move |name, value| {
             if initial.iter().any(|(k, v)| *k == name && v == value) {
-                Ok(())
-            } else {
-                Err(format!(
-                    "parameter {name} is read-only at run time; restart the node with --set"
-                ))
+                return Ok(());
             }
+            let current = check.read().unwrap_or_else(PoisonError::into_inner);
+            check_runtime_change(&current, name, value).map(|_| ())
+        }))
+        // Runs after the validator, and for every declared value at start.
+        // Other parameters (read-only ones, ros2-client's use_sim_time) need
+        // nothing here: the validator refuses changes to the read-only ones.
+        .parameter_set_action(Box::new(move |name, value| {
+            if !RUNTIME_SETTABLE.contains(&name) {
+                return Ok(());
+            }
+            let mut current = apply.write().unwrap_or_else(PoisonError::into_inner);
+            *current = check_runtime_change(&current, name, value)?;
+            Ok(())
         }))
 }
 
@@ -308,6 +377,7 @@ struct Endpoints {
     trajectory: Publisher<PredictedTrajectory>,
     forces: Publisher<ParticleForces>,
     diagnostics: Publisher<NodeDiagnostics>,
+    standard_diagnostics: Publisher<DiagnosticArray>,
     rollout: Server<RolloutRequest, RolloutResponse>,
 }
 
@@ -318,12 +388,14 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         .enable_all()
         .build()
         .context("starting the async runtime")?;
+    let live = Arc::new(RwLock::new(params.clone()));
+    let p_sim = params.use_sim_time;
     let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
         .map_err(|e| anyhow!("creating the DDS participant in domain {domain_id}: {e:?}"))?;
     let mut node = context
         .new_node(
             NodeName::new("/", NODE_NAME).map_err(|e| anyhow!("node name: {e:?}"))?,
-            declare_parameters(&params),
+            declare_parameters(&params, live.clone()),
         )
         .map_err(|e| anyhow!("creating the node: {e:?}"))?;
 
@@ -340,6 +412,13 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
     let traj_topic = topic(&params.trajectory_topic, PACKAGE, "PredictedTrajectory")?;
     let forces_topic = topic(&params.forces_topic, PACKAGE, "ParticleForces")?;
     let diag_topic = topic(&params.diagnostics_topic, PACKAGE, "NodeDiagnostics")?;
+    let std_diag_topic = node
+        .create_topic(
+            &ros_name(STANDARD_DIAGNOSTICS_TOPIC)?,
+            MessageTypeName::new("diagnostic_msgs", "DiagnosticArray"),
+            &service_qos(),
+        )
+        .map_err(|e| anyhow!("creating topic {STANDARD_DIAGNOSTICS_TOPIC}: {e:?}"))?;
     let e = |what: &'static str| move |err| anyhow!("creating {what}: {err:?}");
     let endpoints = Endpoints {
         input: node
@@ -354,6 +433,9 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         diagnostics: node
             .create_publisher(&diag_topic, Some(qos.clone()))
             .map_err(e("the diagnostics publisher"))?,
+        standard_diagnostics: node
+            .create_publisher(&std_diag_topic, Some(service_qos()))
+            .map_err(e("the /diagnostics publisher"))?,
         rollout: node
             .create_server(
                 ServiceMapping::Enhanced,
@@ -374,6 +456,21 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
             service_qos(),
         )
         .map_err(e("the Replay service"))?;
+    let clock_sub = if params.use_sim_time {
+        let clock_topic = node
+            .create_topic(
+                &ros_name(super::clock::CLOCK_TOPIC)?,
+                MessageTypeName::new("rosgraph_msgs", "Clock"),
+                &clock_qos(),
+            )
+            .map_err(|e| anyhow!("creating topic /clock: {e:?}"))?;
+        Some(
+            node.create_subscription::<super::clock::ClockMsg>(&clock_topic, Some(clock_qos()))
+                .map_err(e("the /clock subscription"))?,
+        )
+    } else {
+        None
+    };
     let spinner = node.spinner().map_err(e("the node spinner"))?;
     let recorder = if params.record_dir.is_empty() {
         None
@@ -398,9 +495,10 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         log: Logger {
             rosout: node.logging_handle(),
         },
-        params,
+        params: live,
+        clock: super::clock::Clock::new(p_sim),
     });
-    let p = &shared.params;
+    let p = shared.params();
     shared.log.log(
         LogLevel::Info,
         &format!(
@@ -426,12 +524,32 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
             trajectory,
             forces,
             diagnostics,
+            standard_diagnostics,
             rollout,
         } = endpoints;
         tokio::spawn(input_loop(shared.clone(), input, trajectory, forces));
-        tokio::spawn(rollout_loop(shared.clone(), rollout));
-        tokio::spawn(replay_loop(shared.clone(), replay));
-        tokio::spawn(diagnostics_loop(shared.clone(), diagnostics));
+        tokio::spawn(service::serve(
+            shared.clone(),
+            rollout,
+            "Rollout",
+            Warn,
+            rollout_call,
+        ));
+        if let Some(sub) = clock_sub {
+            tokio::spawn(clock_loop(shared.clone(), sub));
+        }
+        tokio::spawn(service::serve(
+            shared.clone(),
+            replay,
+            "Replay",
+            Warn,
+            replay_call,
+        ));
+        tokio::spawn(diagnostics_loop(
+            shared.clone(),
+            diagnostics,
+            standard_diagnostics,
+        ));
         super::training::spawn(shared.clone(), training_endpoints);
         wait_for_shutdown().await
     });
@@ -479,9 +597,22 @@ async fn input_loop(
     trajectory: Publisher<PredictedTrajectory>,
     forces: Publisher<ParticleForces>,
 ) {
+    // Last sequence number seen from each publisher.
+    let mut last_seen: std::collections::HashMap<String, i64> = Default::default();
     loop {
         let msg = match input.async_take().await {
-            Ok((msg, _info)) => msg,
+            Ok((msg, info)) => {
+                let publisher = format!("{:?}", info.publisher_gid());
+                let sn = info.sequence_number();
+                if let Some(prev) = last_seen.insert(publisher, sn) {
+                    let gap = sn.saturating_sub(prev).saturating_sub(1);
+                    if gap > 0 {
+                        let gap = u64::try_from(gap).unwrap_or(0);
+                        shared.stats.dropped.fetch_add(gap, Ordering::Relaxed);
+                    }
+                }
+                msg
+            }
             Err(e) => {
                 // A sample that does not decode as a ParticleState.
                 shared.stats.received.fetch_add(1, Ordering::Relaxed);
@@ -490,7 +621,7 @@ async fn input_loop(
             }
         };
         shared.stats.received.fetch_add(1, Ordering::Relaxed);
-        let received_ns = now_ns();
+        let received_ns = shared.clock.now_log_ns();
         let worker = shared.clone();
         let job = tokio::task::spawn_blocking(move || worker.handle_state(msg, received_ns));
         let prediction = match job.await {
@@ -522,65 +653,59 @@ async fn input_loop(
     }
 }
 
-/// Answers Rollout calls; failures go back in the response.
-async fn rollout_loop(shared: Arc<Shared>, server: Server<RolloutRequest, RolloutResponse>) {
-    loop {
-        let (id, req) = match server.async_receive_request().await {
-            Ok(r) => r,
-            Err(e) => {
-                shared.log.log(
-                    LogLevel::Warn,
-                    &format!("undecodable Rollout request: {e:?}"),
-                );
-                continue;
-            }
-        };
-        let model = shared.model();
-        let (default_dt, max_steps) = (shared.params.dt, shared.params.max_rollout_steps);
-        let fine_dt = default_dt / f64::from(shared.params.substeps.max(1));
-        let job = tokio::task::spawn_blocking(move || {
-            rollout_response(model.as_ref(), &req, default_dt, fine_dt, max_steps)
-        });
-        let resp = job.await.unwrap_or_else(|join| RolloutResponse {
-            success: false,
-            message: format!("rollout task failed: {join}"),
-            ..RolloutResponse::default()
-        });
-        if !resp.success {
-            shared.failed(
-                &format!("Rollout call failed: {}", resp.message),
-                &shared.warn_service,
-            );
-        }
-        if let Err(e) = server.async_send_response(id, resp).await {
-            shared.log.log(
-                LogLevel::Warn,
-                &format!("sending a Rollout response failed: {e:?}"),
-            );
-        }
-    }
+/// The Rollout service's work with the node's current parameters.
+fn rollout_call(shared: &Arc<Shared>, req: RolloutRequest) -> RolloutResponse {
+    let p = shared.params();
+    let limits = RolloutLimits {
+        default_dt: p.dt,
+        fine_dt: p.dt / f64::from(p.substeps.max(1)),
+        max_steps: p.max_rollout_steps,
+        max_particles: p.max_particles,
+    };
+    rollout_response(shared.model().as_ref(), &req, &limits)
 }
 
-/// The Rollout service's work: checks the request, then predicts. `dt = 0` in the request means `default_dt`;
-/// the model is integrated with steps no longer than `fine_dt` (the node's
-/// `dt / substeps`) and sampled every `dt`.
+/// What the Rollout service accepts and how it integrates, from the node's
+/// parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RolloutLimits {
+    /// Step of a request with `dt = 0` (the `dt` parameter).
+    pub default_dt: f64,
+    /// Longest integration step (`dt / substeps`).
+    pub fine_dt: f64,
+    /// `max_rollout_steps`.
+    pub max_steps: u32,
+    /// `max_particles`.
+    pub max_particles: u32,
+}
+
+/// The Rollout service's work: checks the request, then predicts. `dt = 0` in
+/// the request means `default_dt`; the model is integrated with steps no
+/// longer than `fine_dt` and sampled every `dt`.
 pub fn rollout_response(
     model: &dyn Dynamics,
     req: &RolloutRequest,
-    default_dt: f64,
-    fine_dt: f64,
-    max_steps: u32,
+    limits: &RolloutLimits,
 ) -> RolloutResponse {
     let fail = |message: String| RolloutResponse {
         success: false,
         message,
         ..RolloutResponse::default()
     };
+    let RolloutLimits {
+        default_dt,
+        fine_dt,
+        max_steps,
+        max_particles,
+    } = *limits;
     if req.steps > max_steps {
         return fail(format!(
             "steps = {} exceeds max_rollout_steps = {max_steps}",
             req.steps
         ));
+    }
+    if let Err(e) = predict::check_size(&req.initial, max_particles) {
+        return fail(e);
     }
     let dt = if req.dt == 0.0 { default_dt } else { req.dt };
     let (graph, start) = match predict::accept(model, &req.initial) {
@@ -605,68 +730,104 @@ pub fn rollout_response(
 /// Name of the Replay service (`mcgnode_msgs/srv/Replay`).
 pub const REPLAY_SERVICE: &str = "/mcgnode/replay";
 
-/// Answers Replay calls: the bag through the model served now, with the
-/// node's dt and horizon (see [`crate::replay::replay_as_node`]); failures go
-/// back in the response.
-async fn replay_loop(shared: Arc<Shared>, server: Server<ReplayRequest, ReplayResponse>) {
-    loop {
-        let (id, req) = match server.async_receive_request().await {
-            Ok(r) => r,
-            Err(e) => {
-                shared.log.log(
-                    LogLevel::Warn,
-                    &format!("undecodable Replay request: {e:?}"),
-                );
-                continue;
-            }
-        };
-        let model = shared.model();
-        let p = &shared.params;
-        let (dt, substeps, horizon) = (p.dt, p.substeps, p.horizon);
-        let job = tokio::task::spawn_blocking(move || {
-            crate::replay::replay_as_node(model.as_ref(), &req.bag, dt, substeps, horizon)
-        });
-        let resp = match job.await {
-            Ok(Ok((r, json))) => ReplayResponse {
-                success: true,
-                message: format!(
-                    "{} starts, {} comparisons, mean RE {:.3e}",
-                    r.starts, r.comparisons, r.averages.re
-                ),
-                report_json: json,
-            },
-            Ok(Err(e)) => ReplayResponse {
-                message: format!("{e:#}"),
-                ..ReplayResponse::default()
-            },
-            Err(join) => ReplayResponse {
-                message: format!("replay task failed: {join}"),
-                ..ReplayResponse::default()
-            },
-        };
-        if !resp.success {
-            shared.failed(
-                &format!("Replay call failed: {}", resp.message),
-                &shared.warn_service,
-            );
-        }
-        if let Err(e) = server.async_send_response(id, resp).await {
-            shared.log.log(
-                LogLevel::Warn,
-                &format!("sending a Replay response failed: {e:?}"),
-            );
-        }
+/// The Replay service's work: the bag through the model served now, with the
+/// node's dt and horizon (see [`crate::replay::replay_as_node`]).
+fn replay_call(shared: &Arc<Shared>, req: ReplayRequest) -> ReplayResponse {
+    let p = shared.params();
+    match crate::replay::replay_as_node(
+        shared.model().as_ref(),
+        &req.bag,
+        p.dt,
+        p.substeps,
+        p.horizon,
+    ) {
+        Ok((r, json)) => ReplayResponse {
+            success: true,
+            message: format!(
+                "{} starts, {} comparisons, mean RE {:.3e}",
+                r.starts, r.comparisons, r.averages.re
+            ),
+            report_json: json,
+        },
+        Err(e) => ReplayResponse {
+            message: format!("{e:#}"),
+            ..ReplayResponse::default()
+        },
     }
 }
 
-/// Publishes `NodeDiagnostics` every `diagnostics_period`.
-async fn diagnostics_loop(shared: Arc<Shared>, publisher: Publisher<NodeDiagnostics>) {
-    let mut tick = tokio::time::interval(Duration::from_secs_f64(shared.params.diagnostics_period));
+/// The standard diagnostics topic (`diagnostic_msgs/msg/DiagnosticArray`).
+pub const STANDARD_DIAGNOSTICS_TOPIC: &str = "/diagnostics";
+
+/// The counters as a standard `DiagnosticArray` with one status, `mcgnode:
+/// predictions`: WARN when states were rejected or dropped since the previous
+/// report (`before`), OK otherwise.
+pub fn standard_diagnostics(
+    d: &NodeDiagnostics,
+    dropped: u64,
+    before: (u64, u64),
+) -> DiagnosticArray {
+    let (rejected_now, dropped_now) = (
+        d.rejected.saturating_sub(before.0),
+        dropped.saturating_sub(before.1),
+    );
+    let (level, message) = if rejected_now > 0 || dropped_now > 0 {
+        (
+            DIAGNOSTIC_WARN,
+            format!(
+                "{rejected_now} states rejected, {dropped_now} dropped since the last report; \
+                 last error: {}",
+                d.last_error
+            ),
+        )
+    } else {
+        (DIAGNOSTIC_OK, format!("serving {}", d.model))
+    };
+    let kv = |key: &str, value: String| KeyValue {
+        key: key.into(),
+        value,
+    };
+    DiagnosticArray {
+        header: d.header.clone(),
+        status: vec![DiagnosticStatus {
+            level,
+            name: format!("{NODE_NAME}: predictions"),
+            message,
+            hardware_id: NODE_NAME.into(),
+            values: vec![
+                kv("received", d.received.to_string()),
+                kv("rejected", d.rejected.to_string()),
+                kv("predicted", d.predicted.to_string()),
+                kv("dropped", dropped.to_string()),
+                kv("last_error", d.last_error.clone()),
+                kv("model", d.model.clone()),
+            ],
+        }],
+    }
+}
+
+/// Publishes `NodeDiagnostics` and the standard `/diagnostics` every
+/// `diagnostics_period`.
+async fn diagnostics_loop(
+    shared: Arc<Shared>,
+    publisher: Publisher<NodeDiagnostics>,
+    standard: Publisher<DiagnosticArray>,
+) {
+    let period = shared.params().diagnostics_period;
+    let mut tick = tokio::time::interval(Duration::from_secs_f64(period));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut before = (0, 0);
     loop {
         tick.tick().await;
-        if let Err(e) = publisher.async_publish(shared.diagnostics()).await {
+        let d = shared.diagnostics();
+        let dropped = shared.stats.dropped.load(Ordering::Relaxed);
+        let array = standard_diagnostics(&d, dropped, before);
+        before = (d.rejected, dropped);
+        if let Err(e) = publisher.async_publish(d).await {
             eprintln!("[WARN] [{NODE_NAME}]: publishing diagnostics failed: {e:?}");
+        }
+        if let Err(e) = standard.async_publish(array).await {
+            eprintln!("[WARN] [{NODE_NAME}]: publishing /diagnostics failed: {e:?}");
         }
     }
 }
@@ -687,21 +848,66 @@ mod tests {
     }
 
     #[test]
+    fn standard_diagnostics_warn_on_new_rejections_only() {
+        let d = NodeDiagnostics {
+            received: 10,
+            rejected: 3,
+            predicted: 7,
+            last_error: "state too large".into(),
+            model: "truth:spring".into(),
+            ..NodeDiagnostics::default()
+        };
+        let a = standard_diagnostics(&d, 2, (1, 2));
+        let s = &a.status[0];
+        assert_eq!(s.level, DIAGNOSTIC_WARN);
+        assert!(
+            s.message.contains("2 states rejected, 0 dropped"),
+            "{}",
+            s.message
+        );
+        assert!(s.message.contains("state too large"), "{}", s.message);
+        let value = |k: &str| {
+            s.values
+                .iter()
+                .find(|v| v.key == k)
+                .map(|v| v.value.clone())
+        };
+        assert_eq!(value("dropped").as_deref(), Some("2"));
+        assert_eq!(value("predicted").as_deref(), Some("7"));
+        let quiet = standard_diagnostics(&d, 2, (3, 2));
+        assert_eq!(quiet.status[0].level, DIAGNOSTIC_OK);
+    }
+
+    #[test]
     fn rollout_service_checks_its_request() {
         let model = crate::ros::truth::load_truth("truth:spring").unwrap();
         let req = RolloutRequest {
             steps: 50,
             ..RolloutRequest::default()
         };
-        let r = rollout_response(model.as_ref(), &req, 0.01, 0.01, 10);
+        let limits = |max_steps| RolloutLimits {
+            default_dt: 0.01,
+            fine_dt: 0.01,
+            max_steps,
+            max_particles: 100,
+        };
+        let r = rollout_response(model.as_ref(), &req, &limits(10));
         assert!(
             !r.success && r.message.contains("max_rollout_steps"),
             "{}",
             r.message
         );
-        let r = rollout_response(model.as_ref(), &req, 0.01, 0.01, 100);
+        let r = rollout_response(model.as_ref(), &req, &limits(100));
         assert!(
             !r.success && r.message.contains("malformed"),
+            "{}",
+            r.message
+        );
+        let mut big = req.clone();
+        big.initial.masses = vec![1.0; 101];
+        let r = rollout_response(model.as_ref(), &big, &limits(100));
+        assert!(
+            !r.success && r.message.contains("max_particles = 100") && r.message.contains("101"),
             "{}",
             r.message
         );

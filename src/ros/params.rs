@@ -35,6 +35,9 @@ pub struct NodeParams {
     pub substeps: u32,
     /// Reliable (true) or best-effort (false) QoS on the topics.
     pub qos_reliable: bool,
+    /// Stamp diagnostics, swaps and recordings with `/clock` (bag playback)
+    /// instead of the system clock; read at start.
+    pub use_sim_time: bool,
     /// Keep-last history depth of the topics.
     pub qos_depth: u32,
     /// Seconds between diagnostics messages.
@@ -43,6 +46,9 @@ pub struct NodeParams {
     pub warn_period: f64,
     /// Largest `steps` the Rollout service accepts.
     pub max_rollout_steps: u32,
+    /// Largest state (particles) the node accepts on its input topic and in
+    /// Rollout calls; larger ones are rejected with the reason.
+    pub max_particles: u32,
     /// Folder to record MCAP bags into; empty disables recording.
     pub record_dir: String,
     /// Start a new bag after this many megabytes (0 = no size limit).
@@ -67,10 +73,12 @@ impl Default for NodeParams {
             dt: 0.001,
             substeps: 1,
             qos_reliable: true,
+            use_sim_time: false,
             qos_depth: 10,
             diagnostics_period: 1.0,
             warn_period: 5.0,
             max_rollout_steps: 10_000,
+            max_particles: 10_000,
             record_dir: String::new(),
             record_split_mb: 0,
             record_split_seconds: 0.0,
@@ -81,9 +89,12 @@ impl Default for NodeParams {
 
 /// What a parameter holds, for type checking and messages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Kind {
+pub enum Kind {
+    /// Any text.
     Str,
+    /// An absolute ROS 2 name.
     Topic,
+    /// `true` or `false`.
     Bool,
     /// An integer in `lo..=hi`.
     Int(u32, u32),
@@ -91,8 +102,10 @@ enum Kind {
     Double(bool),
 }
 
-/// Name, kind and documentation of every parameter, in file order.
-const SPECS: &[(&str, Kind, &str)] = &[
+/// Name, kind and documentation of every parameter, in file order: the one
+/// table the parameter file, `--set`, `--print-params` and the node's declared
+/// ROS parameters (with descriptions and ranges) all come from.
+pub const SPECS: &[(&str, Kind, &str)] = &[
     (
         "model",
         Kind::Str,
@@ -150,6 +163,11 @@ const SPECS: &[(&str, Kind, &str)] = &[
     ),
     ("qos_depth", Kind::Int(1, 10_000), "keep-last history depth"),
     (
+        "use_sim_time",
+        Kind::Bool,
+        "stamp diagnostics, swaps and recordings with /clock (bag playback); read at start",
+    ),
+    (
         "diagnostics_period",
         Kind::Double(true),
         "seconds between diagnostics messages",
@@ -163,6 +181,11 @@ const SPECS: &[(&str, Kind, &str)] = &[
         "max_rollout_steps",
         Kind::Int(1, 1_000_000),
         "largest steps of a Rollout call",
+    ),
+    (
+        "max_particles",
+        Kind::Int(1, 10_000_000),
+        "largest state accepted (particles); larger states are rejected with the reason",
     ),
     (
         "record_dir",
@@ -179,6 +202,19 @@ const SPECS: &[(&str, Kind, &str)] = &[
         Kind::Double(false),
         "split bags after this many seconds (0 = never)",
     ),
+];
+
+/// Parameters that can be changed while the node runs (through the ROS
+/// parameter services, e.g. rclpy's `set_parameters`): they take effect from
+/// the next incoming state or call. The others shape DDS endpoints, files or
+/// the loaded model and need a restart.
+pub const RUNTIME_SETTABLE: &[&str] = &[
+    "horizon",
+    "dt",
+    "substeps",
+    "warn_period",
+    "max_rollout_steps",
+    "max_particles",
 ];
 
 /// Keys of the node's section that are accepted as node names.
@@ -277,6 +313,7 @@ impl NodeParams {
                 self.set_str(key, s);
             }
             Kind::Bool => match value {
+                Scalar::Bool(b) if key == "use_sim_time" => self.use_sim_time = *b,
                 Scalar::Bool(b) => self.qos_reliable = *b,
                 _ => return Err(ill("true or false")),
             },
@@ -327,6 +364,7 @@ impl NodeParams {
             "substeps" => self.substeps = v,
             "qos_depth" => self.qos_depth = v,
             "max_rollout_steps" => self.max_rollout_steps = v,
+            "max_particles" => self.max_particles = v,
             "record_split_mb" => self.record_split_mb = v,
             _ => unreachable_key(key),
         }
@@ -354,23 +392,33 @@ impl NodeParams {
         s
     }
 
-    fn value_text(&self, key: &str) -> String {
-        let q = |s: &str| format!("{s:?}");
+    /// The value of `key` as parameter-file text (strings quoted).
+    pub fn value_text(&self, key: &str) -> String {
+        match SPECS.iter().find(|(k, _, _)| *k == key) {
+            Some((_, Kind::Str | Kind::Topic, _)) => format!("{:?}", self.raw_value(key)),
+            _ => self.raw_value(key),
+        }
+    }
+
+    /// The value of `key` as text, strings unquoted ("" for an unknown key).
+    pub fn raw_value(&self, key: &str) -> String {
         match key {
-            "model" => q(&self.model),
-            "input_topic" => q(&self.input_topic),
-            "trajectory_topic" => q(&self.trajectory_topic),
-            "forces_topic" => q(&self.forces_topic),
-            "diagnostics_topic" => q(&self.diagnostics_topic),
-            "rollout_service" => q(&self.rollout_service),
-            "record_dir" => q(&self.record_dir),
-            "model_dir" => q(&self.model_dir),
+            "model" => self.model.clone(),
+            "input_topic" => self.input_topic.clone(),
+            "trajectory_topic" => self.trajectory_topic.clone(),
+            "forces_topic" => self.forces_topic.clone(),
+            "diagnostics_topic" => self.diagnostics_topic.clone(),
+            "rollout_service" => self.rollout_service.clone(),
+            "record_dir" => self.record_dir.clone(),
+            "model_dir" => self.model_dir.clone(),
             "substeps" => self.substeps.to_string(),
             "horizon" => self.horizon.to_string(),
             "qos_depth" => self.qos_depth.to_string(),
             "max_rollout_steps" => self.max_rollout_steps.to_string(),
+            "max_particles" => self.max_particles.to_string(),
             "record_split_mb" => self.record_split_mb.to_string(),
             "qos_reliable" => self.qos_reliable.to_string(),
+            "use_sim_time" => self.use_sim_time.to_string(),
             "dt" => format!("{:?}", self.dt),
             "diagnostics_period" => format!("{:?}", self.diagnostics_period),
             "warn_period" => format!("{:?}", self.warn_period),

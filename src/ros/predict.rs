@@ -17,6 +17,29 @@ pub struct Prediction {
     pub forces: ParticleForces,
 }
 
+/// Refuses a state with more than `max_particles` particles (counted as the
+/// longest per-particle array, so a malformed message cannot slip past),
+/// naming the parameter that allows it.
+pub fn check_size(input: &ParticleState, max_particles: u32) -> Result<(), String> {
+    let n = [
+        input.types.len(),
+        input.masses.len(),
+        input.positions.len(),
+        input.velocities.len(),
+        input.accelerations.len(),
+    ]
+    .into_iter()
+    .max()
+    .unwrap_or(0);
+    if n > max_particles as usize {
+        return Err(format!(
+            "state too large: {n} particles, above max_particles = {max_particles} (raise it with \
+             --set max_particles=N if the subscribers can take predictions that large)"
+        ));
+    }
+    Ok(())
+}
+
 /// Checks an input message and converts it for the model; the error says
 /// what is wrong with the message or why the model cannot take it.
 pub fn accept(model: &dyn Dynamics, input: &ParticleState) -> Result<(Graph, State), String> {

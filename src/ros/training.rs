@@ -155,8 +155,21 @@ pub(super) fn spawn(shared: Arc<Shared>, endpoints: TrainingEndpoints) {
             shared.training.model_dir.display()
         ),
     );
-    tokio::spawn(train_loop(shared.clone(), Arc::new(endpoints.train)));
-    tokio::spawn(load_loop(shared.clone(), endpoints.load));
+    let quiet = super::service::OnFailure::Quiet;
+    tokio::spawn(super::service::serve(
+        shared.clone(),
+        endpoints.train,
+        "Train",
+        quiet,
+        train_call,
+    ));
+    tokio::spawn(super::service::serve(
+        shared.clone(),
+        endpoints.load,
+        "LoadModel",
+        quiet,
+        |shared, req: LoadModelRequest| load_and_swap(shared, &req.path),
+    ));
     super::action::spawn(shared, endpoints.action);
 }
 
@@ -196,7 +209,7 @@ pub(super) fn swap(shared: &Shared, model: Arc<dyn Dynamics>, reason: &str) -> D
     shared.record(|r| r.set_model(&new_model));
     let msg = ModelSwap {
         header: Header {
-            stamp: Time::from_nanos(now_nanos()),
+            stamp: Time::from_nanos(shared.clock.now_ns()),
             frame_id: String::new(),
         },
         old_model: old.describe(),
@@ -219,13 +232,6 @@ pub(super) fn swap(shared: &Shared, model: Arc<dyn Dynamics>, reason: &str) -> D
         );
     }
     locked
-}
-
-fn now_nanos() -> i64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
-        .unwrap_or(0)
 }
 
 /// The variant of a request: empty means [`DEFAULT_VARIANT`].
@@ -402,61 +408,26 @@ pub(super) fn run_training(
     }
 }
 
-/// Answers Train calls; each runs in the background and is answered when done.
-async fn train_loop(shared: Arc<Shared>, server: Arc<Server<TrainRequest, TrainResponse>>) {
-    loop {
-        let (id, req) = match server.async_receive_request().await {
-            Ok(r) => r,
-            Err(e) => {
-                shared
-                    .log
-                    .log(LogLevel::Warn, &format!("undecodable Train request: {e:?}"));
-                continue;
-            }
+/// The Train service's work: refused at once while another training runs,
+/// else trains (blocking) and answers when done.
+fn train_call(shared: &Arc<Shared>, req: TrainRequest) -> TrainResponse {
+    let Some(_claim) = claim(shared) else {
+        shared
+            .log
+            .log(LogLevel::Warn, &format!("Train service: {BUSY}"));
+        return TrainResponse {
+            success: false,
+            message: BUSY.into(),
+            ..TrainResponse::default()
         };
-        let Some(claim) = claim(&shared) else {
-            shared
-                .log
-                .log(LogLevel::Warn, &format!("Train service: {BUSY}"));
-            let resp = TrainResponse {
-                success: false,
-                message: BUSY.into(),
-                ..TrainResponse::default()
-            };
-            if let Err(e) = server.async_send_response(id, resp).await {
-                shared.log.log(
-                    LogLevel::Warn,
-                    &format!("sending a Train response failed: {e:?}"),
-                );
-            }
-            continue;
-        };
-        let (shared, server) = (shared.clone(), server.clone());
-        tokio::spawn(async move {
-            let worker = shared.clone();
-            let job = tokio::task::spawn_blocking(move || {
-                let _claim = claim;
-                run_training(
-                    &worker,
-                    &req,
-                    &AtomicBool::new(false),
-                    |_| {},
-                    "Train service",
-                )
-            });
-            let resp = job.await.unwrap_or_else(|join| TrainResponse {
-                success: false,
-                message: format!("training task failed: {join}"),
-                ..TrainResponse::default()
-            });
-            if let Err(e) = server.async_send_response(id, resp).await {
-                shared.log.log(
-                    LogLevel::Warn,
-                    &format!("sending a Train response failed: {e:?}"),
-                );
-            }
-        });
-    }
+    };
+    run_training(
+        shared,
+        &req,
+        &AtomicBool::new(false),
+        |_| {},
+        "Train service",
+    )
 }
 
 /// Loads `path` (a model file or `truth:*`) and swaps it in; a bad file
@@ -487,34 +458,6 @@ pub(super) fn load_and_swap(shared: &Shared, path: &str) -> LoadModelResponse {
                     locked.as_secs_f64() * 1e6
                 ),
             }
-        }
-    }
-}
-
-/// Answers LoadModel calls.
-async fn load_loop(shared: Arc<Shared>, server: Server<LoadModelRequest, LoadModelResponse>) {
-    loop {
-        let (id, req) = match server.async_receive_request().await {
-            Ok(r) => r,
-            Err(e) => {
-                shared.log.log(
-                    LogLevel::Warn,
-                    &format!("undecodable LoadModel request: {e:?}"),
-                );
-                continue;
-            }
-        };
-        let worker = shared.clone();
-        let job = tokio::task::spawn_blocking(move || load_and_swap(&worker, &req.path));
-        let resp = job.await.unwrap_or_else(|join| LoadModelResponse {
-            success: false,
-            message: format!("loading task failed: {join}"),
-        });
-        if let Err(e) = server.async_send_response(id, resp).await {
-            shared.log.log(
-                LogLevel::Warn,
-                &format!("sending a LoadModel response failed: {e:?}"),
-            );
         }
     }
 }

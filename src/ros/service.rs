@@ -1,0 +1,102 @@
+//! The one loop that serves every service of the node (Rollout, Replay,
+//! Train, LoadModel): take a request, do the work on tokio's blocking pool,
+//! send the reply. Each request runs as its own task, so a long call (a
+//! training) never holds up the next request; an undecodable request, a
+//! failed task and a failed send are logged, never fatal.
+
+use std::future::Future;
+use std::sync::Arc;
+
+use ros2_client::log::LogLevel;
+use ros2_client::{Message, Server};
+
+use super::msgs::{LoadModelResponse, ReplayResponse, RolloutResponse, TrainResponse};
+use super::node::Shared;
+
+/// A service reply that can say it failed.
+pub trait Reply: Message + Send + Sync + 'static {
+    /// A failed reply giving `message` as the reason.
+    fn failure(message: String) -> Self;
+    /// The reason, when the reply reports a failure.
+    fn failure_reason(&self) -> Option<&str>;
+}
+
+macro_rules! reply {
+    ($($t:ty),*) => {$(
+        impl Reply for $t {
+            // LoadModelResponse has no other fields; the others do.
+            #[allow(clippy::needless_update)]
+            fn failure(message: String) -> Self {
+                Self { success: false, message, ..Self::default() }
+            }
+            fn failure_reason(&self) -> Option<&str> {
+                (!self.success).then_some(self.message.as_str())
+            }
+        }
+    )*};
+}
+reply!(
+    RolloutResponse,
+    ReplayResponse,
+    TrainResponse,
+    LoadModelResponse
+);
+
+/// How a service's failures are reported besides the reply itself.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OnFailure {
+    /// A rate-limited warning and the node's `last_error`.
+    Warn,
+    /// Nothing more: the work logs its own failures.
+    Quiet,
+}
+
+/// Serves `server` (named `name` in messages) until the task is cancelled:
+/// every request is answered with `work(shared, request)`, run on the blocking
+/// pool in a task of its own.
+pub(super) fn serve<Req, Resp, W>(
+    shared: Arc<Shared>,
+    server: Server<Req, Resp>,
+    name: &'static str,
+    on_failure: OnFailure,
+    work: W,
+) -> impl Future<Output = ()> + Send + 'static
+where
+    Req: Message + Send + Sync + 'static,
+    Resp: Reply,
+    W: Fn(&Arc<Shared>, Req) -> Resp + Send + Sync + 'static,
+{
+    let server = Arc::new(server);
+    let work = Arc::new(work);
+    async move {
+        loop {
+            let (id, req) = match server.async_receive_request().await {
+                Ok(r) => r,
+                Err(e) => {
+                    shared.log.log(
+                        LogLevel::Warn,
+                        &format!("undecodable {name} request: {e:?}"),
+                    );
+                    continue;
+                }
+            };
+            let (shared, server, work) = (shared.clone(), server.clone(), work.clone());
+            tokio::spawn(async move {
+                let worker = shared.clone();
+                let job = tokio::task::spawn_blocking(move || work(&worker, req));
+                let resp = job
+                    .await
+                    .unwrap_or_else(|join| Resp::failure(format!("{name} task failed: {join}")));
+                if let (OnFailure::Warn, Some(why)) = (on_failure, resp.failure_reason()) {
+                    shared.service_failed(&format!("{name} call failed: {why}"));
+                }
+                if let Err(e) = server.async_send_response(id, resp).await {
+                    shared.log.log(
+                        LogLevel::Warn,
+                        &format!("sending a {name} response failed: {e:?}"),
+                    );
+                }
+            });
+        }
+    }
+}

@@ -1,0 +1,87 @@
+//! Large graphs through the node, against a default rclpy subscriber, inside
+//! the private network namespace (scripts/netns.sh): a 1,000-particle,
+//! 100-step prediction (8.6 MB) arrives within a bounded time, a 5-particle
+//! prediction right after it is not stalled, and a state above `max_particles`
+//! is refused with the reason while the node keeps answering.
+//!
+//! Needs the rclpy venv (`scripts/setup_venv.sh`). Before the paced push in
+//! vendor/rustdds, the large prediction took about 57 s.
+
+use std::fs;
+use std::time::Duration;
+
+mod common;
+
+use common::{driver_outcome, in_netns, ros_env, run_bounded};
+
+#[test]
+fn large_predictions_arrive_promptly_and_oversized_states_are_refused() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let params = dir.path().join("params.yaml");
+    fs::write(
+        &params,
+        "mcgnode:\n  ros__parameters:\n    model: truth:spring\n    horizon: 100\n    dt: 0.001\n    \
+         diagnostics_period: 0.25\n    warn_period: 1.0\n    max_particles: 2000\n",
+    )
+    .expect("writing params");
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$PARAMS" 2>"$LOG" &
+        node=$!
+        timeout 150 python3 scripts/ros/bench_large.py --particles 1000 --messages 3 --small 3 \
+            --oversized 3000 --timeout 20
+        rc=$?
+        kill -INT $node
+        for _ in $(seq 100); do kill -0 $node 2>/dev/null || break; sleep 0.1; done
+        if kill -0 $node 2>/dev/null; then echo "node ignored SIGINT"; kill -KILL $node; exit 3; fi
+        wait $node; node_rc=$?
+        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
+    "#;
+    let log = dir.path().join("node.log");
+    let o = run_bounded(
+        in_netns(script, &params, &env_sh).env("LOG", &log),
+        Duration::from_secs(200),
+        dir.path(),
+    );
+    let (summary, node_log, report) = driver_outcome(&o, &log, "LARGE_JSON ");
+    println!("{summary}");
+    let r: serde_json::Value = serde_json::from_str(&summary).expect("LARGE_JSON is JSON");
+    let num = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    assert!(
+        num(&r["prediction_bytes"]) > 8e6,
+        "the 1,000-particle prediction should be about 8.6 MB\n{report}"
+    );
+    assert_eq!(r["lost"], 0, "predictions lost\n{report}");
+    assert_eq!(r["large"]["count"], 3, "{report}");
+    // Bounds far above the measured figures (about 0.1 s and 1 ms on a loaded
+    // 2-core machine) and far below the 57 s of the unpaced writer.
+    let large = num(&r["large"]["max_ms"]);
+    assert!(
+        large < 5000.0,
+        "1,000-particle prediction took {large} ms\n{report}"
+    );
+    let small = num(&r["small_after_large"]["max_ms"]);
+    assert!(
+        small < 1000.0,
+        "a 5-particle prediction after a large one took {small} ms\n{report}"
+    );
+    let over = &r["oversized"];
+    assert_eq!(
+        over["predicted"], false,
+        "oversized state was predicted\n{report}"
+    );
+    assert!(
+        num(&over["small_after_ms"]) < 1000.0,
+        "the node stalled after an oversized state\n{report}"
+    );
+    assert_eq!(over["rejected"], 1, "{report}");
+    let why = over["last_error"].as_str().unwrap_or_default();
+    assert!(
+        why.contains("3000 particles") && why.contains("max_particles = 2000"),
+        "{why}\n{report}"
+    );
+    assert!(node_log.contains("state too large"), "{report}");
+    assert!(!node_log.contains("panicked"), "{report}");
+}
