@@ -60,6 +60,8 @@ def main():
     ap.add_argument("--limit", type=int, default=0, help="stop after this many messages (0 = all)")
     ap.add_argument("--wait-subscribers", type=int, default=1, help="subscribers to wait for (default 1)")
     ap.add_argument("--timeout", type=float, default=30.0, help="seconds to wait for subscribers")
+    ap.add_argument("--settle", type=float, default=1.0,
+                    help="seconds to wait after the subscribers matched, so that they match us too (default 1)")
     ap.add_argument("--best-effort", action="store_true", help="best-effort QoS (default reliable)")
     args = ap.parse_args()
     if args.rate is not None and not args.rate > 0:
@@ -104,6 +106,11 @@ def main():
             rclpy, node, lambda: pub.get_subscription_count() >= args.wait_subscribers, args.timeout
         ):
             sys.exit(f"error: fewer than {args.wait_subscribers} subscribers on {out_topic} after {args.timeout} s")
+        # Our side seeing the subscriber does not mean the subscriber has
+        # matched our new writer yet: a volatile reader that matches late skips
+        # what was sent before. Let discovery settle both ways.
+        if args.wait_subscribers > 0 and args.settle > 0:
+            ru.spin_until(rclpy, node, lambda: False, args.settle)
 
         decoders = {}
         sent = 0
