@@ -41,7 +41,27 @@ fn to_model(t: mcgnode::train::Trained) -> TrainedModel {
     f.hyper = t.net.hyper.clone();
     f.weights = t.net.store.weights().unwrap();
     f.training = t.report;
+    f.optimizer = Some(t.optimizer);
     TrainedModel::from_file(f).unwrap()
+}
+
+/// Trains and returns the result with the validation loss of its first epoch.
+fn train_first(
+    hy: &Hyper,
+    g: &mcgnode::system::Graph,
+    s: &[State],
+    a: &[Vec<f64>],
+    cfg: &TrainConfig,
+) -> (mcgnode::train::Trained, f64) {
+    let mut first = f64::NAN;
+    let t = train(hy.clone(), g, s, a, cfg, |r| {
+        if r.epoch == 1 {
+            first = r.validation_loss;
+        }
+        true
+    })
+    .unwrap();
+    (t, first)
 }
 
 #[test]
@@ -56,14 +76,7 @@ fn training_is_reproducible_and_learns() {
         ..TrainConfig::default()
     };
     let hy = Hyper::new(Variant::Gnode, 2, 1, 5);
-    let mut first_val = f64::NAN;
-    let t1 = train(hy.clone(), &g, &s, &a, &cfg, |r| {
-        if r.epoch == 1 {
-            first_val = r.validation_loss;
-        }
-        true
-    })
-    .unwrap();
+    let (t1, first_val) = train_first(&hy, &g, &s, &a, &cfg);
     let t2 = train(hy.clone(), &g, &s, &a, &cfg, |_| true).unwrap();
     assert_eq!(
         t1.net.store.weights().unwrap(),
@@ -362,40 +375,22 @@ fn warm_start_continues_training() {
         ..TrainConfig::default()
     };
     let hy = Hyper::new(Variant::Mcgnode, 2, 1, 5);
-    let mut fresh_first = f64::NAN;
-    let first = train(hy.clone(), &g, &s, &a, &cfg, |r| {
-        if r.epoch == 1 {
-            fresh_first = r.validation_loss;
-        }
-        true
-    })
-    .unwrap();
-    let mut file = to_model(first).file;
-    let t = mcgnode::train::train(hy.clone(), &g, &s, &a, &cfg, |_| true).unwrap();
-    file.optimizer = Some(t.optimizer.clone());
-    assert!(t.optimizer.step > 0);
+    let (first, fresh_first) = train_first(&hy, &g, &s, &a, &cfg);
+    let file = to_model(first).file;
+    let steps = file.optimizer.as_ref().expect("Adam state kept").step;
+    assert!(steps > 0);
     let best = file.training.validation_loss;
     let warm = TrainConfig {
         init: Some(Box::new(file.clone())),
         ..cfg.clone()
     };
-    let mut warm_first = f64::NAN;
-    let second = train(file.hyper.clone(), &g, &s, &a, &warm, |r| {
-        if r.epoch == 1 {
-            warm_first = r.validation_loss;
-        }
-        true
-    })
-    .unwrap();
+    let (second, warm_first) = train_first(&file.hyper, &g, &s, &a, &warm);
     assert!(
         warm_first < 0.5 * fresh_first && warm_first < 2.0 * best,
         "warm start's first epoch {warm_first:.3e}: fresh {fresh_first:.3e}, earlier best {best:.3e}"
     );
     assert!(second.report.validation_loss <= warm_first);
-    assert!(
-        second.optimizer.step > t.optimizer.step,
-        "Adam's step count continues"
-    );
+    assert!(second.optimizer.step > steps, "Adam's step count continues");
     let mut other = file.hyper.clone();
     other.hidden = 7;
     let err = train(other, &g, &s, &a, &warm, |_| true).err().unwrap();

@@ -124,6 +124,8 @@ pub(crate) struct Chunk {
     gglob: Vec<f64>,
     gf_edge: Vec<f64>,
     gminv: Vec<f64>,
+    /// Inverse masses per particle type (constrained variants).
+    inv_m: Vec<f64>,
     s1: Vec<f64>,
     s2: Vec<f64>,
     /// ∂(Σ squared errors · scale)/∂θ of the last [`Chunk::run`] with gradients.
@@ -201,6 +203,7 @@ impl Chunk {
             gglob: z(em * nodes),
             gf_edge: z(d * edges),
             gminv: z(nodes),
+            inv_m: z(a.types),
             s1: z(width * rmax),
             s2: z(width * rmax),
             grad: z(m.layout.len()),
@@ -216,6 +219,7 @@ impl Chunk {
             return;
         }
         let (n, e) = (m.plan.n, m.plan.n_edges());
+        let edges = bs * m.plan.recv.len();
         let mut k = 0;
         for half in 0..2 {
             for s in 0..bs {
@@ -224,7 +228,6 @@ impl Chunk {
                     self.send[k] = s * n + m.plan.send[j];
                     if m.arch.edge_physics {
                         // Constant inputs after q_i − q_j: rest length, stiffness.
-                        let edges = bs * m.plan.recv.len();
                         for (f, x) in m.arch.edge_physics_of(&m.plan, j).iter().enumerate() {
                             self.w_in[(m.plan.dim + f) * edges + k] = *x;
                         }
@@ -560,7 +563,12 @@ impl Chunk {
         let nodes = bs * n;
         let k = m.plan.bars.len();
         let lm = m.log_mass.expect("constrained model has masses");
-        let minv = |p: usize| (-th[lm + m.plan.types[p]]).exp();
+        // 1/m per type, once per call (not in the per-bar loops).
+        for (t, x) in self.inv_m.iter_mut().enumerate() {
+            *x = (-th[lm + t]).exp();
+        }
+        let inv_m = &self.inv_m;
+        let minv = |p: usize| inv_m[m.plan.types[p]];
         let (x, out) = (&self.x, &self.out);
         let q = |row: usize, c: usize| x[(t + c) * nodes + row];
         let v = |row: usize, c: usize| x[(t + d + c) * nodes + row];
@@ -630,7 +638,12 @@ impl Chunk {
         let nodes = bs * n;
         let k = m.plan.bars.len();
         let lm = m.log_mass.expect("constrained model has masses");
-        let minv = |p: usize| (-th[lm + m.plan.types[p]]).exp();
+        // 1/m per type, once per call (not in the per-bar loops).
+        for (t, x) in self.inv_m.iter_mut().enumerate() {
+            *x = (-th[lm + t]).exp();
+        }
+        let inv_m = &self.inv_m;
+        let minv = |p: usize| inv_m[m.plan.types[p]];
         for s in 0..bs {
             let base = s * n;
             for p in 0..n {

@@ -61,27 +61,8 @@ pub fn all_cores() -> usize {
 impl Engine {
     /// An engine for `hyper` on `graph`, running on `threads` threads.
     pub fn new(hyper: &Hyper, graph: &Graph, threads: usize) -> Result<Self, EngineError> {
-        graph.validate().map_err(EngineError::Graph)?;
         let arch = Arch::new(hyper);
-        if graph.dim != arch.dim {
-            return Err(EngineError::Graph(format!(
-                "model is {}D, system is {}D",
-                arch.dim, graph.dim
-            )));
-        }
-        if let Some(t) = graph.types.iter().find(|&&t| t as usize >= arch.types) {
-            return Err(EngineError::Graph(format!(
-                "particle type {t} is unknown to the model (it knows {} types)",
-                arch.types
-            )));
-        }
-        if !arch.biases.graph && graph.n() != arch.particles {
-            return Err(EngineError::Graph(format!(
-                "NODE was built for {} particles, system has {} (NODE is not inductive)",
-                arch.particles,
-                graph.n()
-            )));
-        }
+        arch.supports(graph).map_err(EngineError::Graph)?;
         let threads = threads.max(1);
         let pool = if threads > 1 {
             Some(

@@ -10,7 +10,7 @@ use crate::model::mlp::squareplus_f64;
 use crate::model::params::Weights;
 use crate::model::plan::{BarEnd, GraphPlan};
 use crate::model::solve::lu_solve_in_place;
-use crate::model::variant::{EdgeInput, Hyper, Norm};
+use crate::model::variant::{EdgeInput, Hyper};
 use crate::physics::Projector;
 use crate::system::Graph;
 use anyhow::{bail, Context, Result};
@@ -30,8 +30,7 @@ pub struct Kernel {
     edge_out: Option<KMlp>,
     body_out: Option<KMlp>,
     inv_mass: Option<Vec<f64>>,
-    edge_input: EdgeInput,
-    norm: Norm,
+    arch: Arch,
     project_bars: bool,
 }
 
@@ -102,8 +101,7 @@ impl Kernel {
             edge_out: ld(Block::EdgeDecoder)?,
             body_out: ld(Block::BodyDecoder)?,
             inv_mass,
-            edge_input: arch.edge_input,
-            norm: arch.norm.clone(),
+            arch,
             project_bars: true,
         };
         let b = hyper.variant.biases();
@@ -142,31 +140,7 @@ impl Kernel {
 
     /// Whether the kernel can run on this graph.
     pub fn supports(&self, graph: &Graph) -> Result<(), String> {
-        graph.validate()?;
-        if graph.dim != self.hyper.dim {
-            return Err(format!(
-                "model is {}D, system is {}D",
-                self.hyper.dim, graph.dim
-            ));
-        }
-        if let Some(t) = graph
-            .types
-            .iter()
-            .find(|&&t| t as usize >= self.hyper.types)
-        {
-            return Err(format!(
-                "particle type {t} is unknown to the model (it knows {} types)",
-                self.hyper.types
-            ));
-        }
-        if self.node_mlp.is_some() && graph.n() != self.hyper.particles {
-            return Err(format!(
-                "NODE model is built for {} particles, system has {} (NODE is not inductive)",
-                self.hyper.particles,
-                graph.n()
-            ));
-        }
-        Ok(())
+        self.arch.supports(graph)
     }
 
     /// Allocates the buffers for a graph.
@@ -208,7 +182,7 @@ impl Kernel {
         }
         let k = plan.bars.len();
         // Edge inputs: q_i − q_j (filled each step), then constant edge physics.
-        let arch = Arch::new(&self.hyper);
+        let arch = &self.arch;
         let mut w_in_init = vec![0.0; arch.edge_features() * ne];
         if arch.edge_physics {
             for e in 0..ne {
@@ -258,7 +232,7 @@ impl Kernel {
         let bias = self.hyper.variant.biases();
         if let Some(m) = &self.node_mlp {
             let nd = n * d;
-            let nm = &self.norm;
+            let nm = &self.arch.norm;
             for i in 0..nd {
                 ws.x[i] = (q[i] - nm.q_mean[i % d]) / nm.q_scale;
                 ws.x[nd + i] = v[i] / nm.v_scale;
@@ -274,8 +248,9 @@ impl Kernel {
         for (i, &ty) in ws.plan.types.iter().enumerate() {
             ws.x[ty * n + i] = 1.0;
             for c in 0..d {
-                ws.x[(t + c) * n + i] = (q[i * d + c] - self.norm.q_mean[c]) / self.norm.q_scale;
-                ws.x[(t + d + c) * n + i] = v[i * d + c] / self.norm.v_scale;
+                ws.x[(t + c) * n + i] =
+                    (q[i * d + c] - self.arch.norm.q_mean[c]) / self.arch.norm.q_scale;
+                ws.x[(t + d + c) * n + i] = v[i * d + c] / self.arch.norm.v_scale;
             }
         }
         // Node embeddings: of the type alone when decoupled.
@@ -290,7 +265,7 @@ impl Kernel {
         // Edge embeddings of w_ij = q_i − q_j.
         for (e, (&r, &s)) in ws.plan.recv.iter().zip(&ws.plan.send).enumerate() {
             for c in 0..d {
-                ws.w_in[c * ne + e] = (q[r * d + c] - q[s * d + c]) / self.norm.w_scale;
+                ws.w_in[c * ne + e] = (q[r * d + c] - q[s * d + c]) / self.arch.norm.w_scale;
             }
         }
         let edge_em = self.edge_em.as_ref().expect("checked in new");
@@ -327,7 +302,7 @@ impl Kernel {
             }
             if edges_needed {
                 // h_ij ← sqp(h_ij + W_E (h_i ‖ h_j)), from the node states before this round.
-                match self.edge_input {
+                match self.arch.edge_input {
                     EdgeInput::Concat => {
                         we.forward(&ws.hr, &ws.hs, ne, &mut ws.he_new, &mut ws.t1, &mut ws.t2)
                     }
@@ -365,7 +340,7 @@ impl Kernel {
                 let (a, b) = (ws.plan.recv[e], ws.plan.send[e]);
                 for c in 0..d {
                     let f = (ws.f_edge[c * ne + e] - ws.f_edge[c * ne + e + half])
-                        * (0.5 * self.norm.out_scale);
+                        * (0.5 * self.arch.norm.out_scale);
                     ws.edge_force[e * d + c] = f;
                     out[a * d + c] += f;
                     out[b * d + c] -= f;
@@ -375,7 +350,7 @@ impl Kernel {
                 bo.forward(&ws.glob, &[], n, &mut ws.f_node, &mut ws.t1, &mut ws.t2);
                 for i in 0..n {
                     for c in 0..d {
-                        out[i * d + c] += ws.f_node[c * n + i] * self.norm.out_scale;
+                        out[i * d + c] += ws.f_node[c * n + i] * self.arch.norm.out_scale;
                     }
                 }
             }
@@ -388,7 +363,7 @@ impl Kernel {
             no.forward(&ws.h, g, n, &mut ws.f_node, &mut ws.t1, &mut ws.t2);
             for i in 0..n {
                 for c in 0..d {
-                    out[i * d + c] = ws.f_node[c * n + i] * self.norm.out_scale;
+                    out[i * d + c] = ws.f_node[c * n + i] * self.arch.norm.out_scale;
                 }
             }
         }

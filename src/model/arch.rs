@@ -216,6 +216,29 @@ impl Arch {
             .map(|(_, s)| s.as_slice())
     }
 
+    /// Whether a model of this architecture can run on `graph`: valid, of its
+    /// dimension, with known particle types, and (NODE) of its particle count.
+    pub fn supports(&self, graph: &crate::system::Graph) -> Result<(), String> {
+        graph.validate()?;
+        if graph.dim != self.dim {
+            return Err(format!("model is {}D, system is {}D", self.dim, graph.dim));
+        }
+        if let Some(t) = graph.types.iter().find(|&&t| t as usize >= self.types) {
+            return Err(format!(
+                "particle type {t} is unknown to the model (it knows {} types)",
+                self.types
+            ));
+        }
+        if !self.biases.graph && graph.n() != self.particles {
+            return Err(format!(
+                "NODE model is built for {} particles, system has {} (NODE is not inductive)",
+                self.particles,
+                graph.n()
+            ));
+        }
+        Ok(())
+    }
+
     /// Edge input features: q_i − q_j, then (rest, stiffness) with edge physics.
     pub fn edge_features(&self) -> usize {
         self.dim + if self.edge_physics { EDGE_PHYSICS } else { 0 }
