@@ -139,17 +139,8 @@ pub fn epoch_seconds(
             crate::train::train(h, g, states, acc, &cfg, on_epoch)?;
         }
         Trainee::Baseline(kind) => {
-            // LGN and HGN need second derivatives, which candle fixes per
-            // thread at its first backward pass: train on a fresh thread.
-            crate::baselines::autodiff::request_second_order();
-            std::thread::scope(|s| {
-                s.spawn(|| {
-                    let h = crate::baselines::BaselineHyper::new(kind, g.dim, 1);
-                    crate::baselines::train_baseline(h, g, states, acc, &cfg, on_epoch)
-                })
-                .join()
-                .map_err(|_| anyhow::anyhow!("{kind} training thread panicked"))?
-            })?;
+            let h = crate::baselines::BaselineHyper::new(kind, g.dim, 1);
+            crate::baselines::train_baseline(h, g, states, acc, &cfg, on_epoch)?;
         }
     }
     Ok(median(times))

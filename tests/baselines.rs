@@ -608,3 +608,174 @@ fn measure_short_training() {
         );
     }
 }
+
+/// A batch with targets of `count` states of a system (3D when `dim` is 3).
+fn target_batch(kind: SystemKind, n: usize, dim: usize, count: usize) -> (Graph, Batch) {
+    let mut c = SystemConfig::new(kind, n);
+    c.dim = dim;
+    c.states = 20;
+    let t = c.simulate(1, 6);
+    let g = t[0].graph.clone();
+    let plan = GraphPlan::new(&g);
+    let picked: Vec<&mcgnode::system::Sample> =
+        t[0].samples.iter().step_by(3).take(count).collect();
+    let refs: Vec<&State> = picked.iter().map(|x| &x.state).collect();
+    let accs: Vec<&[f64]> = picked.iter().map(|x| x.acc.as_deref().unwrap()).collect();
+    let b = Batch::new(&plan, &refs, Some(&accs), 1).unwrap();
+    (g, b)
+}
+
+fn flat(t: &Tensor) -> Vec<f64> {
+    t.flatten_all().unwrap().to_vec1::<f64>().unwrap()
+}
+
+/// ‖a − b‖∞ / ‖b‖∞.
+fn rel(a: &[f64], b: &[f64]) -> f64 {
+    let scale = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    assert!(scale > 0.0, "reference is all zeros");
+    max_diff(a, b) / scale
+}
+
+/// HGN's derivatives with ∂H/∂p = M⁻¹p, H_pp = M⁻¹, H_pq = 0 and ∂V/∂q by
+/// the hand-written backward pass equal the generic Hamilton code's, and so
+/// do LGN's accelerations; with and without bars, in 2D and 3D.
+#[test]
+fn hand_written_potential_gradient_equals_autodiff() {
+    for (sys, n, dim) in [
+        (SystemKind::Spring, 5, 2),
+        (SystemKind::Pendulum, 4, 2),
+        (SystemKind::Spring, 4, 3),
+    ] {
+        let (g, b) = target_batch(sys, n, dim, 4);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
+        let net = BaselineNet::new(BaselineHyper::new(Kind::Hgn, dim, 1), &mut rng).unwrap();
+        net.store
+            .get("log_mass")
+            .unwrap()
+            .set(&Tensor::new(&[0.35f64], &Device::Cpu).unwrap())
+            .unwrap();
+        let m = masses(&g, &b);
+        let p = b.v.broadcast_mul(&m).unwrap();
+        let (qd, pd) = mcgnode::baselines::hgn::derivatives(&net, &b, &p).unwrap();
+        let (qg, pg) = mcgnode::baselines::hgn::derivatives_generic(&net, &b, &p).unwrap();
+        assert!(rel(&flat(&qd), &flat(&qg)) < 1e-12, "{sys} {dim}D: q̇");
+        let e = rel(&flat(&pd), &flat(&pg));
+        assert!(e < 1e-12, "{sys} {dim}D: ṗ differs by {e:e} (relative)");
+        // Independently: ∂V/∂q against central differences of V.
+        let gq = flat(&net.potential_grad(&b, &b.q).unwrap());
+        let q0 = flat(&b.q);
+        let v_at = |k: usize, h: f64| {
+            let mut q = q0.clone();
+            q[k] += h;
+            let q = Tensor::from_vec(q, b.q.dims(), &Device::Cpu).unwrap();
+            net.potential(&b, &q).unwrap().to_scalar::<f64>().unwrap()
+        };
+        for k in [0, q0.len() / 2, q0.len() - 1] {
+            let fd = (v_at(k, 1e-6) - v_at(k, -1e-6)) / 2e-6;
+            assert!(
+                (fd - gq[k]).abs() < 1e-7 * (1.0 + fd.abs()),
+                "{sys}: ∂V/∂q[{k}] {} vs {fd}",
+                gq[k]
+            );
+        }
+    }
+}
+
+/// Training gradients (d loss/dθ for every parameter) through the
+/// hand-written ∂V/∂q equal candle's grad-of-grad through the generic
+/// mechanics, for LGN and HGN, with and without bars, 2D and 3D.
+#[test]
+fn training_gradients_equal_grad_of_grad() {
+    for kind in [Kind::Lgn, Kind::Hgn] {
+        for (sys, n, dim) in [
+            (SystemKind::Spring, 5, 2),
+            (SystemKind::Pendulum, 3, 2),
+            (SystemKind::Spring, 4, 3),
+        ] {
+            let (g, b) = target_batch(sys, n, dim, 3);
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+            let net = BaselineNet::new(BaselineHyper::new(kind, dim, 1), &mut rng).unwrap();
+            net.store
+                .get("log_mass")
+                .unwrap()
+                .set(&Tensor::new(&[-0.2f64], &Device::Cpu).unwrap())
+                .unwrap();
+            let fast = net.loss(&b, &g.masses).unwrap();
+            let generic = match kind {
+                Kind::Hgn => mcgnode::baselines::hgn::loss_generic(&net, &b, &g.masses).unwrap(),
+                _ => {
+                    let a = mcgnode::baselines::lgn::acceleration_generic(&net, &b).unwrap();
+                    (a - b.target.as_ref().unwrap())
+                        .unwrap()
+                        .sqr()
+                        .unwrap()
+                        .mean_all()
+                        .unwrap()
+                }
+            };
+            let (lf, lg) = (
+                fast.to_scalar::<f64>().unwrap(),
+                generic.to_scalar::<f64>().unwrap(),
+            );
+            assert!(
+                (lf - lg).abs() <= 1e-12 * lg.abs(),
+                "{kind} {sys}: loss {lf} vs {lg}"
+            );
+            let (gf, gg) = (fast.backward().unwrap(), generic.backward().unwrap());
+            let mut all_f = vec![];
+            let mut all_g = vec![];
+            for name in net.store.names() {
+                let v = net.store.get(name).unwrap();
+                // Output biases do not reach ∂V/∂q: no gradient is a zero gradient.
+                let zero = || vec![0.0; v.elem_count()];
+                all_f.extend(gf.get(v.as_tensor()).map_or_else(zero, flat));
+                all_g.extend(gg.get(v.as_tensor()).map_or_else(zero, flat));
+            }
+            let e = rel(&all_f, &all_g);
+            assert!(
+                e < 1e-10,
+                "{kind} on {sys} {dim}D: gradients differ by {e:e} (relative ∞-norm)"
+            );
+        }
+    }
+}
+
+/// The graph network's input backward pass, with GNS's residual updates and
+/// distance feature, against candle's autodiff of Σ c_h∘h + Σ c_e∘e.
+#[test]
+fn graph_network_input_gradients_equal_autodiff() {
+    use mcgnode::baselines::graphnet::{GraphNet, GraphNetSpec};
+    use mcgnode::model::params::ParamStore;
+    for (residual, edge_distance, rounds) in [(true, true, 2), (false, false, 1), (false, true, 2)]
+    {
+        let (_, b) = target_batch(SystemKind::Spring, 5, 2, 3);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+        let mut store = ParamStore::new();
+        let spec = GraphNetSpec {
+            node_in: 3,
+            dim: 2,
+            hidden: 7,
+            latent: 6,
+            rounds,
+            residual,
+            edge_distance,
+        };
+        let net = GraphNet::new(&mut store, spec, &mut rng).unwrap();
+        let q = Var::from_tensor(&b.q).unwrap();
+        let x = Tensor::cat(&[&b.onehot, q.as_tensor()], 1).unwrap();
+        let t = net.run_traced(&store, &b, q.as_tensor(), &x).unwrap();
+        let e = t.e.clone().unwrap();
+        let ch = Tensor::randn(0.0f64, 1.0, t.h.dims(), &Device::Cpu).unwrap();
+        let ce = Tensor::randn(0.0f64, 1.0, e.dims(), &Device::Cpu).unwrap();
+        let s = ((&t.h * &ch).unwrap().sum_all().unwrap() + (&e * &ce).unwrap().sum_all().unwrap())
+            .unwrap();
+        let want = flat(s.backward().unwrap().get(q.as_tensor()).unwrap());
+        let (gx, gq) = net.input_grads(&store, &b, &t, &ch, Some(&ce)).unwrap();
+        let got = (gx.narrow(1, 1, 2).unwrap() + gq.unwrap()).unwrap();
+        let err = rel(&flat(&got), &want);
+        assert!(
+            err < 1e-12,
+            "residual {residual}, distance {edge_distance}: {err:e}"
+        );
+    }
+}

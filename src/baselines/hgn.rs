@@ -8,6 +8,7 @@
 use super::mechanics::hamilton;
 use super::net::BaselineNet;
 use crate::model::batch::Batch;
+use crate::model::solve::solve;
 use crate::physics::{acceleration as true_acceleration, SystemConfig};
 use crate::system::{Graph, Sample, State, Trajectory};
 use anyhow::{bail, Result};
@@ -21,7 +22,38 @@ pub fn hamiltonian(net: &BaselineNet, b: &Batch, q: &Tensor, p: &Tensor) -> Resu
 }
 
 /// (q̇, ṗ) at the batch positions and momenta `p` `(B·n, d)`.
+///
+/// This H is separable with a diagonal learned mass, so ∂H/∂p = M⁻¹p,
+/// H_pp = M⁻¹ and H_pq = 0 exactly; only ∂V/∂q is left, and it comes from a
+/// backward pass written as candle ops ([`BaselineNet::potential_grad`]), so
+/// training differentiates once. The bars' multipliers follow
+/// [`hamilton`]'s formula with those terms: λ = (A M⁻¹ Aᵀ)⁻¹ (Ȧq̇ − A M⁻¹ ∂V/∂q),
+/// ṗ = −∂V/∂q − Aᵀλ. [`derivatives_generic`] (autodiff twice) is the
+/// reference it is tested against.
 pub fn derivatives(net: &BaselineNet, b: &Batch, p: &Tensor) -> Result<(Tensor, Tensor)> {
+    let m = net.row_masses(b)?;
+    let qdot = p.broadcast_div(&m)?;
+    let gq = net.potential_grad(b, &b.q)?;
+    let Some((a, at, adq)) = &b.constraint else {
+        return Ok((qdot, gq.neg()?));
+    };
+    let dd = b.n * b.dim;
+    let minv = m
+        .recip()?
+        .broadcast_as((b.b * b.n, b.dim))?
+        .reshape((b.b, dd, 1))?;
+    let gq3 = gq.reshape((b.b, dd, 1))?;
+    let s = a.matmul(&at.broadcast_mul(&minv)?)?;
+    let rhs = (adq - a.matmul(&(&gq3 * &minv)?)?)?;
+    let lambda = solve(&s, &rhs)?;
+    let pdot = (gq3.neg()? - at.matmul(&lambda)?)?.reshape(b.q.dims())?;
+    Ok((qdot, pdot))
+}
+
+/// The same derivatives through the generic Hamilton code (all derivatives
+/// of H by autodiff, twice in training), for checking [`derivatives`].
+pub fn derivatives_generic(net: &BaselineNet, b: &Batch, p: &Tensor) -> Result<(Tensor, Tensor)> {
+    super::autodiff::ensure_second_order()?;
     let q = Var::from_tensor(&b.q)?;
     let p = Var::from_tensor(p)?;
     hamilton(
@@ -45,6 +77,17 @@ pub fn acceleration(net: &BaselineNet, b: &Batch) -> Result<Tensor> {
 /// MSE over (q̇, ṗ) against (v, m∘a) with the true masses: the momenta fed to
 /// the network are p = m∘v, as recorded by a Hamiltonian simulation.
 pub fn loss(net: &BaselineNet, b: &Batch, masses: &[f64]) -> Result<Tensor> {
+    loss_with(derivatives, net, b, masses)
+}
+
+/// [`loss`] through [`derivatives_generic`], for checking its gradients.
+pub fn loss_generic(net: &BaselineNet, b: &Batch, masses: &[f64]) -> Result<Tensor> {
+    loss_with(derivatives_generic, net, b, masses)
+}
+
+type Derivatives = fn(&BaselineNet, &Batch, &Tensor) -> Result<(Tensor, Tensor)>;
+
+fn loss_with(derivs: Derivatives, net: &BaselineNet, b: &Batch, masses: &[f64]) -> Result<Tensor> {
     let Some(acc) = &b.target else {
         bail!("batch has no targets");
     };
@@ -54,7 +97,7 @@ pub fn loss(net: &BaselineNet, b: &Batch, masses: &[f64]) -> Result<Tensor> {
     let m: Vec<f64> = (0..b.b).flat_map(|_| masses.iter().copied()).collect();
     let m = Tensor::from_vec(m, (b.b * b.n, 1), &Device::Cpu)?;
     let p = b.v.broadcast_mul(&m)?;
-    let (qd, pd) = derivatives(net, b, &p)?;
+    let (qd, pd) = derivs(net, b, &p)?;
     let lq = (qd - &b.v)?.sqr()?.mean_all()?;
     let lp = (pd - acc.broadcast_mul(&m)?)?.sqr()?.mean_all()?;
     Ok(((lq + lp)? * 0.5)?)

@@ -1,13 +1,13 @@
 //! LGN: a full graph network gives the potential V_θ(q); the Lagrangian is
 //! L = ½ q̇ᵀ M q̇ − V_θ(q) with a learnable diagonal mass M (one mass per
 //! particle type), as the paper does "since Cartesian coordinates are used"
-//! (following Finzi et al. 2020). Accelerations come from the generic
-//! Euler–Lagrange code ([`super::mechanics::euler_lagrange`]) with the bar
-//! constraints, so the Hessian ∇_q̇∇_q̇L and the mixed term are computed by
-//! autodiff even though this L makes them M and 0; training differentiates
-//! ∇_q L once more (grad-of-grad).
+//! (following Finzi et al. 2020). For this L the Hessian ∇_q̇∇_q̇L is M and the
+//! mixed term is 0, so Euler–Lagrange needs only ∇_q L = −∂V/∂q, which comes
+//! from a backward pass written as candle ops
+//! ([`BaselineNet::potential_grad`]): training differentiates once. The
+//! generic code ([`super::mechanics::euler_lagrange`], autodiff twice) is the
+//! reference ([`acceleration_generic`]).
 
-use super::autodiff::grads;
 use super::mechanics::{euler_lagrange, solve_constrained};
 use super::net::BaselineNet;
 use crate::model::batch::Batch;
@@ -29,9 +29,9 @@ pub fn lagrangian(net: &BaselineNet, b: &Batch, q: &Tensor, v: &Tensor) -> Resul
 /// [`acceleration_generic`]) would spend one backward pass per coordinate on
 /// the Hessian and a full one on the mixed term.
 pub fn acceleration(net: &BaselineNet, b: &Batch) -> Result<Tensor> {
-    let q = Var::from_tensor(&b.q)?;
-    let l = lagrangian(net, b, q.as_tensor(), &b.v)?;
-    let gq = grads(&l, &[&q])?.remove(0);
+    // ∇_q L = −∂V/∂q, by the hand-written backward pass (candle then
+    // differentiates once in training).
+    let gq = net.potential_grad(b, &b.q)?.neg()?;
     let dd = b.n * b.dim;
     let m = net
         .row_masses(b)?
@@ -48,6 +48,7 @@ pub fn acceleration(net: &BaselineNet, b: &Batch) -> Result<Tensor> {
 /// The same accelerations through the generic Euler–Lagrange code (Hessian
 /// and mixed term by autodiff), for checking [`acceleration`].
 pub fn acceleration_generic(net: &BaselineNet, b: &Batch) -> Result<Tensor> {
+    super::autodiff::ensure_second_order()?;
     let q = Var::from_tensor(&b.q)?;
     let v = Var::from_tensor(&b.v)?;
     euler_lagrange(

@@ -11,12 +11,14 @@
 //!   energy is ½ q̇ᵀMq̇ (LGN) or ½ pᵀM⁻¹p (HGN) with a learnable diagonal mass
 //!   per particle type, "since Cartesian coordinates are used" (paper, after
 //!   Finzi et al. 2020).
-//! * Derivatives come from generic code ([`mechanics`]) that works for any
-//!   scalar L(q, q̇) or H(q, p) and handles rigid bars; it is tested against
-//!   hand-written Lagrangians and Hamiltonians of the true systems.
-//! * LGN and HGN need candle grad-of-grad ([`autodiff`]): they switch on
-//!   `CANDLE_GRAD_DO_NOT_DETACH` themselves and refuse to run on a thread
-//!   where candle has already fixed the old setting.
+//! * Derivatives: with a diagonal learned mass, LGN and HGN need only ∂V/∂q
+//!   of the learned potential, written as a backward pass in candle ops
+//!   ([`graphnet::GraphNet::input_grads`], [`net::BaselineNet::potential_grad`]),
+//!   so training differentiates once. Generic code ([`mechanics`]) that works
+//!   for any scalar L(q, q̇) or H(q, p) and handles rigid bars is the
+//!   reference: tested against hand-written Lagrangians and Hamiltonians of
+//!   the true systems, and the baselines' shortcuts against it. It needs
+//!   candle's grad-of-grad ([`autodiff`]), which it switches on itself.
 //! * HGN trains on (q̇, ṗ); its data come from RK4 on (q, p)
 //!   ([`hgn::rk4_trajectories`]). LGN and GNS train on accelerations.
 

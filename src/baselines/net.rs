@@ -7,7 +7,7 @@ use crate::model::batch::Batch;
 use crate::model::mlp::Mlp;
 use crate::model::params::ParamStore;
 use anyhow::{bail, Result};
-use candle_core::Tensor;
+use candle_core::{DType, Device, Tensor};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -36,12 +36,6 @@ impl Kind {
             Kind::Hgn => "hgn",
             Kind::Gns => "gns",
         }
-    }
-
-    /// Whether the model is differentiated twice (needs candle's
-    /// `CANDLE_GRAD_DO_NOT_DETACH`, see [`super::autodiff`]).
-    pub fn second_order(self) -> bool {
-        self != Kind::Gns
     }
 }
 
@@ -123,9 +117,6 @@ impl BaselineNet {
         if hyper.hidden == 0 || hyper.latent == 0 {
             bail!("hidden and latent widths must be positive");
         }
-        if hyper.kind.second_order() {
-            super::autodiff::ensure_second_order()?;
-        }
         let (d, t, h, l) = (hyper.dim, hyper.types, hyper.hidden, hyper.latent);
         let mut store = ParamStore::new();
         let energy = hyper.kind != Kind::Gns;
@@ -179,6 +170,36 @@ impl BaselineNet {
         Ok(v)
     }
 
+    /// ∂V/∂q `(B·n, d)` of the learned potential ([`BaselineNet::potential`])
+    /// by a backward pass written as candle ops
+    /// ([`GraphNet::input_grads`]): a function of the weights that candle
+    /// differentiates once in training, where a first autodiff pass would
+    /// make it differentiate twice.
+    pub fn potential_grad(&self, b: &Batch, q: &Tensor) -> Result<Tensor> {
+        let x = Tensor::cat(&[&b.onehot, q], 1)?;
+        let t = self.graph.run_traced(&self.store, b, q, &x)?;
+        let ones = |rows: usize| Tensor::ones((rows, 1), DType::F64, &Device::Cpu);
+        let (_, pre) = self.node_out.forward_keep(&self.store, &t.h)?;
+        let dh = self
+            .node_out
+            .input_grad(&self.store, &pre, &ones(t.h.dim(0)?)?)?;
+        let de = match (&t.e, &self.edge_out) {
+            (Some(e), Some(eo)) => {
+                let (_, pre) = eo.forward_keep(&self.store, e)?;
+                Some(eo.input_grad(&self.store, &pre, &ones(e.dim(0)?)?)?)
+            }
+            _ => None,
+        };
+        let (gx, gq) = self
+            .graph
+            .input_grads(&self.store, b, &t, &dh, de.as_ref())?;
+        let gx = gx.narrow(1, self.hyper.types, self.hyper.dim)?;
+        Ok(match gq {
+            Some(gq) => (gx + gq)?,
+            None => gx,
+        })
+    }
+
     /// Predicted accelerations `(B·n, d)`.
     pub fn acceleration(&self, b: &Batch) -> Result<Tensor> {
         self.check(b)?;
@@ -211,9 +232,6 @@ impl BaselineNet {
                 self.hyper.dim,
                 b.dim
             );
-        }
-        if self.hyper.kind.second_order() {
-            super::autodiff::ensure_second_order()?;
         }
         Ok(())
     }

@@ -10,6 +10,12 @@ pub fn squareplus(x: &Tensor) -> candle_core::Result<Tensor> {
     (x + (x.sqr()? + 4.0)?.sqrt()?)? * 0.5
 }
 
+/// squareplus'(x) = (1 + x / √(x² + 4)) / 2, for backward passes written as
+/// candle ops (which candle can then differentiate once more).
+pub fn squareplus_grad(x: &Tensor) -> candle_core::Result<Tensor> {
+    ((x / (x.sqr()? + 4.0)?.sqrt()?)? + 1.0)? * 0.5
+}
+
 /// Scalar squareplus, for the kernel.
 #[inline]
 pub fn squareplus_f64(x: f64) -> f64 {
@@ -61,16 +67,40 @@ impl Mlp {
 
     /// Forward pass on rows of `x` (`(N, sizes[0])` → `(N, sizes.last())`).
     pub fn forward(&self, store: &ParamStore, x: &Tensor) -> Result<Tensor> {
+        Ok(self.forward_keep(store, x)?.0)
+    }
+
+    /// Forward pass that also returns the hidden layers' pre-activations,
+    /// which [`Mlp::input_grad`] needs.
+    pub fn forward_keep(&self, store: &ParamStore, x: &Tensor) -> Result<(Tensor, Vec<Tensor>)> {
         let mut h = x.clone();
+        let mut pre = Vec::with_capacity(self.layers().saturating_sub(1));
         for i in 0..self.layers() {
             let (wn, bn) = self.layer_names(i);
             h = h
                 .matmul(store.get(wn)?.as_tensor())?
                 .broadcast_add(store.get(bn)?.as_tensor())?;
             if i + 1 < self.layers() {
+                pre.push(h.clone());
                 h = squareplus(&h)?;
             }
         }
-        Ok(h)
+        Ok((h, pre))
+    }
+
+    /// The backward pass with respect to the input only: given `dout` =
+    /// ∂s/∂out for a scalar s, returns ∂s/∂x, written as candle ops so that
+    /// it stays differentiable in the weights. `pre` comes from
+    /// [`Mlp::forward_keep`] on the same input.
+    pub fn input_grad(&self, store: &ParamStore, pre: &[Tensor], dout: &Tensor) -> Result<Tensor> {
+        let mut g = dout.clone();
+        for i in (0..self.layers()).rev() {
+            let (wn, _) = self.layer_names(i);
+            g = g.matmul(&store.get(wn)?.as_tensor().t()?)?;
+            if i > 0 {
+                g = (g * squareplus_grad(&pre[i - 1])?)?;
+            }
+        }
+        Ok(g)
     }
 }

@@ -45,9 +45,6 @@ pub struct Outcome {
 pub fn run(opts: &Options, log: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("creating {}", opts.out.display()))?;
-    // LGN and HGN need candle's grad-of-grad; candle fixes the setting per
-    // thread at its first backward pass, so it is set before any thread starts.
-    crate::baselines::autodiff::request_second_order();
     let lab = Lab {
         dir: opts.out.clone(),
         threads: opts.threads.max(1),
