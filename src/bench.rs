@@ -185,9 +185,11 @@ fn epoch_figure(
     })
 }
 
-/// Runs the whole benchmark set. `quick` uses fewer repeats, and a tenth of
-/// the data for the baselines and the candle engine on the cube.
-pub fn run_all(quick: bool) -> Result<Vec<Figure>> {
+/// Runs the benchmark set: every figure, or those whose name contains
+/// `only`. `quick` uses fewer repeats, and a tenth of the data for the
+/// baselines and the candle engine on the cube.
+pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
+    let want = |name: &str| only.is_none_or(|o| name.to_lowercase().contains(&o.to_lowercase()));
     use crate::baselines::Kind;
     let r = if quick { 5 } else { 21 };
     let ep = if quick { 2 } else { 7 };
@@ -209,7 +211,9 @@ pub fn run_all(quick: bool) -> Result<Vec<Figure>> {
             )
             .to_lowercase();
             let t = Trainee::Family(Variant::Mcgnode, engine, threads);
-            out.push(epoch_figure(name, t, &data, ep, jax)?);
+            if want(&name) {
+                out.push(epoch_figure(name, t, &data, ep, jax)?);
+            }
         }
     }
     // The 5×5×5 peridynamic cube, 10 trajectories.
@@ -221,7 +225,9 @@ pub fn run_all(quick: bool) -> Result<Vec<Figure>> {
         )
         .to_lowercase();
         let t = Trainee::Family(Variant::Mcgnode, engine, threads);
-        out.push(epoch_figure(name, t, &cube, ep.min(3), None)?);
+        if want(&name) {
+            out.push(epoch_figure(name, t, &cube, ep.min(3), None)?);
+        }
     }
     // Baselines on the 5-spring set (a tenth of it with --quick).
     let data = training_set(SystemKind::Spring, 5, if quick { 10 } else { 100 });
@@ -229,6 +235,9 @@ pub fn run_all(quick: bool) -> Result<Vec<Figure>> {
     for (kind, jax) in [(Kind::Lgn, "960"), (Kind::Hgn, "320-410"), (Kind::Gns, "-")] {
         let name = format!("5-spring {kind} epoch, {states} states (candle)");
         let jax = (jax != "-" && !quick).then_some(jax);
+        if !want(&name) {
+            continue;
+        }
         out.push(epoch_figure(
             name,
             Trainee::Baseline(kind),
@@ -237,27 +246,35 @@ pub fn run_all(quick: bool) -> Result<Vec<Figure>> {
             jax,
         )?);
     }
-    let rs = rollout_seconds(SystemKind::Spring, 5, Variant::Mcgnode, 20_000, r)?;
-    out.push(Figure {
-        name: "5-spring MCGNODE rollout, 20 s (20,000 steps)".into(),
-        value: rs,
-        unit: "s".into(),
-        jax: Some("0.25".into()),
-        repeats: r,
-    });
-    let rp = rollout_seconds(SystemKind::Pendulum, 5, Variant::Mcgnode, 100_000, r.min(7))?;
-    out.push(Figure {
-        name: "5-pendulum MCGNODE rollout, 1 s (100,000 steps)".into(),
-        value: rp,
-        unit: "s".into(),
-        jax: Some("2.75".into()),
-        repeats: r.min(7),
-    });
+    let name = "5-spring MCGNODE rollout, 20 s (20,000 steps)";
+    if want(name) {
+        out.push(Figure {
+            name: name.into(),
+            value: rollout_seconds(SystemKind::Spring, 5, Variant::Mcgnode, 20_000, r)?,
+            unit: "s".into(),
+            jax: Some("0.25".into()),
+            repeats: r,
+        });
+    }
+    let name = "5-pendulum MCGNODE rollout, 1 s (100,000 steps)";
+    if want(name) {
+        out.push(Figure {
+            name: name.into(),
+            value: rollout_seconds(SystemKind::Pendulum, 5, Variant::Mcgnode, 100_000, r.min(7))?,
+            unit: "s".into(),
+            jax: Some("2.75".into()),
+            repeats: r.min(7),
+        });
+    }
     for n in [5usize, 50, 500] {
+        let name = format!("{n}-spring MCGNODE rollout speed");
+        if !want(&name) {
+            continue;
+        }
         let steps = 2_000_000 / n.max(1) / if quick { 10 } else { 1 };
         let s = rollout_seconds(SystemKind::Spring, n, Variant::Mcgnode, steps, r.min(5))?;
         out.push(Figure {
-            name: format!("{n}-spring MCGNODE rollout speed"),
+            name,
             value: steps as f64 / s,
             unit: "steps/s".into(),
             jax: None,

@@ -11,11 +11,21 @@ pub struct Args {
     /// Print one JSON document on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Only the figures whose name contains this text (case-insensitive),
+    /// e.g. `hgn`, `cube`, `rollout`.
+    #[arg(long, value_name = "TEXT")]
+    pub only: Option<String>,
 }
 
 /// Runs `bench`.
 pub fn run(a: Args) -> Result<()> {
-    let figs = crate::bench::run_all(a.quick)?;
+    let figs = crate::bench::run_all(a.quick, a.only.as_deref())?;
+    if figs.is_empty() {
+        anyhow::bail!(
+            "no figure's name contains {:?}; run `mcgnode bench` without --only to list them",
+            a.only.unwrap_or_default()
+        );
+    }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&figs)?);
         return Ok(());
