@@ -17,7 +17,7 @@ run "$bin" simulate --system pendulum --particles 5 --trajectories 100 --seed 2 
 for job in "spring5 mcgnode" "pendulum5 cgnode" "pendulum5 mcgnode"; do
   set -- $job
   sys=$1 model=$2
-  /usr/bin/time -f "%e s wall" -o "$out/$sys-$model.time" \
+  /usr/bin/time -f "%e s wall, %U s user, %S s system" -o "$out/$sys-$model.time" \
     "$bin" train --model "$model" --data "$out/$sys-train.mcap" --epochs "$epochs" --out "$out/$sys-$model.json" 2> "$out/$sys-$model.train.log"
   "$bin" evaluate --model "$out/$sys-$model.json" --bag "$out/$sys-test.mcap" --plot "$out/$sys-$model.png" > "$out/$sys-$model.eval.txt"
   "$bin" evaluate --model "$out/$sys-$model.json" --bag "$out/$sys-test.mcap" --json > "$out/$sys-$model.eval.json"

@@ -1,18 +1,36 @@
 #!/usr/bin/env bash
-# The README's peridynamic-cube recipe from a clean clone: simulate 10 training
-# and 4 test trajectories of the 125-particle cube, train MCGNODE (batch 10,
-# edge MLPs 16,16, lr 1e-2 stepped to 1e-3 after epoch 200, 300 epochs), and
-# evaluate it and the "nothing moves" reference. Usage: scripts/cube.sh OUT
+# The README's peridynamic-cube recipe from a clean clone: simulate training and
+# 4 test trajectories of the 125-particle cube, train each model with the same
+# recipe (batch 10, lr 1e-2 stepped to 1e-3 after epoch 200, 300 epochs; the
+# GNODE family also with edge MLPs 16,16), and evaluate it and the "nothing
+# moves" reference. Training wall, user and system times go to times.txt.
+# Usage: scripts/cube.sh OUT [TRAINING_TRAJECTORIES (10)] [MODEL ... (mcgnode)]
+# MCGNODE=path/to/mcgnode uses that binary instead of building one.
 set -euo pipefail
-OUT="${1:?usage: scripts/cube.sh OUT}"
+OUT="${1:?usage: scripts/cube.sh OUT [TRAJECTORIES] [MODEL ...]}"
+TRAJ="${2:-10}"
+shift $(( $# < 2 ? $# : 2 ))
+MODELS=("${@:-mcgnode}")
 cd "$(dirname "$0")/.."
-cargo build --release -q
-M="${CARGO_TARGET_DIR:-$PWD/target}/release/mcgnode"
+if [ -z "${MCGNODE:-}" ]; then
+    cargo build --release -q
+fi
+M="${MCGNODE:-${CARGO_TARGET_DIR:-$PWD/target}/release/mcgnode}"
 mkdir -p "$OUT" && cd "$OUT"
-"$M" simulate --system peridynamic --trajectories 10 --seed 1 --out train.mcap
+"$M" simulate --system peridynamic --trajectories "$TRAJ" --seed 1 --out train.mcap
 "$M" simulate --system peridynamic --trajectories 4 --seed 2 --out test.mcap
-time "$M" train --model mcgnode --data train.mcap --batch 10 --lr 1e-2 --lr-drop 200:1e-3 \
-    --epochs 300 --block-hidden edge_em=16,16 --block-hidden edge_out=16,16 --out solid.json
-for m in still solid.json; do
-    "$M" evaluate --model "$m" --bag test.mcap --rows 11 | tee "eval-${m%.json}.txt"
+"$M" evaluate --model still --bag test.mcap --rows 11 | tee eval-still.txt
+for model in "${MODELS[@]}"; do
+    extra=()
+    case "$model" in
+        lgn|hgn|gns) ;;
+        *) extra=(--block-hidden edge_em=16,16 --block-hidden edge_out=16,16) ;;
+    esac
+    start=$(date +%s.%N)
+    /usr/bin/time -f "$model: %e s wall, %U s user, %S s system (load before: $(cut -d' ' -f1-3 /proc/loadavg))" \
+        -a -o times.txt "$M" train --model "$model" --data train.mcap --batch 10 --lr 1e-2 \
+        --lr-drop 200:1e-3 --epochs 300 "${extra[@]}" --out "$model.json" --quiet
+    echo "$model trained in $(echo "$(date +%s.%N) - $start" | bc) s"
+    "$M" evaluate --model "$model.json" --bag test.mcap --rows 11 | tee "eval-$model.txt"
 done
+cat times.txt
