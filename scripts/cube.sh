@@ -2,7 +2,7 @@
 # The README's peridynamic-cube recipe from a clean clone: simulate training and
 # 4 test trajectories of the 125-particle cube, train each model with the same
 # recipe (batch 10, lr 1e-2 stepped to 1e-3 after epoch 200, 300 epochs; the
-# GNODE family also with edge MLPs 16,16), and evaluate it and the "nothing
+# GNODE family also with wider edge MLPs, 16,16), and evaluate it and the "nothing
 # moves" reference. Training wall, user and system times go to times.txt.
 # Usage: scripts/cube.sh OUT [TRAINING_TRAJECTORIES (10)] [MODEL ... (mcgnode)]
 # MCGNODE=path/to/mcgnode uses that binary instead of building one.
@@ -22,9 +22,12 @@ mkdir -p "$OUT" && cd "$OUT"
 "$M" evaluate --model still --bag test.mcap --rows 11 | tee eval-still.txt
 for model in "${MODELS[@]}"; do
     extra=()
+    # Wider edge MLPs where bonds are embedded and decoded (GNODE-style
+    # variants decode per node), as reproduce's peri_opts.
     case "$model" in
         lgn|hgn|gns) ;;
-        *) extra=(--block-hidden edge_em=16,16 --block-hidden edge_out=16,16) ;;
+        mcgnode) extra=(--block-hidden edge_em=16,16 --block-hidden edge_out=16,16) ;;
+        *) extra=(--block-hidden edge_em=16,16 --block-hidden node_out=16,16) ;;
     esac
     start=$(date +%s.%N)
     /usr/bin/time -f "$model: %e s wall, %U s user, %S s system (load before: $(cut -d' ' -f1-3 /proc/loadavg))" \
