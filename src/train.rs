@@ -55,6 +55,11 @@ pub struct TrainConfig {
     /// Step schedule: after epoch `e`, learning rate `lr` (pairs in any order;
     /// the latest passed applies).
     pub lr_drops: Vec<(usize, f64)>,
+    /// Stop after the first epoch that ends this many seconds after training
+    /// started (the best weights so far are kept): a wall-clock budget, as a
+    /// robot retraining between tasks has, and what `reproduce` gives the
+    /// baselines to compare them with MCGNODE at equal time.
+    pub time_budget: Option<f64>,
 }
 
 impl TrainConfig {
@@ -84,6 +89,7 @@ impl Default for TrainConfig {
             init: None,
             normalize: true,
             lr_drops: vec![],
+            time_budget: None,
         }
     }
 }
@@ -430,6 +436,12 @@ pub fn fit(
     let (mut best_epoch, mut best_train) = (0, f64::NAN);
     let mut epochs_run = 0;
     let mut stopped_early = false;
+    let mut out_of_time = false;
+    if let Some(b) = cfg.time_budget {
+        if !(b > 0.0 && b.is_finite()) {
+            bail!("the time budget must be a positive number of seconds, got {b}");
+        }
+    }
     for epoch in 1..=cfg.epochs {
         adam.set_lr(cfg.lr_at(epoch));
         train_idx.shuffle(rng);
@@ -470,6 +482,10 @@ pub fn fit(
             stopped_early = true;
             break;
         }
+        if cfg.time_budget.is_some_and(|b| report.elapsed >= b) {
+            out_of_time = true;
+            break;
+        }
     }
     theta.copy_from_slice(&best_theta);
     Ok(TrainingReport {
@@ -487,6 +503,8 @@ pub fn fit(
         noise: cfg.noise,
         points: cfg.points,
         lr_drops: cfg.lr_drops.clone(),
+        time_budget: cfg.time_budget,
+        out_of_time,
     })
 }
 

@@ -33,6 +33,7 @@ fn quick_reproduce_writes_a_complete_report() {
         "## spring: inductive biases, baselines, zero-shot sizes",
         "## pendulum: inductive biases, baselines, zero-shot sizes",
         "### Zero-shot to large rings",
+        "### MCGNODE against LGN, HGN and GNS at equal wall-clock time",
         "### Training and forward-simulation time (spring",
         "### Training and forward-simulation time (pendulum",
         "## 3D peridynamic solid",
@@ -53,8 +54,8 @@ fn quick_reproduce_writes_a_complete_report() {
         figures += 1;
     }
     assert_eq!(
-        figures, 8,
-        "biases and baselines per system, peridynamic, drag/force, noise, data"
+        figures, 10,
+        "biases, baselines and wall-clock per system, peridynamic, drag/force, noise, data"
     );
     // Every evaluation succeeded with finite metrics; every experiment and
     // every model of the paper is there.
@@ -82,6 +83,7 @@ fn quick_reproduce_writes_a_complete_report() {
     }
     for m in ["mcgnode", "lgn", "hgn", "gns"] {
         assert!(has("baselines", m), "no baseline-comparison row for {m}");
+        assert!(has("wallclock", m), "no wall-clock-comparison row for {m}");
     }
     for (exp, m) in [
         ("large", "mcgnode"),
@@ -107,6 +109,16 @@ fn quick_reproduce_writes_a_complete_report() {
     assert!(training
         .iter()
         .any(|t| t["training"]["points"].as_u64() == Some(100)));
+    // The wall-clock baselines trained on a time budget and ran out of it.
+    let budgeted: Vec<&serde_json::Value> = training
+        .iter()
+        .filter(|t| t["training"]["time_budget"].as_f64().is_some())
+        .collect();
+    assert_eq!(budgeted.len(), 6, "LGN, HGN, GNS per system");
+    assert!(budgeted
+        .iter()
+        .all(|t| t["training"]["out_of_time"] == true
+            && t["training"]["epochs_run"].as_u64() >= Some(1)));
     // MCGNODE without body forces conserves the peridynamic cube's momentum.
     let peri = evals
         .iter()

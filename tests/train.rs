@@ -545,3 +545,57 @@ fn learning_rate_steps_apply_and_are_recorded() {
     assert_eq!(val[2], val[3], "after the step nothing moves");
     assert_eq!(t.report.lr_drops, vec![(2, 1e-300)]);
 }
+
+/// A wall-clock budget ends training after the first epoch that passes it,
+/// keeps the best weights so far and is recorded; a budget that is not a
+/// positive number of seconds is refused.
+#[test]
+fn time_budget_stops_training_and_is_recorded() {
+    let (g, s, a) = data(SystemKind::Spring, 5, 3, 1);
+    let budget = 0.4;
+    let cfg = TrainConfig {
+        epochs: 1_000_000,
+        patience: 1_000_000,
+        time_budget: Some(budget),
+        threads: 1,
+        ..TrainConfig::default()
+    };
+    let mut seen = vec![];
+    let t = train(Hyper::new(Variant::Gnode, 2, 1, 5), &g, &s, &a, &cfg, |r| {
+        seen.push((r.elapsed, r.validation_loss));
+        true
+    })
+    .unwrap();
+    let r = &t.report;
+    assert!(r.out_of_time && !r.stopped_early);
+    assert_eq!(r.time_budget, Some(budget));
+    assert_eq!(r.epochs_run, seen.len());
+    assert!(seen.len() >= 2 && seen.len() < 1_000_000);
+    let last = seen.len() - 1;
+    assert!(seen[last].0 >= budget, "stopped before the budget");
+    assert!(
+        seen[last - 1].0 < budget,
+        "ran past the first epoch over budget"
+    );
+    let best = seen.iter().map(|x| x.1).fold(f64::INFINITY, f64::min);
+    assert_eq!(r.validation_loss, best, "best weights kept");
+    let json = serde_json::to_string(r).unwrap();
+    assert!(json.contains("\"out_of_time\":true"), "{json}");
+    for bad in [0.0, -1.0, f64::NAN] {
+        let cfg = TrainConfig {
+            epochs: 2,
+            time_budget: Some(bad),
+            ..TrainConfig::default()
+        };
+        let e = train(
+            Hyper::new(Variant::Gnode, 2, 1, 5),
+            &g,
+            &s,
+            &a,
+            &cfg,
+            |_| true,
+        );
+        let msg = format!("{:#}", e.err().expect("refused"));
+        assert!(msg.contains("time budget"), "{msg}");
+    }
+}

@@ -39,6 +39,10 @@ pub struct Args {
     /// Batch size.
     #[arg(long, default_value_t = 100)]
     pub batch: usize,
+    /// Wall-clock budget: stop after the first epoch that ends this many
+    /// seconds into training, keeping the best weights so far.
+    #[arg(long, value_name = "SECONDS")]
+    pub max_seconds: Option<f64>,
     /// Stop when the validation loss has not improved for this many epochs.
     #[arg(long, default_value_t = 1000)]
     pub patience: usize,
@@ -187,6 +191,7 @@ pub fn run(a: Args) -> Result<()> {
         points: a.points,
         engine: a.engine,
         lr_drops: a.lr_drop.clone(),
+        time_budget: a.max_seconds,
         threads: a.threads.unwrap_or_else(crate::engine::all_cores),
         normalize: !a.no_normalize,
         init: a
@@ -224,7 +229,11 @@ pub fn run(a: Args) -> Result<()> {
             "wrote {}: {} epochs{} in {:.1} s, best epoch {}, train MSE {:.3e}, validation MSE {:.3e}",
             a.out.display(),
             t.epochs_run,
-            if t.stopped_early { " (early stop)" } else { "" },
+            match (t.stopped_early, t.out_of_time) {
+                (true, _) => " (early stop)",
+                (_, true) => " (time budget reached)",
+                _ => "",
+            },
             t.seconds,
             t.best_epoch,
             t.train_loss,

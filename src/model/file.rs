@@ -119,6 +119,12 @@ pub struct TrainingReport {
     /// Learning-rate steps (after epoch, rate), if the schedule had any.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lr_drops: Vec<(usize, f64)>,
+    /// Wall-clock budget in seconds, if training had one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_budget: Option<f64>,
+    /// Whether the time budget ended training.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub out_of_time: bool,
 }
 
 /// A trained model on disk.

@@ -307,7 +307,37 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
         ));
     }
     let plain: Vec<TrainSpec> = specs.iter().map(|s| s.1.clone()).collect();
-    let trained = lab.train_all(&plain);
+    let mut trained = lab.train_all(&plain);
+    // Equal wall-clock time, a user's real budget: the baselines get the
+    // seconds MCGNODE's bias-ladder training took.
+    let mcgnode = specs
+        .iter()
+        .zip(&trained)
+        .find(|((e, s), _)| *e == "biases" && s.kind == ModelKind::Family(Variant::Mcgnode))
+        .and_then(|(_, t)| t.as_ref().ok())
+        .cloned();
+    if let Some(m) = &mcgnode {
+        let budget = m.report.seconds;
+        let wall: Vec<TrainSpec> = BASELINES
+            .iter()
+            .map(|&k| TrainSpec {
+                label: format!("{k}-5-{sys}-equal-time"),
+                kind: ModelKind::Baseline(k),
+                bags: vec![if k == Kind::Hgn {
+                    hgn_bag.clone()
+                } else {
+                    train_bag.clone()
+                }],
+                cfg: TrainConfig {
+                    time_budget: Some(budget),
+                    ..cfg(usize::MAX / 2)
+                },
+                opts: ModelOptions::default(),
+            })
+            .collect();
+        trained.extend(lab.train_all(&wall));
+        specs.extend(wall.into_iter().map(|s| ("wallclock", s)));
+    }
     lab.say(&format!("{sys}: trained {} models", specs.len()));
     let mut jobs = vec![];
     for ((experiment, spec), t) in specs.iter().zip(&trained) {
@@ -334,6 +364,26 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
                 bag: bag.clone(),
                 dt,
                 max,
+            });
+        }
+    }
+    if let Some(m) = &mcgnode {
+        for &n in bsizes {
+            jobs.push(EvalJob {
+                experiment: "wallclock",
+                system: sys.into(),
+                label: "mcgnode".into(),
+                particles: n,
+                x: None,
+                model: m.path.clone(),
+                bag: test_bags
+                    .iter()
+                    .find(|b| b.0 == n)
+                    .expect("bag simulated")
+                    .1
+                    .clone(),
+                dt,
+                max: sc.baseline_test_trajectories,
             });
         }
     }
@@ -382,9 +432,28 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
             &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
         )
     );
+    if let Some(m) = &mcgnode {
+        md += &format!(
+            "### MCGNODE against LGN, HGN and GNS at equal wall-clock time\n\n\
+             Each baseline trained for the {:.0} s MCGNODE's {} epochs took (the epochs \
+             this bought are in the timing table below).\n\n{}",
+            m.report.seconds,
+            m.report.epochs_run,
+            figure(
+                lab,
+                &format!("wallclock-{sys}.png"),
+                &panels(&rows, "wallclock", sys, bsizes, &bl),
+                &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
+            )
+        );
+    }
     for (exp, what) in [
         ("biases", "the GNODE family"),
         ("baselines", "MCGNODE and the baselines at equal epochs"),
+        (
+            "wallclock",
+            "MCGNODE and the baselines at equal wall-clock time",
+        ),
     ] {
         let mut sorted: Vec<&Row> = rows.iter().filter(|r| r.experiment == exp).collect();
         sorted.sort_by_key(|r| r.particles);
