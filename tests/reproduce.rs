@@ -34,6 +34,7 @@ fn quick_reproduce_writes_a_complete_report() {
         "## pendulum: inductive biases, baselines, zero-shot sizes",
         "### Zero-shot to large rings",
         "### MCGNODE against LGN, HGN and GNS at equal wall-clock time",
+        "### The architecture: the authors' code against the paper's text",
         "### Training and forward-simulation time (spring",
         "### Training and forward-simulation time (pendulum",
         "## 3D peridynamic solid",
@@ -87,6 +88,8 @@ fn quick_reproduce_writes_a_complete_report() {
     }
     for (exp, m) in [
         ("large", "mcgnode"),
+        ("architecture", "gnode"),
+        ("architecture", "mcgnode"),
         ("peridynamic", "mcgnode"),
         ("peridynamic", "gnode"),
         ("peridynamic", "gns"),
