@@ -1,7 +1,8 @@
 //! What the node's tasks share, as separate handles, each owning one concern:
 //! [`LiveParams`] (the parameters now), [`ModelHandle`] (the model served
 //! now), [`Diagnostics`] (counters, the log and rate-limited warnings) and
-//! [`RecorderHandle`] (MCAP recording). A task takes the handles it needs;
+//! [`RecorderHandle`] (MCAP recording), beside the clock and live accuracy
+//! ([`Live`]). A task takes the handles it needs;
 //! [`Handles`] bundles them for the node's own loops.
 //!
 //! This module imports no other task module (node, training, action,
@@ -17,6 +18,7 @@ use ros2_client::rosout::{NodeLoggingHandle, RosoutRaw};
 
 use crate::dynamics::Dynamics;
 
+use super::accuracy::Live;
 use super::clock::Clock;
 use super::msgs::NodeDiagnostics;
 use super::params::{NodeParams, NODE_NAME};
@@ -321,6 +323,8 @@ pub struct Handles {
     pub recorder: Arc<RecorderHandle>,
     /// System time, or `/clock` with `use_sim_time`.
     pub clock: Arc<Clock>,
+    /// Live accuracy of the predictions.
+    pub accuracy: Arc<Live>,
 }
 
 #[cfg(test)]

@@ -6,6 +6,8 @@
 //! - [`params`] (+ [`yaml`]): the ROS 2 parameter file and `--set` overrides;
 //! - [`msgs`]: wire structs of our interfaces;
 //! - [`predict`]: input checks and building the outputs (no ROS);
+//! - [`accuracy`]: live accuracy, comparing incoming states with what was
+//!   predicted for them, and the drift alarm (no DDS);
 //! - [`record`]: MCAP recording of states, predictions and forces;
 //! - [`truth`]: the ground-truth physics as a servable model;
 //! - [`handles`]: what the tasks share: parameters, model, diagnostics,
@@ -20,6 +22,7 @@
 //! - [`clock`]: system or simulated (`/clock`) time;
 //! - [`service`]: the one loop serving every service.
 
+pub mod accuracy;
 pub mod action;
 pub mod clock;
 pub mod handles;

@@ -19,12 +19,13 @@ use ros2_client::{
 use crate::data::msg::{ParticleState, PARTICLE_STATE_TYPE};
 use crate::dynamics::Dynamics;
 
+use super::accuracy::{self, Level};
 use super::action::{self, TrainActionServer};
 use super::handles::{
     Diagnostics, Handles, LiveParams, Logger, ModelHandle, RecorderHandle, Warning,
 };
 use super::msgs::{
-    DiagnosticArray, DiagnosticStatus, KeyValue, NodeDiagnostics, ParticleForces,
+    DiagnosticArray, DiagnosticStatus, KeyValue, LiveAccuracy, NodeDiagnostics, ParticleForces,
     PredictedTrajectory, ReplayRequest, ReplayResponse, RolloutRequest, RolloutResponse,
     DIAGNOSTIC_OK, DIAGNOSTIC_WARN, PACKAGE,
 };
@@ -36,8 +37,13 @@ use super::service::{self, OnFailure::Warn};
 use super::training::{self, Trainer, TrainerHandles, TrainingServers};
 use super::yaml::Scalar;
 
-/// Checks, records and predicts one incoming state (blocking work).
-fn handle_state(h: &Handles, msg: ParticleState, received_ns: u64) -> Result<Prediction, String> {
+/// Checks, records and predicts one incoming state, and scores it against
+/// what was predicted for its moment (blocking work).
+fn handle_state(
+    h: &Handles,
+    msg: ParticleState,
+    received_ns: u64,
+) -> Result<(Prediction, accuracy::Update), String> {
     // Refused before anything is recorded or predicted: an oversized state
     // would hold memory and its prediction could not be delivered promptly.
     let params = h.params.get();
@@ -60,7 +66,8 @@ fn handle_state(h: &Handles, msg: ParticleState, received_ns: u64) -> Result<Pre
     )?;
     h.recorder
         .record(|r| r.prediction(h.clock.now_log_ns(), &p.trajectory, &p.forces));
-    Ok(p)
+    let scored = h.accuracy.update(&params, &msg, &p.trajectory);
+    Ok((p, scored))
 }
 
 /// The counters now, stamped with the node's clock.
@@ -91,6 +98,12 @@ fn scalar(value: &ParameterValue) -> Scalar {
         ParameterValue::Integer(i) => Scalar::Int(*i),
         ParameterValue::Double(x) => Scalar::Float(*x),
         ParameterValue::String(s) => Scalar::Str(s.clone()),
+        ParameterValue::DoubleArray(xs) => {
+            Scalar::List(xs.iter().map(|x| Scalar::Float(*x)).collect())
+        }
+        ParameterValue::IntegerArray(xs) => {
+            Scalar::List(xs.iter().map(|i| Scalar::Int(*i)).collect())
+        }
         other => Scalar::Str(format!("{other:?}")),
     }
 }
@@ -129,6 +142,8 @@ fn declare_parameters(p: &NodeParams, live: LiveParams) -> NodeOptions {
                 Kind::Bool => ParameterValue::Boolean(text == "true"),
                 Kind::Int(..) => ParameterValue::Integer(text.parse().unwrap_or_default()),
                 Kind::Double(_) => ParameterValue::Double(text.parse().unwrap_or_default()),
+                // The only list parameter.
+                Kind::Doubles(_) => ParameterValue::DoubleArray(p.accuracy_lead_times.clone()),
             };
             (*key, v)
         })
@@ -164,6 +179,7 @@ struct Endpoints {
     input: Subscription<ParticleState>,
     trajectory: Publisher<PredictedTrajectory>,
     forces: Publisher<ParticleForces>,
+    accuracy: Publisher<LiveAccuracy>,
     diagnostics: Publisher<NodeDiagnostics>,
     standard_diagnostics: Publisher<DiagnosticArray>,
     rollout: Server<RolloutRequest, RolloutResponse>,
@@ -194,6 +210,7 @@ impl Endpoints {
         )?;
         let forces_topic = topic(&params.forces_topic, PACKAGE, "ParticleForces", &qos)?;
         let diag_topic = topic(&params.diagnostics_topic, PACKAGE, "NodeDiagnostics", &qos)?;
+        let accuracy_topic = topic(LIVE_ACCURACY_TOPIC, PACKAGE, "LiveAccuracy", &qos)?;
         let std_diag_topic = topic(
             STANDARD_DIAGNOSTICS_TOPIC,
             "diagnostic_msgs",
@@ -223,6 +240,9 @@ impl Endpoints {
             forces: node
                 .create_publisher(&forces_topic, Some(qos.clone()))
                 .map_err(e("the forces publisher"))?,
+            accuracy: node
+                .create_publisher(&accuracy_topic, Some(qos.clone()))
+                .map_err(e("the live accuracy publisher"))?,
             diagnostics: node
                 .create_publisher(&diag_topic, Some(qos))
                 .map_err(e("the diagnostics publisher"))?,
@@ -244,12 +264,12 @@ impl Endpoints {
     /// Starts one task per loop: input, diagnostics, /clock, and one per
     /// service (inside the runtime).
     fn spawn(self, h: &Handles) {
-        tokio::spawn(input_loop(
-            h.clone(),
-            self.input,
-            self.trajectory,
-            self.forces,
-        ));
+        let outputs = Outputs {
+            trajectory: self.trajectory,
+            forces: self.forces,
+            accuracy: self.accuracy,
+        };
+        tokio::spawn(input_loop(h.clone(), self.input, outputs));
         tokio::spawn(diagnostics_loop(
             h.clone(),
             self.diagnostics,
@@ -317,6 +337,7 @@ fn handles(
         recorder: Arc::new(RecorderHandle::new(recorder, diag.clone())),
         diag,
         clock: Arc::new(super::clock::Clock::new(params.use_sim_time)),
+        accuracy: Arc::new(accuracy::Live::default()),
     })
 }
 
@@ -417,6 +438,29 @@ fn log_start(h: &Handles, domain_id: u16) {
             p.rollout_service
         ),
     );
+    if !p.accuracy_lead_times.is_empty() {
+        let t = accuracy::Tracker::new(&p.accuracy_lead_times, 1, 1);
+        let reachable: Vec<f64> = t
+            .steps(p.dt, p.horizon)
+            .iter()
+            .map(|(i, _)| p.accuracy_lead_times[*i])
+            .collect();
+        let level = if reachable.len() == p.accuracy_lead_times.len() {
+            LogLevel::Info
+        } else {
+            LogLevel::Warn
+        };
+        // A lead the prediction does not reach, or not a whole number of
+        // steps, is never compared: say so once rather than stay silent.
+        h.diag.log(
+            level,
+            &format!(
+                "live accuracy on {LIVE_ACCURACY_TOPIC} at lead times {:?} s; comparable with \
+                 horizon {} x dt {}: {reachable:?}",
+                p.accuracy_lead_times, p.horizon, p.dt
+            ),
+        );
+    }
 }
 
 /// Closes the open bag at shutdown and says what was recorded.
@@ -443,13 +487,34 @@ async fn wait_for_shutdown() -> anyhow::Result<()> {
     Ok(())
 }
 
-/// For each incoming state: predict, publish trajectory and forces.
-async fn input_loop(
-    h: Handles,
-    input: Subscription<ParticleState>,
+/// Topic of live accuracy (`mcgnode_msgs/msg/LiveAccuracy`).
+pub const LIVE_ACCURACY_TOPIC: &str = "/mcgnode/live_accuracy";
+
+/// What the input loop publishes.
+struct Outputs {
     trajectory: Publisher<PredictedTrajectory>,
     forces: Publisher<ParticleForces>,
-) {
+    accuracy: Publisher<LiveAccuracy>,
+}
+
+/// Logs a change of the drift alarm: at its level, or as news when it clears.
+fn log_alarm(h: &Handles, level: Level, why: &str) {
+    let log_level = match level {
+        Level::Ok => LogLevel::Info,
+        Level::Warn => LogLevel::Warn,
+        Level::Error => LogLevel::Error,
+    };
+    let prefix = if level == Level::Ok {
+        "drift alarm cleared: "
+    } else {
+        ""
+    };
+    h.diag.log(log_level, &format!("{prefix}{why}"));
+}
+
+/// For each incoming state: predict, publish trajectory and forces, and the
+/// live accuracy when the state was compared with earlier predictions.
+async fn input_loop(h: Handles, input: Subscription<ParticleState>, out: Outputs) {
     let stats = &h.diag.stats;
     // Last sequence number seen from each publisher.
     let mut last_seen: std::collections::HashMap<String, i64> = Default::default();
@@ -478,7 +543,7 @@ async fn input_loop(
         let received_ns = h.clock.now_log_ns();
         let worker = h.clone();
         let job = tokio::task::spawn_blocking(move || handle_state(&worker, msg, received_ns));
-        let prediction = match job.await {
+        let (prediction, scored) = match job.await {
             Ok(Ok(p)) => p,
             Ok(Err(why)) => {
                 h.diag.reject(&format!("rejected input: {why}"));
@@ -489,8 +554,17 @@ async fn input_loop(
                 continue;
             }
         };
-        let sent_traj = trajectory.async_publish(prediction.trajectory).await;
-        let sent_forces = forces.async_publish(prediction.forces).await;
+        if let Some((level, why)) = &scored.alarm_changed {
+            log_alarm(&h, *level, why);
+        }
+        let sent_traj = out.trajectory.async_publish(prediction.trajectory).await;
+        let sent_forces = out.forces.async_publish(prediction.forces).await;
+        if let Some(m) = scored.message {
+            if let Err(e) = out.accuracy.async_publish(m).await {
+                let why = format!("publishing the live accuracy failed: {e:?}");
+                h.diag.failed(&why, Warning::Input);
+            }
+        }
         match (sent_traj, sent_forces) {
             (Ok(()), Ok(())) => {
                 stats.predicted.fetch_add(1, Ordering::Relaxed);
@@ -660,6 +734,35 @@ pub fn standard_diagnostics(
     }
 }
 
+/// Live accuracy as a standard diagnostic status, `mcgnode: live accuracy`:
+/// the drift alarm's level and message, and per lead time the running and
+/// latest RE and EE and the number of comparisons (`re_mean@0.5s`, ...).
+pub fn accuracy_status(
+    figures: &[accuracy::LeadAccuracy],
+    level: Level,
+    why: &str,
+    overflowed: u64,
+) -> DiagnosticStatus {
+    let kv = |key: String, value: String| KeyValue { key, value };
+    let mut values = Vec::with_capacity(5 * figures.len() + 1);
+    for f in figures {
+        let at = |what: &str| format!("{what}@{}s", f.lead);
+        values.push(kv(at("compared"), f.compared.to_string()));
+        values.push(kv(at("re_mean"), format!("{:.6e}", f.re_mean)));
+        values.push(kv(at("re"), format!("{:.6e}", f.re)));
+        values.push(kv(at("ee_mean"), format!("{:.6e}", f.ee_mean)));
+        values.push(kv(at("ee"), format!("{:.6e}", f.ee)));
+    }
+    values.push(kv("pending_dropped".into(), overflowed.to_string()));
+    DiagnosticStatus {
+        level: level as u8,
+        name: format!("{NODE_NAME}: live accuracy"),
+        message: why.to_string(),
+        hardware_id: NODE_NAME.into(),
+        values,
+    }
+}
+
 /// Publishes `NodeDiagnostics` and the standard `/diagnostics` every
 /// `diagnostics_period`.
 async fn diagnostics_loop(
@@ -675,7 +778,12 @@ async fn diagnostics_loop(
         tick.tick().await;
         let d = node_diagnostics(&h);
         let dropped = h.diag.stats.dropped.load(Ordering::Relaxed);
-        let array = standard_diagnostics(&d, dropped, before);
+        let mut array = standard_diagnostics(&d, dropped, before);
+        if let Some((figures, level, why, overflowed)) = h.accuracy.figures(&h.params.get()) {
+            array
+                .status
+                .push(accuracy_status(&figures, level, &why, overflowed));
+        }
         before = (d.rejected, dropped);
         if let Err(e) = publisher.async_publish(d).await {
             eprintln!("[WARN] [{NODE_NAME}]: publishing diagnostics failed: {e:?}");
@@ -719,6 +827,26 @@ mod tests {
         assert_eq!(value("predicted").as_deref(), Some("7"));
         let quiet = standard_diagnostics(&d, 2, (3, 2));
         assert_eq!(quiet.status[0].level, DIAGNOSTIC_OK);
+    }
+
+    #[test]
+    fn accuracy_status_carries_level_lead_and_values() {
+        let f = accuracy::LeadAccuracy {
+            lead: 0.5,
+            compared: 4,
+            re: 0.03,
+            re_mean: 0.02,
+            ee: f64::NAN,
+            ee_mean: f64::NAN,
+        };
+        let (level, why) = accuracy::alarm(std::slice::from_ref(&f), 0.01, 0.1);
+        let s = accuracy_status(&[f], level, &why, 0);
+        assert_eq!(s.level, crate::ros::msgs::DIAGNOSTIC_WARN);
+        assert!(s.message.contains("lead 0.5 s"), "{}", s.message);
+        let get = |k: &str| s.values.iter().find(|v| v.key == k).map(|v| &v.value);
+        assert_eq!(get("compared@0.5s").map(String::as_str), Some("4"));
+        assert_eq!(get("re_mean@0.5s").map(String::as_str), Some("2.000000e-2"));
+        assert_eq!(get("ee_mean@0.5s").map(String::as_str), Some("NaN"));
     }
 
     #[test]
