@@ -21,9 +21,9 @@ const BEFORE: usize = 31;
 const AFTER: usize = 40;
 const CHANGE_AT: f64 = 3.0;
 
-/// The played trajectory: one run, the stiffness changed at [`CHANGE_AT`];
-/// every state carries the nominal graph.
-fn drifting_trajectory() -> (SystemConfig, mcgnode::system::Trajectory) {
+/// The played trajectory: one run, the stiffness changed at [`CHANGE_AT`]
+/// and `after` states after it; every state carries the nominal graph.
+fn drifting_trajectory(after: usize) -> (SystemConfig, mcgnode::system::Trajectory) {
     let mut cfg = SystemConfig::new(SystemKind::Spring, 5);
     cfg.states = BEFORE;
     let graph = cfg.graph();
@@ -31,7 +31,7 @@ fn drifting_trajectory() -> (SystemConfig, mcgnode::system::Trajectory) {
     let mut traj = cfg.simulate_one(&graph, start, 0);
     let mut stiff = cfg.clone();
     stiff.stiffness *= 1.2;
-    stiff.states = AFTER + 1;
+    stiff.states = after + 1;
     let last = traj.samples.last().expect("samples").clone();
     let after = stiff.simulate_one(&stiff.graph(), last.state, 0);
     // The first state of the second part is the last of the first.
@@ -42,13 +42,11 @@ fn drifting_trajectory() -> (SystemConfig, mcgnode::system::Trajectory) {
     (cfg, traj)
 }
 
-#[test]
-fn drift_alarm_follows_a_stiffness_change() {
-    let env_sh = ros_env();
-    let dir = tempfile::tempdir().expect("tempdir");
-    let (cfg, traj) = drifting_trajectory();
+/// Writes the drifting trajectory (known field) to `dir/drift.mcap`.
+fn write_bag(dir: &std::path::Path, after: usize) -> std::path::PathBuf {
+    let (cfg, traj) = drifting_trajectory(after);
     assert!((traj.samples[BEFORE - 1].t - CHANGE_AT).abs() < 1e-9);
-    let bag = dir.path().join("drift.mcap");
+    let bag = dir.join("drift.mcap");
     mcgnode::data::write_trajectories_with_field(
         &bag,
         &[traj],
@@ -56,6 +54,14 @@ fn drift_alarm_follows_a_stiffness_change() {
         Some(&cfg.field),
     )
     .expect("writing the bag");
+    bag
+}
+
+#[test]
+fn drift_alarm_follows_a_stiffness_change() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let bag = write_bag(dir.path(), AFTER);
     // Predictions every 0.1 s over 1 s, integrated with the simulator's step.
     let params = dir.path().join("params.yaml");
     fs::write(
@@ -177,4 +183,114 @@ fn drift_alarm_follows_a_stiffness_change() {
         .map(|m| num(m, "stamp") - CHANGE_AT);
     println!("first ERROR {first_error:?} s after the change");
     assert!(first_error.is_some(), "{report}");
+}
+
+/// With `accuracy_retrain`, the alarm starts a warm-start retraining of the
+/// served model (the shipped 5-spring MCGNODE) on what the node records in
+/// the next seconds; the new model is swapped in only if it beats the old one
+/// on the last (held-out) recording.
+#[test]
+fn drift_alarm_starts_a_warm_start_retraining() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let after = 120;
+    let bag = write_bag(dir.path(), after);
+    // States from 0.5 s on are compared (the shortest lead).
+    let params = dir.path().join("params.yaml");
+    // Thresholds from this model's running RE at lead 1 s: 1.5-2.6e-3 before
+    // the change, 1-2e-2 after it.
+    fs::write(
+        &params,
+        format!(
+            "mcgnode:\n  ros__parameters:\n    model: bags/models/spring5-mcgnode.json\n    \
+             dt: 0.1\n    substeps: 100\n    horizon: 10\n    diagnostics_period: 0.2\n    \
+             accuracy_lead_times: [0.5, 1.0]\n    accuracy_window: 3\n    \
+             accuracy_warn_re: 5.0e-3\n    accuracy_error_re: 1.0e-2\n    \
+             accuracy_retrain: true\n    accuracy_retrain_after: 6.0\n    \
+             accuracy_retrain_epochs: 200\n    record_dir: {:?}\n    \
+             record_split_seconds: 1.0\n    model_dir: {:?}\n",
+            dir.path().join("rec").display(),
+            dir.path().join("models").display()
+        ),
+    )
+    .expect("writing params");
+    let compared = BEFORE + after - 5;
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$PARAMS" 2>"$DIR/node.log" &
+        node=$!
+        python3 tests/ros/accuracy_drive.py --count "$COUNT" --timeout 90 --linger 1 \
+            >"$DIR/drive.out" 2>"$DIR/drive.err" &
+        drive=$!
+        for _ in $(seq 400); do grep -q listening "$DIR/drive.err" && break; sleep 0.05; done
+        grep -q listening "$DIR/drive.err" || { echo "driver never matched"; cat "$DIR/drive.err"; exit 2; }
+        python3 scripts/ros/play_bag.py "$BAG" --rate 10 --timeout 30 2>"$DIR/play.err" \
+            || { cat "$DIR/play.err"; exit 3; }
+        wait $drive; rc=$?
+        cat "$DIR/drive.out"
+        # The retraining decides within the playback; wait (bounded) for its verdict.
+        for _ in $(seq 300); do
+            grep -qE "drift retraining: (swapped|kept)" "$DIR/node.log" && break; sleep 0.1
+        done
+        kill -INT $node; wait $node; node_rc=$?
+        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
+    "#;
+    let o = run_bounded(
+        in_netns(script, &params, &env_sh)
+            .env("DIR", dir.path())
+            .env("BAG", &bag)
+            .env("COUNT", compared.to_string()),
+        Duration::from_secs(200),
+        dir.path(),
+    );
+    let (summary, node_log, report) =
+        driver_outcome(&o, &dir.path().join("node.log"), "ACCURACY_SUMMARY ");
+    let s: serde_json::Value = serde_json::from_str(&summary).expect("ACCURACY_SUMMARY is JSON");
+    let live = s["live"].as_array().expect("live");
+    let num = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+    let first = live
+        .iter()
+        .find(|m| m["level"].as_u64().unwrap_or(0) >= 1)
+        .unwrap_or_else(|| panic!("no drift alarm\n{report}"));
+    let alarm_at = num(first, "stamp");
+    println!(
+        "alarm at {:.1} s (change at {CHANGE_AT} s): {}",
+        alarm_at, first["message"]
+    );
+    assert!(
+        alarm_at > CHANGE_AT && alarm_at <= CHANGE_AT + 2.0,
+        "{report}"
+    );
+    assert!(node_log.contains("drift retraining after"), "{report}");
+    let verdict = node_log
+        .lines()
+        .find(|l| l.contains("drift retraining: swapped") || l.contains("drift retraining: kept"))
+        .unwrap_or_else(|| panic!("no retraining verdict\n{report}"));
+    println!("{verdict}");
+    assert!(
+        verdict.contains("held-out RE") && !verdict.contains("failed"),
+        "{report}"
+    );
+    let swapped = verdict.contains("swapped in");
+    if swapped {
+        assert!(node_log.contains("model swapped"), "{report}");
+    }
+    // The running RE at the longest lead over the last second, against the
+    // second before the alarm: what the swap (or keeping the model) gave.
+    let mean_re = |from: f64, to: f64| {
+        let xs: Vec<f64> = live
+            .iter()
+            .filter(|m| (from..to).contains(&num(m, "stamp")))
+            .filter_map(|m| m["re"].as_array()?.last()?.as_f64())
+            .collect();
+        xs.iter().sum::<f64>() / xs.len().max(1) as f64
+    };
+    let end = num(live.last().expect("messages"), "stamp");
+    println!(
+        "RE at lead 1 s: {:.2e} in the second before the change, {:.2e} in the last second \
+         (swapped: {swapped})",
+        mean_re(CHANGE_AT - 1.0, CHANGE_AT),
+        mean_re(end - 1.0, end + 0.01)
+    );
 }

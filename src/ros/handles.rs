@@ -56,13 +56,14 @@ impl LiveParams {
 
 /// The model served now, behind a lock so a swap (Train, LoadModel) can
 /// replace it while predictions go on: readers clone the `Arc` and predict
-/// outside the lock.
-pub struct ModelHandle(RwLock<Arc<dyn Dynamics>>);
+/// outside the lock. Beside it, the file it came from (`None` for
+/// `truth:*`), which a warm-start retraining continues from.
+pub struct ModelHandle(RwLock<(Arc<dyn Dynamics>, Option<PathBuf>)>);
 
 impl ModelHandle {
-    /// Serves `model`.
-    pub fn new(model: Arc<dyn Dynamics>) -> Self {
-        ModelHandle(RwLock::new(model))
+    /// Serves `model`, loaded from `file` when it came from one.
+    pub fn new(model: Arc<dyn Dynamics>, file: Option<PathBuf>) -> Self {
+        ModelHandle(RwLock::new((model, file)))
     }
 
     /// The model served now.
@@ -70,18 +71,32 @@ impl ModelHandle {
         self.0
             .read()
             .unwrap_or_else(PoisonError::into_inner)
+            .0
             .clone()
     }
 
-    /// Serves `model` from now on; returns the old one and how long the write
-    /// lock was held.
-    pub fn replace(&self, model: Arc<dyn Dynamics>) -> (Arc<dyn Dynamics>, Duration) {
+    /// The file of the model served now, if it came from one.
+    pub fn file(&self) -> Option<PathBuf> {
+        self.0
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .1
+            .clone()
+    }
+
+    /// Serves `model` (from `file`) from now on; returns the old model and
+    /// how long the write lock was held.
+    pub fn replace(
+        &self,
+        model: Arc<dyn Dynamics>,
+        file: Option<PathBuf>,
+    ) -> (Arc<dyn Dynamics>, Duration) {
         let start = Instant::now();
         let old = std::mem::replace(
             &mut *self.0.write().unwrap_or_else(PoisonError::into_inner),
-            model,
+            (model, file),
         );
-        (old, start.elapsed())
+        (old.0, start.elapsed())
     }
 }
 

@@ -263,13 +263,14 @@ impl Endpoints {
 
     /// Starts one task per loop: input, diagnostics, /clock, and one per
     /// service (inside the runtime).
-    fn spawn(self, h: &Handles) {
+    fn spawn(self, h: &Handles, trainer: &Arc<Trainer>) {
         let outputs = Outputs {
             trajectory: self.trajectory,
             forces: self.forces,
             accuracy: self.accuracy,
         };
-        tokio::spawn(input_loop(h.clone(), self.input, outputs));
+        let input = input_loop(h.clone(), self.input, outputs, trainer.clone());
+        tokio::spawn(input);
         tokio::spawn(diagnostics_loop(
             h.clone(),
             self.diagnostics,
@@ -315,6 +316,11 @@ fn create_server<Req: Message + Clone + 'static, Resp: Message + Clone + 'static
     .map_err(|err| anyhow!("creating the {ty} service: {err:?}"))
 }
 
+/// The file a `model` parameter names (`None` for `truth:*`).
+fn model_file(model: &str) -> Option<std::path::PathBuf> {
+    (!super::truth::is_truth(model)).then(|| model.into())
+}
+
 /// The handles of a node serving `model`, logging through `node`.
 fn handles(
     node: &Node,
@@ -333,7 +339,7 @@ fn handles(
     ));
     Ok(Handles {
         params: live,
-        model: Arc::new(ModelHandle::new(model)),
+        model: Arc::new(ModelHandle::new(model, model_file(&params.model))),
         recorder: Arc::new(RecorderHandle::new(recorder, diag.clone())),
         diag,
         clock: Arc::new(super::clock::Clock::new(params.use_sim_time)),
@@ -369,7 +375,7 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
                 eprintln!("[ERROR] [{NODE_NAME}]: node spinner stopped: {e:?}");
             }
         });
-        endpoints.spawn(&h);
+        endpoints.spawn(&h, &trainer);
         spawn_training(trainer, servers, action_server);
         wait_for_shutdown().await
     });
@@ -513,8 +519,14 @@ fn log_alarm(h: &Handles, level: Level, why: &str) {
 }
 
 /// For each incoming state: predict, publish trajectory and forces, and the
-/// live accuracy when the state was compared with earlier predictions.
-async fn input_loop(h: Handles, input: Subscription<ParticleState>, out: Outputs) {
+/// live accuracy when the state was compared with earlier predictions; a
+/// drift alarm starts a retraining with `trainer` when `accuracy_retrain` is on.
+async fn input_loop(
+    h: Handles,
+    input: Subscription<ParticleState>,
+    out: Outputs,
+    trainer: Arc<Trainer>,
+) {
     let stats = &h.diag.stats;
     // Last sequence number seen from each publisher.
     let mut last_seen: std::collections::HashMap<String, i64> = Default::default();
@@ -556,6 +568,15 @@ async fn input_loop(h: Handles, input: Subscription<ParticleState>, out: Outputs
         };
         if let Some((level, why)) = &scored.alarm_changed {
             log_alarm(&h, *level, why);
+            let p = h.params.get();
+            if *level != Level::Ok && p.accuracy_retrain {
+                // Off the input loop: it records for a while, then trains.
+                let (trainer, why) = (trainer.clone(), why.clone());
+                tokio::task::spawn_blocking(move || {
+                    // The outcome is logged by retrain_on_drift itself.
+                    let _ = training::retrain_on_drift(&trainer, &p, &why);
+                });
+            }
         }
         let sent_traj = out.trajectory.async_publish(prediction.trajectory).await;
         let sent_forces = out.forces.async_publish(prediction.forces).await;

@@ -69,6 +69,14 @@ pub struct NodeParams {
     pub accuracy_warn_re: f64,
     /// Drift alarm: ERROR when a running RE exceeds this (0 = never).
     pub accuracy_error_re: f64,
+    /// Retrain when the drift alarm is raised: warm-start the served model on
+    /// what is recorded after the alarm, swapped in only if it beats the old
+    /// one on the most recent (held-out) recording.
+    pub accuracy_retrain: bool,
+    /// Seconds recorded after the alarm before retraining.
+    pub accuracy_retrain_after: f64,
+    /// Epochs of a retraining.
+    pub accuracy_retrain_epochs: u32,
 }
 
 impl Default for NodeParams {
@@ -99,6 +107,9 @@ impl Default for NodeParams {
             accuracy_max_pending: 10_000,
             accuracy_warn_re: 0.01,
             accuracy_error_re: 0.05,
+            accuracy_retrain: false,
+            accuracy_retrain_after: 5.0,
+            accuracy_retrain_epochs: 50,
         }
     }
 }
@@ -246,6 +257,23 @@ pub const SPECS: &[(&str, Kind, &str)] = &[
         Kind::Double(false),
         "drift alarm: ERROR when a running RE exceeds this (0 = never)",
     ),
+    (
+        "accuracy_retrain",
+        Kind::Bool,
+        "on a drift alarm, warm-start the served model on what is recorded next (needs \
+         record_dir); swapped in only if it beats the old model on held-out recent data",
+    ),
+    (
+        "accuracy_retrain_after",
+        Kind::Double(true),
+        "seconds recorded after a drift alarm before retraining (bags split by \
+         record_split_seconds; the last is held out)",
+    ),
+    (
+        "accuracy_retrain_epochs",
+        Kind::Int(1, 1_000_000),
+        "epochs of a retraining after a drift alarm",
+    ),
 ];
 
 /// Parameters that can be changed while the node runs (through the ROS
@@ -264,6 +292,9 @@ pub const RUNTIME_SETTABLE: &[&str] = &[
     "accuracy_max_pending",
     "accuracy_warn_re",
     "accuracy_error_re",
+    "accuracy_retrain",
+    "accuracy_retrain_after",
+    "accuracy_retrain_epochs",
 ];
 
 /// Keys of the node's section that are accepted as node names.
@@ -363,6 +394,7 @@ impl NodeParams {
             }
             Kind::Bool => match value {
                 Scalar::Bool(b) if key == "use_sim_time" => self.use_sim_time = *b,
+                Scalar::Bool(b) if key == "accuracy_retrain" => self.accuracy_retrain = *b,
                 Scalar::Bool(b) => self.qos_reliable = *b,
                 _ => return Err(ill("true or false")),
             },
@@ -443,6 +475,7 @@ impl NodeParams {
             "record_split_mb" => self.record_split_mb = v,
             "accuracy_window" => self.accuracy_window = v,
             "accuracy_max_pending" => self.accuracy_max_pending = v,
+            "accuracy_retrain_epochs" => self.accuracy_retrain_epochs = v,
             _ => unreachable_key(key),
         }
     }
@@ -455,6 +488,7 @@ impl NodeParams {
             "record_split_seconds" => self.record_split_seconds = x,
             "accuracy_warn_re" => self.accuracy_warn_re = x,
             "accuracy_error_re" => self.accuracy_error_re = x,
+            "accuracy_retrain_after" => self.accuracy_retrain_after = x,
             _ => unreachable_key(key),
         }
     }
@@ -514,6 +548,9 @@ impl NodeParams {
             "accuracy_max_pending" => self.accuracy_max_pending.to_string(),
             "accuracy_warn_re" => format!("{:?}", self.accuracy_warn_re),
             "accuracy_error_re" => format!("{:?}", self.accuracy_error_re),
+            "accuracy_retrain" => self.accuracy_retrain.to_string(),
+            "accuracy_retrain_after" => format!("{:?}", self.accuracy_retrain_after),
+            "accuracy_retrain_epochs" => self.accuracy_retrain_epochs.to_string(),
             _ => String::new(),
         }
     }
@@ -593,6 +630,8 @@ mod tests {
             record_dir: "/tmp/x".into(),
             accuracy_lead_times: vec![0.1, 0.5, 1.0],
             accuracy_warn_re: 0.02,
+            accuracy_retrain: true,
+            accuracy_retrain_epochs: 7,
             ..NodeParams::default()
         };
         p.qos_reliable = false;

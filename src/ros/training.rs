@@ -17,6 +17,10 @@
 //! Models go to [`model_dir`]: `<record_dir>/models` when the node records,
 //! else `<temp dir>/mcgnode-models`.
 //!
+//! With `accuracy_retrain`, a drift alarm starts [`retrain_on_drift`]: a
+//! warm start of the served model on what is recorded next, swapped in only
+//! if it beats the old model on a held-out recording.
+//!
 //! A [`Trainer`] holds only the handles training needs (model, recorder,
 //! diagnostics, clock); the Train action ([`super::action`]) builds on it, and
 //! the node wires both, so neither imports the node.
@@ -32,7 +36,7 @@ use ros2_client::{MessageTypeName, Node, Publisher, Server, ServiceMapping, Serv
 
 use crate::data::msg::{Header, Time};
 use crate::dynamics::Dynamics;
-use crate::model::{TrainedModel, Variant};
+use crate::model::{ModelFile, TrainedModel, Variant};
 use crate::train::{train_from_bags, EpochReport, ModelOptions, TrainConfig};
 
 use super::clock::Clock;
@@ -203,9 +207,14 @@ pub const BUSY: &str = "refused: a training is already running (one at a time)";
 
 /// Replaces the served model, announces it on the swap topic and in the log;
 /// returns how long the write lock was held.
-pub fn swap(shared: &Trainer, model: Arc<dyn Dynamics>, reason: &str) -> Duration {
+pub fn swap(
+    shared: &Trainer,
+    model: Arc<dyn Dynamics>,
+    file: Option<PathBuf>,
+    reason: &str,
+) -> Duration {
     let new_model = model.describe();
-    let (old, locked) = shared.model.replace(model);
+    let (old, locked) = shared.model.replace(model, file);
     // Bags recorded from now on (and the open one) name the new model.
     shared.recorder.record(|r| r.set_model(&new_model));
     let msg = ModelSwap {
@@ -361,32 +370,18 @@ pub fn run_training(
     }
     // From here to the swap is what a caller waits on top of training.
     let trained_at = Instant::now();
-    let seq = shared.seq.fetch_add(1, Ordering::Relaxed);
-    let secs = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_secs())
-        .unwrap_or(0);
-    let path = shared
-        .model_dir
-        .join(model_file_name(variant, secs, std::process::id(), seq));
-    if let Err(e) = file.save(&path) {
-        return fail(format!("saving the model failed: {e:#}"));
-    }
     let (train_loss, validation_loss) = (file.training.train_loss, file.training.validation_loss);
     let epochs_run = file.training.epochs_run;
-    let trained_for = match serde_json::to_value(&file) {
-        Ok(v) => crate::compat::TrainedFor::from_model_json(&path.display().to_string(), &v),
-        Err(e) => return fail(format!("the trained model does not serialise: {e}")),
-    };
-    let model: Arc<dyn crate::dynamics::Dynamics> = match TrainedModel::from_file(file) {
-        Ok(m) => Arc::new(crate::compat::Checked::new(Arc::new(m), trained_for)),
-        Err(e) => return fail(format!("the trained model does not load: {e:#}")),
+    let (path, model) = match save_and_load(shared, file, variant) {
+        Ok(x) => x,
+        Err(e) => return fail(e),
     };
     let took = trained_at.duration_since(start).as_secs_f64();
     let path_s = path.display().to_string();
     let locked = swap(
         shared,
         model,
+        Some(path),
         &format!(
             "{source}: {variant} trained for {epochs_run} epochs in {took:.1} s \
              (validation {validation_loss:.3e}); model {path_s}"
@@ -403,6 +398,140 @@ pub fn run_training(
         model_path: path_s,
         train_loss,
         validation_loss,
+    }
+}
+
+/// Saves a trained model (atomically) to the model folder and loads it as
+/// the node serves models (checked against what it was trained for).
+fn save_and_load(
+    shared: &Trainer,
+    file: ModelFile,
+    variant: Variant,
+) -> Result<(PathBuf, Arc<dyn Dynamics>), String> {
+    let seq = shared.seq.fetch_add(1, Ordering::Relaxed);
+    let secs = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    let path = shared
+        .model_dir
+        .join(model_file_name(variant, secs, std::process::id(), seq));
+    file.save(&path)
+        .map_err(|e| format!("saving the model failed: {e:#}"))?;
+    let v = serde_json::to_value(&file)
+        .map_err(|e| format!("the trained model does not serialise: {e}"))?;
+    let trained_for = crate::compat::TrainedFor::from_model_json(&path.display().to_string(), &v);
+    let m = TrainedModel::from_file(file)
+        .map_err(|e| format!("the trained model does not load: {e:#}"))?;
+    Ok((
+        path,
+        Arc::new(crate::compat::Checked::new(Arc::new(m), trained_for)),
+    ))
+}
+
+/// Retrains after a drift alarm (`why`), blocking: warm-starts the served
+/// model file (`train --init` semantics, [`TrainConfig::init`]) on the bags
+/// recorded during the `accuracy_retrain_after` seconds after the alarm,
+/// holding the last of them out, and swaps the new model in only if its
+/// replayed RE on that held-out bag (as the node predicts:
+/// [`crate::replay::replay_as_node`]) is below the old model's. Returns
+/// what was decided, or why nothing was tried; either way it is logged.
+pub fn retrain_on_drift(
+    trainer: &Arc<Trainer>,
+    p: &NodeParams,
+    why: &str,
+) -> Result<String, String> {
+    const SOURCE: &str = "drift retraining";
+    let result = retrain(trainer, p, why);
+    match &result {
+        Ok(m) => trainer.log(LogLevel::Info, &format!("{SOURCE}: {m}")),
+        // A retraining (or a requested training) already runs: expected
+        // while the alarm flickers, not worth a warning.
+        Err(e) if e == BUSY => trainer.log(LogLevel::Info, &format!("{SOURCE}: {e}")),
+        Err(e) => trainer.log(LogLevel::Warn, &format!("{SOURCE}: {e}")),
+    }
+    result
+}
+
+fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, String> {
+    let Some(_claim) = claim(trainer) else {
+        return Err(BUSY.into());
+    };
+    let Some(init_path) = trainer.model.file() else {
+        return Err(format!(
+            "not started: the served model ({}) is not a model file to warm-start",
+            trainer.model.get().describe()
+        ));
+    };
+    let init = ModelFile::load(&init_path)
+        .map_err(|e| format!("not started: cannot read {}: {e:#}", init_path.display()))?;
+    // Close the bag open at the alarm: the bags after it hold only what the
+    // system did after the drift was seen.
+    let before = match trainer.recorder.finish() {
+        None => return Err("not started: the node records nothing (set record_dir)".into()),
+        Some(r) => r?.1.len(),
+    };
+    trainer.log(
+        LogLevel::Info,
+        &format!(
+            "drift retraining after \"{why}\": recording {} s, then warm-starting {} for {} epochs",
+            p.accuracy_retrain_after,
+            init_path.display(),
+            p.accuracy_retrain_epochs
+        ),
+    );
+    std::thread::sleep(Duration::from_secs_f64(p.accuracy_retrain_after));
+    let bags = match trainer.recorder.finish() {
+        Some(r) => r?.1,
+        None => Vec::new(),
+    };
+    let recent = bags.get(before..).unwrap_or_default();
+    let Some((held_out, train)) = recent.split_last().filter(|(_, t)| !t.is_empty()) else {
+        return Err(format!(
+            "{} bag(s) recorded in the {} s after the alarm; need 2 (the last is held out): set \
+             record_split_seconds below accuracy_retrain_after",
+            recent.len(),
+            p.accuracy_retrain_after
+        ));
+    };
+    let variant = init.hyper.variant;
+    let cfg = TrainConfig {
+        epochs: p.accuracy_retrain_epochs as usize,
+        init: Some(Box::new(init)),
+        ..TrainConfig::default()
+    };
+    let file = train_from_bags(
+        variant,
+        train,
+        &ModelOptions::default(),
+        &cfg,
+        |_| {},
+        |_| true,
+    )
+    .map_err(|e| format!("training failed: {e:#}"))?;
+    let held = held_out.display().to_string();
+    let score = |m: &dyn Dynamics| {
+        crate::replay::replay_as_node(m, &held, p.dt, p.substeps, p.horizon)
+            .map(|(r, _)| r.averages.re)
+            .map_err(|e| format!("replaying the held-out bag {held} failed: {e:#}"))
+    };
+    let old = trainer.model.get();
+    let candidate = TrainedModel::from_file(file.clone())
+        .map_err(|e| format!("the trained model does not load: {e:#}"))?;
+    let (re_old, re_new) = (score(old.as_ref())?, score(&candidate)?);
+    let figures = format!(
+        "held-out RE (mean over lead times, {held}) {re_new:.3e} for the retrained model \
+         against {re_old:.3e} for the served one; trained on {} bag(s) for {} epochs",
+        train.len(),
+        file.training.epochs_run
+    );
+    if re_new.is_finite() && re_new < re_old {
+        let (path, model) = save_and_load(trainer, file, variant)?;
+        let reason = format!("{}: {figures}", "drift retraining");
+        swap(trainer, model, Some(path.clone()), &reason);
+        Ok(format!("swapped in {}: {figures}", path.display()))
+    } else {
+        Ok(format!("kept the served model: {figures}"))
     }
 }
 
@@ -449,7 +578,8 @@ pub fn load_and_swap(shared: &Trainer, path: &str) -> LoadModelResponse {
         Err(e) => fail(format!("cannot load {path}: {e:#}")),
         Ok(model) => {
             let description = model.describe();
-            let locked = swap(shared, model, &format!("LoadModel: model {path}"));
+            let file = (!super::truth::is_truth(path)).then(|| PathBuf::from(path));
+            let locked = swap(shared, model, file, &format!("LoadModel: model {path}"));
             LoadModelResponse {
                 success: true,
                 message: format!(
