@@ -851,6 +851,20 @@ mod tests {
     }
 
     #[test]
+    fn lead_times_change_at_run_time_from_a_double_array() {
+        let p = NodeParams::default();
+        let set = |v| check_runtime_change(&p, "accuracy_lead_times", &v);
+        let q = set(ParameterValue::DoubleArray(vec![0.1, 1.0])).unwrap();
+        assert_eq!(q.accuracy_lead_times, vec![0.1, 1.0]);
+        let q = set(ParameterValue::IntegerArray(vec![1, 2])).unwrap();
+        assert_eq!(q.accuracy_lead_times, vec![1.0, 2.0]);
+        let e = set(ParameterValue::DoubleArray(vec![0.1, 0.0])).unwrap_err();
+        assert!(e.contains("must be finite and > 0"), "{e}");
+        let e = set(ParameterValue::Double(0.5)).unwrap_err();
+        assert!(e.contains("must be a list"), "{e}");
+    }
+
+    #[test]
     fn accuracy_status_carries_level_lead_and_values() {
         let f = accuracy::LeadAccuracy {
             lead: 0.5,
