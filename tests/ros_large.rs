@@ -85,3 +85,67 @@ fn large_predictions_arrive_promptly_and_oversized_states_are_refused() {
     assert!(node_log.contains("state too large"), "{report}");
     assert!(!node_log.contains("panicked"), "{report}");
 }
+
+/// Rollout replies above one UDP datagram (about 64 KB) go out as DATAFRAG
+/// submessages carrying the related sample identity as inline QoS; they reach
+/// an rclpy client, and a small call right after is answered too. Before the
+/// fix in vendor/rustdds (MCGNODE-PATCH.md, item 4) no such reply arrived.
+#[test]
+fn fragmented_rollout_replies_reach_rclpy() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let params = dir.path().join("params.yaml");
+    fs::write(
+        &params,
+        "mcgnode:\n  ros__parameters:\n    model: truth:spring\n    max_rollout_steps: 5000\n",
+    )
+    .expect("writing params");
+    // Two particles on a stretched spring; `steps` states in the reply
+    // (1,000 steps: about 0.3 MB of CDR, 5 fragments; 3: one datagram).
+    for steps in [1000, 3] {
+        fs::write(
+            dir.path().join(format!("r{steps}.yaml")),
+            format!(
+                "steps: {steps}\ndt: 0.01\ninitial:\n  dimension: 2\n  types: [0, 0]\n  \
+                 masses: [1.0, 1.0]\n  positions: [{{x: 0.0}}, {{x: 1.5}}]\n  velocities: [{{}}, {{}}]\n  \
+                 edge_a: [0]\n  edge_b: [1]\n  edge_kind: [0]\n  edge_rest_length: [1.0]\n  \
+                 edge_stiffness: [1.0]\n"
+            ),
+        )
+        .expect("writing a request");
+    }
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$PARAMS" 2>"$DIR/node.log" &
+        node=$!
+        for steps in 1000 3; do
+            python3 scripts/ros/call.py /mcgnode/rollout mcgnode_msgs/srv/Rollout \
+                --file "$DIR/r$steps.yaml" --json --timeout 30 >"$DIR/out$steps.json" \
+                2>"$DIR/err$steps.txt" || { cat "$DIR/err$steps.txt"; exit 4; }
+        done
+        kill -INT $node; wait $node
+    "#;
+    let o = run_bounded(
+        in_netns(script, &params, &env_sh).env("DIR", dir.path()),
+        Duration::from_secs(120),
+        dir.path(),
+    );
+    let read = |name: &str| fs::read_to_string(dir.path().join(name)).unwrap_or_default();
+    assert!(
+        o.status.success(),
+        "status {}\n{}\n{}\n--- node log\n{}",
+        o.status,
+        o.stdout,
+        o.stderr,
+        read("node.log")
+    );
+    for steps in [1000, 3] {
+        let r: serde_json::Value =
+            serde_json::from_str(read(&format!("out{steps}.json")).trim()).expect("call --json");
+        assert_eq!(r["success"], true, "{r}");
+        let states = r["trajectory"]["states"].as_array().map(Vec::len);
+        assert_eq!(states, Some(steps), "{}", r["message"]);
+        println!("{steps} steps: {}", read(&format!("err{steps}.txt")).trim());
+    }
+}

@@ -21,8 +21,8 @@ use serde::{Deserialize, Serialize};
 use crate::train::EpochReport;
 
 use super::msgs::{TrainRequest, TrainResponse, PACKAGE};
-use super::node::Shared;
-use super::training::{claim, reliable_qos, run_training, BUSY};
+use super::qos::reliable_qos;
+use super::training::{claim, run_training, Claim, Trainer, BUSY};
 
 /// Name of the Train action.
 pub const TRAIN_ACTION: &str = "/mcgnode/train_action";
@@ -107,7 +107,7 @@ type Running = Arc<Mutex<Option<(GoalId, Arc<AtomicBool>)>>>;
 
 /// Creates the action server (QoS as rclpy's action defaults: reliable,
 /// volatile services and feedback; transient-local status).
-pub(super) fn create(node: &mut Node) -> anyhow::Result<TrainActionServer> {
+pub fn create(node: &mut Node) -> anyhow::Result<TrainActionServer> {
     let status = QosProfile::publisher_default()
         .durability(Durability::TransientLocal)
         .history(History::KeepLast { depth: 1 });
@@ -131,7 +131,8 @@ pub(super) fn create(node: &mut Node) -> anyhow::Result<TrainActionServer> {
 }
 
 /// Starts the goal and cancel tasks (inside the runtime).
-pub(super) fn spawn(shared: Arc<Shared>, server: TrainActionServer) {
+pub fn spawn(shared: Arc<Trainer>, server: TrainActionServer) {
+    shared.log(LogLevel::Info, &format!("action {TRAIN_ACTION}"));
     let server = Arc::new(server.0);
     let running: Running = Arc::new(Mutex::new(None));
     tokio::spawn(goal_loop(shared.clone(), server.clone(), running.clone()));
@@ -139,12 +140,8 @@ pub(super) fn spawn(shared: Arc<Shared>, server: TrainActionServer) {
 }
 
 /// Accepts goals while no training runs, and starts each.
-async fn goal_loop(shared: Arc<Shared>, server: Arc<ActionServer>, running: Running) {
-    let warn = |m: String| {
-        shared
-            .log
-            .log(LogLevel::Warn, &format!("Train action: {m}"))
-    };
+async fn goal_loop(shared: Arc<Trainer>, server: Arc<ActionServer>, running: Running) {
+    let warn = |m: String| shared.log(LogLevel::Warn, &format!("Train action: {m}"));
     loop {
         let handle = match server.receive_new_goal().await {
             Ok(h) => h,
@@ -200,13 +197,13 @@ async fn goal_loop(shared: Arc<Shared>, server: Arc<ActionServer>, running: Runn
 
 /// Trains for one goal, forwarding feedback, then sends the result.
 async fn execute(
-    shared: Arc<Shared>,
+    shared: Arc<Trainer>,
     server: Arc<ActionServer>,
     running: Running,
     handle: ExecutingGoalHandle<TrainGoal>,
     req: TrainRequest,
     cancel: Arc<AtomicBool>,
-    claim: super::training::Claim,
+    claim: Claim,
 ) {
     let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<TrainFeedback>();
     let (worker, flag) = (shared.clone(), cancel.clone());
@@ -251,7 +248,7 @@ async fn execute(
         .send_result_response(handle, status, TrainResult::from(resp))
         .await
     {
-        shared.log.log(
+        shared.log(
             LogLevel::Warn,
             &format!("Train action: sending the result failed: {e:?}"),
         );
@@ -259,12 +256,12 @@ async fn execute(
 }
 
 /// Accepts cancel requests for the running goal; others are refused.
-async fn cancel_loop(shared: Arc<Shared>, server: Arc<ActionServer>, running: Running) {
+async fn cancel_loop(shared: Arc<Trainer>, server: Arc<ActionServer>, running: Running) {
     loop {
         let request = match server.receive_cancel_request().await {
             Ok(r) => r,
             Err(e) => {
-                shared.log.log(
+                shared.log(
                     LogLevel::Warn,
                     &format!("Train action: undecodable cancel request: {e:?}"),
                 );
@@ -278,7 +275,7 @@ async fn cancel_loop(shared: Arc<Shared>, server: Arc<ActionServer>, running: Ru
         let to_cancel: Vec<GoalId> = match &current {
             Some((id, flag)) if request.contains_goal(id) => {
                 flag.store(true, Ordering::Release);
-                shared.log.log(
+                shared.log(
                     LogLevel::Info,
                     "Train action: cancel requested; stopping after the current epoch",
                 );
@@ -290,7 +287,7 @@ async fn cancel_loop(shared: Arc<Shared>, server: Arc<ActionServer>, running: Ru
             .respond_to_cancel_requests(&request, to_cancel.into_iter())
             .await
         {
-            shared.log.log(
+            shared.log(
                 LogLevel::Warn,
                 &format!("Train action: answering a cancel failed: {e:?}"),
             );

@@ -6,21 +6,31 @@
 //! - [`params`] (+ [`yaml`]): the ROS 2 parameter file and `--set` overrides;
 //! - [`msgs`]: wire structs of our interfaces;
 //! - [`predict`]: input checks and building the outputs (no ROS);
+//! - [`accuracy`]: live accuracy, comparing incoming states with what was
+//!   predicted for them, and the drift alarm (no DDS);
 //! - [`record`]: MCAP recording of states, predictions and forces;
 //! - [`truth`]: the ground-truth physics as a servable model;
-//! - [`node`]: the DDS entities and the event loop.
+//! - [`handles`]: what the tasks share: parameters, model, diagnostics,
+//!   recorder, each a handle of its own;
+//! - [`qos`]: QoS profiles and ROS names;
+//! - [`node`]: the DDS entities and the event loop; it wires the modules
+//!   below, none of which imports it;
 //! - [`training`]: the Train and LoadModel services, training in the
 //!   background and atomic model swaps announced on `/mcgnode/model_swap`;
-//! - [`action`]: the Train action (per-epoch feedback, cancel);
+//! - [`action`]: the Train action (per-epoch feedback, cancel), on top of
+//!   [`training`];
 //! - [`clock`]: system or simulated (`/clock`) time;
 //! - [`service`]: the one loop serving every service.
 
+pub mod accuracy;
 pub mod action;
 pub mod clock;
+pub mod handles;
 pub mod msgs;
 pub mod node;
 pub mod params;
 pub mod predict;
+pub mod qos;
 pub mod record;
 pub mod service;
 pub mod training;

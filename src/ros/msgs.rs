@@ -55,6 +55,33 @@ pub struct NodeDiagnostics {
     pub model: String,
 }
 
+/// `mcgnode_msgs/msg/LiveAccuracy`: running accuracy per lead time.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LiveAccuracy {
+    /// Stamp and frame of the incoming state compared.
+    pub header: Header,
+    /// Trajectory of that state.
+    pub trajectory_id: u32,
+    /// Lead times, seconds.
+    pub lead_times: Vec<f64>,
+    /// Comparisons so far per lead time.
+    pub compared: Vec<u64>,
+    /// Latest RE per lead time (NaN: none yet).
+    pub re: Vec<f64>,
+    /// Mean RE of the window per lead time.
+    pub re_mean: Vec<f64>,
+    /// Latest EE per lead time (NaN: not computable).
+    pub ee: Vec<f64>,
+    /// Mean EE of the window per lead time.
+    pub ee_mean: Vec<f64>,
+    /// Drift alarm level ([`DIAGNOSTIC_OK`], [`DIAGNOSTIC_WARN`] or
+    /// [`DIAGNOSTIC_ERROR`]).
+    pub level: u8,
+    /// Why, or the worst running RE.
+    pub message: String,
+}
+impl Message for LiveAccuracy {}
+
 /// `diagnostic_msgs/msg/KeyValue`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct KeyValue {

@@ -5,293 +5,90 @@
 //! tasks keep going while a long rollout computes. Every failure is logged and
 //! counted; nothing in the loop panics on bad input.
 
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, PoisonError, RwLock};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::Duration;
 
 use anyhow::{anyhow, Context as _};
 use ros2_client::log::LogLevel;
-use ros2_client::qos::{Durability, History, WhenFull};
-use ros2_client::rosout::{NodeLoggingHandle, RosoutRaw};
 use ros2_client::{
-    Context, ContextOptions, MessageTypeName, Name, NodeName, NodeOptions, ParameterValue,
+    Context, ContextOptions, Message, MessageTypeName, Node, NodeName, NodeOptions, ParameterValue,
     Publisher, QosProfile, Server, ServiceMapping, ServiceTypeName, Subscription,
 };
 
 use crate::data::msg::{ParticleState, PARTICLE_STATE_TYPE};
 use crate::dynamics::Dynamics;
 
+use super::accuracy::{self, Level};
+use super::action::{self, TrainActionServer};
+use super::handles::{
+    Diagnostics, Handles, LiveParams, Logger, ModelHandle, RecorderHandle, Warning,
+};
 use super::msgs::{
-    DiagnosticArray, DiagnosticStatus, KeyValue, NodeDiagnostics, ParticleForces,
+    DiagnosticArray, DiagnosticStatus, KeyValue, LiveAccuracy, NodeDiagnostics, ParticleForces,
     PredictedTrajectory, ReplayRequest, ReplayResponse, RolloutRequest, RolloutResponse,
     DIAGNOSTIC_OK, DIAGNOSTIC_WARN, PACKAGE,
 };
 use super::params::{NodeParams, NODE_NAME, RUNTIME_SETTABLE};
 use super::predict::{self, Prediction};
+use super::qos::{clock_qos, reliable_qos, ros_name, topic_qos};
 use super::record::Recorder;
 use super::service::{self, OnFailure::Warn};
+use super::training::{self, Trainer, TrainerHandles, TrainingServers};
 use super::yaml::Scalar;
 
-/// Counters reported in `NodeDiagnostics`.
-#[derive(Debug, Default)]
-pub struct Stats {
-    /// States received.
-    pub received: AtomicU64,
-    /// States rejected (malformed, unsupported, or the model failed).
-    pub rejected: AtomicU64,
-    /// Predictions published.
-    pub predicted: AtomicU64,
-    /// States lost before the node took them: gaps in a publisher's sequence
-    /// numbers (e.g. the input queue overflowed while the node was busy).
-    pub dropped: AtomicU64,
-    /// Latest failure reason.
-    pub last_error: Mutex<String>,
+/// Checks, records and predicts one incoming state, and scores it against
+/// what was predicted for its moment (blocking work).
+fn handle_state(
+    h: &Handles,
+    msg: ParticleState,
+    received_ns: u64,
+) -> Result<(Prediction, accuracy::Update), String> {
+    // Refused before anything is recorded or predicted: an oversized state
+    // would hold memory and its prediction could not be delivered promptly.
+    let params = h.params.get();
+    predict::check_size(&msg, params.max_particles)?;
+    h.recorder.record(|r| r.state(received_ns, &msg));
+    let model = h.model.get();
+    // A state the model was not trained for (another dimension, edge kinds
+    // or field) is refused with the reason, not predicted.
+    if let Some(t) = model.trained_for() {
+        let (graph, _) = msg.to_parts().map_err(|e| e.to_string())?;
+        let field = msg.field().map_err(|e| e.to_string())?;
+        t.check(&graph, field.as_ref())?;
+    }
+    let p = predict::predict(
+        model.as_ref(),
+        &msg,
+        params.dt,
+        params.horizon,
+        params.substeps,
+    )?;
+    h.recorder
+        .record(|r| r.prediction(h.clock.now_log_ns(), &p.trajectory, &p.forces));
+    let scored = h.accuracy.update(&params, &msg, &p.trajectory);
+    Ok((p, scored))
 }
 
-/// At most one warning per period; the next one says how many were held back.
-#[derive(Debug)]
-pub struct RateLimiter {
-    period: Duration,
-    last: Option<Instant>,
-    suppressed: u64,
-}
-
-impl RateLimiter {
-    /// A limiter letting one event through per `period`.
-    pub fn new(period: Duration) -> Self {
-        RateLimiter {
-            period,
-            last: None,
-            suppressed: 0,
-        }
+/// The counters now, stamped with the node's clock.
+fn node_diagnostics(h: &Handles) -> NodeDiagnostics {
+    NodeDiagnostics {
+        header: h.clock.header(),
+        ..h.diag.snapshot(&h.model.get().describe())
     }
-
-    /// `Some(n)` if an event at `now` may be reported, `n` being how many were
-    /// suppressed since the last report; `None` if it must be suppressed.
-    pub fn allow(&mut self, now: Instant) -> Option<u64> {
-        match self.last {
-            Some(t) if now.saturating_duration_since(t) < self.period => {
-                self.suppressed += 1;
-                None
-            }
-            _ => {
-                self.last = Some(now);
-                Some(std::mem::take(&mut self.suppressed))
-            }
-        }
-    }
-}
-
-/// Logs to stderr and to /rosout.
-pub struct Logger {
-    rosout: NodeLoggingHandle,
-}
-
-impl Logger {
-    /// Logs `msg` at `level`.
-    pub fn log(&self, level: LogLevel, msg: &str) {
-        let tag = match level {
-            LogLevel::Fatal => "FATAL",
-            LogLevel::Error => "ERROR",
-            LogLevel::Warn => "WARN",
-            LogLevel::Info => "INFO",
-            LogLevel::Debug => "DEBUG",
-        };
-        eprintln!("[{tag}] [{:.6}] [{NODE_NAME}]: {msg}", wall_secs());
-        self.rosout.rosout_raw(
-            ros2_client::builtin_interfaces::Time::now(),
-            level,
-            NODE_NAME,
-            msg,
-            file!(),
-            "",
-            line!(),
-        );
-    }
-}
-
-/// What the tasks share.
-pub(super) struct Shared {
-    /// The parameters now: those in [`RUNTIME_SETTABLE`] change at run time.
-    params: Arc<RwLock<NodeParams>>,
-    /// Behind a lock so a model swap (Train, LoadModel) can replace it.
-    pub(super) model: RwLock<Arc<dyn Dynamics>>,
-    stats: Stats,
-    /// Limits warnings about bad input states.
-    warn_input: Mutex<RateLimiter>,
-    /// Limits warnings about failed service calls (the caller gets the reason).
-    warn_service: Mutex<RateLimiter>,
-    /// Limits warnings about recording failures.
-    warn_record: Mutex<RateLimiter>,
-    pub(super) log: Logger,
-    /// System time, or `/clock` with `use_sim_time`.
-    pub(super) clock: super::clock::Clock,
-    /// MCAP recording, when `record_dir` is set.
-    pub(super) recorder: Option<Mutex<Recorder>>,
-    /// Train/LoadModel state and the swap announcer.
-    pub(super) training: super::training::Training,
-}
-
-impl Shared {
-    /// A copy of the parameters now.
-    pub(super) fn params(&self) -> NodeParams {
-        self.params
-            .read()
-            .unwrap_or_else(PoisonError::into_inner)
-            .clone()
-    }
-
-    /// The model served now.
-    pub(super) fn model(&self) -> Arc<dyn Dynamics> {
-        self.model
-            .read()
-            .unwrap_or_else(PoisonError::into_inner)
-            .clone()
-    }
-
-    /// A failed service call: last error and a rate-limited warning.
-    pub(super) fn service_failed(&self, why: &str) {
-        self.failed(why, &self.warn_service);
-    }
-
-    /// Counts a rejected input and warns, rate-limited.
-    fn reject(&self, why: &str) {
-        self.stats.rejected.fetch_add(1, Ordering::Relaxed);
-        self.failed(why, &self.warn_input);
-    }
-
-    /// Records a failure as the last error and warns, rate-limited by `limiter`.
-    fn failed(&self, why: &str, limiter: &Mutex<RateLimiter>) {
-        why.clone_into(
-            &mut self
-                .stats
-                .last_error
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner),
-        );
-        let period = Duration::from_secs_f64(self.params().warn_period);
-        let allowed = {
-            let mut l = limiter.lock().unwrap_or_else(PoisonError::into_inner);
-            l.period = period;
-            l.allow(Instant::now())
-        };
-        if let Some(suppressed) = allowed {
-            let more = if suppressed > 0 {
-                format!(" ({suppressed} similar warnings suppressed)")
-            } else {
-                String::new()
-            };
-            self.log.log(LogLevel::Warn, &format!("{why}{more}"));
-        }
-    }
-
-    /// Records with the recorder, if any; failures are warned about.
-    pub(super) fn record(&self, what: impl FnOnce(&mut Recorder) -> Result<(), String>) {
-        if let Some(r) = &self.recorder {
-            let result = what(&mut r.lock().unwrap_or_else(PoisonError::into_inner));
-            if let Err(e) = result {
-                self.failed(&e, &self.warn_record);
-            }
-        }
-    }
-
-    /// Checks, records and predicts one incoming state (blocking work).
-    fn handle_state(&self, msg: ParticleState, received_ns: u64) -> Result<Prediction, String> {
-        // Refused before anything is recorded or predicted: an oversized state
-        // would hold memory and its prediction could not be delivered promptly.
-        let params = self.params();
-        predict::check_size(&msg, params.max_particles)?;
-        self.record(|r| r.state(received_ns, &msg));
-        let model = self.model();
-        // A state the model was not trained for (another dimension, edge kinds
-        // or field) is refused with the reason, not predicted.
-        if let Some(t) = model.trained_for() {
-            let (graph, _) = msg.to_parts().map_err(|e| e.to_string())?;
-            let field = msg.field().map_err(|e| e.to_string())?;
-            t.check(&graph, field.as_ref())?;
-        }
-        let p = predict::predict(
-            model.as_ref(),
-            &msg,
-            params.dt,
-            params.horizon,
-            params.substeps,
-        )?;
-        self.record(|r| r.prediction(self.clock.now_log_ns(), &p.trajectory, &p.forces));
-        Ok(p)
-    }
-
-    fn diagnostics(&self) -> NodeDiagnostics {
-        NodeDiagnostics {
-            header: self.clock.header(),
-            received: self.stats.received.load(Ordering::Relaxed),
-            rejected: self.stats.rejected.load(Ordering::Relaxed),
-            predicted: self.stats.predicted.load(Ordering::Relaxed),
-            last_error: self
-                .stats
-                .last_error
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner)
-                .clone(),
-            model: self.model().describe(),
-        }
-    }
-}
-
-/// Seconds since the Unix epoch (0 if the clock is before it).
-fn wall_secs() -> f64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_secs_f64())
-        .unwrap_or(0.0)
-}
-
-/// Topic QoS from the parameters: volatile, keep-last `qos_depth`.
-fn topic_qos(p: &NodeParams) -> QosProfile {
-    let q = QosProfile::publisher_default()
-        .durability(Durability::Volatile)
-        .history(History::KeepLast {
-            depth: p.qos_depth as usize,
-        });
-    if p.qos_reliable {
-        q.reliability_reliable(WhenFull::DEFAULT)
-    } else {
-        q.reliability_best_effort()
-    }
-}
-
-/// `/clock` QoS: best-effort keep-last 1 (as rclpy's time source), which
-/// matches reliable and best-effort publishers.
-fn clock_qos() -> QosProfile {
-    QosProfile::publisher_default()
-        .reliability_best_effort()
-        .durability(Durability::Volatile)
-        .history(History::KeepLast { depth: 1 })
 }
 
 /// Follows `/clock` (with `use_sim_time`).
-async fn clock_loop(shared: Arc<Shared>, sub: Subscription<super::clock::ClockMsg>) {
+async fn clock_loop(h: Handles, sub: Subscription<super::clock::ClockMsg>) {
     loop {
         match sub.async_take().await {
-            Ok((msg, _)) => shared.clock.set(&msg),
-            Err(e) => shared.log.log(
+            Ok((msg, _)) => h.clock.set(&msg),
+            Err(e) => h.diag.log(
                 LogLevel::Warn,
                 &format!("undecodable /clock message: {e:?}"),
             ),
         }
     }
-}
-
-/// Service QoS that rclpy clients match: reliable, volatile, keep-last 10.
-fn service_qos() -> QosProfile {
-    QosProfile::publisher_default()
-        .reliability_reliable(WhenFull::DEFAULT)
-        .durability(Durability::Volatile)
-        .history(History::KeepLast { depth: 10 })
-}
-
-fn ros_name(s: &str) -> anyhow::Result<Name> {
-    Name::parse(s).map_err(|e| anyhow!("invalid ROS name {s:?}: {e:?}"))
 }
 
 /// A ROS parameter value as parameter-file text, for [`NodeParams::set`].
@@ -301,6 +98,12 @@ fn scalar(value: &ParameterValue) -> Scalar {
         ParameterValue::Integer(i) => Scalar::Int(*i),
         ParameterValue::Double(x) => Scalar::Float(*x),
         ParameterValue::String(s) => Scalar::Str(s.clone()),
+        ParameterValue::DoubleArray(xs) => {
+            Scalar::List(xs.iter().map(|x| Scalar::Float(*x)).collect())
+        }
+        ParameterValue::IntegerArray(xs) => {
+            Scalar::List(xs.iter().map(|i| Scalar::Int(*i)).collect())
+        }
         other => Scalar::Str(format!("{other:?}")),
     }
 }
@@ -328,7 +131,7 @@ pub fn check_runtime_change(
 /// Every parameter of [`SPECS`](super::params::SPECS) as a ROS parameter, so
 /// rclpy can list and get them all; those in [`RUNTIME_SETTABLE`] can be set
 /// (validated, then applied to `live`), the others refuse with the reason.
-fn declare_parameters(p: &NodeParams, live: Arc<RwLock<NodeParams>>) -> NodeOptions {
+fn declare_parameters(p: &NodeParams, live: LiveParams) -> NodeOptions {
     use super::params::{Kind, SPECS};
     let values: Vec<(&'static str, ParameterValue)> = SPECS
         .iter()
@@ -339,6 +142,8 @@ fn declare_parameters(p: &NodeParams, live: Arc<RwLock<NodeParams>>) -> NodeOpti
                 Kind::Bool => ParameterValue::Boolean(text == "true"),
                 Kind::Int(..) => ParameterValue::Integer(text.parse().unwrap_or_default()),
                 Kind::Double(_) => ParameterValue::Double(text.parse().unwrap_or_default()),
+                // The only list parameter.
+                Kind::Doubles(_) => ParameterValue::DoubleArray(p.accuracy_lead_times.clone()),
             };
             (*key, v)
         })
@@ -355,8 +160,7 @@ fn declare_parameters(p: &NodeParams, live: Arc<RwLock<NodeParams>>) -> NodeOpti
             if initial.iter().any(|(k, v)| *k == name && v == value) {
                 return Ok(());
             }
-            let current = check.read().unwrap_or_else(PoisonError::into_inner);
-            check_runtime_change(&current, name, value).map(|_| ())
+            check_runtime_change(&check.get(), name, value).map(|_| ())
         }))
         // Runs after the validator, and for every declared value at start.
         // Other parameters (read-only ones, ros2-client's use_sim_time) need
@@ -365,20 +169,182 @@ fn declare_parameters(p: &NodeParams, live: Arc<RwLock<NodeParams>>) -> NodeOpti
             if !RUNTIME_SETTABLE.contains(&name) {
                 return Ok(());
             }
-            let mut current = apply.write().unwrap_or_else(PoisonError::into_inner);
-            *current = check_runtime_change(&current, name, value)?;
-            Ok(())
+            apply.update(|current| check_runtime_change(current, name, value))
         }))
 }
 
-/// The node's DDS endpoints.
+/// The node's own DDS endpoints (training's are in [`training::create`] and
+/// [`action::create`]).
 struct Endpoints {
     input: Subscription<ParticleState>,
     trajectory: Publisher<PredictedTrajectory>,
     forces: Publisher<ParticleForces>,
+    accuracy: Publisher<LiveAccuracy>,
     diagnostics: Publisher<NodeDiagnostics>,
     standard_diagnostics: Publisher<DiagnosticArray>,
     rollout: Server<RolloutRequest, RolloutResponse>,
+    replay: Server<ReplayRequest, ReplayResponse>,
+    /// With `use_sim_time` only.
+    clock: Option<Subscription<super::clock::ClockMsg>>,
+}
+
+impl Endpoints {
+    /// Topics, publishers, subscriptions and servers as the parameters say.
+    fn create(node: &mut Node, params: &NodeParams) -> anyhow::Result<Endpoints> {
+        let e = |what: &'static str| move |err| anyhow!("creating {what}: {err:?}");
+        let topic = |name: &str, pkg: &str, ty: &str, qos: &QosProfile| {
+            node.create_topic(&ros_name(name)?, MessageTypeName::new(pkg, ty), qos)
+                .map_err(|e| anyhow!("creating topic {name}: {e:?}"))
+        };
+        let qos = topic_qos(params);
+        let state_type = PARTICLE_STATE_TYPE
+            .rsplit('/')
+            .next()
+            .unwrap_or("ParticleState");
+        let input_topic = topic(&params.input_topic, PACKAGE, state_type, &qos)?;
+        let traj_topic = topic(
+            &params.trajectory_topic,
+            PACKAGE,
+            "PredictedTrajectory",
+            &qos,
+        )?;
+        let forces_topic = topic(&params.forces_topic, PACKAGE, "ParticleForces", &qos)?;
+        let diag_topic = topic(&params.diagnostics_topic, PACKAGE, "NodeDiagnostics", &qos)?;
+        let accuracy_topic = topic(LIVE_ACCURACY_TOPIC, PACKAGE, "LiveAccuracy", &qos)?;
+        let std_diag_topic = topic(
+            STANDARD_DIAGNOSTICS_TOPIC,
+            "diagnostic_msgs",
+            "DiagnosticArray",
+            &reliable_qos(),
+        )?;
+        let clock_topic = if params.use_sim_time {
+            let t = topic(
+                super::clock::CLOCK_TOPIC,
+                "rosgraph_msgs",
+                "Clock",
+                &clock_qos(),
+            )?;
+            Some(t)
+        } else {
+            None
+        };
+        let rollout = create_server(node, &params.rollout_service, "Rollout")?;
+        let replay = create_server(node, REPLAY_SERVICE, "Replay")?;
+        Ok(Endpoints {
+            input: node
+                .create_subscription(&input_topic, Some(qos.clone()))
+                .map_err(e("the input subscription"))?,
+            trajectory: node
+                .create_publisher(&traj_topic, Some(qos.clone()))
+                .map_err(e("the trajectory publisher"))?,
+            forces: node
+                .create_publisher(&forces_topic, Some(qos.clone()))
+                .map_err(e("the forces publisher"))?,
+            accuracy: node
+                .create_publisher(&accuracy_topic, Some(qos.clone()))
+                .map_err(e("the live accuracy publisher"))?,
+            diagnostics: node
+                .create_publisher(&diag_topic, Some(qos))
+                .map_err(e("the diagnostics publisher"))?,
+            standard_diagnostics: node
+                .create_publisher(&std_diag_topic, Some(reliable_qos()))
+                .map_err(e("the /diagnostics publisher"))?,
+            rollout,
+            replay,
+            clock: match clock_topic {
+                Some(t) => Some(
+                    node.create_subscription(&t, Some(clock_qos()))
+                        .map_err(e("the /clock subscription"))?,
+                ),
+                None => None,
+            },
+        })
+    }
+
+    /// Starts one task per loop: input, diagnostics, /clock, and one per
+    /// service (inside the runtime).
+    fn spawn(self, h: &Handles, trainer: &Arc<Trainer>) {
+        let outputs = Outputs {
+            trajectory: self.trajectory,
+            forces: self.forces,
+            accuracy: self.accuracy,
+        };
+        let input = input_loop(h.clone(), self.input, outputs, trainer.clone());
+        tokio::spawn(input);
+        tokio::spawn(diagnostics_loop(
+            h.clone(),
+            self.diagnostics,
+            self.standard_diagnostics,
+        ));
+        if let Some(sub) = self.clock {
+            tokio::spawn(clock_loop(h.clone(), sub));
+        }
+        let d = h.diag.clone();
+        let rollout = service::serve(
+            h.clone(),
+            d.clone(),
+            self.rollout,
+            "Rollout",
+            Warn,
+            rollout_call,
+        );
+        tokio::spawn(rollout);
+        tokio::spawn(service::serve(
+            h.clone(),
+            d,
+            self.replay,
+            "Replay",
+            Warn,
+            replay_call,
+        ));
+    }
+}
+
+/// A server of our service type `ty` named `name`, with rclpy's QoS.
+fn create_server<Req: Message + Clone + 'static, Resp: Message + Clone + 'static>(
+    node: &mut Node,
+    name: &str,
+    ty: &str,
+) -> anyhow::Result<Server<Req, Resp>> {
+    node.create_server(
+        ServiceMapping::Enhanced,
+        &ros_name(name)?,
+        &ServiceTypeName::new(PACKAGE, ty),
+        reliable_qos(),
+        reliable_qos(),
+    )
+    .map_err(|err| anyhow!("creating the {ty} service: {err:?}"))
+}
+
+/// The file a `model` parameter names (`None` for `truth:*`).
+fn model_file(model: &str) -> Option<std::path::PathBuf> {
+    (!super::truth::is_truth(model)).then(|| model.into())
+}
+
+/// The handles of a node serving `model`, logging through `node`.
+fn handles(
+    node: &Node,
+    params: &NodeParams,
+    live: LiveParams,
+    model: Arc<dyn Dynamics>,
+) -> anyhow::Result<Handles> {
+    let recorder = if params.record_dir.is_empty() {
+        None
+    } else {
+        Some(Recorder::new(params, &model.describe()).map_err(anyhow::Error::msg)?)
+    };
+    let diag = Arc::new(Diagnostics::new(
+        Logger::new(node.logging_handle()),
+        live.clone(),
+    ));
+    Ok(Handles {
+        params: live,
+        model: Arc::new(ModelHandle::new(model, model_file(&params.model))),
+        recorder: Arc::new(RecorderHandle::new(recorder, diag.clone())),
+        diag,
+        clock: Arc::new(super::clock::Clock::new(params.use_sim_time)),
+        accuracy: Arc::new(accuracy::Live::default()),
+    })
 }
 
 /// Runs the node in `domain_id` until SIGINT or SIGTERM.
@@ -388,122 +354,88 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    let live = Arc::new(RwLock::new(params.clone()));
-    let p_sim = params.use_sim_time;
+    let live = LiveParams::new(params.clone());
     let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
         .map_err(|e| anyhow!("creating the DDS participant in domain {domain_id}: {e:?}"))?;
+    let name = NodeName::new("/", NODE_NAME).map_err(|e| anyhow!("node name: {e:?}"))?;
     let mut node = context
-        .new_node(
-            NodeName::new("/", NODE_NAME).map_err(|e| anyhow!("node name: {e:?}"))?,
-            declare_parameters(&params, live.clone()),
-        )
+        .new_node(name, declare_parameters(&params, live.clone()))
         .map_err(|e| anyhow!("creating the node: {e:?}"))?;
-
-    let qos = topic_qos(&params);
-    let topic = |name: &str, pkg: &str, ty: &str| {
-        node.create_topic(&ros_name(name)?, MessageTypeName::new(pkg, ty), &qos)
-            .map_err(|e| anyhow!("creating topic {name}: {e:?}"))
-    };
-    let state_type = PARTICLE_STATE_TYPE
-        .rsplit('/')
-        .next()
-        .unwrap_or("ParticleState");
-    let input_topic = topic(&params.input_topic, PACKAGE, state_type)?;
-    let traj_topic = topic(&params.trajectory_topic, PACKAGE, "PredictedTrajectory")?;
-    let forces_topic = topic(&params.forces_topic, PACKAGE, "ParticleForces")?;
-    let diag_topic = topic(&params.diagnostics_topic, PACKAGE, "NodeDiagnostics")?;
-    let std_diag_topic = node
-        .create_topic(
-            &ros_name(STANDARD_DIAGNOSTICS_TOPIC)?,
-            MessageTypeName::new("diagnostic_msgs", "DiagnosticArray"),
-            &service_qos(),
-        )
-        .map_err(|e| anyhow!("creating topic {STANDARD_DIAGNOSTICS_TOPIC}: {e:?}"))?;
-    let e = |what: &'static str| move |err| anyhow!("creating {what}: {err:?}");
-    let endpoints = Endpoints {
-        input: node
-            .create_subscription(&input_topic, Some(qos.clone()))
-            .map_err(e("the input subscription"))?,
-        trajectory: node
-            .create_publisher(&traj_topic, Some(qos.clone()))
-            .map_err(e("the trajectory publisher"))?,
-        forces: node
-            .create_publisher(&forces_topic, Some(qos.clone()))
-            .map_err(e("the forces publisher"))?,
-        diagnostics: node
-            .create_publisher(&diag_topic, Some(qos.clone()))
-            .map_err(e("the diagnostics publisher"))?,
-        standard_diagnostics: node
-            .create_publisher(&std_diag_topic, Some(service_qos()))
-            .map_err(e("the /diagnostics publisher"))?,
-        rollout: node
-            .create_server(
-                ServiceMapping::Enhanced,
-                &ros_name(&params.rollout_service)?,
-                &ServiceTypeName::new(PACKAGE, "Rollout"),
-                service_qos(),
-                service_qos(),
-            )
-            .map_err(e("the Rollout service"))?,
-    };
-    let (training, training_endpoints) = super::training::create(&mut node, &params)?;
-    let replay = node
-        .create_server(
-            ServiceMapping::Enhanced,
-            &ros_name(REPLAY_SERVICE)?,
-            &ServiceTypeName::new(PACKAGE, "Replay"),
-            service_qos(),
-            service_qos(),
-        )
-        .map_err(e("the Replay service"))?;
-    let clock_sub = if params.use_sim_time {
-        let clock_topic = node
-            .create_topic(
-                &ros_name(super::clock::CLOCK_TOPIC)?,
-                MessageTypeName::new("rosgraph_msgs", "Clock"),
-                &clock_qos(),
-            )
-            .map_err(|e| anyhow!("creating topic /clock: {e:?}"))?;
-        Some(
-            node.create_subscription::<super::clock::ClockMsg>(&clock_topic, Some(clock_qos()))
-                .map_err(e("the /clock subscription"))?,
-        )
-    } else {
-        None
-    };
-    let spinner = node.spinner().map_err(e("the node spinner"))?;
-    let recorder = if params.record_dir.is_empty() {
-        None
-    } else {
-        Some(Mutex::new(
-            Recorder::new(&params, &model.describe()).map_err(anyhow::Error::msg)?,
-        ))
-    };
-    let limiter = || {
-        Mutex::new(RateLimiter::new(Duration::from_secs_f64(
-            params.warn_period,
-        )))
-    };
-    let shared = Arc::new(Shared {
-        warn_input: limiter(),
-        warn_service: limiter(),
-        warn_record: limiter(),
-        recorder,
-        training,
-        model: RwLock::new(model),
-        stats: Stats::default(),
-        log: Logger {
-            rosout: node.logging_handle(),
-        },
-        params: live,
-        clock: super::clock::Clock::new(p_sim),
+    let endpoints = Endpoints::create(&mut node, &params)?;
+    let h = handles(&node, &params, live, model)?;
+    let (trainer, servers) = training::create(&mut node, &params, trainer_handles(&h))?;
+    let action_server = action::create(&mut node)?;
+    let spinner = node
+        .spinner()
+        .map_err(|e| anyhow!("the node spinner: {e:?}"))?;
+    log_start(&h, domain_id);
+    let result = runtime.block_on(async {
+        tokio::spawn(async move {
+            if let Err(e) = spinner.spin().await {
+                eprintln!("[ERROR] [{NODE_NAME}]: node spinner stopped: {e:?}");
+            }
+        });
+        endpoints.spawn(&h, &trainer);
+        spawn_training(trainer, servers, action_server);
+        wait_for_shutdown().await
     });
-    let p = shared.params();
-    shared.log.log(
+    h.diag
+        .log(LogLevel::Info, "shutting down (signal received)");
+    node.stop_spinner();
+    // Cancel the tasks (and drop their DDS entities) before the participant.
+    runtime.shutdown_timeout(Duration::from_secs(2));
+    finish_recording(&h);
+    drop(node);
+    drop(context);
+    result
+}
+
+/// The handles training works with.
+fn trainer_handles(h: &Handles) -> TrainerHandles {
+    TrainerHandles {
+        model: h.model.clone(),
+        recorder: h.recorder.clone(),
+        diag: h.diag.clone(),
+        clock: h.clock.clone(),
+    }
+}
+
+/// Starts the Train and LoadModel services and the Train action.
+fn spawn_training(
+    trainer: Arc<Trainer>,
+    servers: TrainingServers,
+    action_server: TrainActionServer,
+) {
+    use service::OnFailure::Quiet;
+    let d = trainer.diagnostics();
+    let (train, load) = (servers.train, servers.load);
+    tokio::spawn(service::serve(
+        trainer.clone(),
+        d.clone(),
+        train,
+        "Train",
+        Quiet,
+        training::train_call,
+    ));
+    tokio::spawn(service::serve(
+        trainer.clone(),
+        d,
+        load,
+        "LoadModel",
+        Quiet,
+        training::load_call,
+    ));
+    action::spawn(trainer, action_server);
+}
+
+/// Says what the node serves, where.
+fn log_start(h: &Handles, domain_id: u16) {
+    let p = h.params.get();
+    h.diag.log(
         LogLevel::Info,
         &format!(
             "serving {} in domain {domain_id}: {} -> {} + {} (horizon {}, dt {}), service {}",
-            shared.model().describe(),
+            h.model.get().describe(),
             p.input_topic,
             p.trajectory_topic,
             p.forces_topic,
@@ -512,70 +444,41 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
             p.rollout_service
         ),
     );
-
-    let result = runtime.block_on(async {
-        tokio::spawn(async move {
-            if let Err(e) = spinner.spin().await {
-                eprintln!("[ERROR] [{NODE_NAME}]: node spinner stopped: {e:?}");
-            }
-        });
-        let Endpoints {
-            input,
-            trajectory,
-            forces,
-            diagnostics,
-            standard_diagnostics,
-            rollout,
-        } = endpoints;
-        tokio::spawn(input_loop(shared.clone(), input, trajectory, forces));
-        tokio::spawn(service::serve(
-            shared.clone(),
-            rollout,
-            "Rollout",
-            Warn,
-            rollout_call,
-        ));
-        if let Some(sub) = clock_sub {
-            tokio::spawn(clock_loop(shared.clone(), sub));
-        }
-        tokio::spawn(service::serve(
-            shared.clone(),
-            replay,
-            "Replay",
-            Warn,
-            replay_call,
-        ));
-        tokio::spawn(diagnostics_loop(
-            shared.clone(),
-            diagnostics,
-            standard_diagnostics,
-        ));
-        super::training::spawn(shared.clone(), training_endpoints);
-        wait_for_shutdown().await
-    });
-    shared
-        .log
-        .log(LogLevel::Info, "shutting down (signal received)");
-    node.stop_spinner();
-    // Cancel the tasks (and drop their DDS entities) before the participant.
-    runtime.shutdown_timeout(Duration::from_secs(2));
-    if let Some(r) = &shared.recorder {
-        let mut r = r.lock().unwrap_or_else(PoisonError::into_inner);
-        match r.finish() {
-            Ok(()) => shared.log.log(
-                LogLevel::Info,
-                &format!(
-                    "recorded {} bag(s) in {}",
-                    r.finished.len(),
-                    r.dir().display()
-                ),
+    if !p.accuracy_lead_times.is_empty() {
+        let t = accuracy::Tracker::new(&p.accuracy_lead_times, 1, 1);
+        let reachable: Vec<f64> = t
+            .steps(p.dt, p.horizon)
+            .iter()
+            .map(|(i, _)| p.accuracy_lead_times[*i])
+            .collect();
+        let level = if reachable.len() == p.accuracy_lead_times.len() {
+            LogLevel::Info
+        } else {
+            LogLevel::Warn
+        };
+        // A lead the prediction does not reach, or not a whole number of
+        // steps, is never compared: say so once rather than stay silent.
+        h.diag.log(
+            level,
+            &format!(
+                "live accuracy on {LIVE_ACCURACY_TOPIC} at lead times {:?} s; comparable with \
+                 horizon {} x dt {}: {reachable:?}",
+                p.accuracy_lead_times, p.horizon, p.dt
             ),
-            Err(e) => shared.log.log(LogLevel::Error, &e),
-        }
+        );
     }
-    drop(node);
-    drop(context);
-    result
+}
+
+/// Closes the open bag at shutdown and says what was recorded.
+fn finish_recording(h: &Handles) {
+    match h.recorder.finish() {
+        None => {}
+        Some(Ok((dir, finished))) => h.diag.log(
+            LogLevel::Info,
+            &format!("recorded {} bag(s) in {}", finished.len(), dir.display()),
+        ),
+        Some(Err(e)) => h.diag.log(LogLevel::Error, &e),
+    }
 }
 
 /// Resolves on the first SIGINT or SIGTERM.
@@ -590,13 +493,41 @@ async fn wait_for_shutdown() -> anyhow::Result<()> {
     Ok(())
 }
 
-/// For each incoming state: predict, publish trajectory and forces.
-async fn input_loop(
-    shared: Arc<Shared>,
-    input: Subscription<ParticleState>,
+/// Topic of live accuracy (`mcgnode_msgs/msg/LiveAccuracy`).
+pub const LIVE_ACCURACY_TOPIC: &str = "/mcgnode/live_accuracy";
+
+/// What the input loop publishes.
+struct Outputs {
     trajectory: Publisher<PredictedTrajectory>,
     forces: Publisher<ParticleForces>,
+    accuracy: Publisher<LiveAccuracy>,
+}
+
+/// Logs a change of the drift alarm: at its level, or as news when it clears.
+fn log_alarm(h: &Handles, level: Level, why: &str) {
+    let log_level = match level {
+        Level::Ok => LogLevel::Info,
+        Level::Warn => LogLevel::Warn,
+        Level::Error => LogLevel::Error,
+    };
+    let prefix = if level == Level::Ok {
+        "drift alarm cleared: "
+    } else {
+        ""
+    };
+    h.diag.log(log_level, &format!("{prefix}{why}"));
+}
+
+/// For each incoming state: predict, publish trajectory and forces, and the
+/// live accuracy when the state was compared with earlier predictions; a
+/// drift alarm starts a retraining with `trainer` when `accuracy_retrain` is on.
+async fn input_loop(
+    h: Handles,
+    input: Subscription<ParticleState>,
+    out: Outputs,
+    trainer: Arc<Trainer>,
 ) {
+    let stats = &h.diag.stats;
     // Last sequence number seen from each publisher.
     let mut last_seen: std::collections::HashMap<String, i64> = Default::default();
     loop {
@@ -608,61 +539,79 @@ async fn input_loop(
                     let gap = sn.saturating_sub(prev).saturating_sub(1);
                     if gap > 0 {
                         let gap = u64::try_from(gap).unwrap_or(0);
-                        shared.stats.dropped.fetch_add(gap, Ordering::Relaxed);
+                        stats.dropped.fetch_add(gap, Ordering::Relaxed);
                     }
                 }
                 msg
             }
             Err(e) => {
                 // A sample that does not decode as a ParticleState.
-                shared.stats.received.fetch_add(1, Ordering::Relaxed);
-                shared.reject(&format!("undecodable ParticleState: {e:?}"));
+                stats.received.fetch_add(1, Ordering::Relaxed);
+                h.diag.reject(&format!("undecodable ParticleState: {e:?}"));
                 continue;
             }
         };
-        shared.stats.received.fetch_add(1, Ordering::Relaxed);
-        let received_ns = shared.clock.now_log_ns();
-        let worker = shared.clone();
-        let job = tokio::task::spawn_blocking(move || worker.handle_state(msg, received_ns));
-        let prediction = match job.await {
+        stats.received.fetch_add(1, Ordering::Relaxed);
+        let received_ns = h.clock.now_log_ns();
+        let worker = h.clone();
+        let job = tokio::task::spawn_blocking(move || handle_state(&worker, msg, received_ns));
+        let (prediction, scored) = match job.await {
             Ok(Ok(p)) => p,
             Ok(Err(why)) => {
-                shared.reject(&format!("rejected input: {why}"));
+                h.diag.reject(&format!("rejected input: {why}"));
                 continue;
             }
             Err(join) => {
-                shared.reject(&format!("prediction task failed: {join}"));
+                h.diag.reject(&format!("prediction task failed: {join}"));
                 continue;
             }
         };
-        let sent_traj = trajectory.async_publish(prediction.trajectory).await;
-        let sent_forces = forces.async_publish(prediction.forces).await;
+        if let Some((level, why)) = &scored.alarm_changed {
+            log_alarm(&h, *level, why);
+            let p = h.params.get();
+            if *level != Level::Ok && p.accuracy_retrain {
+                // Off the input loop: it records for a while, then trains.
+                let (trainer, why) = (trainer.clone(), why.clone());
+                tokio::task::spawn_blocking(move || {
+                    // The outcome is logged by retrain_on_drift itself.
+                    let _ = training::retrain_on_drift(&trainer, &p, &why);
+                });
+            }
+        }
+        let sent_traj = out.trajectory.async_publish(prediction.trajectory).await;
+        let sent_forces = out.forces.async_publish(prediction.forces).await;
+        if let Some(m) = scored.message {
+            if let Err(e) = out.accuracy.async_publish(m).await {
+                let why = format!("publishing the live accuracy failed: {e:?}");
+                h.diag.failed(&why, Warning::Input);
+            }
+        }
         match (sent_traj, sent_forces) {
             (Ok(()), Ok(())) => {
-                shared.stats.predicted.fetch_add(1, Ordering::Relaxed);
+                stats.predicted.fetch_add(1, Ordering::Relaxed);
             }
-            (Err(e), _) => shared.failed(
+            (Err(e), _) => h.diag.failed(
                 &format!("publishing the trajectory failed: {e:?}"),
-                &shared.warn_input,
+                Warning::Input,
             ),
-            (_, Err(e)) => shared.failed(
+            (_, Err(e)) => h.diag.failed(
                 &format!("publishing the forces failed: {e:?}"),
-                &shared.warn_input,
+                Warning::Input,
             ),
         }
     }
 }
 
 /// The Rollout service's work with the node's current parameters.
-fn rollout_call(shared: &Arc<Shared>, req: RolloutRequest) -> RolloutResponse {
-    let p = shared.params();
+fn rollout_call(h: &Handles, req: RolloutRequest) -> RolloutResponse {
+    let p = h.params.get();
     let limits = RolloutLimits {
         default_dt: p.dt,
         fine_dt: p.dt / f64::from(p.substeps.max(1)),
         max_steps: p.max_rollout_steps,
         max_particles: p.max_particles,
     };
-    rollout_response(shared.model().as_ref(), &req, &limits)
+    rollout_response(h.model.get().as_ref(), &req, &limits)
 }
 
 /// What the Rollout service accepts and how it integrates, from the node's
@@ -732,10 +681,10 @@ pub const REPLAY_SERVICE: &str = "/mcgnode/replay";
 
 /// The Replay service's work: the bag through the model served now, with the
 /// node's dt and horizon (see [`crate::replay::replay_as_node`]).
-fn replay_call(shared: &Arc<Shared>, req: ReplayRequest) -> ReplayResponse {
-    let p = shared.params();
+fn replay_call(h: &Handles, req: ReplayRequest) -> ReplayResponse {
+    let p = h.params.get();
     match crate::replay::replay_as_node(
-        shared.model().as_ref(),
+        h.model.get().as_ref(),
         &req.bag,
         p.dt,
         p.substeps,
@@ -806,22 +755,56 @@ pub fn standard_diagnostics(
     }
 }
 
+/// Live accuracy as a standard diagnostic status, `mcgnode: live accuracy`:
+/// the drift alarm's level and message, and per lead time the running and
+/// latest RE and EE and the number of comparisons (`re_mean@0.5s`, ...).
+pub fn accuracy_status(
+    figures: &[accuracy::LeadAccuracy],
+    level: Level,
+    why: &str,
+    overflowed: u64,
+) -> DiagnosticStatus {
+    let kv = |key: String, value: String| KeyValue { key, value };
+    let mut values = Vec::with_capacity(5 * figures.len() + 1);
+    for f in figures {
+        let at = |what: &str| format!("{what}@{}s", f.lead);
+        values.push(kv(at("compared"), f.compared.to_string()));
+        values.push(kv(at("re_mean"), format!("{:.6e}", f.re_mean)));
+        values.push(kv(at("re"), format!("{:.6e}", f.re)));
+        values.push(kv(at("ee_mean"), format!("{:.6e}", f.ee_mean)));
+        values.push(kv(at("ee"), format!("{:.6e}", f.ee)));
+    }
+    values.push(kv("pending_dropped".into(), overflowed.to_string()));
+    DiagnosticStatus {
+        level: level as u8,
+        name: format!("{NODE_NAME}: live accuracy"),
+        message: why.to_string(),
+        hardware_id: NODE_NAME.into(),
+        values,
+    }
+}
+
 /// Publishes `NodeDiagnostics` and the standard `/diagnostics` every
 /// `diagnostics_period`.
 async fn diagnostics_loop(
-    shared: Arc<Shared>,
+    h: Handles,
     publisher: Publisher<NodeDiagnostics>,
     standard: Publisher<DiagnosticArray>,
 ) {
-    let period = shared.params().diagnostics_period;
+    let period = h.params.get().diagnostics_period;
     let mut tick = tokio::time::interval(Duration::from_secs_f64(period));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut before = (0, 0);
     loop {
         tick.tick().await;
-        let d = shared.diagnostics();
-        let dropped = shared.stats.dropped.load(Ordering::Relaxed);
-        let array = standard_diagnostics(&d, dropped, before);
+        let d = node_diagnostics(&h);
+        let dropped = h.diag.stats.dropped.load(Ordering::Relaxed);
+        let mut array = standard_diagnostics(&d, dropped, before);
+        if let Some((figures, level, why, overflowed)) = h.accuracy.figures(&h.params.get()) {
+            array
+                .status
+                .push(accuracy_status(&figures, level, &why, overflowed));
+        }
         before = (d.rejected, dropped);
         if let Err(e) = publisher.async_publish(d).await {
             eprintln!("[WARN] [{NODE_NAME}]: publishing diagnostics failed: {e:?}");
@@ -835,17 +818,6 @@ async fn diagnostics_loop(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn rate_limiter_lets_one_through_per_period_and_counts_the_rest() {
-        let mut r = RateLimiter::new(Duration::from_secs(5));
-        let t0 = Instant::now();
-        assert_eq!(r.allow(t0), Some(0));
-        assert_eq!(r.allow(t0 + Duration::from_secs(1)), None);
-        assert_eq!(r.allow(t0 + Duration::from_secs(4)), None);
-        assert_eq!(r.allow(t0 + Duration::from_secs(6)), Some(2));
-        assert_eq!(r.allow(t0 + Duration::from_secs(7)), None);
-    }
 
     #[test]
     fn standard_diagnostics_warn_on_new_rejections_only() {
@@ -876,6 +848,40 @@ mod tests {
         assert_eq!(value("predicted").as_deref(), Some("7"));
         let quiet = standard_diagnostics(&d, 2, (3, 2));
         assert_eq!(quiet.status[0].level, DIAGNOSTIC_OK);
+    }
+
+    #[test]
+    fn lead_times_change_at_run_time_from_a_double_array() {
+        let p = NodeParams::default();
+        let set = |v| check_runtime_change(&p, "accuracy_lead_times", &v);
+        let q = set(ParameterValue::DoubleArray(vec![0.1, 1.0])).unwrap();
+        assert_eq!(q.accuracy_lead_times, vec![0.1, 1.0]);
+        let q = set(ParameterValue::IntegerArray(vec![1, 2])).unwrap();
+        assert_eq!(q.accuracy_lead_times, vec![1.0, 2.0]);
+        let e = set(ParameterValue::DoubleArray(vec![0.1, 0.0])).unwrap_err();
+        assert!(e.contains("must be finite and > 0"), "{e}");
+        let e = set(ParameterValue::Double(0.5)).unwrap_err();
+        assert!(e.contains("must be a list"), "{e}");
+    }
+
+    #[test]
+    fn accuracy_status_carries_level_lead_and_values() {
+        let f = accuracy::LeadAccuracy {
+            lead: 0.5,
+            compared: 4,
+            re: 0.03,
+            re_mean: 0.02,
+            ee: f64::NAN,
+            ee_mean: f64::NAN,
+        };
+        let (level, why) = accuracy::alarm(std::slice::from_ref(&f), 0.01, 0.1);
+        let s = accuracy_status(&[f], level, &why, 0);
+        assert_eq!(s.level, crate::ros::msgs::DIAGNOSTIC_WARN);
+        assert!(s.message.contains("lead 0.5 s"), "{}", s.message);
+        let get = |k: &str| s.values.iter().find(|v| v.key == k).map(|v| &v.value);
+        assert_eq!(get("compared@0.5s").map(String::as_str), Some("4"));
+        assert_eq!(get("re_mean@0.5s").map(String::as_str), Some("2.000000e-2"));
+        assert_eq!(get("ee_mean@0.5s").map(String::as_str), Some("NaN"));
     }
 
     #[test]

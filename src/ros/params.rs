@@ -58,6 +58,25 @@ pub struct NodeParams {
     /// Folder for models trained by the node; empty: `<record_dir>/models`,
     /// or a temporary folder when not recording.
     pub model_dir: String,
+    /// Lead times (seconds) at which live accuracy compares incoming states
+    /// with what was predicted for them; empty disables live accuracy.
+    pub accuracy_lead_times: Vec<f64>,
+    /// Comparisons averaged into the running RE and EE per lead time.
+    pub accuracy_window: u32,
+    /// Predictions kept waiting for their moment (bounds memory).
+    pub accuracy_max_pending: u32,
+    /// Drift alarm: WARN when a running RE exceeds this (0 = never).
+    pub accuracy_warn_re: f64,
+    /// Drift alarm: ERROR when a running RE exceeds this (0 = never).
+    pub accuracy_error_re: f64,
+    /// Retrain when the drift alarm is raised: warm-start the served model on
+    /// what is recorded after the alarm, swapped in only if it beats the old
+    /// one on the most recent (held-out) recording.
+    pub accuracy_retrain: bool,
+    /// Seconds recorded after the alarm before retraining.
+    pub accuracy_retrain_after: f64,
+    /// Epochs of a retraining.
+    pub accuracy_retrain_epochs: u32,
 }
 
 impl Default for NodeParams {
@@ -83,6 +102,14 @@ impl Default for NodeParams {
             record_split_mb: 0,
             record_split_seconds: 0.0,
             model_dir: String::new(),
+            accuracy_lead_times: Vec::new(),
+            accuracy_window: 10,
+            accuracy_max_pending: 10_000,
+            accuracy_warn_re: 0.01,
+            accuracy_error_re: 0.05,
+            accuracy_retrain: false,
+            accuracy_retrain_after: 5.0,
+            accuracy_retrain_epochs: 50,
         }
     }
 }
@@ -100,6 +127,8 @@ pub enum Kind {
     Int(u32, u32),
     /// A finite double, strictly positive when `true`, else ≥ 0.
     Double(bool),
+    /// A list of at most this many finite doubles > 0.
+    Doubles(usize),
 }
 
 /// Name, kind and documentation of every parameter, in file order: the one
@@ -202,6 +231,49 @@ pub const SPECS: &[(&str, Kind, &str)] = &[
         Kind::Double(false),
         "split bags after this many seconds (0 = never)",
     ),
+    (
+        "accuracy_lead_times",
+        Kind::Doubles(16),
+        "live accuracy: lead times (s) at which incoming states are compared with their \
+         predictions, each within horizon * dt; [] = off",
+    ),
+    (
+        "accuracy_window",
+        Kind::Int(1, 100_000),
+        "live accuracy: comparisons averaged into the running RE and EE",
+    ),
+    (
+        "accuracy_max_pending",
+        Kind::Int(1, 10_000_000),
+        "live accuracy: predictions kept waiting for their moment (bounds memory)",
+    ),
+    (
+        "accuracy_warn_re",
+        Kind::Double(false),
+        "drift alarm: WARN when a running RE exceeds this (0 = never)",
+    ),
+    (
+        "accuracy_error_re",
+        Kind::Double(false),
+        "drift alarm: ERROR when a running RE exceeds this (0 = never)",
+    ),
+    (
+        "accuracy_retrain",
+        Kind::Bool,
+        "on a drift alarm, warm-start the served model on what is recorded next (needs \
+         record_dir); swapped in only if it beats the old model on held-out recent data",
+    ),
+    (
+        "accuracy_retrain_after",
+        Kind::Double(true),
+        "seconds recorded after a drift alarm before retraining (bags split by \
+         record_split_seconds; the last is held out)",
+    ),
+    (
+        "accuracy_retrain_epochs",
+        Kind::Int(1, 1_000_000),
+        "epochs of a retraining after a drift alarm",
+    ),
 ];
 
 /// Parameters that can be changed while the node runs (through the ROS
@@ -215,6 +287,14 @@ pub const RUNTIME_SETTABLE: &[&str] = &[
     "warn_period",
     "max_rollout_steps",
     "max_particles",
+    "accuracy_lead_times",
+    "accuracy_window",
+    "accuracy_max_pending",
+    "accuracy_warn_re",
+    "accuracy_error_re",
+    "accuracy_retrain",
+    "accuracy_retrain_after",
+    "accuracy_retrain_epochs",
 ];
 
 /// Keys of the node's section that are accepted as node names.
@@ -314,6 +394,7 @@ impl NodeParams {
             }
             Kind::Bool => match value {
                 Scalar::Bool(b) if key == "use_sim_time" => self.use_sim_time = *b,
+                Scalar::Bool(b) if key == "accuracy_retrain" => self.accuracy_retrain = *b,
                 Scalar::Bool(b) => self.qos_reliable = *b,
                 _ => return Err(ill("true or false")),
             },
@@ -339,6 +420,32 @@ impl NodeParams {
                     return Err(format!("parameter {key:?} = {x} must be finite and {want}"));
                 }
                 self.set_double(key, x);
+            }
+            Kind::Doubles(max) => {
+                let Scalar::List(items) = value else {
+                    return Err(ill(&format!("a list of at most {max} numbers > 0")));
+                };
+                if items.len() > max {
+                    return Err(format!(
+                        "parameter {key:?} has {} entries; at most {max}",
+                        items.len()
+                    ));
+                }
+                let mut xs = Vec::with_capacity(items.len());
+                for item in items {
+                    let x = match item {
+                        Scalar::Float(x) => *x,
+                        Scalar::Int(i) => *i as f64,
+                        _ => return Err(ill(&format!("a list of at most {max} numbers > 0"))),
+                    };
+                    if !(x.is_finite() && x > 0.0) {
+                        return Err(format!(
+                            "parameter {key:?}: entry {x} must be finite and > 0"
+                        ));
+                    }
+                    xs.push(x);
+                }
+                self.accuracy_lead_times = xs;
             }
         }
         Ok(())
@@ -366,6 +473,9 @@ impl NodeParams {
             "max_rollout_steps" => self.max_rollout_steps = v,
             "max_particles" => self.max_particles = v,
             "record_split_mb" => self.record_split_mb = v,
+            "accuracy_window" => self.accuracy_window = v,
+            "accuracy_max_pending" => self.accuracy_max_pending = v,
+            "accuracy_retrain_epochs" => self.accuracy_retrain_epochs = v,
             _ => unreachable_key(key),
         }
     }
@@ -376,6 +486,9 @@ impl NodeParams {
             "diagnostics_period" => self.diagnostics_period = x,
             "warn_period" => self.warn_period = x,
             "record_split_seconds" => self.record_split_seconds = x,
+            "accuracy_warn_re" => self.accuracy_warn_re = x,
+            "accuracy_error_re" => self.accuracy_error_re = x,
+            "accuracy_retrain_after" => self.accuracy_retrain_after = x,
             _ => unreachable_key(key),
         }
     }
@@ -423,6 +536,21 @@ impl NodeParams {
             "diagnostics_period" => format!("{:?}", self.diagnostics_period),
             "warn_period" => format!("{:?}", self.warn_period),
             "record_split_seconds" => format!("{:?}", self.record_split_seconds),
+            "accuracy_lead_times" => {
+                let xs: Vec<String> = self
+                    .accuracy_lead_times
+                    .iter()
+                    .map(|x| format!("{x:?}"))
+                    .collect();
+                format!("[{}]", xs.join(", "))
+            }
+            "accuracy_window" => self.accuracy_window.to_string(),
+            "accuracy_max_pending" => self.accuracy_max_pending.to_string(),
+            "accuracy_warn_re" => format!("{:?}", self.accuracy_warn_re),
+            "accuracy_error_re" => format!("{:?}", self.accuracy_error_re),
+            "accuracy_retrain" => self.accuracy_retrain.to_string(),
+            "accuracy_retrain_after" => format!("{:?}", self.accuracy_retrain_after),
+            "accuracy_retrain_epochs" => self.accuracy_retrain_epochs.to_string(),
             _ => String::new(),
         }
     }
@@ -500,6 +628,10 @@ mod tests {
             horizon: 3,
             dt: 0.25,
             record_dir: "/tmp/x".into(),
+            accuracy_lead_times: vec![0.1, 0.5, 1.0],
+            accuracy_warn_re: 0.02,
+            accuracy_retrain: true,
+            accuracy_retrain_epochs: 7,
             ..NodeParams::default()
         };
         p.qos_reliable = false;
@@ -553,6 +685,20 @@ mod tests {
             let e = NodeParams::default().apply_file_text(text).unwrap_err();
             assert!(e.contains(want), "{text:?}: {e}");
         }
+        for (set, want) in [
+            ("accuracy_lead_times=0.5", "must be a list"),
+            (
+                "accuracy_lead_times=[0.1, -1]",
+                "entry -1 must be finite and > 0",
+            ),
+            ("accuracy_lead_times=[0.1, x]", "must be a list"),
+        ] {
+            let e = NodeParams::default().apply_override(set).unwrap_err();
+            assert!(e.contains(want), "{set}: {e}");
+        }
+        let mut p = NodeParams::default();
+        p.apply_override("accuracy_lead_times=[0.1, 1]").unwrap();
+        assert_eq!(p.accuracy_lead_times, vec![0.1, 1.0]);
         let e = NodeParams::default().apply_override("horizon").unwrap_err();
         assert!(e.contains("key=value"), "{e}");
         let e = NodeParams::default().apply_override("nope=1").unwrap_err();

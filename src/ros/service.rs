@@ -3,6 +3,9 @@
 //! send the reply. Each request runs as its own task, so a long call (a
 //! training) never holds up the next request; an undecodable request, a
 //! failed task and a failed send are logged, never fatal.
+//!
+//! The work gets a context of the caller's choosing (the node's handles, the
+//! trainer), so this module depends on no task module.
 
 use std::future::Future;
 use std::sync::Arc;
@@ -10,8 +13,8 @@ use std::sync::Arc;
 use ros2_client::log::LogLevel;
 use ros2_client::{Message, Server};
 
+use super::handles::{Diagnostics, Warning};
 use super::msgs::{LoadModelResponse, ReplayResponse, RolloutResponse, TrainResponse};
-use super::node::Shared;
 
 /// A service reply that can say it failed.
 pub trait Reply: Message + Send + Sync + 'static {
@@ -52,19 +55,21 @@ pub enum OnFailure {
 }
 
 /// Serves `server` (named `name` in messages) until the task is cancelled:
-/// every request is answered with `work(shared, request)`, run on the blocking
-/// pool in a task of its own.
-pub(super) fn serve<Req, Resp, W>(
-    shared: Arc<Shared>,
+/// every request is answered with `work(ctx, request)`, run on the blocking
+/// pool in a task of its own; failures go to `diag`.
+pub fn serve<C, Req, Resp, W>(
+    ctx: C,
+    diag: Arc<Diagnostics>,
     server: Server<Req, Resp>,
     name: &'static str,
     on_failure: OnFailure,
     work: W,
 ) -> impl Future<Output = ()> + Send + 'static
 where
+    C: Clone + Send + Sync + 'static,
     Req: Message + Send + Sync + 'static,
     Resp: Reply,
-    W: Fn(&Arc<Shared>, Req) -> Resp + Send + Sync + 'static,
+    W: Fn(&C, Req) -> Resp + Send + Sync + 'static,
 {
     let server = Arc::new(server);
     let work = Arc::new(work);
@@ -73,25 +78,25 @@ where
             let (id, req) = match server.async_receive_request().await {
                 Ok(r) => r,
                 Err(e) => {
-                    shared.log.log(
+                    diag.log(
                         LogLevel::Warn,
                         &format!("undecodable {name} request: {e:?}"),
                     );
                     continue;
                 }
             };
-            let (shared, server, work) = (shared.clone(), server.clone(), work.clone());
+            let (ctx, diag, server, work) =
+                (ctx.clone(), diag.clone(), server.clone(), work.clone());
             tokio::spawn(async move {
-                let worker = shared.clone();
-                let job = tokio::task::spawn_blocking(move || work(&worker, req));
+                let job = tokio::task::spawn_blocking(move || work(&ctx, req));
                 let resp = job
                     .await
                     .unwrap_or_else(|join| Resp::failure(format!("{name} task failed: {join}")));
                 if let (OnFailure::Warn, Some(why)) = (on_failure, resp.failure_reason()) {
-                    shared.service_failed(&format!("{name} call failed: {why}"));
+                    diag.failed(&format!("{name} call failed: {why}"), Warning::Service);
                 }
                 if let Err(e) = server.async_send_response(id, resp).await {
-                    shared.log.log(
+                    diag.log(
                         LogLevel::Warn,
                         &format!("sending a {name} response failed: {e:?}"),
                     );

@@ -16,29 +16,36 @@
 //!
 //! Models go to [`model_dir`]: `<record_dir>/models` when the node records,
 //! else `<temp dir>/mcgnode-models`.
+//!
+//! With `accuracy_retrain`, a drift alarm starts [`retrain_on_drift`]: a
+//! warm start of the served model on what is recorded next, swapped in only
+//! if it beats the old model on a held-out recording.
+//!
+//! A [`Trainer`] holds only the handles training needs (model, recorder,
+//! diagnostics, clock); the Train action ([`super::action`]) builds on it, and
+//! the node wires both, so neither imports the node.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, PoisonError};
+use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::anyhow;
 use ros2_client::log::LogLevel;
-use ros2_client::qos::{Durability, History, WhenFull};
-use ros2_client::{
-    MessageTypeName, Name, Node, Publisher, QosProfile, Server, ServiceMapping, ServiceTypeName,
-};
+use ros2_client::{MessageTypeName, Node, Publisher, Server, ServiceMapping, ServiceTypeName};
 
 use crate::data::msg::{Header, Time};
 use crate::dynamics::Dynamics;
-use crate::model::{TrainedModel, Variant};
+use crate::model::{ModelFile, TrainedModel, Variant};
 use crate::train::{train_from_bags, EpochReport, ModelOptions, TrainConfig};
 
+use super::clock::Clock;
+use super::handles::{Diagnostics, ModelHandle, RecorderHandle};
 use super::msgs::{
     LoadModelRequest, LoadModelResponse, ModelSwap, TrainRequest, TrainResponse, PACKAGE,
 };
-use super::node::Shared;
 use super::params::NodeParams;
+use super::qos::{reliable_qos, ros_name as name};
 
 /// Name of the Train service.
 pub const TRAIN_SERVICE: &str = "/mcgnode/train";
@@ -49,8 +56,17 @@ pub const MODEL_SWAP_TOPIC: &str = "/mcgnode/model_swap";
 /// Variant trained when a request leaves it empty.
 pub const DEFAULT_VARIANT: Variant = Variant::Mcgnode;
 
-/// Training state shared by the node's tasks.
-pub struct Training {
+/// Training state and the handles it needs, shared by the Train and
+/// LoadModel services and the Train action.
+pub struct Trainer {
+    /// The model to replace.
+    model: Arc<ModelHandle>,
+    /// The recordings trained on when a request names no bags.
+    recorder: Arc<RecorderHandle>,
+    /// The log.
+    diag: Arc<Diagnostics>,
+    /// Stamps swap announcements.
+    clock: Arc<Clock>,
     /// Set while a training runs (service or action).
     busy: AtomicBool,
     /// Announces swaps.
@@ -61,11 +77,13 @@ pub struct Training {
     seq: AtomicU64,
 }
 
-/// The Train and LoadModel servers, handed to [`spawn`].
-pub struct TrainingEndpoints {
-    train: Server<TrainRequest, TrainResponse>,
-    load: Server<LoadModelRequest, LoadModelResponse>,
-    action: super::action::TrainActionServer,
+/// The Train and LoadModel servers, for [`super::service::serve`] with
+/// [`train_call`] and [`load_call`].
+pub struct TrainingServers {
+    /// The Train service.
+    pub train: Server<TrainRequest, TrainResponse>,
+    /// The LoadModel service.
+    pub load: Server<LoadModelRequest, LoadModelResponse>,
 }
 
 /// Where trained models go: `<record_dir>/models`, or
@@ -80,24 +98,24 @@ pub fn model_dir(params: &NodeParams) -> PathBuf {
     }
 }
 
-/// Reliable, volatile, keep-last 10: what rclpy's defaults match.
-pub(super) fn reliable_qos() -> QosProfile {
-    QosProfile::publisher_default()
-        .reliability_reliable(WhenFull::DEFAULT)
-        .durability(Durability::Volatile)
-        .history(History::KeepLast { depth: 10 })
+/// The handles a [`Trainer`] works with.
+pub struct TrainerHandles {
+    /// The model to replace.
+    pub model: Arc<ModelHandle>,
+    /// The recordings trained on when a request names no bags.
+    pub recorder: Arc<RecorderHandle>,
+    /// The log.
+    pub diag: Arc<Diagnostics>,
+    /// Stamps swap announcements.
+    pub clock: Arc<Clock>,
 }
 
-fn name(s: &str) -> anyhow::Result<Name> {
-    Name::parse(s).map_err(|e| anyhow!("invalid ROS name {s:?}: {e:?}"))
-}
-
-/// Creates the swap publisher, the Train and LoadModel servers and the Train
-/// action server.
-pub(super) fn create(
+/// Creates the swap publisher and the Train and LoadModel servers.
+pub fn create(
     node: &mut Node,
     params: &NodeParams,
-) -> anyhow::Result<(Training, TrainingEndpoints)> {
+    handles: TrainerHandles,
+) -> anyhow::Result<(Arc<Trainer>, TrainingServers)> {
     let qos = reliable_qos();
     let topic = node
         .create_topic(
@@ -127,69 +145,61 @@ pub(super) fn create(
             qos,
         )
         .map_err(|e| anyhow!("creating the LoadModel service: {e:?}"))?;
-    let action = super::action::create(node)?;
-    let training = Training {
+    let TrainerHandles {
+        model,
+        recorder,
+        diag,
+        clock,
+    } = handles;
+    let trainer = Trainer {
+        model,
+        recorder,
+        diag,
+        clock,
         busy: AtomicBool::new(false),
         swap,
         model_dir: model_dir(params),
         seq: AtomicU64::new(0),
     };
-    Ok((
-        training,
-        TrainingEndpoints {
-            train,
-            load,
-            action,
-        },
-    ))
-}
-
-/// Starts the Train, LoadModel and Train-action tasks (inside the runtime).
-pub(super) fn spawn(shared: Arc<Shared>, endpoints: TrainingEndpoints) {
-    shared.log.log(
+    trainer.log(
         LogLevel::Info,
         &format!(
-            "services {TRAIN_SERVICE}, {LOAD_MODEL_SERVICE}; action {}; swaps announced on \
+            "services {TRAIN_SERVICE}, {LOAD_MODEL_SERVICE}; swaps announced on \
              {MODEL_SWAP_TOPIC}; trained models go to {}",
-            super::action::TRAIN_ACTION,
-            shared.training.model_dir.display()
+            trainer.model_dir.display()
         ),
     );
-    let quiet = super::service::OnFailure::Quiet;
-    tokio::spawn(super::service::serve(
-        shared.clone(),
-        endpoints.train,
-        "Train",
-        quiet,
-        train_call,
-    ));
-    tokio::spawn(super::service::serve(
-        shared.clone(),
-        endpoints.load,
-        "LoadModel",
-        quiet,
-        |shared, req: LoadModelRequest| load_and_swap(shared, &req.path),
-    ));
-    super::action::spawn(shared, endpoints.action);
+    Ok((Arc::new(trainer), TrainingServers { train, load }))
+}
+
+impl Trainer {
+    /// Logs through the node's log.
+    pub fn log(&self, level: LogLevel, msg: &str) {
+        self.diag.log(level, msg);
+    }
+
+    /// The node's diagnostics (for the service loop's failure reports).
+    pub fn diagnostics(&self) -> Arc<Diagnostics> {
+        self.diag.clone()
+    }
 }
 
 /// The right to train, held for the training's duration; released on drop.
-pub struct Claim(Arc<Shared>);
+pub struct Claim(Arc<Trainer>);
 
 impl Drop for Claim {
     fn drop(&mut self) {
-        self.0.training.busy.store(false, Ordering::Release);
+        self.0.busy.store(false, Ordering::Release);
     }
 }
 
 /// The right to train, or `None` while another training runs.
-pub(super) fn claim(shared: &Arc<Shared>) -> Option<Claim> {
-    shared
-        .training
+pub fn claim(trainer: &Arc<Trainer>) -> Option<Claim> {
+    trainer
         .busy
         .compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire)
         .is_ok()
-        .then(|| Claim(shared.clone()))
+        .then(|| Claim(trainer.clone()))
 }
 
 /// Why a second training is refused.
@@ -197,16 +207,16 @@ pub const BUSY: &str = "refused: a training is already running (one at a time)";
 
 /// Replaces the served model, announces it on the swap topic and in the log;
 /// returns how long the write lock was held.
-pub(super) fn swap(shared: &Shared, model: Arc<dyn Dynamics>, reason: &str) -> Duration {
+pub fn swap(
+    shared: &Trainer,
+    model: Arc<dyn Dynamics>,
+    file: Option<PathBuf>,
+    reason: &str,
+) -> Duration {
     let new_model = model.describe();
-    let start = Instant::now();
-    let old = std::mem::replace(
-        &mut *shared.model.write().unwrap_or_else(PoisonError::into_inner),
-        model,
-    );
-    let locked = start.elapsed();
+    let (old, locked) = shared.model.replace(model, file);
     // Bags recorded from now on (and the open one) name the new model.
-    shared.record(|r| r.set_model(&new_model));
+    shared.recorder.record(|r| r.set_model(&new_model));
     let msg = ModelSwap {
         header: Header {
             stamp: Time::from_nanos(shared.clock.now_ns()),
@@ -216,8 +226,8 @@ pub(super) fn swap(shared: &Shared, model: Arc<dyn Dynamics>, reason: &str) -> D
         new_model: new_model.clone(),
         reason: reason.to_string(),
     };
-    let published = shared.training.swap.publish(msg);
-    shared.log.log(
+    let published = shared.swap.publish(msg);
+    shared.log(
         LogLevel::Info,
         &format!(
             "model swapped ({:.1} µs under the lock): now serving {new_model} (was {}); {reason}",
@@ -226,7 +236,7 @@ pub(super) fn swap(shared: &Shared, model: Arc<dyn Dynamics>, reason: &str) -> D
         ),
     );
     if let Err(e) = published {
-        shared.log.log(
+        shared.log(
             LogLevel::Warn,
             &format!("announcing the model swap on {MODEL_SWAP_TOPIC} failed: {e:?}"),
         );
@@ -262,41 +272,40 @@ pub fn model_file_name(variant: Variant, unix_secs: u64, pid: u32, seq: u64) -> 
 
 /// The bags to train on: the request's, or this run's recordings (the open
 /// bag is closed first, so its footer is written and it reads back whole).
-fn training_bags(shared: &Shared, bags: &[String]) -> Result<Vec<PathBuf>, String> {
+fn training_bags(shared: &Trainer, bags: &[String]) -> Result<Vec<PathBuf>, String> {
     if !bags.is_empty() {
         return Ok(bags.iter().map(PathBuf::from).collect());
     }
-    let Some(recorder) = &shared.recorder else {
+    let Some(finished) = shared.recorder.finish() else {
         return Err(
             "no bags given and the node records nothing (set record_dir to train on what it sees)"
                 .into(),
         );
     };
-    let mut r = recorder.lock().unwrap_or_else(PoisonError::into_inner);
-    r.finish()?;
-    if r.finished.is_empty() {
+    let (dir, finished) = finished?;
+    if finished.is_empty() {
         return Err(format!(
             "no bags given and the node has recorded nothing yet in {}",
-            r.dir().display()
+            dir.display()
         ));
     }
-    Ok(r.finished.clone())
+    Ok(finished)
 }
 
 /// Trains as `req` asks (blocking; `source` names the caller in messages),
 /// reporting each epoch to `progress`; `cancel` is polled after every epoch.
 /// On success the model file is written and swapped in.
-pub(super) fn run_training(
-    shared: &Shared,
+pub fn run_training(
+    shared: &Trainer,
     req: &TrainRequest,
     cancel: &AtomicBool,
     mut progress: impl FnMut(&EpochReport),
     source: &str,
 ) -> TrainResponse {
     let start = Instant::now();
-    let log = |level, msg: &str| shared.log.log(level, &format!("{source}: {msg}"));
+    let log = |level, msg: &str| shared.log(level, &format!("{source}: {msg}"));
     let fail = |why: String| {
-        let message = format!("{why}; still serving {}", shared.model().describe());
+        let message = format!("{why}; still serving {}", shared.model.get().describe());
         log(LogLevel::Warn, &message);
         TrainResponse {
             success: false,
@@ -361,34 +370,18 @@ pub(super) fn run_training(
     }
     // From here to the swap is what a caller waits on top of training.
     let trained_at = Instant::now();
-    let seq = shared.training.seq.fetch_add(1, Ordering::Relaxed);
-    let secs = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_secs())
-        .unwrap_or(0);
-    let path =
-        shared
-            .training
-            .model_dir
-            .join(model_file_name(variant, secs, std::process::id(), seq));
-    if let Err(e) = file.save(&path) {
-        return fail(format!("saving the model failed: {e:#}"));
-    }
     let (train_loss, validation_loss) = (file.training.train_loss, file.training.validation_loss);
     let epochs_run = file.training.epochs_run;
-    let trained_for = match serde_json::to_value(&file) {
-        Ok(v) => crate::compat::TrainedFor::from_model_json(&path.display().to_string(), &v),
-        Err(e) => return fail(format!("the trained model does not serialise: {e}")),
-    };
-    let model: Arc<dyn crate::dynamics::Dynamics> = match TrainedModel::from_file(file) {
-        Ok(m) => Arc::new(crate::compat::Checked::new(Arc::new(m), trained_for)),
-        Err(e) => return fail(format!("the trained model does not load: {e:#}")),
+    let (path, model) = match save_and_load(shared, file, variant) {
+        Ok(x) => x,
+        Err(e) => return fail(e),
     };
     let took = trained_at.duration_since(start).as_secs_f64();
     let path_s = path.display().to_string();
     let locked = swap(
         shared,
         model,
+        Some(path),
         &format!(
             "{source}: {variant} trained for {epochs_run} epochs in {took:.1} s \
              (validation {validation_loss:.3e}); model {path_s}"
@@ -408,13 +401,145 @@ pub(super) fn run_training(
     }
 }
 
+/// Saves a trained model (atomically) to the model folder and loads it as
+/// the node serves models (checked against what it was trained for).
+fn save_and_load(
+    shared: &Trainer,
+    file: ModelFile,
+    variant: Variant,
+) -> Result<(PathBuf, Arc<dyn Dynamics>), String> {
+    let seq = shared.seq.fetch_add(1, Ordering::Relaxed);
+    let secs = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    let path = shared
+        .model_dir
+        .join(model_file_name(variant, secs, std::process::id(), seq));
+    file.save(&path)
+        .map_err(|e| format!("saving the model failed: {e:#}"))?;
+    let v = serde_json::to_value(&file)
+        .map_err(|e| format!("the trained model does not serialise: {e}"))?;
+    let trained_for = crate::compat::TrainedFor::from_model_json(&path.display().to_string(), &v);
+    let m = TrainedModel::from_file(file)
+        .map_err(|e| format!("the trained model does not load: {e:#}"))?;
+    Ok((
+        path,
+        Arc::new(crate::compat::Checked::new(Arc::new(m), trained_for)),
+    ))
+}
+
+/// Retrains after a drift alarm (`why`), blocking: warm-starts the served
+/// model file (`train --init` semantics, [`TrainConfig::init`]) on the bags
+/// recorded during the `accuracy_retrain_after` seconds after the alarm,
+/// holding the last of them out, and swaps the new model in only if its
+/// replayed RE on that held-out bag (as the node predicts:
+/// [`crate::replay::replay_as_node`]) is below the old model's. Returns
+/// what was decided, or why nothing was tried; either way it is logged.
+pub fn retrain_on_drift(
+    trainer: &Arc<Trainer>,
+    p: &NodeParams,
+    why: &str,
+) -> Result<String, String> {
+    const SOURCE: &str = "drift retraining";
+    let result = retrain(trainer, p, why);
+    match &result {
+        Ok(m) => trainer.log(LogLevel::Info, &format!("{SOURCE}: {m}")),
+        // A retraining (or a requested training) already runs: expected
+        // while the alarm flickers, not worth a warning.
+        Err(e) if e == BUSY => trainer.log(LogLevel::Info, &format!("{SOURCE}: {e}")),
+        Err(e) => trainer.log(LogLevel::Warn, &format!("{SOURCE}: {e}")),
+    }
+    result
+}
+
+fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, String> {
+    let Some(_claim) = claim(trainer) else {
+        return Err(BUSY.into());
+    };
+    let Some(init_path) = trainer.model.file() else {
+        return Err(format!(
+            "not started: the served model ({}) is not a model file to warm-start",
+            trainer.model.get().describe()
+        ));
+    };
+    let init = ModelFile::load(&init_path)
+        .map_err(|e| format!("not started: cannot read {}: {e:#}", init_path.display()))?;
+    // Close the bag open at the alarm: the bags after it hold only what the
+    // system did after the drift was seen.
+    let before = match trainer.recorder.finish() {
+        None => return Err("not started: the node records nothing (set record_dir)".into()),
+        Some(r) => r?.1.len(),
+    };
+    trainer.log(
+        LogLevel::Info,
+        &format!(
+            "drift retraining after \"{why}\": recording {} s, then warm-starting {} for {} epochs",
+            p.accuracy_retrain_after,
+            init_path.display(),
+            p.accuracy_retrain_epochs
+        ),
+    );
+    std::thread::sleep(Duration::from_secs_f64(p.accuracy_retrain_after));
+    let bags = match trainer.recorder.finish() {
+        Some(r) => r?.1,
+        None => Vec::new(),
+    };
+    let recent = bags.get(before..).unwrap_or_default();
+    let Some((held_out, train)) = recent.split_last().filter(|(_, t)| !t.is_empty()) else {
+        return Err(format!(
+            "{} bag(s) recorded in the {} s after the alarm; need 2 (the last is held out): set \
+             record_split_seconds below accuracy_retrain_after",
+            recent.len(),
+            p.accuracy_retrain_after
+        ));
+    };
+    let variant = init.hyper.variant;
+    let cfg = TrainConfig {
+        epochs: p.accuracy_retrain_epochs as usize,
+        init: Some(Box::new(init)),
+        ..TrainConfig::default()
+    };
+    let file = train_from_bags(
+        variant,
+        train,
+        &ModelOptions::default(),
+        &cfg,
+        |_| {},
+        |_| true,
+    )
+    .map_err(|e| format!("training failed: {e:#}"))?;
+    let held = held_out.display().to_string();
+    let score = |m: &dyn Dynamics| {
+        crate::replay::replay_as_node(m, &held, p.dt, p.substeps, p.horizon)
+            .map(|(r, _)| r.averages.re)
+            .map_err(|e| format!("replaying the held-out bag {held} failed: {e:#}"))
+    };
+    let old = trainer.model.get();
+    let candidate = TrainedModel::from_file(file.clone())
+        .map_err(|e| format!("the trained model does not load: {e:#}"))?;
+    let (re_old, re_new) = (score(old.as_ref())?, score(&candidate)?);
+    let figures = format!(
+        "held-out RE (mean over lead times, {held}) {re_new:.3e} for the retrained model \
+         against {re_old:.3e} for the served one; trained on {} bag(s) for {} epochs",
+        train.len(),
+        file.training.epochs_run
+    );
+    if re_new.is_finite() && re_new < re_old {
+        let (path, model) = save_and_load(trainer, file, variant)?;
+        let reason = format!("{}: {figures}", "drift retraining");
+        swap(trainer, model, Some(path.clone()), &reason);
+        Ok(format!("swapped in {}: {figures}", path.display()))
+    } else {
+        Ok(format!("kept the served model: {figures}"))
+    }
+}
+
 /// The Train service's work: refused at once while another training runs,
 /// else trains (blocking) and answers when done.
-fn train_call(shared: &Arc<Shared>, req: TrainRequest) -> TrainResponse {
+pub fn train_call(shared: &Arc<Trainer>, req: TrainRequest) -> TrainResponse {
     let Some(_claim) = claim(shared) else {
-        shared
-            .log
-            .log(LogLevel::Warn, &format!("Train service: {BUSY}"));
+        shared.log(LogLevel::Warn, &format!("Train service: {BUSY}"));
         return TrainResponse {
             success: false,
             message: BUSY.into(),
@@ -430,14 +555,17 @@ fn train_call(shared: &Arc<Shared>, req: TrainRequest) -> TrainResponse {
     )
 }
 
+/// The LoadModel service's work: [`load_and_swap`] of the request's path.
+pub fn load_call(shared: &Arc<Trainer>, req: LoadModelRequest) -> LoadModelResponse {
+    load_and_swap(shared, &req.path)
+}
+
 /// Loads `path` (a model file or `truth:*`) and swaps it in; a bad file
 /// leaves the old model.
-pub(super) fn load_and_swap(shared: &Shared, path: &str) -> LoadModelResponse {
+pub fn load_and_swap(shared: &Trainer, path: &str) -> LoadModelResponse {
     let fail = |why: String| {
-        let message = format!("{why}; still serving {}", shared.model().describe());
-        shared
-            .log
-            .log(LogLevel::Warn, &format!("LoadModel: {message}"));
+        let message = format!("{why}; still serving {}", shared.model.get().describe());
+        shared.log(LogLevel::Warn, &format!("LoadModel: {message}"));
         LoadModelResponse {
             success: false,
             message,
@@ -450,7 +578,8 @@ pub(super) fn load_and_swap(shared: &Shared, path: &str) -> LoadModelResponse {
         Err(e) => fail(format!("cannot load {path}: {e:#}")),
         Ok(model) => {
             let description = model.describe();
-            let locked = swap(shared, model, &format!("LoadModel: model {path}"));
+            let file = (!super::truth::is_truth(path)).then(|| PathBuf::from(path));
+            let locked = swap(shared, model, file, &format!("LoadModel: model {path}"));
             LoadModelResponse {
                 success: true,
                 message: format!(

@@ -1,8 +1,9 @@
 //! ROS 2 parameter files (nested mappings of scalars), read with the YAML 1.2
 //! crate `yaml-rust2` and handed to [`super::params`] as [`Value`]s. Scalars are
-//! typed by YAML 1.2's core schema (as rcl types them); what parameter files do
-//! not use here (lists, non-string keys) is an error naming the key; anchors
-//! and aliases are resolved by the crate.
+//! typed by YAML 1.2's core schema (as rcl types them); lists of scalars are
+//! one value (a ROS array parameter); what parameter files do not use here
+//! (nested lists, lists of mappings, non-string keys) is an error naming the
+//! key; anchors and aliases are resolved by the crate.
 
 use std::fmt;
 
@@ -21,6 +22,8 @@ pub enum Scalar {
     Str(String),
     /// `~`, `null` or an empty value.
     Null,
+    /// A list of scalars (`[0.1, 0.5]`), a ROS array parameter.
+    List(Vec<Scalar>),
 }
 
 impl Scalar {
@@ -32,15 +35,27 @@ impl Scalar {
             Scalar::Float(_) => "double",
             Scalar::Str(_) => "string",
             Scalar::Null => "null",
+            Scalar::List(_) => "list",
         }
     }
 
     /// Types an unquoted scalar (a `--set` value) as the YAML crate types a
     /// plain scalar.
     pub fn parse_plain(text: &str) -> Scalar {
-        match scalar(&Yaml::from_str(text.trim())) {
+        let text = text.trim();
+        // A flow list (`[0.1, 0.5]`) needs the full parser.
+        if text.starts_with('[') {
+            if let Ok(docs) = YamlLoader::load_from_str(text) {
+                if let [Yaml::Array(items)] = docs.as_slice() {
+                    if let Some(list) = items.iter().map(scalar).collect() {
+                        return Scalar::List(list);
+                    }
+                }
+            }
+        }
+        match scalar(&Yaml::from_str(text)) {
             Some(s) => s,
-            None => Scalar::Str(text.trim().to_string()),
+            None => Scalar::Str(text.to_string()),
         }
     }
 }
@@ -53,6 +68,10 @@ impl fmt::Display for Scalar {
             Scalar::Float(x) => write!(f, "{x}"),
             Scalar::Str(s) => write!(f, "{s:?}"),
             Scalar::Null => f.write_str("null"),
+            Scalar::List(items) => {
+                let items: Vec<String> = items.iter().map(ToString::to_string).collect();
+                write!(f, "[{}]", items.join(", "))
+            }
         }
     }
 }
@@ -79,8 +98,8 @@ fn scalar(y: &Yaml) -> Option<Scalar> {
 }
 
 /// Parses a parameter file: one document of nested mappings of scalars (an
-/// empty document is an empty mapping). Syntax errors name the line; lists,
-/// aliases and non-string keys name the key.
+/// empty document is an empty mapping). Syntax errors name the line; nested
+/// lists, aliases and non-string keys name the key.
 pub fn parse(text: &str) -> Result<Value, String> {
     let docs = YamlLoader::load_from_str(text)
         .map_err(|e| format!("line {}: {}", e.marker().line(), e.info()))?;
@@ -122,7 +141,15 @@ fn convert(y: &Yaml, path: &str) -> Result<Value, String> {
             }
             Ok(Value::Map(out))
         }
-        Yaml::Array(_) => Err(at("lists are not supported in parameter files")),
+        Yaml::Array(items) => items
+            .iter()
+            .map(|y| match y {
+                Yaml::Array(_) | Yaml::Hash(_) => None,
+                other => scalar(other),
+            })
+            .collect::<Option<Vec<_>>>()
+            .map(|list| Value::Scalar(Scalar::List(list)))
+            .ok_or_else(|| at("only lists of scalars are supported in parameter files")),
         Yaml::Alias(_) => Err(at("aliases are not supported in parameter files")),
         Yaml::BadValue => Err(at("not a YAML value")),
         other => Ok(Value::Scalar(
@@ -176,13 +203,28 @@ mod tests {
         assert!(matches!(Scalar::parse_plain(".nan"), Scalar::Float(x) if x.is_nan()));
         assert_eq!(Scalar::parse_plain("1.2.3"), Scalar::Str("1.2.3".into()));
         assert_eq!(Scalar::parse_plain("~"), Scalar::Null);
+        let list = Scalar::List(vec![Scalar::Float(0.1), Scalar::Int(1)]);
+        assert_eq!(Scalar::parse_plain("[0.1, 1]"), list);
+        assert_eq!(list.to_string(), "[0.1, 1]");
+        assert_eq!(Scalar::parse_plain("[]"), Scalar::List(vec![]));
+        let v = parse("a: [0.5, 2]\nb: []\n").unwrap();
+        assert_eq!(
+            v,
+            Value::Map(vec![
+                (
+                    "a".into(),
+                    Value::Scalar(Scalar::List(vec![Scalar::Float(0.5), Scalar::Int(2)]))
+                ),
+                ("b".into(), Value::Scalar(Scalar::List(vec![]))),
+            ])
+        );
     }
 
     #[test]
     fn rejects_what_it_does_not_support_with_the_line() {
         for (text, want) in [
-            ("a:\n  - 1\n", "a: lists"),
-            ("a:\n  b: [1, 2]\n", "a.b: lists"),
+            ("a:\n  - [1]\n", "a: only lists of scalars"),
+            ("a:\n  b: [1, {c: 2}]\n", "a.b: only lists of scalars"),
             ("a: 1\na: 2\n", "duplicated key"),
             ("a:\n    b: 1\n  c: 2\n", "line 3"),
             ("a: \"open\n", "quoted scalar"),

@@ -301,8 +301,12 @@ impl<C: Context> Writable<C> for DataFrag {
     writer.write_value(&self.fragments_in_submessage)?;
     writer.write_value(&self.fragment_size)?;
     writer.write_value(&self.data_size)?;
-    if self.inline_qos.is_some() && !self.inline_qos.as_ref().unwrap().parameters.is_empty() {
-      writer.write_value(&self.inline_qos)?;
+    // mcgnode patch: write the ParameterList itself. `write_value(&Option<_>)`
+    // wrote speedy's one-byte Option tag before it, so every DATAFRAG with
+    // inline QoS (a fragmented service reply carries the related sample
+    // identity) was malformed and dropped by the receiver.
+    if let Some(inline_qos) = self.inline_qos.as_ref().filter(|q| !q.parameters.is_empty()) {
+      writer.write_value(inline_qos)?;
     }
     writer.write_bytes(&self.serialized_payload)?;
     Ok(())

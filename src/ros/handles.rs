@@ -1,0 +1,359 @@
+//! What the node's tasks share, as separate handles, each owning one concern:
+//! [`LiveParams`] (the parameters now), [`ModelHandle`] (the model served
+//! now), [`Diagnostics`] (counters, the log and rate-limited warnings) and
+//! [`RecorderHandle`] (MCAP recording), beside the clock and live accuracy
+//! ([`Live`]). A task takes the handles it needs;
+//! [`Handles`] bundles them for the node's own loops.
+//!
+//! This module imports no other task module (node, training, action,
+//! service): they all import it, so the module graph has no cycle.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError, RwLock};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use ros2_client::log::LogLevel;
+use ros2_client::rosout::{NodeLoggingHandle, RosoutRaw};
+
+use crate::dynamics::Dynamics;
+
+use super::accuracy::Live;
+use super::clock::Clock;
+use super::msgs::NodeDiagnostics;
+use super::params::{NodeParams, NODE_NAME};
+use super::record::Recorder;
+
+/// The parameters now: those in
+/// [`RUNTIME_SETTABLE`](super::params::RUNTIME_SETTABLE) change at run time.
+#[derive(Clone, Debug)]
+pub struct LiveParams(Arc<RwLock<NodeParams>>);
+
+impl LiveParams {
+    /// Starts from `params`.
+    pub fn new(params: NodeParams) -> Self {
+        LiveParams(Arc::new(RwLock::new(params)))
+    }
+
+    /// A copy of the parameters now.
+    pub fn get(&self) -> NodeParams {
+        self.0
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .clone()
+    }
+
+    /// Replaces the parameters with `f(current)`, unless `f` refuses.
+    pub fn update(
+        &self,
+        f: impl FnOnce(&NodeParams) -> Result<NodeParams, String>,
+    ) -> Result<(), String> {
+        let mut p = self.0.write().unwrap_or_else(PoisonError::into_inner);
+        *p = f(&p)?;
+        Ok(())
+    }
+}
+
+/// The model served now, behind a lock so a swap (Train, LoadModel) can
+/// replace it while predictions go on: readers clone the `Arc` and predict
+/// outside the lock. Beside it, the file it came from (`None` for
+/// `truth:*`), which a warm-start retraining continues from.
+pub struct ModelHandle(RwLock<(Arc<dyn Dynamics>, Option<PathBuf>)>);
+
+impl ModelHandle {
+    /// Serves `model`, loaded from `file` when it came from one.
+    pub fn new(model: Arc<dyn Dynamics>, file: Option<PathBuf>) -> Self {
+        ModelHandle(RwLock::new((model, file)))
+    }
+
+    /// The model served now.
+    pub fn get(&self) -> Arc<dyn Dynamics> {
+        self.0
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .0
+            .clone()
+    }
+
+    /// The file of the model served now, if it came from one.
+    pub fn file(&self) -> Option<PathBuf> {
+        self.0
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .1
+            .clone()
+    }
+
+    /// Serves `model` (from `file`) from now on; returns the old model and
+    /// how long the write lock was held.
+    pub fn replace(
+        &self,
+        model: Arc<dyn Dynamics>,
+        file: Option<PathBuf>,
+    ) -> (Arc<dyn Dynamics>, Duration) {
+        let start = Instant::now();
+        let old = std::mem::replace(
+            &mut *self.0.write().unwrap_or_else(PoisonError::into_inner),
+            (model, file),
+        );
+        (old.0, start.elapsed())
+    }
+}
+
+/// Counters reported in `NodeDiagnostics`.
+#[derive(Debug, Default)]
+pub struct Stats {
+    /// States received.
+    pub received: AtomicU64,
+    /// States rejected (malformed, unsupported, or the model failed).
+    pub rejected: AtomicU64,
+    /// Predictions published.
+    pub predicted: AtomicU64,
+    /// States lost before the node took them: gaps in a publisher's sequence
+    /// numbers (e.g. the input queue overflowed while the node was busy).
+    pub dropped: AtomicU64,
+    /// Latest failure reason.
+    pub last_error: Mutex<String>,
+}
+
+/// At most one warning per period; the next one says how many were held back.
+#[derive(Debug)]
+pub struct RateLimiter {
+    period: Duration,
+    last: Option<Instant>,
+    suppressed: u64,
+}
+
+impl RateLimiter {
+    /// A limiter letting one event through per `period`.
+    pub fn new(period: Duration) -> Self {
+        RateLimiter {
+            period,
+            last: None,
+            suppressed: 0,
+        }
+    }
+
+    /// `Some(n)` if an event at `now` may be reported, `n` being how many were
+    /// suppressed since the last report; `None` if it must be suppressed.
+    pub fn allow(&mut self, now: Instant) -> Option<u64> {
+        match self.last {
+            Some(t) if now.saturating_duration_since(t) < self.period => {
+                self.suppressed += 1;
+                None
+            }
+            _ => {
+                self.last = Some(now);
+                Some(std::mem::take(&mut self.suppressed))
+            }
+        }
+    }
+}
+
+/// Logs to stderr and to /rosout.
+pub struct Logger {
+    rosout: NodeLoggingHandle,
+}
+
+impl Logger {
+    /// Logs through the node's /rosout handle.
+    pub fn new(rosout: NodeLoggingHandle) -> Self {
+        Logger { rosout }
+    }
+
+    /// Logs `msg` at `level`.
+    pub fn log(&self, level: LogLevel, msg: &str) {
+        let tag = match level {
+            LogLevel::Fatal => "FATAL",
+            LogLevel::Error => "ERROR",
+            LogLevel::Warn => "WARN",
+            LogLevel::Info => "INFO",
+            LogLevel::Debug => "DEBUG",
+        };
+        eprintln!("[{tag}] [{:.6}] [{NODE_NAME}]: {msg}", wall_secs());
+        self.rosout.rosout_raw(
+            ros2_client::builtin_interfaces::Time::now(),
+            level,
+            NODE_NAME,
+            msg,
+            file!(),
+            "",
+            line!(),
+        );
+    }
+}
+
+/// Seconds since the Unix epoch (0 if the clock is before it).
+fn wall_secs() -> f64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0)
+}
+
+/// Which kind of failure a warning is about: each kind has its own rate
+/// limit, so a flood of one does not hide the others.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Warning {
+    /// Bad input states, failed publishing.
+    Input,
+    /// Failed service calls (the caller gets the reason).
+    Service,
+    /// Recording failures.
+    Record,
+}
+
+/// Counters, the log and rate-limited warnings.
+pub struct Diagnostics {
+    /// The counters reported in `NodeDiagnostics`.
+    pub stats: Stats,
+    limiters: [Mutex<RateLimiter>; 3],
+    log: Logger,
+    /// The warning period is a run-time parameter.
+    params: LiveParams,
+}
+
+impl Diagnostics {
+    /// Counters at zero; warnings rate-limited by `warn_period` of `params`.
+    pub fn new(log: Logger, params: LiveParams) -> Self {
+        let period = Duration::from_secs_f64(params.get().warn_period);
+        Diagnostics {
+            stats: Stats::default(),
+            limiters: std::array::from_fn(|_| Mutex::new(RateLimiter::new(period))),
+            log,
+            params,
+        }
+    }
+
+    /// Logs `msg` at `level` (stderr and /rosout), not rate-limited.
+    pub fn log(&self, level: LogLevel, msg: &str) {
+        self.log.log(level, msg);
+    }
+
+    /// Counts a rejected input and warns, rate-limited.
+    pub fn reject(&self, why: &str) {
+        self.stats.rejected.fetch_add(1, Ordering::Relaxed);
+        self.failed(why, Warning::Input);
+    }
+
+    /// Records a failure as the last error and warns, rate-limited per kind.
+    pub fn failed(&self, why: &str, kind: Warning) {
+        why.clone_into(
+            &mut self
+                .stats
+                .last_error
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner),
+        );
+        let period = Duration::from_secs_f64(self.params.get().warn_period);
+        let allowed = {
+            let mut l = self.limiters[kind as usize]
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner);
+            l.period = period;
+            l.allow(Instant::now())
+        };
+        if let Some(suppressed) = allowed {
+            let more = if suppressed > 0 {
+                format!(" ({suppressed} similar warnings suppressed)")
+            } else {
+                String::new()
+            };
+            self.log.log(LogLevel::Warn, &format!("{why}{more}"));
+        }
+    }
+
+    /// The counters as a `NodeDiagnostics` message (header left default).
+    pub fn snapshot(&self, model: &str) -> NodeDiagnostics {
+        NodeDiagnostics {
+            received: self.stats.received.load(Ordering::Relaxed),
+            rejected: self.stats.rejected.load(Ordering::Relaxed),
+            predicted: self.stats.predicted.load(Ordering::Relaxed),
+            last_error: self
+                .stats
+                .last_error
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .clone(),
+            model: model.to_string(),
+            ..NodeDiagnostics::default()
+        }
+    }
+}
+
+/// MCAP recording when `record_dir` is set; otherwise every call is a no-op.
+pub struct RecorderHandle {
+    recorder: Option<Mutex<Recorder>>,
+    /// Recording failures are warned about, not fatal.
+    diag: Arc<Diagnostics>,
+}
+
+impl RecorderHandle {
+    /// Records with `recorder`, if any.
+    pub fn new(recorder: Option<Recorder>, diag: Arc<Diagnostics>) -> Self {
+        RecorderHandle {
+            recorder: recorder.map(Mutex::new),
+            diag,
+        }
+    }
+
+    /// Whether the node records.
+    pub fn is_recording(&self) -> bool {
+        self.recorder.is_some()
+    }
+
+    /// Records with the recorder, if any; failures are warned about.
+    pub fn record(&self, what: impl FnOnce(&mut Recorder) -> Result<(), String>) {
+        if let Some(r) = &self.recorder {
+            let result = what(&mut r.lock().unwrap_or_else(PoisonError::into_inner));
+            if let Err(e) = result {
+                self.diag.failed(&e, Warning::Record);
+            }
+        }
+    }
+
+    /// Closes the open bag (its footer written, so it reads back whole) and
+    /// returns the folder and every bag finished so far; `None` when the node
+    /// does not record.
+    pub fn finish(&self) -> Option<Result<(PathBuf, Vec<PathBuf>), String>> {
+        let r = self.recorder.as_ref()?;
+        let mut r = r.lock().unwrap_or_else(PoisonError::into_inner);
+        Some(
+            r.finish()
+                .map(|()| (r.dir().to_path_buf(), r.finished.clone())),
+        )
+    }
+}
+
+/// Every handle, for the node's own loops and the Rollout and Replay calls.
+#[derive(Clone)]
+pub struct Handles {
+    /// The parameters now.
+    pub params: LiveParams,
+    /// The model served now.
+    pub model: Arc<ModelHandle>,
+    /// Counters and the log.
+    pub diag: Arc<Diagnostics>,
+    /// Recording.
+    pub recorder: Arc<RecorderHandle>,
+    /// System time, or `/clock` with `use_sim_time`.
+    pub clock: Arc<Clock>,
+    /// Live accuracy of the predictions.
+    pub accuracy: Arc<Live>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rate_limiter_lets_one_through_per_period_and_counts_the_rest() {
+        let mut r = RateLimiter::new(Duration::from_secs(5));
+        let t0 = Instant::now();
+        assert_eq!(r.allow(t0), Some(0));
+        assert_eq!(r.allow(t0 + Duration::from_secs(1)), None);
+        assert_eq!(r.allow(t0 + Duration::from_secs(4)), None);
+        assert_eq!(r.allow(t0 + Duration::from_secs(6)), Some(2));
+        assert_eq!(r.allow(t0 + Duration::from_secs(7)), None);
+    }
+}

@@ -1,0 +1,296 @@
+//! Live accuracy and the drift alarm against rclpy, inside the private
+//! network namespace (scripts/netns.sh): the node serves the 5-spring ground
+//! truth while a bag plays a 5-spring system whose springs stiffen by 20 %
+//! mid-way. The states keep reporting the nominal stiffness, as a robot's
+//! state message would when the world changes beneath the model; so the
+//! predictions made before the change stop matching after it.
+//!
+//! Needs the rclpy venv (`scripts/setup_venv.sh`).
+
+use std::fs;
+use std::time::Duration;
+
+use mcgnode::physics::{SystemConfig, SystemKind};
+
+mod common;
+
+use common::{driver_outcome, in_netns, ros_env, run_bounded};
+
+/// States every 0.1 s: 3 s at stiffness 1, then 4 s at 1.2.
+const BEFORE: usize = 31;
+const AFTER: usize = 40;
+const CHANGE_AT: f64 = 3.0;
+
+/// The played trajectory: one run, the stiffness changed at [`CHANGE_AT`]
+/// and `after` states after it; every state carries the nominal graph.
+fn drifting_trajectory(after: usize) -> (SystemConfig, mcgnode::system::Trajectory) {
+    let mut cfg = SystemConfig::new(SystemKind::Spring, 5);
+    cfg.states = BEFORE;
+    let graph = cfg.graph();
+    let start = cfg.start_for(&graph, 11, 0);
+    let mut traj = cfg.simulate_one(&graph, start, 0);
+    let mut stiff = cfg.clone();
+    stiff.stiffness *= 1.2;
+    stiff.states = after + 1;
+    let last = traj.samples.last().expect("samples").clone();
+    let after = stiff.simulate_one(&stiff.graph(), last.state, 0);
+    // The first state of the second part is the last of the first.
+    for mut s in after.samples.into_iter().skip(1) {
+        s.t += last.t;
+        traj.samples.push(s);
+    }
+    (cfg, traj)
+}
+
+/// Writes the drifting trajectory (known field) to `dir/drift.mcap`.
+fn write_bag(dir: &std::path::Path, after: usize) -> std::path::PathBuf {
+    let (cfg, traj) = drifting_trajectory(after);
+    assert!((traj.samples[BEFORE - 1].t - CHANGE_AT).abs() < 1e-9);
+    let bag = dir.join("drift.mcap");
+    mcgnode::data::write_trajectories_with_field(
+        &bag,
+        &[traj],
+        &Default::default(),
+        Some(&cfg.field),
+    )
+    .expect("writing the bag");
+    bag
+}
+
+#[test]
+fn drift_alarm_follows_a_stiffness_change() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let bag = write_bag(dir.path(), AFTER);
+    // Predictions every 0.1 s over 1 s, integrated with the simulator's step.
+    let params = dir.path().join("params.yaml");
+    fs::write(
+        &params,
+        "mcgnode:\n  ros__parameters:\n    model: truth:spring\n    dt: 0.1\n    substeps: 100\n    \
+         horizon: 10\n    diagnostics_period: 0.2\n    accuracy_lead_times: [0.1, 0.5, 1.0]\n    \
+         accuracy_window: 3\n    accuracy_warn_re: 1.0e-3\n    accuracy_error_re: 5.0e-3\n",
+    )
+    .expect("writing params");
+    // Every state after the first is compared with a prediction; played at
+    // the recorded pace (states 0.1 s apart), so stamps and wall time agree.
+    let compared = BEFORE + AFTER - 1;
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$PARAMS" 2>"$DIR/node.log" &
+        node=$!
+        python3 tests/ros/accuracy_drive.py --count "$COUNT" --timeout 60 >"$DIR/drive.out" \
+            2>"$DIR/drive.err" &
+        drive=$!
+        for _ in $(seq 400); do grep -q listening "$DIR/drive.err" && break; sleep 0.05; done
+        grep -q listening "$DIR/drive.err" || { echo "driver never matched"; cat "$DIR/drive.err"; exit 2; }
+        python3 scripts/ros/play_bag.py "$BAG" --rate 10 --timeout 30 2>"$DIR/play.err" \
+            || { cat "$DIR/play.err"; exit 3; }
+        wait $drive; rc=$?
+        cat "$DIR/drive.out"
+        kill -INT $node; wait $node; node_rc=$?
+        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
+    "#;
+    let o = run_bounded(
+        in_netns(script, &params, &env_sh)
+            .env("DIR", dir.path())
+            .env("BAG", &bag)
+            .env("COUNT", compared.to_string()),
+        Duration::from_secs(150),
+        dir.path(),
+    );
+    let (summary, node_log, report) =
+        driver_outcome(&o, &dir.path().join("node.log"), "ACCURACY_SUMMARY ");
+    let s: serde_json::Value = serde_json::from_str(&summary).expect("ACCURACY_SUMMARY is JSON");
+    let live = s["live"].as_array().expect("live");
+    assert_eq!(live.len(), compared, "{report}");
+    let num = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+    // Before the change: every running RE tiny, no alarm.
+    let before: Vec<&serde_json::Value> = live
+        .iter()
+        .filter(|m| num(m, "stamp") <= CHANGE_AT + 1e-6)
+        .collect();
+    assert_eq!(before.len(), BEFORE - 1, "{report}");
+    for m in &before {
+        assert_eq!(m["level"], 0, "alarm before the change: {m}\n{report}");
+    }
+    let worst_before = before
+        .iter()
+        .flat_map(|m| m["re_mean"].as_array().cloned().unwrap_or_default())
+        .filter_map(|x| x.as_f64())
+        .fold(0.0, f64::max);
+    // The first alarm, by the compared state's stamp: within 2 s of the change.
+    let first = live
+        .iter()
+        .find(|m| m["level"].as_u64().unwrap_or(0) >= 1)
+        .unwrap_or_else(|| panic!("no drift alarm at all\n{report}"));
+    let after_change = num(first, "stamp") - CHANGE_AT;
+    println!(
+        "worst running RE before the change {worst_before:.2e}; first alarm {after_change:.1} s \
+         after it (level {}): {}",
+        first["level"], first["message"]
+    );
+    assert!(
+        after_change > 0.0 && after_change <= 2.0 + 1e-6,
+        "alarm {after_change} s after the change\n{report}"
+    );
+    assert!(
+        first["message"].as_str().unwrap_or("").contains("lead"),
+        "{first}"
+    );
+    // EE is reported: the bag's field is known.
+    assert!(first["ee_mean"][0].as_f64().is_some(), "{first}");
+    // On /diagnostics too, within 2 s of wall time after the first changed
+    // state was scored, and not before it.
+    let t_change = live
+        .iter()
+        .find(|m| num(m, "stamp") > CHANGE_AT + 1e-6)
+        .map(|m| num(m, "t"))
+        .expect("a state after the change");
+    let diags = s["diagnostics"].as_array().expect("diagnostics");
+    let first_diag = diags
+        .iter()
+        .find(|d| d["level"].as_u64().unwrap_or(0) >= 1)
+        .unwrap_or_else(|| panic!("no alarm on /diagnostics\n{report}"));
+    let late = num(first_diag, "t") - t_change;
+    println!(
+        "/diagnostics alarm {late:.2} s (wall) after the first changed state was scored: {}",
+        first_diag["message"]
+    );
+    assert!(late > -0.2 && late <= 2.0, "{late} s\n{report}");
+    assert!(
+        first_diag["message"]
+            .as_str()
+            .unwrap_or("")
+            .contains("lead")
+            && first_diag["values"]["re_mean@1s"].is_string(),
+        "{first_diag}"
+    );
+    assert!(node_log.contains("drift: running RE at lead"), "{report}");
+    // Later, as the error grows, the alarm turns to ERROR.
+    let last = live.last().expect("messages");
+    println!(
+        "at the end ({:.1} s): running RE {} at leads {}, EE {}; level {}",
+        num(last, "stamp"),
+        last["re_mean"],
+        last["lead_times"],
+        last["ee_mean"],
+        last["level"]
+    );
+    let first_error = live
+        .iter()
+        .find(|m| m["level"] == 2)
+        .map(|m| num(m, "stamp") - CHANGE_AT);
+    println!("first ERROR {first_error:?} s after the change");
+    assert!(first_error.is_some(), "{report}");
+}
+
+/// With `accuracy_retrain`, the alarm starts a warm-start retraining of the
+/// served model (the shipped 5-spring MCGNODE) on what the node records in
+/// the next seconds; the new model is swapped in only if it beats the old one
+/// on the last (held-out) recording.
+#[test]
+fn drift_alarm_starts_a_warm_start_retraining() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let after = 120;
+    let bag = write_bag(dir.path(), after);
+    // States from 0.5 s on are compared (the shortest lead).
+    let params = dir.path().join("params.yaml");
+    // Thresholds from this model's running RE at lead 1 s: 1.5-2.6e-3 before
+    // the change, 1-2e-2 after it.
+    fs::write(
+        &params,
+        format!(
+            "mcgnode:\n  ros__parameters:\n    model: bags/models/spring5-mcgnode.json\n    \
+             dt: 0.1\n    substeps: 100\n    horizon: 10\n    diagnostics_period: 0.2\n    \
+             accuracy_lead_times: [0.5, 1.0]\n    accuracy_window: 3\n    \
+             accuracy_warn_re: 5.0e-3\n    accuracy_error_re: 1.0e-2\n    \
+             accuracy_retrain: true\n    accuracy_retrain_after: 6.0\n    \
+             accuracy_retrain_epochs: 200\n    record_dir: {:?}\n    \
+             record_split_seconds: 1.0\n    model_dir: {:?}\n",
+            dir.path().join("rec").display(),
+            dir.path().join("models").display()
+        ),
+    )
+    .expect("writing params");
+    let compared = BEFORE + after - 5;
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$PARAMS" 2>"$DIR/node.log" &
+        node=$!
+        python3 tests/ros/accuracy_drive.py --count "$COUNT" --timeout 90 --linger 1 \
+            >"$DIR/drive.out" 2>"$DIR/drive.err" &
+        drive=$!
+        for _ in $(seq 400); do grep -q listening "$DIR/drive.err" && break; sleep 0.05; done
+        grep -q listening "$DIR/drive.err" || { echo "driver never matched"; cat "$DIR/drive.err"; exit 2; }
+        python3 scripts/ros/play_bag.py "$BAG" --rate 10 --timeout 30 2>"$DIR/play.err" \
+            || { cat "$DIR/play.err"; exit 3; }
+        wait $drive; rc=$?
+        cat "$DIR/drive.out"
+        # The retraining decides within the playback; wait (bounded) for its verdict.
+        for _ in $(seq 300); do
+            grep -qE "drift retraining: (swapped|kept)" "$DIR/node.log" && break; sleep 0.1
+        done
+        kill -INT $node; wait $node; node_rc=$?
+        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
+    "#;
+    let o = run_bounded(
+        in_netns(script, &params, &env_sh)
+            .env("DIR", dir.path())
+            .env("BAG", &bag)
+            .env("COUNT", compared.to_string()),
+        Duration::from_secs(200),
+        dir.path(),
+    );
+    let (summary, node_log, report) =
+        driver_outcome(&o, &dir.path().join("node.log"), "ACCURACY_SUMMARY ");
+    let s: serde_json::Value = serde_json::from_str(&summary).expect("ACCURACY_SUMMARY is JSON");
+    let live = s["live"].as_array().expect("live");
+    let num = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+    let first = live
+        .iter()
+        .find(|m| m["level"].as_u64().unwrap_or(0) >= 1)
+        .unwrap_or_else(|| panic!("no drift alarm\n{report}"));
+    let alarm_at = num(first, "stamp");
+    println!(
+        "alarm at {:.1} s (change at {CHANGE_AT} s): {}",
+        alarm_at, first["message"]
+    );
+    assert!(
+        alarm_at > CHANGE_AT && alarm_at <= CHANGE_AT + 2.0,
+        "{report}"
+    );
+    assert!(node_log.contains("drift retraining after"), "{report}");
+    let verdict = node_log
+        .lines()
+        .find(|l| l.contains("drift retraining: swapped") || l.contains("drift retraining: kept"))
+        .unwrap_or_else(|| panic!("no retraining verdict\n{report}"));
+    println!("{verdict}");
+    assert!(
+        verdict.contains("held-out RE") && !verdict.contains("failed"),
+        "{report}"
+    );
+    let swapped = verdict.contains("swapped in");
+    if swapped {
+        assert!(node_log.contains("model swapped"), "{report}");
+    }
+    // The running RE at the longest lead over the last second, against the
+    // second before the alarm: what the swap (or keeping the model) gave.
+    let mean_re = |from: f64, to: f64| {
+        let xs: Vec<f64> = live
+            .iter()
+            .filter(|m| (from..to).contains(&num(m, "stamp")))
+            .filter_map(|m| m["re"].as_array()?.last()?.as_f64())
+            .collect();
+        xs.iter().sum::<f64>() / xs.len().max(1) as f64
+    };
+    let end = num(live.last().expect("messages"), "stamp");
+    println!(
+        "RE at lead 1 s: {:.2e} in the second before the change, {:.2e} in the last second \
+         (swapped: {swapped})",
+        mean_re(CHANGE_AT - 1.0, CHANGE_AT),
+        mean_re(end - 1.0, end + 0.01)
+    );
+}
