@@ -132,6 +132,8 @@ fn node_retrains_and_swaps_models() {
         "cannot load /nonexistent/model.json",
         "cancel requested",
         "training cancelled",
+        "fine-tuning the served model",
+        "cannot fine-tune",
     ] {
         assert!(
             node_log.contains(needle),
@@ -140,8 +142,8 @@ fn node_retrains_and_swaps_models() {
     }
     assert!(!node_log.contains("panicked"), "{report}");
     let swaps = node_log.matches("model swapped").count();
-    // Train service, LoadModel twice, action, recorded training.
-    assert_eq!(swaps, 5, "expected 5 swaps\n{report}");
+    // Train service, LoadModel twice, action, recorded training, fine-tuning.
+    assert_eq!(swaps, 6, "expected 6 swaps\n{report}");
     let lock_us: Vec<f64> = node_log
         .match_indices("model swapped (")
         .filter_map(|(i, m)| {

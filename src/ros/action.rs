@@ -38,6 +38,8 @@ pub struct TrainGoal {
     pub epochs: u32,
     /// Random seed.
     pub seed: u64,
+    /// Start from the served model file (weights and Adam state).
+    pub fine_tune: bool,
 }
 impl Message for TrainGoal {}
 
@@ -182,6 +184,7 @@ async fn goal_loop(shared: Arc<Trainer>, server: Arc<ActionServer>, running: Run
             variant: goal.variant,
             epochs: goal.epochs,
             seed: goal.seed,
+            fine_tune: goal.fine_tune,
         };
         tokio::spawn(execute(
             shared.clone(),

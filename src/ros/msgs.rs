@@ -173,6 +173,8 @@ pub struct TrainRequest {
     pub epochs: u32,
     /// Random seed.
     pub seed: u64,
+    /// Start from the served model file (weights and Adam state).
+    pub fine_tune: bool,
 }
 impl Message for TrainRequest {}
 

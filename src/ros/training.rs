@@ -317,6 +317,20 @@ pub fn run_training(
         Ok(v) => v,
         Err(e) => return fail(format!("bad request: {e}")),
     };
+    let (variant, init) = if req.fine_tune {
+        match fine_tune_start(shared, &req.variant) {
+            Ok((v, f, path)) => {
+                log(
+                    LogLevel::Info,
+                    &format!("fine-tuning the served model {}", path.display()),
+                );
+                (v, Some(Box::new(f)))
+            }
+            Err(e) => return fail(format!("cannot fine-tune: {e}")),
+        }
+    } else {
+        (variant, None)
+    };
     let bags = match training_bags(shared, &req.bags) {
         Ok(b) => b,
         Err(e) => return fail(e),
@@ -337,6 +351,7 @@ pub fn run_training(
     let cfg = TrainConfig {
         epochs: req.epochs as usize,
         seed: req.seed,
+        init,
         ..TrainConfig::default()
     };
     let every = (cfg.epochs / 10).max(1);
@@ -399,6 +414,30 @@ pub fn run_training(
         train_loss,
         validation_loss,
     }
+}
+
+/// The served model file a fine-tuning starts from, with its variant, which
+/// a request's `variant` must match when it names one.
+fn fine_tune_start(
+    shared: &Trainer,
+    requested: &str,
+) -> Result<(Variant, ModelFile, PathBuf), String> {
+    let Some(path) = shared.model.file() else {
+        return Err(format!(
+            "the served model ({}) is not a model file (load one with LoadModel, or train              without fine_tune)",
+            shared.model.get().describe()
+        ));
+    };
+    let file = ModelFile::load(&path)
+        .map_err(|e| format!("reading the served model {}: {e:#}", path.display()))?;
+    let variant = file.hyper.variant;
+    if !requested.trim().is_empty() && request_variant(requested)? != variant {
+        return Err(format!(
+            "the served model is {variant}, the request asks for {}; leave variant empty              to fine-tune it",
+            requested.trim()
+        ));
+    }
+    Ok((variant, file, path))
 }
 
 /// Saves a trained model (atomically) to the model folder and loads it as

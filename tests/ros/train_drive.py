@@ -16,6 +16,8 @@ Checks:
   * the Train action: per-epoch feedback, a result, a swap; a cancelled goal
     ends CANCELED and leaves the model as it was;
   * Train with no bags trains on what the node recorded (a played trajectory);
+  * Train with fine_tune continues the served model (weights, Adam state) and
+    refuses another variant;
   * a training still running when the driver ends (the node must stop on SIGINT).
 """
 
@@ -272,6 +274,25 @@ class Driver:
         check(on["states"] >= a.played, f"trained on {on['states']} states, fewer than the {a.played} played")
         self.swap_with(r.model_path, t0)
         self.summary.update(recorded_train_s=round(time.monotonic() - t0, 3), recorded_states=on["states"])
+
+        # 6b. Fine-tune the served model: it starts from the served file's
+        # weights and Adam state (the optimiser's step count carries on), and
+        # a variant other than the served one is refused.
+        with open(r.model_path) as f:
+            base = json.load(f)
+        t0 = time.monotonic()
+        r = self.call(self.train, Train.Request(bags=[a.train_bag], epochs=2, seed=8, fine_tune=True), 120)
+        check(r.success, f"fine-tuning failed: {r.message}")
+        with open(r.model_path) as f:
+            tuned = json.load(f)
+        check(tuned["hyper"] == base["hyper"], "fine-tuning changed the architecture")
+        check(tuned["optimizer"]["step"] >= base["optimizer"]["step"] + 2,
+              f"Adam did not carry on: step {tuned['optimizer']['step']} after {base['optimizer']['step']}")
+        check(tuned["weights"] != base["weights"], "fine-tuning did not change the weights")
+        self.swap_with(r.model_path, t0)
+        bad = self.call(self.train, Train.Request(bags=[a.train_bag], variant="gnode", epochs=1, fine_tune=True), 30)
+        check(not bad.success and "fine-tune" in bad.message, f"fine-tuning as gnode: {bad.success} {bad.message!r}")
+        self.summary.update(fine_tune_steps=[base["optimizer"]["step"], tuned["optimizer"]["step"]])
 
         # 7. Leave a long training running: the node must still stop on SIGINT.
         h = self.send_goal(TrainAction.Goal(bags=[a.train_bag], epochs=1_000_000, seed=7), [])
