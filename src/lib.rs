@@ -4,7 +4,8 @@
 //! served as a ROS 2 node.
 //!
 //! Data flows one way: [`physics`] → [`simulate`] → [`data`] (bags) →
-//! [`train`] (on the [`engine`], or candle via [`model`]) → model file →
+//! [`train`] (on the [`engine`], or candle via [`model`]) → model file
+//! ([`models`] loads and trains any kind) →
 //! [`kernel`] rollouts ([`dynamics`], [`ros`]) → [`data`] → [`evaluate`] /
 //! [`replay`] → [`metrics`].
 
@@ -20,6 +21,7 @@ pub mod evaluate;
 pub mod kernel;
 pub mod metrics;
 pub mod model;
+pub mod models;
 pub mod physics;
 pub mod plot;
 pub mod replay;

@@ -25,8 +25,8 @@ use anyhow::{bail, Context as _, Result};
 use serde::Serialize;
 
 use crate::data::bag::Bag;
+use crate::data::field::bag_system;
 use crate::dynamics::Dynamics;
-use crate::evaluate::bag_system;
 use crate::metrics::{error_curves, Averages, Band, Summary, LOG_FLOOR};
 use crate::physics::Field;
 use crate::system::{State, Trajectory};
@@ -56,7 +56,7 @@ pub struct ReplayOptions {
     /// all), else [`DEFAULT_IRREGULAR_BINS`].
     pub bins: Option<usize>,
     /// Field for the energy error. Default: the bag's
-    /// ([`crate::evaluate::bag_field`]); refused when it cannot be known.
+    /// ([`crate::data::field::bag_field`]); refused when it cannot be known.
     pub field: Option<Field>,
     /// Replay at most this many trajectories (the first ones, by id).
     pub max_trajectories: Option<usize>,
@@ -215,7 +215,7 @@ fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> 
         (Some(dt), _, _) => (dt, "option"),
         (None, Some(s), _) => (s.dt, "bag system_config (simulator step)"),
         (None, None, Some(dt)) => (dt, "bag metadata dt (the recording node's step)"),
-        (None, None, None) => match crate::evaluate::stamp_interval(bag) {
+        (None, None, None) => match crate::data::field::stamp_interval(bag) {
             Some(d) => (d, "the header stamps (their interval)"),
             None => bail!(
                 "the bag does not say its integration step (no system_config or dt metadata, \
@@ -264,8 +264,8 @@ fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> 
             horizon / DEFAULT_IRREGULAR_BINS as f64,
         ),
     };
-    let origin = crate::evaluate::bag_field(bag, opts.field.as_ref())?
-        .ok_or_else(|| crate::evaluate::unknown_field_error("the energy error"))?;
+    let origin = crate::data::field::bag_field(bag, opts.field.as_ref())?
+        .ok_or_else(|| crate::data::field::unknown_field_error("the energy error"))?;
     let (field, field_source) = (origin.field, origin.source);
     Ok(Plan {
         dt,

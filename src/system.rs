@@ -6,6 +6,7 @@
 //! velocities are stored flat, `dim` numbers per particle (2 or 3).
 
 use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
 
 /// What an edge is physically.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -199,4 +200,18 @@ pub struct Trajectory {
     pub graph: Graph,
     /// The samples, in time order.
     pub samples: Vec<Sample>,
+}
+
+/// A fingerprint of a state (SHA-256 of its numbers, rounded to 1e-9), used to
+/// detect test trajectories that start where training ones did.
+pub fn fingerprint(s: &State) -> String {
+    let mut h = Sha256::new();
+    for x in s.q.iter().chain(&s.v) {
+        h.update(((x * 1e9).round() as i64).to_le_bytes());
+    }
+    h.finalize()
+        .iter()
+        .take(12)
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }

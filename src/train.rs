@@ -744,7 +744,8 @@ pub fn load_training_data_from(
 ) -> Result<TrainingData> {
     use crate::data::bag::{read_bags, ReadOptions};
     use crate::data::dataset::AccSource;
-    use crate::evaluate::{bag_field, bag_system, fingerprint};
+    use crate::data::field::{bag_field, bag_system};
+    use crate::system::fingerprint;
     if bags.is_empty() {
         bail!("no training bags given");
     }

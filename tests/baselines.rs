@@ -269,9 +269,9 @@ fn hamilton_matches_physics() {
     }
 }
 
-use mcgnode::baselines::hgn::rk4_trajectories;
 use mcgnode::baselines::{train_baseline, BaselineHyper, BaselineNet, Kind, TrainedBaseline};
 use mcgnode::dynamics::Dynamics;
+use mcgnode::physics::rk4::rk4_trajectories;
 use mcgnode::train::TrainConfig;
 use rand::SeedableRng;
 

@@ -71,7 +71,7 @@ fn the_shipped_spring_model_knows_what_it_was_trained_on() {
 
 #[test]
 fn truth_models_check_the_field_and_refuse_through_supports() {
-    let m = mcgnode::ros::load_model("truth:pendulum").unwrap();
+    let m = mcgnode::models::load_model("truth:pendulum").unwrap();
     let t = m.trained_for().expect("truth models say what they are");
     assert_eq!(t.field.as_ref().map(|f| f.gravity), Some(10.0));
     t.check(
@@ -85,7 +85,7 @@ fn truth_models_check_the_field_and_refuse_through_supports() {
     assert!(e.contains("gravity 10") && e.contains("no field"), "{e}");
     // A file model wrapped by load_model refuses a foreign graph in supports.
     let m =
-        mcgnode::ros::load_model(&format!("{ROOT}/bags/models/pendulum5-mcgnode.json")).unwrap();
+        mcgnode::models::load_model(&format!("{ROOT}/bags/models/pendulum5-mcgnode.json")).unwrap();
     let e = m.supports(&graph(SystemKind::Spring, 5)).unwrap_err();
     assert!(
         e.contains("rigid bars") && e.contains("these data have springs"),

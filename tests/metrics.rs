@@ -314,7 +314,7 @@ fn diverged_rollouts_are_scored_not_fatal() {
     let bag = mcgnode::data::bag::Bag {
         trajectories: trajs,
         metadata: [(
-            mcgnode::evaluate::META_SYSTEM.to_string(),
+            mcgnode::data::meta::KEY_SYSTEM_CONFIG.to_string(),
             serde_json::to_string(&c).unwrap(),
         )]
         .into_iter()

@@ -18,10 +18,10 @@
 //!   `CANDLE_GRAD_DO_NOT_DETACH` themselves and refuse to run on a thread
 //!   where candle has already fixed the old setting.
 //! * HGN trains on (q̇, ṗ); its data come from RK4 on (q, p)
-//!   ([`hgn::rk4_trajectories`]). LGN and GNS train on accelerations.
+//!   ([`crate::physics::rk4::rk4_trajectories`]). LGN and GNS train on accelerations.
 
-pub mod any;
 pub mod autodiff;
+pub mod forward;
 pub mod gns;
 pub mod graphnet;
 pub mod hgn;
@@ -34,7 +34,6 @@ pub mod file;
 pub mod train;
 pub mod trained;
 
-pub use any::{load_any_model, train_any_from_bags, LoadedModel, ModelKind};
 pub use file::BaselineFile;
 pub use train::{train_baseline, train_baseline_from_bags};
 pub use trained::TrainedBaseline;

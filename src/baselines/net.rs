@@ -1,8 +1,8 @@
-//! The baseline models' hyperparameters and parameters, and the one entry
-//! point (`acceleration`, `loss`) that dispatches to LGN, HGN or GNS.
+//! The baseline models' hyperparameters and parameters. The one entry point
+//! (`acceleration`, `loss`) that dispatches to LGN, HGN or GNS is in
+//! [`super::forward`], above the three.
 
 use super::graphnet::{GraphNet, GraphNetSpec};
-use super::{gns, hgn, lgn};
 use crate::model::batch::Batch;
 use crate::model::mlp::Mlp;
 use crate::model::params::ParamStore;
@@ -179,31 +179,9 @@ impl BaselineNet {
         Ok(v)
     }
 
-    /// Predicted accelerations `(B·n, d)`.
-    pub fn acceleration(&self, b: &Batch) -> Result<Tensor> {
-        self.check(b)?;
-        match self.hyper.kind {
-            Kind::Lgn => lgn::acceleration(self, b),
-            Kind::Hgn => hgn::acceleration(self, b),
-            Kind::Gns => gns::acceleration(self, b),
-        }
-    }
-
-    /// Training loss: MSE on accelerations (LGN, GNS) or on (q̇, ṗ) (HGN,
-    /// targets derived from the batch's velocities and accelerations with the
-    /// true `masses`, one per particle).
-    pub fn loss(&self, b: &Batch, masses: &[f64]) -> Result<Tensor> {
-        self.check(b)?;
-        let Some(t) = &b.target else {
-            bail!("batch has no targets");
-        };
-        match self.hyper.kind {
-            Kind::Hgn => hgn::loss(self, b, masses),
-            _ => Ok((self.acceleration(b)? - t)?.sqr()?.mean_all()?),
-        }
-    }
-
-    fn check(&self, b: &Batch) -> Result<()> {
+    /// Refuses a batch of another dimension, and second-order baselines on a
+    /// thread where candle cannot differentiate twice.
+    pub(super) fn check(&self, b: &Batch) -> Result<()> {
         if b.dim != self.hyper.dim {
             bail!(
                 "{} was built for {}D systems, got {}D",

@@ -54,7 +54,7 @@ pub struct Args {
 
 /// Runs `evaluate`.
 pub fn run(a: Args) -> Result<()> {
-    let model = crate::baselines::load_any_model(&a.model)?;
+    let model = crate::models::load_any_model(&a.model)?;
     let bag = read_bags(
         &a.bag,
         &ReadOptions {
@@ -64,7 +64,7 @@ pub fn run(a: Args) -> Result<()> {
     .context("reading the test bag")?;
     let flag_field = field_from_flags(a.gravity, a.drag, a.closed)?;
     // Refuse data the model was not trained for (dimension, edges, field).
-    let data_field = crate::evaluate::bag_field(&bag, flag_field.as_ref())?.map(|o| o.field);
+    let data_field = crate::data::field::bag_field(&bag, flag_field.as_ref())?.map(|o| o.field);
     let trained = crate::compat::TrainedFor::from_model_file(&a.model)?;
     crate::compat::check_bag(&trained, &bag, data_field.as_ref())?;
     let opts = EvalOptions {

@@ -66,7 +66,7 @@ pub struct Args {
 
 /// Runs `replay`.
 pub fn run(a: Args) -> Result<()> {
-    let model = crate::ros::load_model(&a.model)?;
+    let model = crate::models::load_model(&a.model)?;
     let bag = read_bags(
         &a.bag,
         &ReadOptions {
@@ -76,7 +76,7 @@ pub fn run(a: Args) -> Result<()> {
     .context("reading the bag")?;
     let field = field_from_flags(a.gravity, a.drag, a.closed)?;
     if let Some(t) = model.trained_for() {
-        let data_field = crate::evaluate::bag_field(&bag, field.as_ref())?.map(|o| o.field);
+        let data_field = crate::data::field::bag_field(&bag, field.as_ref())?.map(|o| o.field);
         crate::compat::check_bag(t, &bag, data_field.as_ref())?;
     }
     let opts = ReplayOptions {

@@ -1,8 +1,8 @@
 //! `mcgnode rollout`.
 
-use crate::baselines::load_any_model;
 use crate::data::bag::{read_bags, write_trajectories_with_field, ReadOptions};
-use crate::evaluate::bag_system;
+use crate::data::field::bag_system;
+use crate::models::load_any_model;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::system::{Sample, Trajectory};
 use anyhow::{bail, Context, Result};

@@ -1,7 +1,7 @@
 //! `mcgnode train`.
 
-use crate::baselines::{train_any_from_bags, ModelKind};
 use crate::model::{ArchPreset, EdgeInput, MessageFn};
+use crate::models::{train_any_from_bags, ModelKind};
 use crate::train::{BodyForce, EngineKind, EpochReport, ModelOptions, TrainConfig};
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};

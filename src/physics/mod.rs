@@ -6,6 +6,7 @@
 //! * [`integrator`]: velocity Verlet + SHAKE/RATTLE;
 //! * [`config`]: the paper's spring, pendulum and peridynamic-solid systems,
 //!   initial states, trajectory generation;
+//! * [`rk4`]: RK4 on (q, p), the paper's HGN training data;
 //! * [`truth`]: the physics behind the [`crate::dynamics::Dynamics`] trait.
 
 pub mod config;
@@ -14,6 +15,7 @@ pub mod forces;
 pub mod integrator;
 mod linalg;
 pub mod projection;
+pub mod rk4;
 pub mod truth;
 
 use std::fmt;

@@ -4,9 +4,10 @@
 use super::lab::{Job, Lab, TrainSpec, Trained};
 use super::report::{error_table, num, table, Row};
 use super::scale::Scale;
-use crate::baselines::{Kind, ModelKind};
+use crate::baselines::Kind;
 use crate::evaluate::Evaluation;
 use crate::model::Variant;
+use crate::models::ModelKind;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::plot::{plot_metrics, plot_sweep, Metric, SweepLine};
 use crate::train::{ModelOptions, TrainConfig};

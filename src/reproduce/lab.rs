@@ -3,10 +3,10 @@
 //! Each step goes through the same public path as the command line:
 //! simulate → bag → train → model file → evaluate.
 
-use crate::baselines::{load_any_model, train_any_from_bags, ModelKind};
 use crate::data::bag::read_trajectories;
 use crate::evaluate::{evaluate, EvalOptions, Evaluation};
 use crate::model::file::TrainingReport;
+use crate::models::{load_any_model, train_any_from_bags, ModelKind};
 use crate::physics::SystemConfig;
 use crate::simulate::{simulate_with, DataIntegrator};
 use crate::train::{ModelOptions, TrainConfig};

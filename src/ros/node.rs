@@ -880,7 +880,7 @@ mod tests {
 
     #[test]
     fn rollout_service_checks_its_request() {
-        let model = crate::ros::truth::load_truth("truth:spring").unwrap();
+        let model = crate::models::truth::load_truth("truth:spring").unwrap();
         let req = RolloutRequest {
             steps: 50,
             ..RolloutRequest::default()

@@ -446,7 +446,7 @@ pub(super) fn load_and_swap(shared: &Shared, path: &str) -> LoadModelResponse {
     if path.trim().is_empty() {
         return fail("no path given".into());
     }
-    match super::load_model(path) {
+    match crate::models::load_model(path) {
         Err(e) => fail(format!("cannot load {path}: {e:#}")),
         Ok(model) => {
             let description = model.describe();
