@@ -2,7 +2,8 @@
 //! times of training steps and rollouts, next to the authors' JAX figures
 //! measured on this same 2-core machine.
 
-use crate::model::{Hyper, Net, TrainedModel, Variant};
+use crate::kernel::TrainedModel;
+use crate::model::{Hyper, Net, Variant};
 use crate::physics::{SystemConfig, SystemKind};
 use crate::system::{Graph, State};
 use crate::train::{EngineKind, TrainConfig};

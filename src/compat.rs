@@ -6,11 +6,9 @@
 //! data under gravity).
 
 use std::path::Path;
-use std::sync::Arc;
 
-use crate::dynamics::{Dynamics, Forces, Rollout};
 use crate::physics::{Field, SystemConfig, SystemKind};
-use crate::system::{EdgeKind, Graph, State};
+use crate::system::{EdgeKind, Graph};
 
 /// What a model was trained on, as far as its file tells (`None`: unknown,
 /// not checked).
@@ -126,13 +124,6 @@ impl TrainedFor {
 
     /// Reads a model file's training description.
     pub fn from_model_file(path: &Path) -> anyhow::Result<TrainedFor> {
-        if path == Path::new(crate::dynamics::STILL) {
-            // The reference fits any data.
-            return Ok(TrainedFor {
-                model: crate::dynamics::STILL.into(),
-                ..TrainedFor::default()
-            });
-        }
         let text = std::fs::read_to_string(path)
             .map_err(|e| anyhow::anyhow!("cannot read model file {}: {e}", path.display()))?;
         let v: serde_json::Value = serde_json::from_str(&text)
@@ -228,91 +219,6 @@ fn describe(f: &Field) -> String {
             "gravity {}, drag {}, force {:?}",
             f.gravity, f.drag, f.force
         )
-    }
-}
-
-/// A model with what it was trained on: [`Dynamics::supports`] also refuses
-/// graphs the model was not trained for, and
-/// [`Dynamics::trained_for`] lets a caller check the data's field.
-pub struct Checked {
-    inner: Arc<dyn Dynamics>,
-    trained: TrainedFor,
-}
-
-impl Checked {
-    /// Wraps `inner`.
-    pub fn new(inner: Arc<dyn Dynamics>, trained: TrainedFor) -> Checked {
-        Checked { inner, trained }
-    }
-}
-
-impl Dynamics for Checked {
-    fn describe(&self) -> String {
-        self.inner.describe()
-    }
-
-    fn supports(&self, graph: &Graph) -> Result<(), String> {
-        self.trained.check(graph, None)?;
-        self.inner.supports(graph)
-    }
-
-    fn trained_for(&self) -> Option<&TrainedFor> {
-        Some(&self.trained)
-    }
-
-    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
-        self.trained.check(graph, None)?;
-        self.inner.acceleration(graph, state, out)
-    }
-
-    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String> {
-        self.trained.check(graph, None)?;
-        self.inner.forces(graph, state)
-    }
-
-    fn rollout_every(
-        &self,
-        graph: &Graph,
-        start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
-    ) -> Result<Vec<State>, String> {
-        self.trained.check(graph, None)?;
-        self.inner.rollout_every(graph, start, dt, steps, every)
-    }
-
-    fn acceleration_batch(
-        &self,
-        graph: &Graph,
-        states: &[State],
-        out: &mut [Vec<f64>],
-    ) -> Result<(), String> {
-        self.trained.check(graph, None)?;
-        self.inner.acceleration_batch(graph, states, out)
-    }
-
-    fn rollout_many(
-        &self,
-        graph: &Graph,
-        starts: &[State],
-        dt: f64,
-        steps: usize,
-        every: usize,
-    ) -> Result<Vec<Rollout>, String> {
-        self.trained.check(graph, None)?;
-        self.inner.rollout_many(graph, starts, dt, steps, every)
-    }
-
-    fn rollout(
-        &self,
-        graph: &Graph,
-        start: &State,
-        dt: f64,
-        steps: usize,
-    ) -> Result<Vec<State>, String> {
-        self.trained.check(graph, None)?;
-        self.inner.rollout(graph, start, dt, steps)
     }
 }
 

@@ -124,7 +124,7 @@ pub trait Dynamics: Send + Sync {
     fn supports(&self, graph: &Graph) -> Result<(), String>;
 
     /// What the model was trained on, when a caller wrapped it with that
-    /// knowledge ([`crate::compat::Checked`]); `None` otherwise.
+    /// knowledge ([`crate::models::Checked`]); `None` otherwise.
     fn trained_for(&self) -> Option<&crate::compat::TrainedFor> {
         None
     }

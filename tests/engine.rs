@@ -5,9 +5,10 @@
 //! count; and both engines ending a seeded training at the same loss.
 
 use mcgnode::engine::Engine;
+use mcgnode::kernel::TrainedModel;
 use mcgnode::model::batch::Batch;
 use mcgnode::model::plan::GraphPlan;
-use mcgnode::model::{ArchPreset, Hyper, Net, Norm, TrainedModel, Variant};
+use mcgnode::model::{ArchPreset, Hyper, Net, Norm, Variant};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Edge, EdgeKind, Endpoint, Graph, State};
 use mcgnode::train::{train, EngineKind, TrainConfig};

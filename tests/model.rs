@@ -4,10 +4,11 @@
 
 use candle_core::{Device, Tensor, Var};
 use mcgnode::dynamics::Dynamics;
+use mcgnode::kernel::TrainedModel;
 use mcgnode::model::batch::Batch;
 use mcgnode::model::plan::GraphPlan;
 use mcgnode::model::solve::solve;
-use mcgnode::model::{Hyper, ModelFile, Net, TrainedModel, Variant};
+use mcgnode::model::{Hyper, ModelFile, Net, Variant};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State};
 use rand::{Rng, SeedableRng};

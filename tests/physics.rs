@@ -492,7 +492,7 @@ fn hamiltonian_of_hand_computed_cases() {
 #[test]
 fn truth_implements_dynamics() {
     use mcgnode::dynamics::Dynamics;
-    use mcgnode::physics::Truth;
+    use mcgnode::models::Truth;
     let cfg = SystemConfig::new(SystemKind::Spring, 5);
     let g = cfg.graph();
     let s = cfg.start_for(&g, 4, 2);

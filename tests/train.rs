@@ -1,7 +1,8 @@
 //! Training: reproducible, learns, conserves momentum exactly (MCGNODE), inductive.
 
 use mcgnode::dynamics::Dynamics;
-use mcgnode::model::{Hyper, ModelFile, TrainedModel, Variant};
+use mcgnode::kernel::TrainedModel;
+use mcgnode::model::{Hyper, ModelFile, Variant};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::State;
 use mcgnode::train::{train, TrainConfig};

@@ -65,7 +65,7 @@ pub fn run(a: Args) -> Result<()> {
     let flag_field = field_from_flags(a.gravity, a.drag, a.closed)?;
     // Refuse data the model was not trained for (dimension, edges, field).
     let data_field = crate::data::field::bag_field(&bag, flag_field.as_ref())?.map(|o| o.field);
-    let trained = crate::compat::TrainedFor::from_model_file(&a.model)?;
+    let trained = crate::models::trained_for(&a.model)?;
     crate::compat::check_bag(&trained, &bag, data_field.as_ref())?;
     let opts = EvalOptions {
         dt: a.dt,

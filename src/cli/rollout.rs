@@ -53,7 +53,7 @@ pub struct Args {
 /// Runs `rollout`.
 pub fn run(a: Args) -> Result<()> {
     let model = load_any_model(&a.model)?.dynamics;
-    let trained = crate::compat::TrainedFor::from_model_file(&a.model)?;
+    let trained = crate::models::trained_for(&a.model)?;
     let (graph, start, system, mut cfg, field, stamp_dt) = match &a.initial {
         Some(paths) => {
             let bag = read_bags(

@@ -4,6 +4,7 @@
 //! only for training. Tested against candle's forward to 1e-12.
 
 mod dense;
+pub mod trained;
 
 use crate::model::arch::{Arch, Block, LOG_MASS};
 use crate::model::mlp::squareplus_f64;
@@ -16,6 +17,7 @@ use crate::system::Graph;
 use anyhow::{bail, Context, Result};
 use dense::Mlp as KMlp;
 use rand::SeedableRng;
+pub use trained::TrainedModel;
 
 /// A trained model's forward pass, ready to run.
 #[derive(Clone, Debug)]

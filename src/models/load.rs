@@ -6,7 +6,7 @@ use super::truth;
 use crate::baselines::file::FORMAT as BASELINE_FORMAT;
 use crate::baselines::TrainedBaseline;
 use crate::dynamics::Dynamics;
-use crate::model::TrainedModel;
+use crate::kernel::TrainedModel;
 use anyhow::{Context, Result};
 use std::path::Path;
 use std::sync::Arc;
@@ -59,13 +59,13 @@ pub fn load_any_model(path: &Path) -> Result<LoadedModel> {
 }
 
 /// `truth:<system>`, or a trained model file (GNODE family or baseline)
-/// wrapped in [`crate::compat::Checked`] so it refuses data it was not
+/// wrapped in [`super::Checked`] so it refuses data it was not
 /// trained for: the model the node serves and `replay` rolls out.
 pub fn load_model(model: &str) -> Result<Arc<dyn Dynamics>> {
     if truth::is_truth(model) {
         return truth::load_truth(model).map_err(anyhow::Error::msg);
     }
     let m = load_any_model(Path::new(model)).with_context(|| format!("loading model {model}"))?;
-    let trained = crate::compat::TrainedFor::from_model_file(Path::new(model))?;
-    Ok(Arc::new(crate::compat::Checked::new(m.dynamics, trained)))
+    let trained = super::trained_for(Path::new(model))?;
+    Ok(Arc::new(super::Checked::new(m.dynamics, trained)))
 }

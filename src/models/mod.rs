@@ -6,11 +6,14 @@
 //! The CLI, `reproduce` and the ROS node reach models through here, never
 //! through `baselines` or `ros`.
 
+mod checked;
 mod kind;
 mod load;
 mod train;
 pub mod truth;
 
+pub use checked::{trained_for, Checked};
 pub use kind::ModelKind;
 pub use load::{load_any_model, load_model, LoadedModel};
 pub use train::train_any_from_bags;
+pub use truth::Truth;

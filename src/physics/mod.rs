@@ -6,8 +6,10 @@
 //! * [`integrator`]: velocity Verlet + SHAKE/RATTLE;
 //! * [`config`]: the paper's spring, pendulum and peridynamic-solid systems,
 //!   initial states, trajectory generation;
-//! * [`rk4`]: RK4 on (q, p), the paper's HGN training data;
-//! * [`truth`]: the physics behind the [`crate::dynamics::Dynamics`] trait.
+//! * [`rk4`]: RK4 on (q, p), the paper's HGN training data.
+//!
+//! The same physics as a model behind [`crate::dynamics::Dynamics`] is
+//! [`crate::models::truth::Truth`], above the trait.
 
 pub mod config;
 pub mod constraints;
@@ -16,7 +18,6 @@ pub mod integrator;
 mod linalg;
 pub mod projection;
 pub mod rk4;
-pub mod truth;
 
 use std::fmt;
 use std::str::FromStr;
@@ -28,7 +29,6 @@ pub use constraints::{acceleration, bar_jacobian, constraint_residual};
 pub use forces::{applied_forces, hamiltonian, kinetic_energy, potential_energy};
 pub use integrator::Integrator;
 pub use projection::Projector;
-pub use truth::Truth;
 
 #[cfg(doc)]
 use crate::system::Graph;

@@ -31,7 +31,8 @@ use ros2_client::{
 
 use crate::data::msg::{Header, Time};
 use crate::dynamics::Dynamics;
-use crate::model::{TrainedModel, Variant};
+use crate::kernel::TrainedModel;
+use crate::model::Variant;
 use crate::train::{train_from_bags, EpochReport, ModelOptions, TrainConfig};
 
 use super::msgs::{
@@ -381,7 +382,7 @@ pub(super) fn run_training(
         Err(e) => return fail(format!("the trained model does not serialise: {e}")),
     };
     let model: Arc<dyn crate::dynamics::Dynamics> = match TrainedModel::from_file(file) {
-        Ok(m) => Arc::new(crate::compat::Checked::new(Arc::new(m), trained_for)),
+        Ok(m) => Arc::new(crate::models::Checked::new(Arc::new(m), trained_for)),
         Err(e) => return fail(format!("the trained model does not load: {e:#}")),
     };
     let took = trained_at.duration_since(start).as_secs_f64();

@@ -1,8 +1,8 @@
 //! A trained model, loaded from its file, running on the inference kernel.
 
-use super::file::ModelFile;
+use super::{Kernel, Workspace};
 use crate::dynamics::{Dynamics, EdgeForce, Forces, Rollout};
-use crate::kernel::{Kernel, Workspace};
+use crate::model::file::ModelFile;
 use crate::system::{Graph, State};
 use anyhow::Result;
 use std::path::Path;
