@@ -11,27 +11,6 @@ use anyhow::{bail, Result};
 use serde::Serialize;
 use std::time::Instant;
 
-/// What the flags say about the field: `--gravity`/`--drag` (either one
-/// states the whole field, the other being 0 when not given) or `--closed`.
-pub fn field_from_flags(
-    gravity: Option<f64>,
-    drag: Option<f64>,
-    closed: bool,
-) -> Result<Option<Field>> {
-    if closed && (gravity.is_some_and(|g| g != 0.0) || drag.is_some_and(|d| d != 0.0)) {
-        bail!("--closed means no gravity and no drag: it contradicts --gravity/--drag");
-    }
-    if closed || gravity.is_some() || drag.is_some() {
-        Ok(Some(Field {
-            gravity: gravity.unwrap_or(0.0),
-            drag: drag.unwrap_or(0.0),
-            force: vec![],
-        }))
-    } else {
-        Ok(None)
-    }
-}
-
 /// Evaluation settings.
 #[derive(Clone, Debug, Default)]
 pub struct EvalOptions {

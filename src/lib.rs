@@ -22,6 +22,7 @@ pub mod kernel;
 pub mod metrics;
 pub mod model;
 pub mod models;
+pub mod names;
 pub mod physics;
 pub mod plot;
 pub mod replay;

@@ -214,19 +214,32 @@ fn band(curves: &[ErrorCurves], pick: impl Fn(&ErrorCurves) -> &Vec<f64>) -> Ban
         hi: Vec::with_capacity(len),
     };
     for k in 0..len {
-        let logs = curves.iter().map(|c| pick(c)[k].max(LOG_FLOOR).ln());
+        let logs = curves.iter().map(|c| floored_ln(pick(c)[k]));
         let mean = logs.clone().sum::<f64>() / n;
         let var = if curves.len() > 1 {
             logs.map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
         } else {
             0.0
         };
-        let half = Z95 * var.sqrt();
-        b.gmean.push(mean.exp());
-        b.lo.push((mean - half).exp());
-        b.hi.push((mean + half).exp());
+        let (gmean, lo, hi) = log_band(mean, var);
+        b.gmean.push(gmean);
+        b.lo.push(lo);
+        b.hi.push(hi);
     }
     b
+}
+
+/// ln of an error, clamped to [`LOG_FLOOR`] first so zero stays finite.
+pub(crate) fn floored_ln(x: f64) -> f64 {
+    x.max(LOG_FLOOR).ln()
+}
+
+/// (geometric mean, lo, hi) of the 95% normal band in log space, from the
+/// mean and sample variance of the [`floored_ln`] of the errors: the band of
+/// every summary ([`summarize`], and `replay`'s streaming statistics).
+pub(crate) fn log_band(mean: f64, var: f64) -> (f64, f64, f64) {
+    let half = Z95 * var.sqrt();
+    (mean.exp(), (mean - half).exp(), (mean + half).exp())
 }
 
 /// Summarises curves that share their times (within 1e-9 relative).

@@ -27,7 +27,7 @@ use serde::Serialize;
 use crate::data::bag::Bag;
 use crate::data::field::bag_system;
 use crate::dynamics::Dynamics;
-use crate::metrics::{error_curves, Averages, Band, Summary, LOG_FLOOR};
+use crate::metrics::{error_curves, floored_ln, log_band, Averages, Band, Summary};
 use crate::physics::Field;
 use crate::system::{State, Trajectory};
 
@@ -37,9 +37,6 @@ pub const DEFAULT_IRREGULAR_BINS: usize = 20;
 pub const DEFAULT_HORIZON_INTERVALS: f64 = 10.0;
 /// Largest number of grid points accepted.
 pub const MAX_BINS: usize = 100_000;
-/// z-value of a two-sided 95% normal band (as in [`crate::metrics`]).
-const Z95: f64 = 1.96;
-
 /// Replay settings; `Default` takes everything from the bag.
 #[derive(Clone, Debug, Default)]
 pub struct ReplayOptions {
@@ -141,7 +138,7 @@ struct LogStats {
 impl LogStats {
     fn push(&mut self, x: f64) {
         self.max = self.max.max(x);
-        let l = x.max(LOG_FLOOR).ln();
+        let l = floored_ln(x);
         self.n += 1;
         let d = l - self.mean;
         self.mean += d / self.n as f64;
@@ -155,12 +152,7 @@ impl LogStats {
         } else {
             0.0
         };
-        let half = Z95 * var.sqrt();
-        (
-            self.mean.exp(),
-            (self.mean - half).exp(),
-            (self.mean + half).exp(),
-        )
+        log_band(self.mean, var)
     }
 }
 

@@ -344,7 +344,7 @@ fn system_kind_parses_and_explains_errors() {
         SystemKind::Pendulum
     );
     assert_eq!(SystemKind::Pendulum.to_string(), "pendulum");
-    let err = "rope".parse::<SystemKind>().unwrap_err();
+    let err = "rope".parse::<SystemKind>().unwrap_err().to_string();
     assert!(
         err.contains("rope") && err.contains("spring") && err.contains("pendulum"),
         "{err}"

@@ -10,8 +10,6 @@ use anyhow::{bail, Result};
 use candle_core::Tensor;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
-use std::fmt;
-use std::str::FromStr;
 
 /// Which baseline.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -45,22 +43,16 @@ impl Kind {
     }
 }
 
-impl fmt::Display for Kind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+impl crate::names::Named for Kind {
+    const ALL: &'static [Self] = &Kind::ALL;
+    const WHAT: &'static str = "baseline";
+
+    fn name(self) -> &'static str {
+        Kind::name(self)
     }
 }
 
-impl FromStr for Kind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        let t = s.trim().to_ascii_lowercase();
-        Self::ALL
-            .into_iter()
-            .find(|k| k.name() == t)
-            .ok_or_else(|| format!("unknown baseline {s:?}; expected one of lgn, hgn, gns"))
-    }
-}
+crate::impl_named!(Kind);
 
 /// Architecture of a baseline.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -4,6 +4,7 @@ mod bag;
 mod bench;
 mod demo;
 mod evaluate;
+mod field;
 mod replay;
 mod reproduce;
 mod rollout;

@@ -1,12 +1,15 @@
 //! The kinds of model: the GNODE family and the baselines, one name space.
 
+use crate::baselines::Kind;
+use crate::model::Variant;
+
 /// A model of the GNODE family or a baseline, named as on the command line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ModelKind {
     /// NODE, GNODE, CGNODE, CDGNODE, MCGNODE.
-    Family(crate::model::Variant),
+    Family(Variant),
     /// LGN, HGN, GNS.
-    Baseline(crate::baselines::Kind),
+    Baseline(Kind),
 }
 
 impl ModelKind {
@@ -19,27 +22,22 @@ impl ModelKind {
     }
 }
 
-impl std::fmt::Display for ModelKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
+impl crate::names::Named for ModelKind {
+    const ALL: &'static [Self] = &[
+        ModelKind::Family(Variant::Node),
+        ModelKind::Family(Variant::Gnode),
+        ModelKind::Family(Variant::Cgnode),
+        ModelKind::Family(Variant::Cdgnode),
+        ModelKind::Family(Variant::Mcgnode),
+        ModelKind::Baseline(Kind::Lgn),
+        ModelKind::Baseline(Kind::Hgn),
+        ModelKind::Baseline(Kind::Gns),
+    ];
+    const WHAT: &'static str = "model";
+
+    fn name(self) -> &'static str {
+        ModelKind::name(self)
     }
 }
 
-impl std::str::FromStr for ModelKind {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s.parse::<crate::model::Variant>() {
-            Ok(v) => Ok(ModelKind::Family(v)),
-            Err(_) => s
-                .parse::<crate::baselines::Kind>()
-                .map(ModelKind::Baseline)
-                .map_err(|_| {
-                    format!(
-                        "unknown model {s:?}; expected one of node, gnode, cgnode, cdgnode, \
-                     mcgnode, lgn, hgn, gns"
-                    )
-                }),
-        }
-    }
-}
+crate::impl_named!(ModelKind);

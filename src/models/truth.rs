@@ -174,7 +174,9 @@ pub fn load_truth(model: &str) -> Result<Arc<dyn Dynamics>, String> {
     let name = model
         .strip_prefix(TRUTH_PREFIX)
         .ok_or_else(|| format!("{model:?} is not a truth:<system> model name"))?;
-    let kind: SystemKind = name.parse()?;
+    let kind: SystemKind = name
+        .parse()
+        .map_err(|e: crate::names::UnknownName| e.to_string())?;
     let field = SystemConfig::new(kind, 1).field;
     let trained = crate::compat::TrainedFor::truth(model, field.clone());
     Ok(Arc::new(super::Checked::new(

@@ -19,8 +19,6 @@ mod linalg;
 pub mod projection;
 pub mod rk4;
 
-use std::fmt;
-use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
@@ -74,29 +72,16 @@ impl SystemKind {
     }
 }
 
-impl fmt::Display for SystemKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+impl crate::names::Named for SystemKind {
+    const ALL: &'static [Self] = &SystemKind::ALL;
+    const WHAT: &'static str = "system kind";
+
+    fn name(self) -> &'static str {
+        SystemKind::name(self)
     }
 }
 
-impl FromStr for SystemKind {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, String> {
-        let t = s.trim().to_ascii_lowercase();
-        SystemKind::ALL
-            .into_iter()
-            .find(|k| k.name() == t)
-            .ok_or_else(|| {
-                let valid: Vec<&str> = SystemKind::ALL.iter().map(|k| k.name()).collect();
-                format!(
-                    "unknown system kind {s:?}; valid kinds are: {}",
-                    valid.join(", ")
-                )
-            })
-    }
-}
+crate::impl_named!(SystemKind);
 
 /// The field every particle sits in. Missing JSON fields default to 0 / empty.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]

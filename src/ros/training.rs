@@ -240,7 +240,10 @@ pub fn request_variant(variant: &str) -> Result<Variant, String> {
     if variant.trim().is_empty() {
         Ok(DEFAULT_VARIANT)
     } else {
-        variant.trim().parse()
+        variant
+            .trim()
+            .parse()
+            .map_err(|e: crate::names::UnknownName| e.to_string())
     }
 }
 
