@@ -142,25 +142,26 @@ impl TrainedFor {
 
     /// Refuses a graph (and the field its data state, when known) the model
     /// was not trained for; the error says what differs.
-    pub fn check(&self, graph: &Graph, field: Option<&Field>) -> Result<(), String> {
+    pub fn check(&self, graph: &Graph, field: Option<&Field>) -> Result<(), Mismatch> {
         let m = &self.model;
         if let Some(d) = self.dim {
             if d != graph.dim {
-                return Err(format!(
-                    "model {m} was trained on {d}D data; these are {}D",
-                    graph.dim
-                ));
+                return Err(Mismatch::Dimension {
+                    model: m.clone(),
+                    trained: d,
+                    data: graph.dim,
+                });
             }
         }
         let have = EdgeKinds::of(graph);
         if let Some(e) = self.edges {
             let new_kind = (have.springs && !e.springs) || (have.bars && !e.bars);
             if new_kind || have.anchors != e.anchors {
-                return Err(format!(
-                    "model {m} was trained on a system with {}; these data have {}",
-                    e.words(),
-                    have.words()
-                ));
+                return Err(Mismatch::Edges {
+                    model: m.clone(),
+                    trained: e.words(),
+                    data: have.words(),
+                });
             }
         }
         if let Some(known) = &self.edge_params {
@@ -174,40 +175,97 @@ impl TrainedFor {
                 .iter()
                 .find(|p| !known.iter().any(|k| k.same(p)))
             {
-                return Err(format!(
-                    "model {m} was trained on edges {}; these data have a {}; a model trained \
-                     with --edge-physics reads each edge's rest length and stiffness",
-                    known.iter().map(words).collect::<Vec<_>>().join(", "),
-                    words(p)
-                ));
+                return Err(Mismatch::EdgeParams {
+                    model: m.clone(),
+                    trained: known.iter().map(words).collect::<Vec<_>>().join(", "),
+                    data: words(p),
+                });
             }
         }
         if self.closed == Some(true) && have.anchors {
-            return Err(format!(
-                "model {m} assumes a closed system (MCGNODE without its body-force branch); \
-                 these data have anchors"
-            ));
+            return Err(Mismatch::NotClosed {
+                model: m.clone(),
+                data: "have anchors".into(),
+            });
         }
         if let Some(data) = field {
             if self.closed == Some(true) && !data.is_free() {
-                return Err(format!(
-                    "model {m} assumes a closed system (MCGNODE without its body-force branch); \
-                     these data state {}",
-                    describe(data)
-                ));
+                return Err(Mismatch::NotClosed {
+                    model: m.clone(),
+                    data: format!("state {}", describe(data)),
+                });
             }
             if let Some(trained) = &self.field {
                 if trained.normalized() != data.normalized() {
-                    return Err(format!(
-                        "model {m} was trained with {}; these data state {}",
-                        describe(trained),
-                        describe(data)
-                    ));
+                    return Err(Mismatch::Field {
+                        model: m.clone(),
+                        trained: describe(trained),
+                        data: describe(data),
+                    });
                 }
             }
         }
         Ok(())
     }
+}
+
+/// How data differ from what a model was trained on; the message names both.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum Mismatch {
+    /// Another spatial dimension.
+    #[error("model {model} was trained on {trained}D data; these are {data}D")]
+    Dimension {
+        /// The model.
+        model: String,
+        /// Its training data's dimension.
+        trained: usize,
+        /// The data's.
+        data: usize,
+    },
+    /// Edge kinds (springs, bars, anchors) it was not trained on.
+    #[error("model {model} was trained on a system with {trained}; these data have {data}")]
+    Edges {
+        /// The model.
+        model: String,
+        /// Its training data's edge kinds, in words.
+        trained: String,
+        /// The data's.
+        data: String,
+    },
+    /// An edge (rest length, stiffness) it was not trained on and cannot read.
+    #[error(
+        "model {model} was trained on edges {trained}; these data have a {data}; a model \
+         trained with --edge-physics reads each edge's rest length and stiffness"
+    )]
+    EdgeParams {
+        /// The model.
+        model: String,
+        /// The edges it was trained on, in words.
+        trained: String,
+        /// The data's unknown edge.
+        data: String,
+    },
+    /// A closed-system model on data with anchors or a field.
+    #[error(
+        "model {model} assumes a closed system (MCGNODE without its body-force branch); \
+         these data {data}"
+    )]
+    NotClosed {
+        /// The model.
+        model: String,
+        /// What the data have ("have anchors", "state gravity ...").
+        data: String,
+    },
+    /// Another field than its training data's.
+    #[error("model {model} was trained with {trained}; these data state {data}")]
+    Field {
+        /// The model.
+        model: String,
+        /// Its training data's field, in words.
+        trained: String,
+        /// The data's.
+        data: String,
+    },
 }
 
 /// A field in words.

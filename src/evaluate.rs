@@ -166,7 +166,7 @@ pub fn evaluate(
     }
     let curves: Vec<ErrorCurves> = curves.into_iter().flatten().collect();
     let rollout_seconds = start.elapsed().as_secs_f64();
-    let summary = summarize(&curves).map_err(anyhow::Error::msg)?;
+    let summary = summarize(&curves)?;
     Ok(Evaluation {
         averages: summary.time_average(),
         model: model.describe(),

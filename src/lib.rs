@@ -9,6 +9,8 @@
 //! [`kernel`] rollouts ([`dynamics`], [`ros`]) → [`data`] → [`evaluate`] /
 //! [`replay`] → [`metrics`].
 
+#![deny(missing_docs)]
+
 pub mod alloc;
 pub mod baselines;
 pub mod bench;
@@ -30,4 +32,6 @@ pub mod reproduce;
 pub mod ros;
 pub mod simulate;
 pub mod system;
+#[doc(hidden)]
+pub mod testing;
 pub mod train;

@@ -26,7 +26,7 @@ use serde::Serialize;
 
 use crate::data::bag::Bag;
 use crate::data::field::bag_system;
-use crate::dynamics::Dynamics;
+use crate::dynamics::{Dynamics, DynamicsError};
 use crate::metrics::{error_curves, floored_ln, log_band, Averages, Band, Summary};
 use crate::physics::Field;
 use crate::system::{State, Trajectory};
@@ -280,7 +280,7 @@ fn advance(
     from: &State,
     span: f64,
     dt: f64,
-) -> Result<State, String> {
+) -> Result<State, DynamicsError> {
     // The 1e-9 keeps an interval that is a whole number of steps (up to
     // round-off in the stamps) from getting one extra tiny step.
     let steps = ((span / dt) * (1.0 - 1e-9)).ceil().max(1.0) as usize;
@@ -288,7 +288,7 @@ fn advance(
     let mut states = model.rollout_every(&tr.graph, from, h, steps, steps)?;
     states
         .pop()
-        .ok_or_else(|| "the model returned no states".to_string())
+        .ok_or_else(|| DynamicsError::Model("the model returned no states".into()))
 }
 
 /// Replays every start state of one trajectory into the bins.

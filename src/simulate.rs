@@ -52,9 +52,7 @@ pub fn simulate_with(
     out: &Path,
 ) -> Result<()> {
     let trajs = match integrator {
-        DataIntegrator::Verlet => cfg
-            .try_simulate(trajectories, seed)
-            .map_err(anyhow::Error::msg)?,
+        DataIntegrator::Verlet => cfg.try_simulate(trajectories, seed)?,
         DataIntegrator::Rk4 => {
             let trajs = crate::physics::rk4::rk4_trajectories(cfg, trajectories, seed)?;
             let worst = trajs

@@ -365,7 +365,7 @@ pub fn check_data(
     if cfg.batch == 0 || cfg.epochs == 0 {
         bail!("batch size and epochs must be positive");
     }
-    graph.validate().map_err(anyhow::Error::msg)?;
+    graph.validate()?;
     for (i, (s, a)) in states.iter().zip(acc).enumerate() {
         s.validate(graph)
             .map_err(|e| anyhow::anyhow!("state {i}: {e}"))?;

@@ -270,7 +270,7 @@ fn hamilton_matches_physics() {
 }
 
 use mcgnode::baselines::{train_baseline, BaselineHyper, BaselineNet, Kind, TrainedBaseline};
-use mcgnode::dynamics::Dynamics;
+use mcgnode::dynamics::{Dynamics, DynamicsError};
 use mcgnode::physics::rk4::rk4_trajectories;
 use mcgnode::train::TrainConfig;
 use rand::SeedableRng;
@@ -509,18 +509,24 @@ impl Dynamics for NetDyn {
     fn describe(&self) -> String {
         "mcgnode (candle)".into()
     }
-    fn supports(&self, _: &Graph) -> Result<(), String> {
+    fn supports(&self, _: &Graph) -> Result<(), DynamicsError> {
         Ok(())
     }
-    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
+    fn acceleration(
+        &self,
+        graph: &Graph,
+        state: &State,
+        out: &mut [f64],
+    ) -> Result<(), DynamicsError> {
         let plan = GraphPlan::new(graph);
-        let b = Batch::new(&plan, &[state], None, 1).map_err(|e| e.to_string())?;
-        let a = self.0.forward(&b).map_err(|e| e.to_string())?.acc;
+        let model = |e: anyhow::Error| DynamicsError::Model(e.to_string());
+        let b = Batch::new(&plan, &[state], None, 1).map_err(model)?;
+        let a = self.0.forward(&b).map_err(model)?.acc;
         out.copy_from_slice(&a.flatten_all().unwrap().to_vec1::<f64>().unwrap());
         Ok(())
     }
-    fn forces(&self, _: &Graph, _: &State) -> Result<mcgnode::dynamics::Forces, String> {
-        Err("not needed".into())
+    fn forces(&self, _: &Graph, _: &State) -> Result<mcgnode::dynamics::Forces, DynamicsError> {
+        Err(DynamicsError::Model("not needed".into()))
     }
 }
 

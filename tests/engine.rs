@@ -257,7 +257,7 @@ fn engine_gradients_equal_candle_and_finite_differences() {
             }
         }
         // The engine's accelerations are the kernel's.
-        let file = mcgnode::bench::random_model(case.hyper.variant, g, 0)
+        let file = mcgnode::testing::random_model(case.hyper.variant, g, 0)
             .map(|(_, m)| m.file)
             .unwrap();
         let file = mcgnode::model::ModelFile {

@@ -76,16 +76,14 @@ pub fn run(a: Args) -> Result<()> {
         }
         None => {
             let cfg = SystemConfig::new(a.system, a.particles);
-            cfg.validate().map_err(anyhow::Error::msg)?;
+            cfg.validate()?;
             let g = cfg.graph();
             let s0 = cfg.start_for(&g, a.seed, 0);
             let field = Some(cfg.field.clone());
             (g, s0, a.system.name().to_string(), Some(cfg), field, None)
         }
     };
-    trained
-        .check(&graph, field.as_ref())
-        .map_err(anyhow::Error::msg)?;
+    trained.check(&graph, field.as_ref())?;
     // Without a flag or a system_config, the step is the recorded interval and
     // every step is saved.
     let (dt, default_every) = match (a.dt, &cfg, stamp_dt) {
@@ -104,16 +102,12 @@ pub fn run(a: Args) -> Result<()> {
     let steps = (a.duration / dt).round() as usize;
     let t0 = std::time::Instant::now();
     // The GNODE family integrates on the allocation-free kernel, baselines on candle.
-    let states = model
-        .rollout_every(&graph, &start, dt, steps, every)
-        .map_err(anyhow::Error::msg)?;
+    let states = model.rollout_every(&graph, &start, dt, steps, every)?;
     let secs = t0.elapsed().as_secs_f64();
     let mut acc = vec![0.0; graph.ndof()];
     let mut samples = Vec::with_capacity(states.len());
     for (k, state) in states.into_iter().enumerate() {
-        model
-            .acceleration(&graph, &state, &mut acc)
-            .map_err(anyhow::Error::msg)?;
+        model.acceleration(&graph, &state, &mut acc)?;
         samples.push(Sample {
             t: (k * every) as f64 * dt,
             state,

@@ -80,7 +80,7 @@ pub fn config(a: &Args) -> Result<SystemConfig> {
     if let Some(s) = a.states {
         c.states = s;
     }
-    c.validate().map_err(anyhow::Error::msg)?;
+    c.validate()?;
     Ok(c)
 }
 

@@ -198,7 +198,7 @@ impl Bag {
 fn check_trajectory(tr: &Trajectory) -> Result<(), DataError> {
     let bad = |m: String| Err(DataError::Trajectory(format!("trajectory {}: {m}", tr.id)));
     if let Err(e) = tr.graph.validate() {
-        return bad(e);
+        return bad(e.to_string());
     }
     if tr.samples.is_empty() {
         return bad("has no samples".into());

@@ -6,7 +6,7 @@
 mod dense;
 pub mod trained;
 
-use crate::model::arch::{Arch, Block, LOG_MASS};
+use crate::model::arch::{Arch, ArchError, Block, LOG_MASS};
 use crate::model::mlp::squareplus_f64;
 use crate::model::params::Weights;
 use crate::model::plan::{BarEnd, GraphPlan};
@@ -141,12 +141,12 @@ impl Kernel {
     }
 
     /// Whether the kernel can run on this graph.
-    pub fn supports(&self, graph: &Graph) -> Result<(), String> {
+    pub fn supports(&self, graph: &Graph) -> Result<(), ArchError> {
         self.arch.supports(graph)
     }
 
     /// Allocates the buffers for a graph.
-    pub fn workspace(&self, graph: &Graph) -> Result<Workspace, String> {
+    pub fn workspace(&self, graph: &Graph) -> Result<Workspace, ArchError> {
         self.supports(graph)?;
         let plan = GraphPlan::new(graph);
         let (n, d, em, t) = (plan.n, plan.dim, self.hyper.embed, self.hyper.types);

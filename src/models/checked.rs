@@ -6,7 +6,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use crate::compat::TrainedFor;
-use crate::dynamics::{Dynamics, Forces, Rollout};
+use crate::dynamics::{Dynamics, DynamicsError, Forces, Rollout};
 use crate::system::{Graph, State};
 
 /// What the model at `path` was trained on: its file's training description
@@ -43,7 +43,7 @@ impl Dynamics for Checked {
         self.inner.describe()
     }
 
-    fn supports(&self, graph: &Graph) -> Result<(), String> {
+    fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
         self.trained.check(graph, None)?;
         self.inner.supports(graph)
     }
@@ -52,12 +52,17 @@ impl Dynamics for Checked {
         Some(&self.trained)
     }
 
-    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
+    fn acceleration(
+        &self,
+        graph: &Graph,
+        state: &State,
+        out: &mut [f64],
+    ) -> Result<(), DynamicsError> {
         self.trained.check(graph, None)?;
         self.inner.acceleration(graph, state, out)
     }
 
-    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String> {
+    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, DynamicsError> {
         self.trained.check(graph, None)?;
         self.inner.forces(graph, state)
     }
@@ -69,7 +74,7 @@ impl Dynamics for Checked {
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<Vec<State>, String> {
+    ) -> Result<Vec<State>, DynamicsError> {
         self.trained.check(graph, None)?;
         self.inner.rollout_every(graph, start, dt, steps, every)
     }
@@ -79,7 +84,7 @@ impl Dynamics for Checked {
         graph: &Graph,
         states: &[State],
         out: &mut [Vec<f64>],
-    ) -> Result<(), String> {
+    ) -> Result<(), DynamicsError> {
         self.trained.check(graph, None)?;
         self.inner.acceleration_batch(graph, states, out)
     }
@@ -91,7 +96,7 @@ impl Dynamics for Checked {
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<Vec<Rollout>, String> {
+    ) -> Result<Vec<Rollout>, DynamicsError> {
         self.trained.check(graph, None)?;
         self.inner.rollout_many(graph, starts, dt, steps, every)
     }
@@ -102,7 +107,7 @@ impl Dynamics for Checked {
         start: &State,
         dt: f64,
         steps: usize,
-    ) -> Result<Vec<State>, String> {
+    ) -> Result<Vec<State>, DynamicsError> {
         self.trained.check(graph, None)?;
         self.inner.rollout(graph, start, dt, steps)
     }

@@ -63,7 +63,7 @@ pub fn load_any_model(path: &Path) -> Result<LoadedModel> {
 /// trained for: the model the node serves and `replay` rolls out.
 pub fn load_model(model: &str) -> Result<Arc<dyn Dynamics>> {
     if truth::is_truth(model) {
-        return truth::load_truth(model).map_err(anyhow::Error::msg);
+        return Ok(truth::load_truth(model)?);
     }
     let m = load_any_model(Path::new(model)).with_context(|| format!("loading model {model}"))?;
     let trained = super::trained_for(Path::new(model))?;

@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use crate::dynamics::{Dynamics, EdgeForce, Forces, Rollout};
+use crate::dynamics::{Dynamics, DynamicsError, EdgeForce, Forces, Rollout};
 use crate::physics::constraints::{acceleration, Bars};
 use crate::physics::integrator::Integrator;
 use crate::physics::{applied_forces, Field, SystemConfig, SystemKind};
@@ -26,19 +26,23 @@ impl Dynamics for Truth {
         )
     }
 
-    fn supports(&self, graph: &Graph) -> Result<(), String> {
+    fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
         graph.validate()?;
-        self.field.validate(graph.dim)
+        Ok(self.field.validate(graph.dim)?)
     }
 
-    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
+    fn acceleration(
+        &self,
+        graph: &Graph,
+        state: &State,
+        out: &mut [f64],
+    ) -> Result<(), DynamicsError> {
         state.validate(graph)?;
         if out.len() != graph.ndof() {
-            return Err(format!(
-                "output has {} slots, need {}",
-                out.len(),
-                graph.ndof()
-            ));
+            return Err(DynamicsError::OutputSize {
+                got: out.len(),
+                need: graph.ndof(),
+            });
         }
         out.copy_from_slice(&acceleration(graph, &self.field, state));
         Ok(())
@@ -46,7 +50,7 @@ impl Dynamics for Truth {
 
     /// Total force m·q̈ (constraint forces included) and, per particle edge,
     /// the spring force or the bar's constraint force on `a` due to `b`.
-    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String> {
+    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, DynamicsError> {
         self.supports(graph)?;
         state.validate(graph)?;
         let d = graph.dim;
@@ -118,7 +122,7 @@ impl Dynamics for Truth {
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<Vec<State>, String> {
+    ) -> Result<Vec<State>, DynamicsError> {
         self.supports(graph)?;
         let every = every.max(1);
         let mut it = Integrator::new(graph, &self.field, dt, start.clone())?;
@@ -127,9 +131,7 @@ impl Dynamics for Truth {
         for step in 1..=steps {
             it.step();
             if it.state().validate(graph).is_err() {
-                return Err(format!(
-                    "rollout diverged (non-finite state) at step {step}"
-                ));
+                return Err(DynamicsError::Diverged(step));
             }
             if step % every == 0 {
                 out.push(it.state().clone());
@@ -146,7 +148,7 @@ impl Dynamics for Truth {
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<Vec<Rollout>, String> {
+    ) -> Result<Vec<Rollout>, DynamicsError> {
         starts
             .iter()
             .map(|s| {
@@ -170,13 +172,11 @@ pub fn is_truth(model: &str) -> bool {
 /// The exact dynamics in the field of the paper's `spring` or `pendulum`
 /// system (no gravity for springs, g = 10 for pendulums); they work for any
 /// graph of springs and bars, not only the paper's.
-pub fn load_truth(model: &str) -> Result<Arc<dyn Dynamics>, String> {
+pub fn load_truth(model: &str) -> Result<Arc<dyn Dynamics>, TruthError> {
     let name = model
         .strip_prefix(TRUTH_PREFIX)
-        .ok_or_else(|| format!("{model:?} is not a truth:<system> model name"))?;
-    let kind: SystemKind = name
-        .parse()
-        .map_err(|e: crate::names::UnknownName| e.to_string())?;
+        .ok_or_else(|| TruthError::NotTruth(model.to_string()))?;
+    let kind: SystemKind = name.parse()?;
     let field = SystemConfig::new(kind, 1).field;
     let trained = crate::compat::TrainedFor::truth(model, field.clone());
     Ok(Arc::new(super::Checked::new(
@@ -186,6 +186,17 @@ pub fn load_truth(model: &str) -> Result<Arc<dyn Dynamics>, String> {
         }),
         trained,
     )))
+}
+
+/// A model name that selects no ground truth.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum TruthError {
+    /// The name does not start with `truth:`.
+    #[error("{0:?} is not a truth:<system> model name")]
+    NotTruth(String),
+    /// `truth:` names no system kind.
+    #[error(transparent)]
+    UnknownSystem(#[from] crate::names::UnknownName),
 }
 
 /// [`Truth`] under the name it was selected by, so diagnostics say which.
@@ -199,7 +210,7 @@ impl Dynamics for TruthModel {
         format!("{}: {}", self.name, self.truth.describe())
     }
 
-    fn supports(&self, graph: &crate::system::Graph) -> Result<(), String> {
+    fn supports(&self, graph: &crate::system::Graph) -> Result<(), DynamicsError> {
         self.truth.supports(graph)
     }
 
@@ -208,7 +219,7 @@ impl Dynamics for TruthModel {
         graph: &crate::system::Graph,
         state: &crate::system::State,
         out: &mut [f64],
-    ) -> Result<(), String> {
+    ) -> Result<(), DynamicsError> {
         self.truth.acceleration(graph, state, out)
     }
 
@@ -216,7 +227,7 @@ impl Dynamics for TruthModel {
         &self,
         graph: &crate::system::Graph,
         state: &crate::system::State,
-    ) -> Result<crate::dynamics::Forces, String> {
+    ) -> Result<crate::dynamics::Forces, DynamicsError> {
         self.truth.forces(graph, state)
     }
 
@@ -226,7 +237,7 @@ impl Dynamics for TruthModel {
         start: &crate::system::State,
         dt: f64,
         steps: usize,
-    ) -> Result<Vec<crate::system::State>, String> {
+    ) -> Result<Vec<crate::system::State>, DynamicsError> {
         self.truth.rollout(graph, start, dt, steps)
     }
 
@@ -239,7 +250,7 @@ impl Dynamics for TruthModel {
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<Vec<crate::system::State>, String> {
+    ) -> Result<Vec<crate::system::State>, DynamicsError> {
         self.truth.rollout_every(graph, start, dt, steps, every)
     }
 
@@ -250,7 +261,7 @@ impl Dynamics for TruthModel {
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<Vec<crate::dynamics::Rollout>, String> {
+    ) -> Result<Vec<crate::dynamics::Rollout>, DynamicsError> {
         self.truth.rollout_many(graph, starts, dt, steps, every)
     }
 
@@ -259,7 +270,7 @@ impl Dynamics for TruthModel {
         graph: &crate::system::Graph,
         states: &[crate::system::State],
         out: &mut [Vec<f64>],
-    ) -> Result<(), String> {
+    ) -> Result<(), DynamicsError> {
         self.truth.acceleration_batch(graph, states, out)
     }
 }
@@ -278,7 +289,7 @@ mod tests {
             "{}",
             pendulum.describe()
         );
-        let e = load_truth("truth:rope").err().unwrap();
+        let e = load_truth("truth:rope").err().unwrap().to_string();
         assert!(e.contains("unknown system kind"), "{e}");
         assert!(load_truth("model.bin").is_err());
     }

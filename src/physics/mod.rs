@@ -13,17 +13,18 @@
 
 pub mod config;
 pub mod constraints;
+mod error;
 pub mod forces;
 pub mod integrator;
 mod linalg;
 pub mod projection;
 pub mod rk4;
 
-
 use serde::{Deserialize, Serialize};
 
 pub use config::SystemConfig;
 pub use constraints::{acceleration, bar_jacobian, constraint_residual};
+pub use error::PhysicsError;
 pub use forces::{applied_forces, hamiltonian, kinetic_energy, potential_energy};
 pub use integrator::Integrator;
 pub use projection::Projector;
@@ -97,21 +98,21 @@ pub struct Field {
 
 impl Field {
     /// Checks finiteness, a non-negative drag and the force's length.
-    pub fn validate(&self, dim: usize) -> Result<(), String> {
+    pub fn validate(&self, dim: usize) -> Result<(), PhysicsError> {
         if !self.gravity.is_finite() {
-            return Err(format!("gravity {} is not finite", self.gravity));
+            return Err(PhysicsError::Gravity(self.gravity));
         }
         if !(self.drag.is_finite() && self.drag >= 0.0) {
-            return Err(format!("drag {} must be a finite number ≥ 0", self.drag));
+            return Err(PhysicsError::Drag(self.drag));
         }
         if !self.force.is_empty() && self.force.len() != dim {
-            return Err(format!(
-                "external force has {} components, the system is {dim}-dimensional",
-                self.force.len()
-            ));
+            return Err(PhysicsError::ForceLength {
+                components: self.force.len(),
+                dim,
+            });
         }
         if self.force.iter().any(|x| !x.is_finite()) {
-            return Err("external force is not finite".into());
+            return Err(PhysicsError::ForceNotFinite);
         }
         Ok(())
     }

@@ -2,9 +2,8 @@
 //! paper's training data for HGN (`simulate --integrator rk4`). The baseline
 //! itself is [`crate::baselines::hgn`].
 
-use super::{acceleration as true_acceleration, SystemConfig};
+use super::{acceleration as true_acceleration, PhysicsError, SystemConfig};
 use crate::system::{Graph, Sample, State, Trajectory};
-use anyhow::Result;
 
 /// One RK4 step of the true Hamiltonian system on (q, p): q̇ = p/m,
 /// ṗ = m·q̈ with q̈ the exact constrained acceleration (for springs this is
@@ -49,8 +48,8 @@ pub fn rk4_trajectories(
     c: &SystemConfig,
     trajectories: usize,
     seed: u64,
-) -> Result<Vec<Trajectory>> {
-    c.validate().map_err(anyhow::Error::msg)?;
+) -> Result<Vec<Trajectory>, PhysicsError> {
+    c.validate()?;
     let g = c.graph();
     let d = g.dim;
     let mut out = Vec::with_capacity(trajectories);
@@ -78,7 +77,11 @@ pub fn rk4_trajectories(
             let state = State { q: q.clone(), v };
             state
                 .validate(&g)
-                .map_err(|e| anyhow::anyhow!("trajectory {i} diverged at sample {k}: {e}"))?;
+                .map_err(|cause| PhysicsError::Rk4Diverged {
+                    id: i,
+                    sample: k,
+                    cause,
+                })?;
             samples.push(Sample {
                 t: (k * c.save_every) as f64 * c.dt,
                 acc: Some(true_acceleration(&g, &c.field, &state)),

@@ -208,7 +208,7 @@ impl Shared {
         if let Some(t) = model.trained_for() {
             let (graph, _) = msg.to_parts().map_err(|e| e.to_string())?;
             let field = msg.field().map_err(|e| e.to_string())?;
-            t.check(&graph, field.as_ref())?;
+            t.check(&graph, field.as_ref()).map_err(|e| e.to_string())?;
         }
         let p = predict::predict(
             model.as_ref(),
