@@ -369,7 +369,7 @@ fn training_gradients_match_finite_differences() {
                 .unwrap()
                 .to_vec1::<f64>()
                 .unwrap();
-            for &k in [0usize, base.len() / 2, base.len() - 1].iter() {
+            for &k in &[0usize, base.len() / 2, base.len() - 1] {
                 let h = 1e-5;
                 let eval = |x: f64| {
                     let mut p = base.clone();

@@ -196,7 +196,7 @@ fn engine_gradients_equal_candle_and_finite_differences() {
         // Candle.
         let plan = GraphPlan::new(g);
         let sr: Vec<&State> = states.iter().collect();
-        let tr: Vec<&[f64]> = targets.iter().map(|t| t.as_slice()).collect();
+        let tr: Vec<&[f64]> = targets.iter().map(std::vec::Vec::as_slice).collect();
         let batch = Batch::new(&plan, &sr, Some(&tr), case.hyper.types).unwrap();
         let loss_c = net.loss(&batch).unwrap();
         let grads_c = loss_c.backward().unwrap();

@@ -182,7 +182,7 @@ fn summary_band_by_hand() {
 fn growing(t: &[f64], a: f64) -> Summary {
     let curves: Vec<ErrorCurves> = (0..10)
         .map(|i| {
-            let f = 1.0 + 0.3 * i as f64;
+            let f = 1.0 + 0.3 * f64::from(i);
             ErrorCurves {
                 t: t.to_vec(),
                 re: t.iter().map(|x| f * a * x.exp()).collect(),
@@ -199,7 +199,7 @@ fn growing(t: &[f64], a: f64) -> Summary {
 
 #[test]
 fn plot_is_written_as_png() {
-    let t: Vec<f64> = (0..100).map(|k| k as f64 * 0.1).collect();
+    let t: Vec<f64> = (0..100).map(|k| f64::from(k) * 0.1).collect();
     let panels = vec![
         (
             "5-spring".to_string(),

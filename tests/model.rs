@@ -131,7 +131,7 @@ fn model_gradients_match_finite_differences() {
         .collect();
     let plan = GraphPlan::new(&g);
     let sr: Vec<&State> = st.iter().collect();
-    let ar: Vec<&[f64]> = acc.iter().map(|a| a.as_slice()).collect();
+    let ar: Vec<&[f64]> = acc.iter().map(std::vec::Vec::as_slice).collect();
     let batch = Batch::new(&plan, &sr, Some(&ar), 1).unwrap();
     for v in Variant::ALL {
         let net = Net::new(Hyper::new(v, 2, 1, 3), &mut ChaCha8Rng::seed_from_u64(5)).unwrap();

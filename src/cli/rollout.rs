@@ -54,34 +54,31 @@ pub struct Args {
 pub fn run(a: Args) -> Result<()> {
     let model = load_any_model(&a.model)?.dynamics;
     let trained = crate::models::trained_for(&a.model)?;
-    let (graph, start, system, mut cfg, field, stamp_dt) = match &a.initial {
-        Some(paths) => {
-            let bag = read_bags(
-                paths,
-                &ReadOptions {
-                    topic: a.topic.clone(),
-                },
-            )
-            .context("reading --initial")?;
-            let cfg = bag_system(&bag)?;
-            let field = bag.field.clone().or(cfg.as_ref().map(|c| c.field.clone()));
-            let tr = bag
-                .trajectories
-                .into_iter()
-                .find(|t| t.id == a.trajectory)
-                .with_context(|| format!("--initial has no trajectory {}", a.trajectory))?;
-            let stamp_dt = tr.samples.get(1).map(|s| s.t - tr.samples[0].t);
-            let s0 = tr.samples[0].state.clone();
-            (tr.graph, s0, tr.system, cfg, field, stamp_dt)
-        }
-        None => {
-            let cfg = SystemConfig::new(a.system, a.particles);
-            cfg.validate()?;
-            let g = cfg.graph();
-            let s0 = cfg.start_for(&g, a.seed, 0);
-            let field = Some(cfg.field.clone());
-            (g, s0, a.system.name().to_string(), Some(cfg), field, None)
-        }
+    let (graph, start, system, mut cfg, field, stamp_dt) = if let Some(paths) = &a.initial {
+        let bag = read_bags(
+            paths,
+            &ReadOptions {
+                topic: a.topic.clone(),
+            },
+        )
+        .context("reading --initial")?;
+        let cfg = bag_system(&bag)?;
+        let field = bag.field.clone().or(cfg.as_ref().map(|c| c.field.clone()));
+        let tr = bag
+            .trajectories
+            .into_iter()
+            .find(|t| t.id == a.trajectory)
+            .with_context(|| format!("--initial has no trajectory {}", a.trajectory))?;
+        let stamp_dt = tr.samples.get(1).map(|s| s.t - tr.samples[0].t);
+        let s0 = tr.samples[0].state.clone();
+        (tr.graph, s0, tr.system, cfg, field, stamp_dt)
+    } else {
+        let cfg = SystemConfig::new(a.system, a.particles);
+        cfg.validate()?;
+        let g = cfg.graph();
+        let s0 = cfg.start_for(&g, a.seed, 0);
+        let field = Some(cfg.field.clone());
+        (g, s0, a.system.name().to_string(), Some(cfg), field, None)
     };
     trained.check(&graph, field.as_ref())?;
     // Without a flag or a system_config, the step is the recorded interval and

@@ -66,7 +66,7 @@ pub fn config(a: &Args) -> Result<SystemConfig> {
         c.field.drag = d;
     }
     if let Some(f) = &a.force {
-        c.field.force = f.0.clone();
+        c.field.force.clone_from(&f.0);
     }
     if let Some(g) = a.gravity {
         c.field.gravity = g;

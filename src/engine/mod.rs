@@ -55,7 +55,7 @@ pub struct Engine {
 
 /// The number of cores, for `--threads` defaults.
 pub fn all_cores() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get())
+    std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
 }
 
 impl Engine {

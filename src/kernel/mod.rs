@@ -163,7 +163,7 @@ impl Kernel {
         let mut width = mlps
             .iter()
             .filter_map(|m| m.as_ref())
-            .map(|m| m.width())
+            .map(dense::Mlp::width)
             .max()
             .unwrap_or(1);
         for (a, b) in &self.rounds {

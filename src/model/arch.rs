@@ -158,13 +158,7 @@ impl Arch {
             EdgeInput::Concat => 2 * em,
             EdgeInput::Product => em,
         };
-        if !b.graph {
-            let io = h.particles * d;
-            let mut sizes = vec![2 * io];
-            sizes.extend(std::iter::repeat_n(h.node_hidden, h.node_layers));
-            sizes.push(io);
-            mlps.push((Block::Flat, sizes));
-        } else {
+        if b.graph {
             let node_in = match node_input {
                 NodeInput::TypeOnly => t,
                 NodeInput::Full => t + 2 * d,
@@ -190,6 +184,12 @@ impl Arch {
                     mlps.push(mlp(Block::NodeDecoder, inp, d, true));
                 }
             }
+        } else {
+            let io = h.particles * d;
+            let mut sizes = vec![2 * io];
+            sizes.extend(std::iter::repeat_n(h.node_hidden, h.node_layers));
+            sizes.push(io);
+            mlps.push((Block::Flat, sizes));
         }
         Self {
             dim: d,

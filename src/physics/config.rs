@@ -309,7 +309,7 @@ impl SystemConfig {
                 q[i * d + c] = scale * x + rng.random_range(-0.01..0.01) * r0;
             }
         }
-        for x in v.iter_mut() {
+        for x in &mut v {
             *x = rng.random_range(-0.05..0.05) * vscale;
         }
         let mtot: f64 = graph.masses.iter().sum();
@@ -393,7 +393,7 @@ impl SystemConfig {
                     let ph = rng.random_range(0.0..2.0 * PI);
                     let u = [th.sin() * ph.cos(), -th.cos(), th.sin() * ph.sin()];
                     let mut w = [0.0; 3];
-                    for x in w.iter_mut() {
+                    for x in &mut w {
                         *x = rng.random_range(-1.0..1.0) * wscale * l;
                     }
                     let dot: f64 = (0..3).map(|c| u[c] * w[c]).sum();
@@ -510,7 +510,7 @@ impl SystemConfig {
         }
         let graph = self.graph();
         let threads = std::thread::available_parallelism()
-            .map_or(1, |n| n.get())
+            .map_or(1, std::num::NonZero::get)
             .min(trajectories.max(1));
         let run = |i: usize| {
             let start = self.start_for(&graph, seed, i);

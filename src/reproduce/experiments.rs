@@ -372,7 +372,7 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
     );
     let bl: Vec<String> = ["mcgnode", "lgn", "hgn", "gns"]
         .iter()
-        .map(|s| s.to_string())
+        .map(std::string::ToString::to_string)
         .collect();
     md += &format!(
         "### MCGNODE against LGN, HGN and GNS (paper Figs. 2–3)\n\n{}",
@@ -442,7 +442,7 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
             .map_or(f64::NAN, |r| r.rollout_seconds);
         let r = &t.report;
         timing.push(vec![
-            label.to_string(),
+            label.clone(),
             r.epochs_run.to_string(),
             format!("{:.1}", r.seconds),
             format!("{:.1}", 1e3 * r.seconds / r.epochs_run.max(1) as f64),
@@ -595,7 +595,10 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
         .chain(names.iter().map(|m| format!("{m} RE / ME")))
         .collect();
     md += &table(
-        &header.iter().map(|s| s.as_str()).collect::<Vec<_>>(),
+        &header
+            .iter()
+            .map(std::string::String::as_str)
+            .collect::<Vec<_>>(),
         &body,
     );
     md += "\nTime averages, with the absolute errors:\n\n";
@@ -875,7 +878,10 @@ fn sweep(lab: &Lab, sc: &Scale, w: Sweep<'_>) -> Result<Section> {
         })
         .collect();
     md += &table(
-        &header.iter().map(|s| s.as_str()).collect::<Vec<_>>(),
+        &header
+            .iter()
+            .map(std::string::String::as_str)
+            .collect::<Vec<_>>(),
         &body,
     );
     Ok(section(md, rows, &plain, trained))

@@ -86,7 +86,7 @@ pub fn run(opts: &Options, log: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
         lab.threads,
         seconds,
         seconds / 60.0,
-        std::thread::available_parallelism().map_or(1, |n| n.get())
+        std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
     );
     md += "Metrics (paper's definitions): RE = ‖q̂ − q‖/(‖q̂‖ + ‖q‖), EE the same for the \
            Hamiltonian, ME for the total momentum; ME scaled = ‖P̂ − P‖/(Σm|v̂| + Σm|v|) \
