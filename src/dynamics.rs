@@ -105,6 +105,27 @@ pub fn verlet_lockstep(
     Ok(out)
 }
 
+/// [`Dynamics::rollout_many`] as one [`Dynamics::rollout_every`] per start,
+/// for models whose rollouts do not diverge (an error fails the call).
+pub fn rollout_each(
+    model: &(impl Dynamics + ?Sized),
+    graph: &Graph,
+    starts: &[State],
+    dt: f64,
+    steps: usize,
+    every: usize,
+) -> Result<Vec<Rollout>, DynamicsError> {
+    starts
+        .iter()
+        .map(|s| {
+            Ok(Rollout {
+                states: model.rollout_every(graph, s, dt, steps, every)?,
+                diverged_at: None,
+            })
+        })
+        .collect()
+}
+
 /// The buffers of [`Dynamics::acceleration_batch`]: one per state.
 pub fn check_batch(states: &[State], out: &[Vec<f64>]) -> Result<(), DynamicsError> {
     if states.len() == out.len() {
@@ -295,15 +316,7 @@ impl Dynamics for Still {
         steps: usize,
         every: usize,
     ) -> Result<Vec<Rollout>, DynamicsError> {
-        starts
-            .iter()
-            .map(|s| {
-                Ok(Rollout {
-                    states: self.rollout_every(graph, s, dt, steps, every)?,
-                    diverged_at: None,
-                })
-            })
-            .collect()
+        rollout_each(self, graph, starts, dt, steps, every)
     }
 }
 

@@ -149,15 +149,7 @@ impl Dynamics for Truth {
         steps: usize,
         every: usize,
     ) -> Result<Vec<Rollout>, DynamicsError> {
-        starts
-            .iter()
-            .map(|s| {
-                Ok(Rollout {
-                    states: self.rollout_every(graph, s, dt, steps, every)?,
-                    diverged_at: None,
-                })
-            })
-            .collect()
+        crate::dynamics::rollout_each(self, graph, starts, dt, steps, every)
     }
 }
 

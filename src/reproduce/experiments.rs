@@ -2,7 +2,7 @@
 //! section of the report and its result rows.
 
 use super::lab::{Job, Lab, TrainSpec, Trained};
-use super::report::{error_table, num, table, Row};
+use super::report::{error_table, num, table, Experiment, Row};
 use super::scale::Scale;
 use crate::baselines::Kind;
 use crate::evaluate::Evaluation;
@@ -90,7 +90,7 @@ fn cfg(epochs: usize) -> TrainConfig {
 
 /// An evaluation job description: (row experiment, system, label, particles, x, model, bag, dt, max).
 struct EvalJob {
-    experiment: &'static str,
+    experiment: Experiment,
     system: String,
     label: String,
     particles: usize,
@@ -132,7 +132,7 @@ fn run_evals(lab: &Lab, jobs: Vec<EvalJob>) -> Vec<Row> {
 /// Panels for [`plot_metrics`]: one per particle count, the given models.
 fn panels(
     rows: &[Row],
-    experiment: &str,
+    experiment: Experiment,
     system: &str,
     sizes: &[usize],
     models: &[String],
@@ -274,11 +274,11 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
     // The GNODE family gets `family_epochs` (the bias ladder); MCGNODE and
     // the baselines meet at `epochs` each (the baseline comparison): the
     // candle baselines cost 10–50× more per epoch.
-    let mut specs: Vec<(&'static str, TrainSpec)> = FAMILY
+    let mut specs: Vec<(Experiment, TrainSpec)> = FAMILY
         .iter()
         .map(|&v| {
             (
-                "biases",
+                Experiment::Biases,
                 TrainSpec {
                     label: format!("{v}-5-{sys}"),
                     kind: ModelKind::Family(v),
@@ -293,7 +293,7 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
         .chain(BASELINES.iter().map(|&k| ModelKind::Baseline(k)))
     {
         specs.push((
-            "baselines",
+            Experiment::Baselines,
             TrainSpec {
                 label: format!("{k}-5-{sys}-{}ep", sc.epochs),
                 kind: k,
@@ -316,7 +316,7 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
         let k = spec.kind;
         let (evals, max): (Vec<usize>, usize) = match (*experiment, k) {
             (_, ModelKind::Family(Variant::Node)) => (vec![5], sc.test_trajectories),
-            ("biases", _) => (sizes.clone(), sc.test_trajectories),
+            (Experiment::Biases, _) => (sizes.clone(), sc.test_trajectories),
             _ => (bsizes.clone(), sc.baseline_test_trajectories),
         };
         for n in evals {
@@ -326,7 +326,7 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
                 .expect("bag simulated")
                 .1;
             jobs.push(EvalJob {
-                experiment,
+                experiment: *experiment,
                 system: sys.into(),
                 label: k.name().into(),
                 particles: n,
@@ -366,7 +366,7 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
         figure(
             lab,
             &format!("biases-{sys}.png"),
-            &panels(&rows, "biases", sys, sizes, &fam),
+            &panels(&rows, Experiment::Biases, sys, sizes, &fam),
             &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
         )
     );
@@ -379,13 +379,16 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
         figure(
             lab,
             &format!("baselines-{sys}.png"),
-            &panels(&rows, "baselines", sys, bsizes, &bl),
+            &panels(&rows, Experiment::Baselines, sys, bsizes, &bl),
             &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
         )
     );
     for (exp, what) in [
-        ("biases", "the GNODE family"),
-        ("baselines", "MCGNODE and the baselines at equal epochs"),
+        (Experiment::Biases, "the GNODE family"),
+        (
+            Experiment::Baselines,
+            "MCGNODE and the baselines at equal epochs",
+        ),
     ] {
         let mut sorted: Vec<&Row> = rows.iter().filter(|r| r.experiment == exp).collect();
         sorted.sort_by_key(|r| r.particles);
@@ -405,14 +408,15 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
             let mut c = SystemConfig::new(kind, n);
             c.states = states;
             let bag = lab.bag(&format!("test-{n}-{sys}"), &c, t, TEST_SEED, false)?;
-            for (label, tr) in &section_trained {
+            for ((exp, spec), (_, tr)) in specs.iter().zip(&section_trained) {
                 let Ok(tr) = tr else { continue };
-                let name = label.split('-').next().unwrap_or("");
-                if (name == "mcgnode" || name == "gnode") && *label == format!("{name}-5-{sys}") {
+                let k = spec.kind;
+                let zero_shot = [Variant::Mcgnode, Variant::Gnode].map(ModelKind::Family);
+                if *exp == Experiment::Biases && zero_shot.contains(&k) {
                     jobs.push(EvalJob {
-                        experiment: "large",
+                        experiment: Experiment::Large,
                         system: sys.into(),
-                        label: name.into(),
+                        label: k.name().into(),
                         particles: n,
                         x: None,
                         model: tr.path.clone(),
@@ -433,9 +437,9 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
     }
     md += &format!("### Training and forward-simulation time ({sys}; paper Tables 3–4)\n\n");
     let mut timing = vec![];
-    for ((exp, _), (label, t)) in specs.iter().zip(&section_trained) {
+    for ((exp, spec), (label, t)) in specs.iter().zip(&section_trained) {
         let Ok(t) = t else { continue };
-        let name = label.split('-').next().unwrap_or("");
+        let name = spec.kind.name();
         let fwd = rows
             .iter()
             .find(|r| r.model == name && r.particles == 5 && r.experiment == *exp)
@@ -516,7 +520,7 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
     for (k, t) in kinds.iter().zip(&trained) {
         if let Ok(t) = t {
             jobs.push(EvalJob {
-                experiment: "peridynamic",
+                experiment: Experiment::Peridynamic,
                 system: sys.into(),
                 label: k.name().into(),
                 particles: sc.peri_particles,
@@ -564,7 +568,13 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
     md += &figure(
         lab,
         "peridynamic.png",
-        &panels(&rows, "peridynamic", sys, &[sc.peri_particles], &names),
+        &panels(
+            &rows,
+            Experiment::Peridynamic,
+            sys,
+            &[sc.peri_particles],
+            &names,
+        ),
         &[Metric::Re, Metric::Me, Metric::ReAbs, Metric::MeAbs],
     );
     // The paper's tables: RE and ME at whole seconds.
@@ -662,7 +672,7 @@ pub fn drag_and_force(lab: &Lab, sc: &Scale) -> Result<Section> {
         let Ok(t) = t else { continue };
         let case = cases.iter().find(|c| s.bags[0] == c.1).expect("case");
         jobs.push(EvalJob {
-            experiment: "drag-force",
+            experiment: Experiment::DragForce,
             system: case.0.into(),
             label: s.kind.name().into(),
             particles: 5,
@@ -685,8 +695,14 @@ pub fn drag_and_force(lab: &Lab, sc: &Scale) -> Result<Section> {
         (sc.sweep_states - 1) as f64 * 0.1
     );
     let names = vec!["mcgnode".to_string(), "node".to_string()];
-    let mut p = panels(&rows, "drag-force", "spring+drag", &[5], &names);
-    p.extend(panels(&rows, "drag-force", "spring+force", &[5], &names));
+    let mut p = panels(&rows, Experiment::DragForce, "spring+drag", &[5], &names);
+    p.extend(panels(
+        &rows,
+        Experiment::DragForce,
+        "spring+force",
+        &[5],
+        &names,
+    ));
     md += &figure(
         lab,
         "drag-force.png",
@@ -738,7 +754,7 @@ fn sweep_lines(
 /// A sweep over one training setting on the 5-spring (noise or data size):
 /// what to train and how the section shows it.
 struct Sweep<'a> {
-    experiment: &'static str,
+    experiment: Experiment,
     models: &'a [ModelKind],
     xs: &'a [f64],
     train_trajectories: usize,
@@ -908,7 +924,7 @@ pub fn noise(lab: &Lab, sc: &Scale) -> Result<Section> {
         lab,
         sc,
         Sweep {
-            experiment: "noise",
+            experiment: Experiment::Noise,
             models: &models,
             xs: &sc.noise,
             train_trajectories: sc.sweep_train_trajectories,
@@ -944,7 +960,7 @@ pub fn data_efficiency(lab: &Lab, sc: &Scale) -> Result<Section> {
         lab,
         sc,
         Sweep {
-            experiment: "points",
+            experiment: Experiment::Points,
             models: &models,
             xs: &xs,
             train_trajectories: max.div_ceil(100),
