@@ -221,181 +221,13 @@ fn failures(trained: &[(String, anyhow::Result<Trained>)]) -> String {
 /// Biases, baselines, zero-shot sizes and timing on one system family
 /// (paper Figs. 1–4, the zero-shot figure and the timing tables).
 pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Section> {
-    let sys = kind.name();
-    let base = SystemConfig::new(kind, 5);
-    let train_bag = lab.bag(
-        &format!("train-5-{sys}"),
-        &base,
-        sc.train_trajectories,
-        TRAIN_SEED,
-        false,
-    )?;
-    // HGN learns from RK4 data on (q, p), as in the paper.
-    let hgn_bag = lab.bag(
-        &format!("train-5-{sys}-rk4"),
-        &base,
-        sc.train_trajectories,
-        TRAIN_SEED,
-        true,
-    )?;
-    let (sizes, bsizes, states, dt) = match kind {
-        SystemKind::Pendulum => (
-            &sc.pendulum_sizes,
-            &sc.baseline_pendulum_sizes,
-            sc.pendulum_states,
-            Some(sc.pendulum_dt),
-        ),
-        _ => (
-            &sc.spring_sizes,
-            &sc.baseline_spring_sizes,
-            sc.spring_states,
-            None,
-        ),
-    };
-    let mut all_sizes: Vec<usize> = sizes.iter().chain(bsizes.iter()).copied().collect();
-    all_sizes.sort_unstable();
-    all_sizes.dedup();
-    let mut test_bags = vec![];
-    for &n in &all_sizes {
-        let mut c = SystemConfig::new(kind, n);
-        c.states = states;
-        test_bags.push((
-            n,
-            lab.bag(
-                &format!("test-{n}-{sys}"),
-                &c,
-                sc.test_trajectories,
-                TEST_SEED,
-                false,
-            )?,
-        ));
-    }
-    lab.say(&format!("{sys}: simulated training and test bags"));
-    // The GNODE family gets `family_epochs` (the bias ladder); MCGNODE and
-    // the baselines meet at `epochs` each (the baseline comparison): the
-    // candle baselines cost 10–50× more per epoch.
-    let mut specs: Vec<(Experiment, TrainSpec)> = FAMILY
-        .iter()
-        .map(|&v| {
-            (
-                Experiment::Biases,
-                TrainSpec {
-                    label: format!("{v}-5-{sys}"),
-                    kind: ModelKind::Family(v),
-                    bags: vec![train_bag.clone()],
-                    cfg: cfg(sc.family_epochs),
-                    opts: ModelOptions::default(),
-                },
-            )
-        })
-        .collect();
-    for k in std::iter::once(ModelKind::Family(Variant::Mcgnode))
-        .chain(BASELINES.iter().map(|&k| ModelKind::Baseline(k)))
-    {
-        specs.push((
-            Experiment::Baselines,
-            TrainSpec {
-                label: format!("{k}-5-{sys}-{}ep", sc.epochs),
-                kind: k,
-                bags: vec![if k == ModelKind::Baseline(Kind::Hgn) {
-                    hgn_bag.clone()
-                } else {
-                    train_bag.clone()
-                }],
-                cfg: cfg(sc.epochs),
-                opts: ModelOptions::default(),
-            },
-        ));
-    }
+    let c = Comparison::simulate(lab, sc, kind)?;
+    let specs = c.specs(sc);
     let plain: Vec<TrainSpec> = specs.iter().map(|s| s.1.clone()).collect();
     let trained = lab.train_all(&plain);
-    lab.say(&format!("{sys}: trained {} models", specs.len()));
-    let mut jobs = vec![];
-    for ((experiment, spec), t) in specs.iter().zip(&trained) {
-        let Ok(t) = t else { continue };
-        let k = spec.kind;
-        let (evals, max): (Vec<usize>, usize) = match (*experiment, k) {
-            (_, ModelKind::Family(Variant::Node)) => (vec![5], sc.test_trajectories),
-            (Experiment::Biases, _) => (sizes.clone(), sc.test_trajectories),
-            _ => (bsizes.clone(), sc.baseline_test_trajectories),
-        };
-        for n in evals {
-            let bag = &test_bags
-                .iter()
-                .find(|b| b.0 == n)
-                .expect("bag simulated")
-                .1;
-            jobs.push(EvalJob {
-                experiment: *experiment,
-                system: sys.into(),
-                label: k.name().into(),
-                particles: n,
-                x: None,
-                model: t.path.clone(),
-                bag: bag.clone(),
-                dt,
-                max,
-            });
-        }
-    }
-    let mut rows = run_evals(lab, jobs);
-    let mut md = format!("## {sys}: inductive biases, baselines, zero-shot sizes\n\n");
-    md += &format!(
-        "Trained on {} trajectories of the 5-{sys} ({} states): the GNODE family for {} \
-         epochs, and MCGNODE, LGN, HGN and GNS for {} epochs each (HGN on RK4 data). \
-         Evaluated from held-out starts (seed {TEST_SEED}) over {} s with rollout step {} s \
-         ({} test trajectories for the GNODE family; the baseline comparison uses the first {} \
-         of them for every model). NODE is transductive: it runs only on the size it was \
-         trained on.\n\n",
-        sc.train_trajectories,
-        sc.train_trajectories * base.states,
-        sc.family_epochs,
-        sc.epochs,
-        (states - 1) as f64
-            * match kind {
-                SystemKind::Pendulum => 0.01,
-                _ => 0.1,
-            },
-        dt.unwrap_or(base.dt),
-        sc.test_trajectories,
-        sc.baseline_test_trajectories,
-    );
-    let fam: Vec<String> = FAMILY.iter().map(|v| v.name().to_string()).collect();
-    md += &format!(
-        "### Each bias in turn (paper Figs. 1 and 4)\n\n{}",
-        figure(
-            lab,
-            &format!("biases-{sys}.png"),
-            &panels(&rows, Experiment::Biases, sys, sizes, &fam),
-            &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
-        )
-    );
-    let bl: Vec<String> = ["mcgnode", "lgn", "hgn", "gns"]
-        .iter()
-        .map(std::string::ToString::to_string)
-        .collect();
-    md += &format!(
-        "### MCGNODE against LGN, HGN and GNS (paper Figs. 2–3)\n\n{}",
-        figure(
-            lab,
-            &format!("baselines-{sys}.png"),
-            &panels(&rows, Experiment::Baselines, sys, bsizes, &bl),
-            &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
-        )
-    );
-    for (exp, what) in [
-        (Experiment::Biases, "the GNODE family"),
-        (
-            Experiment::Baselines,
-            "MCGNODE and the baselines at equal epochs",
-        ),
-    ] {
-        let mut sorted: Vec<&Row> = rows.iter().filter(|r| r.experiment == exp).collect();
-        sorted.sort_by_key(|r| r.particles);
-        md += &format!("Time-averaged geometric means (t > 0), {what}:\n\n");
-        md += &error_table(&sorted);
-        md += "\n";
-    }
+    lab.say(&format!("{}: trained {} models", c.sys, specs.len()));
+    let mut rows = run_evals(lab, c.jobs(sc, &specs, &trained));
+    let mut md = c.results(lab, sc, &rows);
     let section_trained: TrainedList = specs
         .iter()
         .map(|s| s.1.label.clone())
@@ -403,12 +235,273 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
         .collect();
     md += &failures(&section_trained);
     if kind == SystemKind::Spring && !sc.large_springs.is_empty() {
+        let large = c.zero_shot_large(lab, sc, &specs, &section_trained)?;
+        md += "### Zero-shot to large rings (beyond the paper)\n\n";
+        md += "Trained on 5 springs, run unchanged on hundreds and thousands; rollout time \
+                is the wall time of one trajectory on the hand-written kernel (one core).\n\n";
+        md += &error_table(&large.iter().collect::<Vec<_>>());
+        md += "\n";
+        rows.extend(large);
+    }
+    md += &timing_table(lab, c.sys, &specs, &section_trained, &rows);
+    Ok(Section {
+        markdown: md,
+        rows,
+        trained: section_trained,
+    })
+}
+
+/// One system's comparison (GNODE family, baselines, zero-shot sizes): its
+/// simulated bags and the sizes and settings it is evaluated at.
+struct Comparison<'s> {
+    kind: SystemKind,
+    sys: &'static str,
+    base: SystemConfig,
+    train_bag: PathBuf,
+    hgn_bag: PathBuf,
+    sizes: &'s Vec<usize>,
+    bsizes: &'s Vec<usize>,
+    states: usize,
+    dt: Option<f64>,
+    test_bags: Vec<(usize, PathBuf)>,
+}
+
+impl<'s> Comparison<'s> {
+    /// Simulates the training bags (HGN's on RK4) and a test bag per size.
+    fn simulate(lab: &Lab, sc: &'s Scale, kind: SystemKind) -> Result<Self> {
+        let sys = kind.name();
+        let base = SystemConfig::new(kind, 5);
+        let train_bag = lab.bag(
+            &format!("train-5-{sys}"),
+            &base,
+            sc.train_trajectories,
+            TRAIN_SEED,
+            false,
+        )?;
+        // HGN learns from RK4 data on (q, p), as in the paper.
+        let hgn_bag = lab.bag(
+            &format!("train-5-{sys}-rk4"),
+            &base,
+            sc.train_trajectories,
+            TRAIN_SEED,
+            true,
+        )?;
+        let (sizes, bsizes, states, dt) = match kind {
+            SystemKind::Pendulum => (
+                &sc.pendulum_sizes,
+                &sc.baseline_pendulum_sizes,
+                sc.pendulum_states,
+                Some(sc.pendulum_dt),
+            ),
+            _ => (
+                &sc.spring_sizes,
+                &sc.baseline_spring_sizes,
+                sc.spring_states,
+                None,
+            ),
+        };
+        let mut all_sizes: Vec<usize> = sizes.iter().chain(bsizes.iter()).copied().collect();
+        all_sizes.sort_unstable();
+        all_sizes.dedup();
+        let mut test_bags = vec![];
+        for &n in &all_sizes {
+            let mut c = SystemConfig::new(kind, n);
+            c.states = states;
+            test_bags.push((
+                n,
+                lab.bag(
+                    &format!("test-{n}-{sys}"),
+                    &c,
+                    sc.test_trajectories,
+                    TEST_SEED,
+                    false,
+                )?,
+            ));
+        }
+        lab.say(&format!("{sys}: simulated training and test bags"));
+        Ok(Self {
+            kind,
+            sys,
+            base,
+            train_bag,
+            hgn_bag,
+            sizes,
+            bsizes,
+            states,
+            dt,
+            test_bags,
+        })
+    }
+
+    /// What to train, with the experiment each belongs to.
+    fn specs(&self, sc: &Scale) -> Vec<(Experiment, TrainSpec)> {
+        let (sys, train_bag, hgn_bag) = (self.sys, &self.train_bag, &self.hgn_bag);
+        // The GNODE family gets `family_epochs` (the bias ladder); MCGNODE and
+        // the baselines meet at `epochs` each (the baseline comparison): the
+        // candle baselines cost 10–50× more per epoch.
+        let mut specs: Vec<(Experiment, TrainSpec)> = FAMILY
+            .iter()
+            .map(|&v| {
+                (
+                    Experiment::Biases,
+                    TrainSpec {
+                        label: format!("{v}-5-{sys}"),
+                        kind: ModelKind::Family(v),
+                        bags: vec![train_bag.clone()],
+                        cfg: cfg(sc.family_epochs),
+                        opts: ModelOptions::default(),
+                    },
+                )
+            })
+            .collect();
+        for k in std::iter::once(ModelKind::Family(Variant::Mcgnode))
+            .chain(BASELINES.iter().map(|&k| ModelKind::Baseline(k)))
+        {
+            specs.push((
+                Experiment::Baselines,
+                TrainSpec {
+                    label: format!("{k}-5-{sys}-{}ep", sc.epochs),
+                    kind: k,
+                    bags: vec![if k == ModelKind::Baseline(Kind::Hgn) {
+                        hgn_bag.clone()
+                    } else {
+                        train_bag.clone()
+                    }],
+                    cfg: cfg(sc.epochs),
+                    opts: ModelOptions::default(),
+                },
+            ));
+        }
+        specs
+    }
+
+    /// The evaluations of the trained models: the family at every size,
+    /// MCGNODE and the baselines at the baseline sizes, NODE on its own.
+    fn jobs(
+        &self,
+        sc: &Scale,
+        specs: &[(Experiment, TrainSpec)],
+        trained: &[Result<Trained>],
+    ) -> Vec<EvalJob> {
+        let (sys, sizes, bsizes, dt, test_bags) =
+            (self.sys, self.sizes, self.bsizes, self.dt, &self.test_bags);
+        let mut jobs = vec![];
+        for ((experiment, spec), t) in specs.iter().zip(trained) {
+            let Ok(t) = t else { continue };
+            let k = spec.kind;
+            let (evals, max): (Vec<usize>, usize) = match (*experiment, k) {
+                (_, ModelKind::Family(Variant::Node)) => (vec![5], sc.test_trajectories),
+                (Experiment::Biases, _) => (sizes.clone(), sc.test_trajectories),
+                _ => (bsizes.clone(), sc.baseline_test_trajectories),
+            };
+            for n in evals {
+                let bag = &test_bags
+                    .iter()
+                    .find(|b| b.0 == n)
+                    .expect("bag simulated")
+                    .1;
+                jobs.push(EvalJob {
+                    experiment: *experiment,
+                    system: sys.into(),
+                    label: k.name().into(),
+                    particles: n,
+                    x: None,
+                    model: t.path.clone(),
+                    bag: bag.clone(),
+                    dt,
+                    max,
+                });
+            }
+        }
+        jobs
+    }
+
+    /// The section's text, figures and error tables.
+    fn results(&self, lab: &Lab, sc: &Scale, rows: &[Row]) -> String {
+        let (kind, sys, base, sizes, bsizes, states, dt) = (
+            self.kind,
+            self.sys,
+            &self.base,
+            self.sizes,
+            self.bsizes,
+            self.states,
+            self.dt,
+        );
+        let mut md = format!("## {sys}: inductive biases, baselines, zero-shot sizes\n\n");
+        md += &format!(
+            "Trained on {} trajectories of the 5-{sys} ({} states): the GNODE family for {} \
+             epochs, and MCGNODE, LGN, HGN and GNS for {} epochs each (HGN on RK4 data). \
+             Evaluated from held-out starts (seed {TEST_SEED}) over {} s with rollout step {} s \
+             ({} test trajectories for the GNODE family; the baseline comparison uses the first {} \
+             of them for every model). NODE is transductive: it runs only on the size it was \
+             trained on.\n\n",
+            sc.train_trajectories,
+            sc.train_trajectories * base.states,
+            sc.family_epochs,
+            sc.epochs,
+            (states - 1) as f64
+                * match kind {
+                    SystemKind::Pendulum => 0.01,
+                    _ => 0.1,
+                },
+            dt.unwrap_or(base.dt),
+            sc.test_trajectories,
+            sc.baseline_test_trajectories,
+        );
+        let fam: Vec<String> = FAMILY.iter().map(|v| v.name().to_string()).collect();
+        md += &format!(
+            "### Each bias in turn (paper Figs. 1 and 4)\n\n{}",
+            figure(
+                lab,
+                &format!("biases-{sys}.png"),
+                &panels(rows, Experiment::Biases, sys, sizes, &fam),
+                &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
+            )
+        );
+        let bl: Vec<String> = ["mcgnode", "lgn", "hgn", "gns"]
+            .iter()
+            .map(std::string::ToString::to_string)
+            .collect();
+        md += &format!(
+            "### MCGNODE against LGN, HGN and GNS (paper Figs. 2–3)\n\n{}",
+            figure(
+                lab,
+                &format!("baselines-{sys}.png"),
+                &panels(rows, Experiment::Baselines, sys, bsizes, &bl),
+                &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
+            )
+        );
+        for (exp, what) in [
+            (Experiment::Biases, "the GNODE family"),
+            (
+                Experiment::Baselines,
+                "MCGNODE and the baselines at equal epochs",
+            ),
+        ] {
+            let mut sorted: Vec<&Row> = rows.iter().filter(|r| r.experiment == exp).collect();
+            sorted.sort_by_key(|r| r.particles);
+            md += &format!("Time-averaged geometric means (t > 0), {what}:\n\n");
+            md += &error_table(&sorted);
+            md += "\n";
+        }
+        md
+    }
+
+    /// The 5-spring models of the family, run unchanged on large rings.
+    fn zero_shot_large(
+        &self,
+        lab: &Lab,
+        sc: &Scale,
+        specs: &[(Experiment, TrainSpec)],
+        section_trained: &TrainedList,
+    ) -> Result<Vec<Row>> {
+        let (kind, sys, states, dt) = (self.kind, self.sys, self.states, self.dt);
         let mut jobs = vec![];
         for &(n, t) in &sc.large_springs {
             let mut c = SystemConfig::new(kind, n);
             c.states = states;
             let bag = lab.bag(&format!("test-{n}-{sys}"), &c, t, TEST_SEED, false)?;
-            for ((exp, spec), (_, tr)) in specs.iter().zip(&section_trained) {
+            for ((exp, spec), (_, tr)) in specs.iter().zip(section_trained) {
                 let Ok(tr) = tr else { continue };
                 let k = spec.kind;
                 let zero_shot = [Variant::Mcgnode, Variant::Gnode].map(ModelKind::Family);
@@ -427,17 +520,22 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
                 }
             }
         }
-        let large = run_evals(lab, jobs);
-        md += "### Zero-shot to large rings (beyond the paper)\n\n";
-        md += "Trained on 5 springs, run unchanged on hundreds and thousands; rollout time \
-                is the wall time of one trajectory on the hand-written kernel (one core).\n\n";
-        md += &error_table(&large.iter().collect::<Vec<_>>());
-        md += "\n";
-        rows.extend(large);
+        Ok(run_evals(lab, jobs))
     }
+}
+
+/// Training and forward-simulation time of every model of a comparison.
+fn timing_table(
+    lab: &Lab,
+    sys: &str,
+    specs: &[(Experiment, TrainSpec)],
+    section_trained: &TrainedList,
+    rows: &[Row],
+) -> String {
+    let mut md = String::new();
     md += &format!("### Training and forward-simulation time ({sys}; paper Tables 3–4)\n\n");
     let mut timing = vec![];
-    for ((exp, spec), (label, t)) in specs.iter().zip(&section_trained) {
+    for ((exp, spec), (label, t)) in specs.iter().zip(section_trained) {
         let Ok(t) = t else { continue };
         let name = spec.kind.name();
         let fwd = rows
@@ -472,11 +570,7 @@ pub fn main_comparison(lab: &Lab, sc: &Scale, kind: SystemKind) -> Result<Sectio
          trajectories together in one candle call per step (time divided by their number).\n\n",
         lab.threads
     );
-    Ok(Section {
-        markdown: md,
-        rows,
-        trained: section_trained,
-    })
+    md
 }
 
 /// The 3D peridynamic solid: MCGNODE vs GNODE vs GNS (paper Fig. 9, its
