@@ -2,11 +2,12 @@
 //! engine (forward + backward, batch 100) and one kernel step of a rollout.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use mcgnode::bench::{random_model, rollout_seconds, training_set};
+use mcgnode::bench::{rollout_seconds, training_set};
 use mcgnode::engine::{all_cores, Engine};
 use mcgnode::model::Variant;
 use mcgnode::model::{Hyper, Net};
 use mcgnode::physics::{SystemConfig, SystemKind};
+use mcgnode::testing::random_model;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 

@@ -6,11 +6,9 @@
 //! data under gravity).
 
 use std::path::Path;
-use std::sync::Arc;
 
-use crate::dynamics::{Dynamics, Forces, Rollout};
 use crate::physics::{Field, SystemConfig, SystemKind};
-use crate::system::{EdgeKind, Graph, State};
+use crate::system::{EdgeKind, Graph};
 
 /// What a model was trained on, as far as its file tells (`None`: unknown,
 /// not checked).
@@ -126,13 +124,6 @@ impl TrainedFor {
 
     /// Reads a model file's training description.
     pub fn from_model_file(path: &Path) -> anyhow::Result<TrainedFor> {
-        if path == Path::new(crate::dynamics::STILL) {
-            // The reference fits any data.
-            return Ok(TrainedFor {
-                model: crate::dynamics::STILL.into(),
-                ..TrainedFor::default()
-            });
-        }
         let text = std::fs::read_to_string(path)
             .map_err(|e| anyhow::anyhow!("cannot read model file {}: {e}", path.display()))?;
         let v: serde_json::Value = serde_json::from_str(&text)
@@ -151,25 +142,26 @@ impl TrainedFor {
 
     /// Refuses a graph (and the field its data state, when known) the model
     /// was not trained for; the error says what differs.
-    pub fn check(&self, graph: &Graph, field: Option<&Field>) -> Result<(), String> {
+    pub fn check(&self, graph: &Graph, field: Option<&Field>) -> Result<(), Mismatch> {
         let m = &self.model;
         if let Some(d) = self.dim {
             if d != graph.dim {
-                return Err(format!(
-                    "model {m} was trained on {d}D data; these are {}D",
-                    graph.dim
-                ));
+                return Err(Mismatch::Dimension {
+                    model: m.clone(),
+                    trained: d,
+                    data: graph.dim,
+                });
             }
         }
         let have = EdgeKinds::of(graph);
         if let Some(e) = self.edges {
             let new_kind = (have.springs && !e.springs) || (have.bars && !e.bars);
             if new_kind || have.anchors != e.anchors {
-                return Err(format!(
-                    "model {m} was trained on a system with {}; these data have {}",
-                    e.words(),
-                    have.words()
-                ));
+                return Err(Mismatch::Edges {
+                    model: m.clone(),
+                    trained: e.words(),
+                    data: have.words(),
+                });
             }
         }
         if let Some(known) = &self.edge_params {
@@ -183,40 +175,97 @@ impl TrainedFor {
                 .iter()
                 .find(|p| !known.iter().any(|k| k.same(p)))
             {
-                return Err(format!(
-                    "model {m} was trained on edges {}; these data have a {}; a model trained \
-                     with --edge-physics reads each edge's rest length and stiffness",
-                    known.iter().map(words).collect::<Vec<_>>().join(", "),
-                    words(p)
-                ));
+                return Err(Mismatch::EdgeParams {
+                    model: m.clone(),
+                    trained: known.iter().map(words).collect::<Vec<_>>().join(", "),
+                    data: words(p),
+                });
             }
         }
         if self.closed == Some(true) && have.anchors {
-            return Err(format!(
-                "model {m} assumes a closed system (MCGNODE without its body-force branch); \
-                 these data have anchors"
-            ));
+            return Err(Mismatch::NotClosed {
+                model: m.clone(),
+                data: "have anchors".into(),
+            });
         }
         if let Some(data) = field {
             if self.closed == Some(true) && !data.is_free() {
-                return Err(format!(
-                    "model {m} assumes a closed system (MCGNODE without its body-force branch); \
-                     these data state {}",
-                    describe(data)
-                ));
+                return Err(Mismatch::NotClosed {
+                    model: m.clone(),
+                    data: format!("state {}", describe(data)),
+                });
             }
             if let Some(trained) = &self.field {
                 if trained.normalized() != data.normalized() {
-                    return Err(format!(
-                        "model {m} was trained with {}; these data state {}",
-                        describe(trained),
-                        describe(data)
-                    ));
+                    return Err(Mismatch::Field {
+                        model: m.clone(),
+                        trained: describe(trained),
+                        data: describe(data),
+                    });
                 }
             }
         }
         Ok(())
     }
+}
+
+/// How data differ from what a model was trained on; the message names both.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum Mismatch {
+    /// Another spatial dimension.
+    #[error("model {model} was trained on {trained}D data; these are {data}D")]
+    Dimension {
+        /// The model.
+        model: String,
+        /// Its training data's dimension.
+        trained: usize,
+        /// The data's.
+        data: usize,
+    },
+    /// Edge kinds (springs, bars, anchors) it was not trained on.
+    #[error("model {model} was trained on a system with {trained}; these data have {data}")]
+    Edges {
+        /// The model.
+        model: String,
+        /// Its training data's edge kinds, in words.
+        trained: String,
+        /// The data's.
+        data: String,
+    },
+    /// An edge (rest length, stiffness) it was not trained on and cannot read.
+    #[error(
+        "model {model} was trained on edges {trained}; these data have a {data}; a model \
+         trained with --edge-physics reads each edge's rest length and stiffness"
+    )]
+    EdgeParams {
+        /// The model.
+        model: String,
+        /// The edges it was trained on, in words.
+        trained: String,
+        /// The data's unknown edge.
+        data: String,
+    },
+    /// A closed-system model on data with anchors or a field.
+    #[error(
+        "model {model} assumes a closed system (MCGNODE without its body-force branch); \
+         these data {data}"
+    )]
+    NotClosed {
+        /// The model.
+        model: String,
+        /// What the data have ("have anchors", "state gravity ...").
+        data: String,
+    },
+    /// Another field than its training data's.
+    #[error("model {model} was trained with {trained}; these data state {data}")]
+    Field {
+        /// The model.
+        model: String,
+        /// Its training data's field, in words.
+        trained: String,
+        /// The data's.
+        data: String,
+    },
 }
 
 /// A field in words.
@@ -228,91 +277,6 @@ fn describe(f: &Field) -> String {
             "gravity {}, drag {}, force {:?}",
             f.gravity, f.drag, f.force
         )
-    }
-}
-
-/// A model with what it was trained on: [`Dynamics::supports`] also refuses
-/// graphs the model was not trained for, and
-/// [`Dynamics::trained_for`] lets a caller check the data's field.
-pub struct Checked {
-    inner: Arc<dyn Dynamics>,
-    trained: TrainedFor,
-}
-
-impl Checked {
-    /// Wraps `inner`.
-    pub fn new(inner: Arc<dyn Dynamics>, trained: TrainedFor) -> Checked {
-        Checked { inner, trained }
-    }
-}
-
-impl Dynamics for Checked {
-    fn describe(&self) -> String {
-        self.inner.describe()
-    }
-
-    fn supports(&self, graph: &Graph) -> Result<(), String> {
-        self.trained.check(graph, None)?;
-        self.inner.supports(graph)
-    }
-
-    fn trained_for(&self) -> Option<&TrainedFor> {
-        Some(&self.trained)
-    }
-
-    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
-        self.trained.check(graph, None)?;
-        self.inner.acceleration(graph, state, out)
-    }
-
-    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String> {
-        self.trained.check(graph, None)?;
-        self.inner.forces(graph, state)
-    }
-
-    fn rollout_every(
-        &self,
-        graph: &Graph,
-        start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
-    ) -> Result<Vec<State>, String> {
-        self.trained.check(graph, None)?;
-        self.inner.rollout_every(graph, start, dt, steps, every)
-    }
-
-    fn acceleration_batch(
-        &self,
-        graph: &Graph,
-        states: &[State],
-        out: &mut [Vec<f64>],
-    ) -> Result<(), String> {
-        self.trained.check(graph, None)?;
-        self.inner.acceleration_batch(graph, states, out)
-    }
-
-    fn rollout_many(
-        &self,
-        graph: &Graph,
-        starts: &[State],
-        dt: f64,
-        steps: usize,
-        every: usize,
-    ) -> Result<Vec<Rollout>, String> {
-        self.trained.check(graph, None)?;
-        self.inner.rollout_many(graph, starts, dt, steps, every)
-    }
-
-    fn rollout(
-        &self,
-        graph: &Graph,
-        start: &State,
-        dt: f64,
-        steps: usize,
-    ) -> Result<Vec<State>, String> {
-        self.trained.check(graph, None)?;
-        self.inner.rollout(graph, start, dt, steps)
     }
 }
 

@@ -2,7 +2,10 @@
 //! model, or the ground-truth physics) and whoever uses it (rollouts, metrics,
 //! the ROS node).
 
-use crate::system::{Graph, State};
+use crate::compat::Mismatch;
+use crate::model::arch::ArchError;
+use crate::physics::PhysicsError;
+use crate::system::{Graph, State, SystemError};
 
 /// Forces a model attributes to a state.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -46,10 +49,10 @@ pub fn verlet_lockstep(
     dt: f64,
     steps: usize,
     every: usize,
-    mut accel: impl FnMut(&[State], &mut [Vec<f64>]) -> Result<(), String>,
-) -> Result<Vec<Rollout>, String> {
+    mut accel: impl FnMut(&[State], &mut [Vec<f64>]) -> Result<(), DynamicsError>,
+) -> Result<Vec<Rollout>, DynamicsError> {
     if !(dt.is_finite() && dt > 0.0) {
-        return Err(format!("time step must be positive and finite, got {dt}"));
+        return Err(DynamicsError::TimeStep(dt));
     }
     for s in starts {
         s.validate(graph)?;
@@ -102,16 +105,36 @@ pub fn verlet_lockstep(
     Ok(out)
 }
 
+/// [`Dynamics::rollout_many`] as one [`Dynamics::rollout_every`] per start,
+/// for models whose rollouts do not diverge (an error fails the call).
+pub fn rollout_each(
+    model: &(impl Dynamics + ?Sized),
+    graph: &Graph,
+    starts: &[State],
+    dt: f64,
+    steps: usize,
+    every: usize,
+) -> Result<Vec<Rollout>, DynamicsError> {
+    starts
+        .iter()
+        .map(|s| {
+            Ok(Rollout {
+                states: model.rollout_every(graph, s, dt, steps, every)?,
+                diverged_at: None,
+            })
+        })
+        .collect()
+}
+
 /// The buffers of [`Dynamics::acceleration_batch`]: one per state.
-pub fn check_batch(states: &[State], out: &[Vec<f64>]) -> Result<(), String> {
+pub fn check_batch(states: &[State], out: &[Vec<f64>]) -> Result<(), DynamicsError> {
     if states.len() == out.len() {
         Ok(())
     } else {
-        Err(format!(
-            "{} states but {} output buffers: one per state is needed",
-            states.len(),
-            out.len()
-        ))
+        Err(DynamicsError::Buffers {
+            states: states.len(),
+            buffers: out.len(),
+        })
     }
 }
 
@@ -121,19 +144,24 @@ pub trait Dynamics: Send + Sync {
     fn describe(&self) -> String;
 
     /// Whether this graph can be handled (particle types known, dimension, ...).
-    fn supports(&self, graph: &Graph) -> Result<(), String>;
+    fn supports(&self, graph: &Graph) -> Result<(), DynamicsError>;
 
     /// What the model was trained on, when a caller wrapped it with that
-    /// knowledge ([`crate::compat::Checked`]); `None` otherwise.
+    /// knowledge ([`crate::models::Checked`]); `None` otherwise.
     fn trained_for(&self) -> Option<&crate::compat::TrainedFor> {
         None
     }
 
     /// Accelerations at a state, written to `out` (`n * dim`).
-    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String>;
+    fn acceleration(
+        &self,
+        graph: &Graph,
+        state: &State,
+        out: &mut [f64],
+    ) -> Result<(), DynamicsError>;
 
     /// Forces at a state.
-    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String>;
+    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, DynamicsError>;
 
     /// Velocity-Verlet rollout of `steps` steps of `dt`, keeping `start` and
     /// every `every`-th state (so a coarse output can come from a fine
@@ -148,7 +176,7 @@ pub trait Dynamics: Send + Sync {
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<Vec<State>, String> {
+    ) -> Result<Vec<State>, DynamicsError> {
         self.supports(graph)?;
         start.validate(graph)?;
         let every = every.max(1);
@@ -167,9 +195,7 @@ pub trait Dynamics: Send + Sync {
                 *v += 0.5 * a * dt;
             }
             if s.q.iter().chain(&s.v).any(|x| !x.is_finite()) {
-                return Err(format!(
-                    "rollout diverged (non-finite state) at step {step}"
-                ));
+                return Err(DynamicsError::Diverged(step));
             }
             if step % every == 0 {
                 out.push(s.clone());
@@ -185,7 +211,7 @@ pub trait Dynamics: Send + Sync {
         graph: &Graph,
         states: &[State],
         out: &mut [Vec<f64>],
-    ) -> Result<(), String> {
+    ) -> Result<(), DynamicsError> {
         check_batch(states, out)?;
         for (s, o) in states.iter().zip(out.iter_mut()) {
             self.acceleration(graph, s, o)?;
@@ -205,7 +231,7 @@ pub trait Dynamics: Send + Sync {
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<Vec<Rollout>, String> {
+    ) -> Result<Vec<Rollout>, DynamicsError> {
         self.supports(graph)?;
         verlet_lockstep(graph, starts, dt, steps, every, |s, a| {
             self.acceleration_batch(graph, s, a)
@@ -219,7 +245,7 @@ pub trait Dynamics: Send + Sync {
         start: &State,
         dt: f64,
         steps: usize,
-    ) -> Result<Vec<State>, String> {
+    ) -> Result<Vec<State>, DynamicsError> {
         self.rollout_every(graph, start, dt, steps, 1)
     }
 }
@@ -247,17 +273,22 @@ impl Dynamics for Still {
         "nothing moves (q̂(t) = q(0), at rest): the reference".into()
     }
 
-    fn supports(&self, graph: &Graph) -> Result<(), String> {
-        graph.validate()
+    fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
+        Ok(graph.validate()?)
     }
 
-    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
+    fn acceleration(
+        &self,
+        graph: &Graph,
+        state: &State,
+        out: &mut [f64],
+    ) -> Result<(), DynamicsError> {
         state.validate(graph)?;
         out.fill(0.0);
         Ok(())
     }
 
-    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String> {
+    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, DynamicsError> {
         state.validate(graph)?;
         Ok(Forces {
             total: vec![0.0; graph.ndof()],
@@ -272,7 +303,7 @@ impl Dynamics for Still {
         _dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<Vec<State>, String> {
+    ) -> Result<Vec<State>, DynamicsError> {
         start.validate(graph)?;
         Ok(vec![Self::at_rest(start); steps / every.max(1) + 1])
     }
@@ -284,15 +315,63 @@ impl Dynamics for Still {
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<Vec<Rollout>, String> {
-        starts
-            .iter()
-            .map(|s| {
-                Ok(Rollout {
-                    states: self.rollout_every(graph, s, dt, steps, every)?,
-                    diverged_at: None,
-                })
-            })
-            .collect()
+    ) -> Result<Vec<Rollout>, DynamicsError> {
+        rollout_each(self, graph, starts, dt, steps, every)
     }
+}
+
+/// Why a model cannot predict: the input is invalid or does not fit the
+/// model, or the prediction failed.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum DynamicsError {
+    /// The graph or a state is invalid.
+    #[error(transparent)]
+    System(#[from] SystemError),
+    /// The field (or the physics' input) is invalid.
+    #[error(transparent)]
+    Physics(#[from] PhysicsError),
+    /// The graph does not fit a GNODE-family model's architecture.
+    #[error(transparent)]
+    Arch(#[from] ArchError),
+    /// The data are not what the model was trained on ([`crate::compat`]).
+    #[error(transparent)]
+    NotTrainedFor(#[from] Mismatch),
+    /// A baseline meets a graph of another dimension.
+    #[error("{model} was trained on {trained}D systems, the graph is {graph}D")]
+    Dimension {
+        /// The model.
+        model: String,
+        /// Its dimension.
+        trained: usize,
+        /// The graph's.
+        graph: usize,
+    },
+    /// The integration step is not positive and finite.
+    #[error("time step must be positive and finite, got {0}")]
+    TimeStep(f64),
+    /// Not one output buffer per state.
+    #[error("{states} states but {buffers} output buffers: one per state is needed")]
+    Buffers {
+        /// States given.
+        states: usize,
+        /// Buffers given.
+        buffers: usize,
+    },
+    /// An output buffer of the wrong length.
+    #[error("output has {got} slots, need {need}")]
+    OutputSize {
+        /// Its length.
+        got: usize,
+        /// n · dim.
+        need: usize,
+    },
+    /// The rolled-out state turned non-finite at this step.
+    #[error("rollout diverged (non-finite state) at step {0}")]
+    Diverged(usize),
+    /// A thread of a parallel rollout panicked.
+    #[error("a rollout thread panicked")]
+    ThreadPanicked,
+    /// The model's own computation failed (candle), with its causes.
+    #[error("{0}")]
+    Model(String),
 }

@@ -4,9 +4,12 @@
 //! served as a ROS 2 node.
 //!
 //! Data flows one way: [`physics`] → [`simulate`] → [`data`] (bags) →
-//! [`train`] (on the [`engine`], or candle via [`model`]) → model file →
+//! [`train`] (on the [`engine`], or candle via [`model`]) → model file
+//! ([`models`] loads and trains any kind) →
 //! [`kernel`] rollouts ([`dynamics`], [`ros`]) → [`data`] → [`evaluate`] /
 //! [`replay`] → [`metrics`].
+
+#![deny(missing_docs)]
 
 pub mod alloc;
 pub mod baselines;
@@ -20,6 +23,8 @@ pub mod evaluate;
 pub mod kernel;
 pub mod metrics;
 pub mod model;
+pub mod models;
+pub mod names;
 pub mod physics;
 pub mod plot;
 pub mod replay;
@@ -27,4 +32,6 @@ pub mod reproduce;
 pub mod ros;
 pub mod simulate;
 pub mod system;
+#[doc(hidden)]
+pub mod testing;
 pub mod train;

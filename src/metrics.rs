@@ -38,6 +38,71 @@ pub const DIVERGED: f64 = 1e300;
 /// z-value of a two-sided 95% normal band.
 const Z95: f64 = 1.96;
 
+/// Why error curves cannot be computed or summarised.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum MetricsError {
+    /// Truth, prediction and times of different lengths.
+    #[error("{truth} true states, {pred} predicted states and {times} times: they must match")]
+    Lengths {
+        /// True states.
+        truth: usize,
+        /// Predicted states.
+        pred: usize,
+        /// Times.
+        times: usize,
+    },
+    /// Nothing to compare.
+    #[error("no states to compare")]
+    NoStates,
+    /// The graph is invalid.
+    #[error(transparent)]
+    System(#[from] crate::system::SystemError),
+    /// The field is invalid.
+    #[error(transparent)]
+    Physics(#[from] crate::physics::PhysicsError),
+    /// A true or predicted state does not fit the graph or is not finite.
+    #[error("{which} state {k}: {cause}")]
+    State {
+        /// "true" or "predicted".
+        which: &'static str,
+        /// Its index.
+        k: usize,
+        /// What is wrong.
+        cause: crate::system::SystemError,
+    },
+    /// No curves to summarise.
+    #[error("no error curves to summarise")]
+    NoCurves,
+    /// A curve of another length than the first.
+    #[error("curve {curve} has a different length than curve 0 ({len})")]
+    CurveLength {
+        /// The curve.
+        curve: usize,
+        /// The first curve's length.
+        len: usize,
+    },
+    /// A curve at other times than the first.
+    #[error("curve {curve} has time {time} at index {index}, curve 0 has {first}")]
+    CurveTime {
+        /// The curve.
+        curve: usize,
+        /// The index.
+        index: usize,
+        /// Its time there.
+        time: f64,
+        /// The first curve's.
+        first: f64,
+    },
+    /// A negative or non-finite error.
+    #[error("curve {curve} has an invalid error value {value}")]
+    Value {
+        /// The curve.
+        curve: usize,
+        /// The value.
+        value: f64,
+    },
+}
+
 /// Error curves of one predicted trajectory against the truth.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ErrorCurves {
@@ -113,17 +178,16 @@ pub fn error_curves(
     truth: &[State],
     pred: &[State],
     times: &[f64],
-) -> Result<ErrorCurves, String> {
+) -> Result<ErrorCurves, MetricsError> {
     if truth.len() != pred.len() || truth.len() != times.len() {
-        return Err(format!(
-            "{} true states, {} predicted states and {} times: they must match",
-            truth.len(),
-            pred.len(),
-            times.len()
-        ));
+        return Err(MetricsError::Lengths {
+            truth: truth.len(),
+            pred: pred.len(),
+            times: times.len(),
+        });
     }
     if truth.is_empty() {
-        return Err("no states to compare".into());
+        return Err(MetricsError::NoStates);
     }
     graph.validate()?;
     field.validate(graph.dim)?;
@@ -137,10 +201,16 @@ pub fn error_curves(
         me_abs: Vec::with_capacity(times.len()),
     };
     for (k, (s, p)) in truth.iter().zip(pred).enumerate() {
-        s.validate(graph)
-            .map_err(|e| format!("true state {k}: {e}"))?;
-        p.validate(graph)
-            .map_err(|e| format!("predicted state {k}: {e}"))?;
+        s.validate(graph).map_err(|cause| MetricsError::State {
+            which: "true",
+            k,
+            cause,
+        })?;
+        p.validate(graph).map_err(|cause| MetricsError::State {
+            which: "predicted",
+            k,
+            cause,
+        })?;
         let dq = norm(p.q.iter().zip(&s.q).map(|(a, b)| a - b));
         c.re.push(ratio(
             dq,
@@ -214,27 +284,40 @@ fn band(curves: &[ErrorCurves], pick: impl Fn(&ErrorCurves) -> &Vec<f64>) -> Ban
         hi: Vec::with_capacity(len),
     };
     for k in 0..len {
-        let logs = curves.iter().map(|c| pick(c)[k].max(LOG_FLOOR).ln());
+        let logs = curves.iter().map(|c| floored_ln(pick(c)[k]));
         let mean = logs.clone().sum::<f64>() / n;
         let var = if curves.len() > 1 {
             logs.map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
         } else {
             0.0
         };
-        let half = Z95 * var.sqrt();
-        b.gmean.push(mean.exp());
-        b.lo.push((mean - half).exp());
-        b.hi.push((mean + half).exp());
+        let (gmean, lo, hi) = log_band(mean, var);
+        b.gmean.push(gmean);
+        b.lo.push(lo);
+        b.hi.push(hi);
     }
     b
+}
+
+/// ln of an error, clamped to [`LOG_FLOOR`] first so zero stays finite.
+pub(crate) fn floored_ln(x: f64) -> f64 {
+    x.max(LOG_FLOOR).ln()
+}
+
+/// (geometric mean, lo, hi) of the 95% normal band in log space, from the
+/// mean and sample variance of the [`floored_ln`] of the errors: the band of
+/// every summary ([`summarize`], and `replay`'s streaming statistics).
+pub(crate) fn log_band(mean: f64, var: f64) -> (f64, f64, f64) {
+    let half = Z95 * var.sqrt();
+    (mean.exp(), (mean - half).exp(), (mean + half).exp())
 }
 
 /// Summarises curves that share their times (within 1e-9 relative).
 ///
 /// Errors on no curves, differing times or lengths, or non-finite / negative
 /// values.
-pub fn summarize(curves: &[ErrorCurves]) -> Result<Summary, String> {
-    let first = curves.first().ok_or("no error curves to summarise")?;
+pub fn summarize(curves: &[ErrorCurves]) -> Result<Summary, MetricsError> {
+    let first = curves.first().ok_or(MetricsError::NoCurves)?;
     let len = first.t.len();
     for (i, c) in curves.iter().enumerate() {
         if [
@@ -249,15 +332,16 @@ pub fn summarize(curves: &[ErrorCurves]) -> Result<Summary, String> {
         .iter()
         .any(|l| *l != len)
         {
-            return Err(format!(
-                "curve {i} has a different length than curve 0 ({len})"
-            ));
+            return Err(MetricsError::CurveLength { curve: i, len });
         }
         for (k, (a, b)) in c.t.iter().zip(&first.t).enumerate() {
             if (a - b).abs() > 1e-9 * a.abs().max(b.abs()).max(1.0) {
-                return Err(format!(
-                    "curve {i} has time {a} at index {k}, curve 0 has {b}"
-                ));
+                return Err(MetricsError::CurveTime {
+                    curve: i,
+                    index: k,
+                    time: *a,
+                    first: *b,
+                });
             }
         }
         let mut vals =
@@ -268,7 +352,10 @@ pub fn summarize(curves: &[ErrorCurves]) -> Result<Summary, String> {
                 .chain(&c.re_abs)
                 .chain(&c.me_abs);
         if let Some(x) = vals.find(|x| !(x.is_finite() && **x >= 0.0)) {
-            return Err(format!("curve {i} has an invalid error value {x}"));
+            return Err(MetricsError::Value {
+                curve: i,
+                value: *x,
+            });
         }
     }
     Ok(Summary {

@@ -21,13 +21,14 @@ const CELL: (u32, u32) = (460, 300);
 
 /// Registers the embedded font with plotters once per process.
 fn ensure_font() -> anyhow::Result<()> {
-    static DONE: OnceLock<Result<(), String>> = OnceLock::new();
-    DONE.get_or_init(|| {
-        plotters::style::register_font(FAMILY, FontStyle::Normal, FONT)
-            .map_err(|_| "the embedded DejaVu Sans font could not be loaded".to_string())
-    })
-    .clone()
-    .map_err(|e| anyhow!(e))
+    static LOADED: OnceLock<bool> = OnceLock::new();
+    let loaded = *LOADED
+        .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
+    if loaded {
+        Ok(())
+    } else {
+        Err(anyhow!("the embedded DejaVu Sans font could not be loaded"))
+    }
 }
 
 /// Line colours, distinguishable and print-friendly.

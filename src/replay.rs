@@ -25,9 +25,9 @@ use anyhow::{bail, Context as _, Result};
 use serde::Serialize;
 
 use crate::data::bag::Bag;
-use crate::dynamics::Dynamics;
-use crate::evaluate::bag_system;
-use crate::metrics::{error_curves, Averages, Band, Summary, LOG_FLOOR};
+use crate::data::field::bag_system;
+use crate::dynamics::{Dynamics, DynamicsError};
+use crate::metrics::{error_curves, floored_ln, log_band, Averages, Band, Summary};
 use crate::physics::Field;
 use crate::system::{State, Trajectory};
 
@@ -37,9 +37,6 @@ pub const DEFAULT_IRREGULAR_BINS: usize = 20;
 pub const DEFAULT_HORIZON_INTERVALS: f64 = 10.0;
 /// Largest number of grid points accepted.
 pub const MAX_BINS: usize = 100_000;
-/// z-value of a two-sided 95% normal band (as in [`crate::metrics`]).
-const Z95: f64 = 1.96;
-
 /// Replay settings; `Default` takes everything from the bag.
 #[derive(Clone, Debug, Default)]
 pub struct ReplayOptions {
@@ -56,7 +53,7 @@ pub struct ReplayOptions {
     /// all), else [`DEFAULT_IRREGULAR_BINS`].
     pub bins: Option<usize>,
     /// Field for the energy error. Default: the bag's
-    /// ([`crate::evaluate::bag_field`]); refused when it cannot be known.
+    /// ([`crate::data::field::bag_field`]); refused when it cannot be known.
     pub field: Option<Field>,
     /// Replay at most this many trajectories (the first ones, by id).
     pub max_trajectories: Option<usize>,
@@ -141,7 +138,7 @@ struct LogStats {
 impl LogStats {
     fn push(&mut self, x: f64) {
         self.max = self.max.max(x);
-        let l = x.max(LOG_FLOOR).ln();
+        let l = floored_ln(x);
         self.n += 1;
         let d = l - self.mean;
         self.mean += d / self.n as f64;
@@ -155,12 +152,7 @@ impl LogStats {
         } else {
             0.0
         };
-        let half = Z95 * var.sqrt();
-        (
-            self.mean.exp(),
-            (self.mean - half).exp(),
-            (self.mean + half).exp(),
-        )
+        log_band(self.mean, var)
     }
 }
 
@@ -215,7 +207,7 @@ fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> 
         (Some(dt), _, _) => (dt, "option"),
         (None, Some(s), _) => (s.dt, "bag system_config (simulator step)"),
         (None, None, Some(dt)) => (dt, "bag metadata dt (the recording node's step)"),
-        (None, None, None) => match crate::evaluate::stamp_interval(bag) {
+        (None, None, None) => match crate::data::field::stamp_interval(bag) {
             Some(d) => (d, "the header stamps (their interval)"),
             None => bail!(
                 "the bag does not say its integration step (no system_config or dt metadata, \
@@ -264,8 +256,8 @@ fn plan(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> Result<Plan> 
             horizon / DEFAULT_IRREGULAR_BINS as f64,
         ),
     };
-    let origin = crate::evaluate::bag_field(bag, opts.field.as_ref())?
-        .ok_or_else(|| crate::evaluate::unknown_field_error("the energy error"))?;
+    let origin = crate::data::field::bag_field(bag, opts.field.as_ref())?
+        .ok_or_else(|| crate::data::field::unknown_field_error("the energy error"))?;
     let (field, field_source) = (origin.field, origin.source);
     Ok(Plan {
         dt,
@@ -288,7 +280,7 @@ fn advance(
     from: &State,
     span: f64,
     dt: f64,
-) -> Result<State, String> {
+) -> Result<State, DynamicsError> {
     // The 1e-9 keeps an interval that is a whole number of steps (up to
     // round-off in the stamps) from getting one extra tiny step.
     let steps = ((span / dt) * (1.0 - 1e-9)).ceil().max(1.0) as usize;
@@ -296,7 +288,7 @@ fn advance(
     let mut states = model.rollout_every(&tr.graph, from, h, steps, steps)?;
     states
         .pop()
-        .ok_or_else(|| "the model returned no states".to_string())
+        .ok_or_else(|| DynamicsError::Model("the model returned no states".into()))
 }
 
 /// Replays every start state of one trajectory into the bins.

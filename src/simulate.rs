@@ -7,9 +7,6 @@ use crate::physics::{constraint_residual, SystemConfig};
 use anyhow::{bail, Context, Result};
 use std::path::Path;
 
-/// Bag metadata key naming the integrator that produced the data.
-pub const META_INTEGRATOR: &str = crate::data::meta::KEY_INTEGRATOR;
-
 /// Largest bar-length residual |r − l| accepted in RK4 data. RK4 integrates the
 /// constrained flow without projecting back onto the bars, so the bars drift
 /// slowly; past this the data no longer describe a rigid pendulum.
@@ -21,7 +18,7 @@ pub enum DataIntegrator {
     /// Velocity Verlet (+ SHAKE/RATTLE for bars): symplectic, bars exact.
     Verlet,
     /// Classical RK4 on (q, p) with the exact constrained acceleration
-    /// ([`crate::baselines::hgn::rk4_trajectories`]): the paper's HGN data.
+    /// ([`crate::physics::rk4::rk4_trajectories`]): the paper's HGN data.
     Rk4,
 }
 
@@ -55,11 +52,9 @@ pub fn simulate_with(
     out: &Path,
 ) -> Result<()> {
     let trajs = match integrator {
-        DataIntegrator::Verlet => cfg
-            .try_simulate(trajectories, seed)
-            .map_err(anyhow::Error::msg)?,
+        DataIntegrator::Verlet => cfg.try_simulate(trajectories, seed)?,
         DataIntegrator::Rk4 => {
-            let trajs = crate::baselines::hgn::rk4_trajectories(cfg, trajectories, seed)?;
+            let trajs = crate::physics::rk4::rk4_trajectories(cfg, trajectories, seed)?;
             let worst = trajs
                 .iter()
                 .flat_map(|t| {

@@ -6,6 +6,7 @@
 //! velocities are stored flat, `dim` numbers per particle (2 or 3).
 
 use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
 
 /// What an edge is physically.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -85,54 +86,68 @@ impl Graph {
     }
 
     /// Checks indices, lengths and finiteness; the error says what is wrong.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SystemError> {
         if self.dim != 2 && self.dim != 3 {
-            return Err(format!("dimension must be 2 or 3, got {}", self.dim));
+            return Err(SystemError::Dimension(self.dim));
         }
         let n = self.n();
         if n == 0 {
-            return Err("system has no particles".into());
+            return Err(SystemError::NoParticles);
         }
         if self.masses.len() != n {
-            return Err(format!("{} masses for {} particles", self.masses.len(), n));
+            return Err(SystemError::Masses {
+                masses: self.masses.len(),
+                particles: n,
+            });
         }
         if let Some(m) = self.masses.iter().find(|m| !(m.is_finite() && **m > 0.0)) {
-            return Err(format!("mass {m} is not a positive finite number"));
+            return Err(SystemError::Mass(*m));
         }
         for (i, a) in self.anchors.iter().enumerate() {
             if a.len() != self.dim || a.iter().any(|x| !x.is_finite()) {
-                return Err(format!("anchor {i} is not a finite {}-vector", self.dim));
+                return Err(SystemError::Anchor {
+                    index: i,
+                    dim: self.dim,
+                });
             }
         }
         for (k, e) in self.edges.iter().enumerate() {
             if e.a >= n {
-                return Err(format!(
-                    "edge {k}: particle index {} out of range (n = {n})",
-                    e.a
-                ));
+                return Err(SystemError::Edge {
+                    edge: k,
+                    problem: format!("particle index {} out of range (n = {n})", e.a),
+                });
             }
             match e.b {
                 Endpoint::Particle(b) if b >= n => {
-                    return Err(format!(
-                        "edge {k}: particle index {b} out of range (n = {n})"
-                    ))
+                    return Err(SystemError::Edge {
+                        edge: k,
+                        problem: format!("particle index {b} out of range (n = {n})"),
+                    })
                 }
                 Endpoint::Particle(b) if b == e.a => {
-                    return Err(format!("edge {k}: joins particle {b} to itself"))
+                    return Err(SystemError::Edge {
+                        edge: k,
+                        problem: format!("joins particle {b} to itself"),
+                    })
                 }
                 Endpoint::Anchor(b) if b >= self.anchors.len() => {
-                    return Err(format!(
-                        "edge {k}: anchor index {b} out of range ({} anchors)",
-                        self.anchors.len()
-                    ))
+                    return Err(SystemError::Edge {
+                        edge: k,
+                        problem: format!(
+                            "anchor index {b} out of range ({} anchors)",
+                            self.anchors.len()
+                        ),
+                    })
                 }
                 _ => {}
             }
             let rest_ok = e.rest_length.is_finite() && e.rest_length >= 0.0;
             if !rest_ok || !e.stiffness.is_finite() {
-                return Err(format!(
-                    "edge {k}: rest length must be finite and ≥ 0, stiffness finite"
-                ));
+                return Err(SystemError::Edge {
+                    edge: k,
+                    problem: "rest length must be finite and ≥ 0, stiffness finite".into(),
+                });
             }
         }
         Ok(())
@@ -150,17 +165,17 @@ pub struct State {
 
 impl State {
     /// Checks lengths against a graph and that every number is finite.
-    pub fn validate(&self, graph: &Graph) -> Result<(), String> {
+    pub fn validate(&self, graph: &Graph) -> Result<(), SystemError> {
         let d = graph.ndof();
         if self.q.len() != d || self.v.len() != d {
-            return Err(format!(
-                "state has {} positions and {} velocities, the graph needs {d} each",
-                self.q.len(),
-                self.v.len()
-            ));
+            return Err(SystemError::StateShape {
+                positions: self.q.len(),
+                velocities: self.v.len(),
+                needed: d,
+            });
         }
         if self.q.iter().chain(&self.v).any(|x| !x.is_finite()) {
-            return Err("state contains NaN or infinite values".into());
+            return Err(SystemError::NonFinite);
         }
         Ok(())
     }
@@ -199,4 +214,70 @@ pub struct Trajectory {
     pub graph: Graph,
     /// The samples, in time order.
     pub samples: Vec<Sample>,
+}
+
+/// A fingerprint of a state (SHA-256 of its numbers, rounded to 1e-9), used to
+/// detect test trajectories that start where training ones did.
+pub fn fingerprint(s: &State) -> String {
+    let mut h = Sha256::new();
+    for x in s.q.iter().chain(&s.v) {
+        h.update(((x * 1e9).round() as i64).to_le_bytes());
+    }
+    h.finalize()
+        .iter()
+        .take(12)
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// A graph or state that does not describe a valid system; the message says
+/// what is wrong.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SystemError {
+    /// The dimension is neither 2 nor 3.
+    #[error("dimension must be 2 or 3, got {0}")]
+    Dimension(usize),
+    /// The graph has no particles.
+    #[error("system has no particles")]
+    NoParticles,
+    /// Not one mass per particle.
+    #[error("{masses} masses for {particles} particles")]
+    Masses {
+        /// Masses given.
+        masses: usize,
+        /// Particles in the graph.
+        particles: usize,
+    },
+    /// A mass is zero, negative or not finite.
+    #[error("mass {0} is not a positive finite number")]
+    Mass(f64),
+    /// An anchor has the wrong length or a non-finite coordinate.
+    #[error("anchor {index} is not a finite {dim}-vector")]
+    Anchor {
+        /// Which anchor.
+        index: usize,
+        /// The graph's dimension.
+        dim: usize,
+    },
+    /// An edge joins what it cannot, or has invalid parameters.
+    #[error("edge {edge}: {problem}")]
+    Edge {
+        /// Which edge.
+        edge: usize,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// A state's lengths do not fit the graph.
+    #[error("state has {positions} positions and {velocities} velocities, the graph needs {needed} each")]
+    StateShape {
+        /// Positions given.
+        positions: usize,
+        /// Velocities given.
+        velocities: usize,
+        /// What the graph needs (n · dim).
+        needed: usize,
+    },
+    /// A state holds NaN or infinite values.
+    #[error("state contains NaN or infinite values")]
+    NonFinite,
 }

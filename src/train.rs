@@ -371,7 +371,7 @@ pub fn check_data(
     if cfg.batch == 0 || cfg.epochs == 0 {
         bail!("batch size and epochs must be positive");
     }
-    graph.validate().map_err(anyhow::Error::msg)?;
+    graph.validate()?;
     for (i, (s, a)) in states.iter().zip(acc).enumerate() {
         s.validate(graph)
             .map_err(|e| anyhow::anyhow!("state {i}: {e}"))?;
@@ -762,7 +762,8 @@ pub fn load_training_data_from(
 ) -> Result<TrainingData> {
     use crate::data::bag::{read_bags, ReadOptions};
     use crate::data::dataset::AccSource;
-    use crate::evaluate::{bag_field, bag_system, fingerprint};
+    use crate::data::field::{bag_field, bag_system};
+    use crate::system::fingerprint;
     if bags.is_empty() {
         bail!("no training bags given");
     }

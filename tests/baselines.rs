@@ -269,9 +269,9 @@ fn hamilton_matches_physics() {
     }
 }
 
-use mcgnode::baselines::hgn::rk4_trajectories;
 use mcgnode::baselines::{train_baseline, BaselineHyper, BaselineNet, Kind, TrainedBaseline};
-use mcgnode::dynamics::Dynamics;
+use mcgnode::dynamics::{Dynamics, DynamicsError};
+use mcgnode::physics::rk4::rk4_trajectories;
 use mcgnode::train::TrainConfig;
 use rand::SeedableRng;
 
@@ -369,7 +369,7 @@ fn training_gradients_match_finite_differences() {
                 .unwrap()
                 .to_vec1::<f64>()
                 .unwrap();
-            for &k in [0usize, base.len() / 2, base.len() - 1].iter() {
+            for &k in &[0usize, base.len() / 2, base.len() - 1] {
                 let h = 1e-5;
                 let eval = |x: f64| {
                     let mut p = base.clone();
@@ -509,18 +509,24 @@ impl Dynamics for NetDyn {
     fn describe(&self) -> String {
         "mcgnode (candle)".into()
     }
-    fn supports(&self, _: &Graph) -> Result<(), String> {
+    fn supports(&self, _: &Graph) -> Result<(), DynamicsError> {
         Ok(())
     }
-    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
+    fn acceleration(
+        &self,
+        graph: &Graph,
+        state: &State,
+        out: &mut [f64],
+    ) -> Result<(), DynamicsError> {
         let plan = GraphPlan::new(graph);
-        let b = Batch::new(&plan, &[state], None, 1).map_err(|e| e.to_string())?;
-        let a = self.0.forward(&b).map_err(|e| e.to_string())?.acc;
+        let model = |e: anyhow::Error| DynamicsError::Model(e.to_string());
+        let b = Batch::new(&plan, &[state], None, 1).map_err(model)?;
+        let a = self.0.forward(&b).map_err(model)?.acc;
         out.copy_from_slice(&a.flatten_all().unwrap().to_vec1::<f64>().unwrap());
         Ok(())
     }
-    fn forces(&self, _: &Graph, _: &State) -> Result<mcgnode::dynamics::Forces, String> {
-        Err("not needed".into())
+    fn forces(&self, _: &Graph, _: &State) -> Result<mcgnode::dynamics::Forces, DynamicsError> {
+        Err(DynamicsError::Model("not needed".into()))
     }
 }
 
@@ -701,17 +707,16 @@ fn training_gradients_equal_grad_of_grad() {
                 .set(&Tensor::new(&[-0.2f64], &Device::Cpu).unwrap())
                 .unwrap();
             let fast = net.loss(&b, &g.masses).unwrap();
-            let generic = match kind {
-                Kind::Hgn => mcgnode::baselines::hgn::loss_generic(&net, &b, &g.masses).unwrap(),
-                _ => {
-                    let a = mcgnode::baselines::lgn::acceleration_generic(&net, &b).unwrap();
-                    (a - b.target.as_ref().unwrap())
-                        .unwrap()
-                        .sqr()
-                        .unwrap()
-                        .mean_all()
-                        .unwrap()
-                }
+            let generic = if kind == Kind::Hgn {
+                mcgnode::baselines::hgn::loss_generic(&net, &b, &g.masses).unwrap()
+            } else {
+                let a = mcgnode::baselines::lgn::acceleration_generic(&net, &b).unwrap();
+                (a - b.target.as_ref().unwrap())
+                    .unwrap()
+                    .sqr()
+                    .unwrap()
+                    .mean_all()
+                    .unwrap()
             };
             let (lf, lg) = (
                 fast.to_scalar::<f64>().unwrap(),

@@ -472,9 +472,9 @@ fn train_engine_arch_and_warm_start_options() {
     let args = |extra: &[&str]| -> Vec<String> {
         let mut v: Vec<String> = ["train", "--data", "t.mcap", "--epochs", "4", "--quiet"]
             .iter()
-            .map(|s| s.to_string())
+            .map(std::string::ToString::to_string)
             .collect();
-        v.extend(extra.iter().map(|s| s.to_string()));
+        v.extend(extra.iter().map(std::string::ToString::to_string));
         v
     };
     let run = |extra: &[&str]| {

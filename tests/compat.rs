@@ -45,7 +45,10 @@ fn the_shipped_spring_model_knows_what_it_was_trained_on() {
         .unwrap();
     t.check(&graph(SystemKind::Spring, 3), None).unwrap();
     // A pendulum: bars and an anchor.
-    let e = t.check(&graph(SystemKind::Pendulum, 5), None).unwrap_err();
+    let e = t
+        .check(&graph(SystemKind::Pendulum, 5), None)
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("springs") && e.contains("rigid bars, anchors"),
         "{e}"
@@ -53,7 +56,7 @@ fn the_shipped_spring_model_knows_what_it_was_trained_on() {
     // 3D.
     let mut g3 = SystemConfig::new(SystemKind::Spring, 5);
     g3.dim = 3;
-    let e = t.check(&g3.graph(), None).unwrap_err();
+    let e = t.check(&g3.graph(), None).unwrap_err().to_string();
     assert!(e.contains("2D") && e.contains("3D"), "{e}");
     // Gravity on a closed-system model.
     let g = Field {
@@ -62,7 +65,8 @@ fn the_shipped_spring_model_knows_what_it_was_trained_on() {
     };
     let e = t
         .check(&graph(SystemKind::Spring, 5), Some(&g))
-        .unwrap_err();
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("closed system") && e.contains("gravity 9.81"),
         "{e}"
@@ -71,7 +75,7 @@ fn the_shipped_spring_model_knows_what_it_was_trained_on() {
 
 #[test]
 fn truth_models_check_the_field_and_refuse_through_supports() {
-    let m = mcgnode::ros::load_model("truth:pendulum").unwrap();
+    let m = mcgnode::models::load_model("truth:pendulum").unwrap();
     let t = m.trained_for().expect("truth models say what they are");
     assert_eq!(t.field.as_ref().map(|f| f.gravity), Some(10.0));
     t.check(
@@ -81,12 +85,16 @@ fn truth_models_check_the_field_and_refuse_through_supports() {
     .unwrap();
     let e = t
         .check(&graph(SystemKind::Spring, 5), Some(&Field::default()))
-        .unwrap_err();
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("gravity 10") && e.contains("no field"), "{e}");
     // A file model wrapped by load_model refuses a foreign graph in supports.
     let m =
-        mcgnode::ros::load_model(&format!("{ROOT}/bags/models/pendulum5-mcgnode.json")).unwrap();
-    let e = m.supports(&graph(SystemKind::Spring, 5)).unwrap_err();
+        mcgnode::models::load_model(&format!("{ROOT}/bags/models/pendulum5-mcgnode.json")).unwrap();
+    let e = m
+        .supports(&graph(SystemKind::Spring, 5))
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("rigid bars") && e.contains("these data have springs"),
         "{e}"

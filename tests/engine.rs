@@ -5,9 +5,10 @@
 //! count; and both engines ending a seeded training at the same loss.
 
 use mcgnode::engine::Engine;
+use mcgnode::kernel::TrainedModel;
 use mcgnode::model::batch::Batch;
 use mcgnode::model::plan::GraphPlan;
-use mcgnode::model::{ArchPreset, Hyper, Net, Norm, TrainedModel, Variant};
+use mcgnode::model::{ArchPreset, Hyper, Net, Norm, Variant};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Edge, EdgeKind, Endpoint, Graph, State};
 use mcgnode::train::{train, EngineKind, TrainConfig};
@@ -195,7 +196,7 @@ fn engine_gradients_equal_candle_and_finite_differences() {
         // Candle.
         let plan = GraphPlan::new(g);
         let sr: Vec<&State> = states.iter().collect();
-        let tr: Vec<&[f64]> = targets.iter().map(|t| t.as_slice()).collect();
+        let tr: Vec<&[f64]> = targets.iter().map(std::vec::Vec::as_slice).collect();
         let batch = Batch::new(&plan, &sr, Some(&tr), case.hyper.types).unwrap();
         let loss_c = net.loss(&batch).unwrap();
         let grads_c = loss_c.backward().unwrap();
@@ -256,7 +257,7 @@ fn engine_gradients_equal_candle_and_finite_differences() {
             }
         }
         // The engine's accelerations are the kernel's.
-        let file = mcgnode::bench::random_model(case.hyper.variant, g, 0)
+        let file = mcgnode::testing::random_model(case.hyper.variant, g, 0)
             .map(|(_, m)| m.file)
             .unwrap();
         let file = mcgnode::model::ModelFile {

@@ -108,13 +108,16 @@ fn bad_input_is_rejected() {
         &[s.clone(), s.clone()],
         &[0.0],
     )
-    .unwrap_err();
+    .unwrap_err()
+    .to_string();
     assert!(err.contains("must match"), "{err}");
     let nan = State {
         q: vec![f64::NAN, 0.0, 0.0, 0.0],
         v: vec![0.0; 4],
     };
-    let err = error_curves(&g, &f, std::slice::from_ref(&s), &[nan], &[0.0]).unwrap_err();
+    let err = error_curves(&g, &f, std::slice::from_ref(&s), &[nan], &[0.0])
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("predicted state 0"), "{err}");
     assert!(error_curves(&g, &f, &[], &[], &[]).is_err());
     assert!(summarize(&[]).is_err());
@@ -169,7 +172,9 @@ fn summary_band_by_hand() {
     assert!(close(s.time_average().re, 1e-2, 1e-12));
     // Curves on different times are refused.
     let c = constant(&[0.0, 2.0], 1.0, 1.0, 1.0);
-    let err = summarize(&[constant(&t, 1.0, 1.0, 1.0), c]).unwrap_err();
+    let err = summarize(&[constant(&t, 1.0, 1.0, 1.0), c])
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("time"), "{err}");
 }
 
@@ -177,7 +182,7 @@ fn summary_band_by_hand() {
 fn growing(t: &[f64], a: f64) -> Summary {
     let curves: Vec<ErrorCurves> = (0..10)
         .map(|i| {
-            let f = 1.0 + 0.3 * i as f64;
+            let f = 1.0 + 0.3 * f64::from(i);
             ErrorCurves {
                 t: t.to_vec(),
                 re: t.iter().map(|x| f * a * x.exp()).collect(),
@@ -194,7 +199,7 @@ fn growing(t: &[f64], a: f64) -> Summary {
 
 #[test]
 fn plot_is_written_as_png() {
-    let t: Vec<f64> = (0..100).map(|k| k as f64 * 0.1).collect();
+    let t: Vec<f64> = (0..100).map(|k| f64::from(k) * 0.1).collect();
     let panels = vec![
         (
             "5-spring".to_string(),
@@ -274,17 +279,26 @@ impl mcgnode::dynamics::Dynamics for Exploding {
     fn describe(&self) -> String {
         "exploding".into()
     }
-    fn supports(&self, _: &Graph) -> Result<(), String> {
+    fn supports(&self, _: &Graph) -> Result<(), mcgnode::dynamics::DynamicsError> {
         Ok(())
     }
-    fn acceleration(&self, _: &Graph, s: &State, out: &mut [f64]) -> Result<(), String> {
+    fn acceleration(
+        &self,
+        _: &Graph,
+        s: &State,
+        out: &mut [f64],
+    ) -> Result<(), mcgnode::dynamics::DynamicsError> {
         let r = s.q.iter().map(|x| x * x).sum::<f64>().sqrt();
         for o in out.iter_mut() {
             *o = if r > 3.0 { f64::INFINITY } else { 1.0 };
         }
         Ok(())
     }
-    fn forces(&self, _: &Graph, _: &State) -> Result<mcgnode::dynamics::Forces, String> {
+    fn forces(
+        &self,
+        _: &Graph,
+        _: &State,
+    ) -> Result<mcgnode::dynamics::Forces, mcgnode::dynamics::DynamicsError> {
         Ok(Default::default())
     }
 }
@@ -314,7 +328,7 @@ fn diverged_rollouts_are_scored_not_fatal() {
     let bag = mcgnode::data::bag::Bag {
         trajectories: trajs,
         metadata: [(
-            mcgnode::evaluate::META_SYSTEM.to_string(),
+            mcgnode::data::meta::KEY_SYSTEM_CONFIG.to_string(),
             serde_json::to_string(&c).unwrap(),
         )]
         .into_iter()

@@ -4,10 +4,11 @@
 
 use candle_core::{Device, Tensor, Var};
 use mcgnode::dynamics::Dynamics;
+use mcgnode::kernel::TrainedModel;
 use mcgnode::model::batch::Batch;
 use mcgnode::model::plan::GraphPlan;
 use mcgnode::model::solve::solve;
-use mcgnode::model::{Hyper, ModelFile, Net, TrainedModel, Variant};
+use mcgnode::model::{Hyper, ModelFile, Net, Variant};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State};
 use rand::{Rng, SeedableRng};
@@ -24,7 +25,7 @@ fn states(c: &SystemConfig, g: &Graph, k: usize, seed: u64) -> Vec<State> {
 }
 
 fn model_file(net: &Net) -> ModelFile {
-    let (_, m) = mcgnode::bench::random_model(
+    let (_, m) = mcgnode::testing::random_model(
         net.hyper.variant,
         &SystemConfig::new(SystemKind::Spring, net.hyper.particles).graph(),
         0,
@@ -130,7 +131,7 @@ fn model_gradients_match_finite_differences() {
         .collect();
     let plan = GraphPlan::new(&g);
     let sr: Vec<&State> = st.iter().collect();
-    let ar: Vec<&[f64]> = acc.iter().map(|a| a.as_slice()).collect();
+    let ar: Vec<&[f64]> = acc.iter().map(std::vec::Vec::as_slice).collect();
     let batch = Batch::new(&plan, &sr, Some(&ar), 1).unwrap();
     for v in Variant::ALL {
         let net = Net::new(Hyper::new(v, 2, 1, 3), &mut ChaCha8Rng::seed_from_u64(5)).unwrap();
@@ -230,7 +231,7 @@ fn kernel_matches_candle() {
 fn constrained_accelerations_respect_bars() {
     let (c, g) = system(SystemKind::Pendulum, 5);
     for v in [Variant::Cgnode, Variant::Cdgnode, Variant::Mcgnode] {
-        let (_, m) = mcgnode::bench::random_model(v, &g, 3).unwrap();
+        let (_, m) = mcgnode::testing::random_model(v, &g, 3).unwrap();
         for s in states(&c, &g, 5, 8) {
             let mut a = vec![0.0; g.ndof()];
             m.acceleration(&g, &s, &mut a).unwrap();
@@ -274,7 +275,7 @@ fn mcgnode_forces_obey_newtons_third_law() {
 #[test]
 fn model_file_round_trip_and_bad_files() {
     let (c, g) = system(SystemKind::Pendulum, 3);
-    let (_, m) = mcgnode::bench::random_model(Variant::Mcgnode, &g, 9).unwrap();
+    let (_, m) = mcgnode::testing::random_model(Variant::Mcgnode, &g, 9).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("m.json");
     m.file.save(&p).unwrap();
@@ -309,7 +310,7 @@ fn model_file_round_trip_and_bad_files() {
     // A graph the model cannot handle: unknown particle type, wrong dimension.
     let mut g2 = g.clone();
     g2.types[1] = 3;
-    assert!(m.supports(&g2).unwrap_err().contains("type 3"));
+    assert!(m.supports(&g2).unwrap_err().to_string().contains("type 3"));
     let s_nan = State {
         q: vec![f64::NAN; 6],
         v: vec![0.0; 6],

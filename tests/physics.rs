@@ -344,7 +344,7 @@ fn system_kind_parses_and_explains_errors() {
         SystemKind::Pendulum
     );
     assert_eq!(SystemKind::Pendulum.to_string(), "pendulum");
-    let err = "rope".parse::<SystemKind>().unwrap_err();
+    let err = "rope".parse::<SystemKind>().unwrap_err().to_string();
     assert!(
         err.contains("rope") && err.contains("spring") && err.contains("pendulum"),
         "{err}"
@@ -433,14 +433,14 @@ fn simulate_produces_the_documented_trajectories() {
 #[test]
 fn bad_input_is_an_error() {
     let mut c = SystemConfig::new(SystemKind::Spring, 1);
-    assert!(c.validate().unwrap_err().contains("at least 2"));
+    assert!(c.validate().unwrap_err().to_string().contains("at least 2"));
     assert!(c.try_simulate(1, 0).is_err());
     c.particles = 3;
     c.dt = 0.0;
-    assert!(c.validate().unwrap_err().contains("dt"));
+    assert!(c.validate().unwrap_err().to_string().contains("dt"));
     c.dt = 1e-3;
     c.field.force = vec![1.0, 2.0, 3.0];
-    assert!(c.validate().unwrap_err().contains("force"));
+    assert!(c.validate().unwrap_err().to_string().contains("force"));
     c.field.force = vec![];
     c.field.drag = f64::NAN;
     assert!(c.validate().is_err());
@@ -492,7 +492,7 @@ fn hamiltonian_of_hand_computed_cases() {
 #[test]
 fn truth_implements_dynamics() {
     use mcgnode::dynamics::Dynamics;
-    use mcgnode::physics::Truth;
+    use mcgnode::models::Truth;
     let cfg = SystemConfig::new(SystemKind::Spring, 5);
     let g = cfg.graph();
     let s = cfg.start_for(&g, 4, 2);
@@ -670,7 +670,8 @@ fn peridynamic_bad_input_and_seeds() {
     for n in [100, 1, 0, 9] {
         let err = SystemConfig::new(SystemKind::Peridynamic, n)
             .validate()
-            .unwrap_err();
+            .unwrap_err()
+            .to_string();
         assert!(
             err.contains("cube number") && err.contains(&n.to_string()),
             "{n}: {err}"
@@ -682,7 +683,7 @@ fn peridynamic_bad_input_and_seeds() {
     let mut c = SystemConfig::new(SystemKind::Peridynamic, 27);
     c.validate().unwrap();
     c.dim = 2;
-    let err = c.validate().unwrap_err();
+    let err = c.validate().unwrap_err().to_string();
     assert!(err.contains("3-dimensional") && err.contains('2'), "{err}");
     assert_eq!(
         "peridynamic".parse::<SystemKind>().unwrap(),

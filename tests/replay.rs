@@ -5,13 +5,15 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use mcgnode::data::meta::KEY_SYSTEM_CONFIG as META_SYSTEM;
 use mcgnode::data::msg::Time;
 use mcgnode::data::{read_trajectories, write_trajectories, Bag, BagWriter, ParticleState};
 use mcgnode::dynamics::Dynamics;
-use mcgnode::evaluate::{fingerprint, META_SYSTEM};
-use mcgnode::model::TrainedModel;
-use mcgnode::physics::{SystemConfig, SystemKind, Truth};
+use mcgnode::kernel::TrainedModel;
+use mcgnode::models::Truth;
+use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::replay::{replay, ReplayOptions, ReplayReport};
+use mcgnode::system::fingerprint;
 use mcgnode::system::Trajectory;
 
 const BIN: &str = env!("CARGO_BIN_EXE_mcgnode");

@@ -110,7 +110,9 @@ fn node_serves_rclpy_clients() {
         check.stderr
     );
     println!("{}", check.stdout.trim());
-    let bags = fs::read_dir(&rec).map(|d| d.count()).unwrap_or(0);
+    let bags = fs::read_dir(&rec)
+        .map(std::iter::Iterator::count)
+        .unwrap_or(0);
     assert!(
         bags >= 2,
         "expected the 1 s split to give several bags, got {bags}"

@@ -11,7 +11,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use mcgnode::model::TrainedModel;
+use mcgnode::kernel::TrainedModel;
 use mcgnode::replay::{replay_bag, ReplayOptions};
 
 mod common;

@@ -779,7 +779,7 @@ fn zero_force_written_either_way_is_one_field() {
         .collect();
     write_trajectories_with_field(&p, &trajs, &meta, Some(&cfg.field)).unwrap();
     let bag = read(&p);
-    let origin = mcgnode::evaluate::bag_field(&bag, None)
+    let origin = mcgnode::data::field::bag_field(&bag, None)
         .unwrap()
         .expect("stated");
     assert!(origin.field.is_free());
@@ -794,7 +794,7 @@ fn zero_force_written_either_way_is_one_field() {
     .to_map()
     .unwrap();
     write_trajectories_with_field(&p, &trajs, &meta, Some(&cfg.field)).unwrap();
-    let e = mcgnode::evaluate::bag_field(&read(&p), None)
+    let e = mcgnode::data::field::bag_field(&read(&p), None)
         .unwrap_err()
         .to_string();
     assert!(e.contains("system_config"), "{e}");

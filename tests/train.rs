@@ -1,7 +1,8 @@
 //! Training: reproducible, learns, conserves momentum exactly (MCGNODE), inductive.
 
 use mcgnode::dynamics::Dynamics;
-use mcgnode::model::{Hyper, ModelFile, TrainedModel, Variant};
+use mcgnode::kernel::TrainedModel;
+use mcgnode::model::{Hyper, ModelFile, Variant};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::State;
 use mcgnode::train::{train, TrainConfig};
@@ -31,7 +32,7 @@ fn data(
 }
 
 fn to_model(t: mcgnode::train::Trained) -> TrainedModel {
-    let (_, m) = mcgnode::bench::random_model(
+    let (_, m) = mcgnode::testing::random_model(
         t.net.hyper.variant,
         &SystemConfig::new(SystemKind::Spring, 5).graph(),
         0,
@@ -492,7 +493,7 @@ fn edge_physics_reads_stiffness_and_plain_models_refuse_other_edges() {
     );
     let tf = trained_for(&plain);
     assert!(tf.check(&g, None).is_ok());
-    let err = tf.check(&stiff, None).unwrap_err();
+    let err = tf.check(&stiff, None).unwrap_err().to_string();
     assert!(
         err.contains("--edge-physics") && err.contains("stiffness 5"),
         "{err}"

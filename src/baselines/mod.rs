@@ -20,10 +20,10 @@
 //!   the true systems, and the baselines' shortcuts against it. It needs
 //!   candle's grad-of-grad ([`autodiff`]), which it switches on itself.
 //! * HGN trains on (q̇, ṗ); its data come from RK4 on (q, p)
-//!   ([`hgn::rk4_trajectories`]). LGN and GNS train on accelerations.
+//!   ([`crate::physics::rk4::rk4_trajectories`]). LGN and GNS train on accelerations.
 
-pub mod any;
 pub mod autodiff;
+pub mod forward;
 pub mod gns;
 pub mod graphnet;
 pub mod hgn;
@@ -36,7 +36,6 @@ pub mod file;
 pub mod train;
 pub mod trained;
 
-pub use any::{load_any_model, train_any_from_bags, LoadedModel, ModelKind};
 pub use file::BaselineFile;
 pub use train::{train_baseline, train_baseline_from_bags};
 pub use trained::TrainedBaseline;

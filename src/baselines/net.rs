@@ -1,8 +1,8 @@
-//! The baseline models' hyperparameters and parameters, and the one entry
-//! point (`acceleration`, `loss`) that dispatches to LGN, HGN or GNS.
+//! The baseline models' hyperparameters and parameters. The one entry point
+//! (`acceleration`, `loss`) that dispatches to LGN, HGN or GNS is in
+//! [`super::forward`], above the three.
 
 use super::graphnet::{GraphNet, GraphNetSpec};
-use super::{gns, hgn, lgn};
 use crate::model::batch::Batch;
 use crate::model::mlp::Mlp;
 use crate::model::params::ParamStore;
@@ -10,8 +10,6 @@ use anyhow::{bail, Result};
 use candle_core::{DType, Device, Tensor};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
-use std::fmt;
-use std::str::FromStr;
 
 /// Which baseline.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -39,22 +37,16 @@ impl Kind {
     }
 }
 
-impl fmt::Display for Kind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+impl crate::names::Named for Kind {
+    const ALL: &'static [Self] = &Kind::ALL;
+    const WHAT: &'static str = "baseline";
+
+    fn name(self) -> &'static str {
+        Kind::name(self)
     }
 }
 
-impl FromStr for Kind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        let t = s.trim().to_ascii_lowercase();
-        Self::ALL
-            .into_iter()
-            .find(|k| k.name() == t)
-            .ok_or_else(|| format!("unknown baseline {s:?}; expected one of lgn, hgn, gns"))
-    }
-}
+crate::impl_named!(Kind);
 
 /// Architecture of a baseline.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -200,31 +192,8 @@ impl BaselineNet {
         })
     }
 
-    /// Predicted accelerations `(B·n, d)`.
-    pub fn acceleration(&self, b: &Batch) -> Result<Tensor> {
-        self.check(b)?;
-        match self.hyper.kind {
-            Kind::Lgn => lgn::acceleration(self, b),
-            Kind::Hgn => hgn::acceleration(self, b),
-            Kind::Gns => gns::acceleration(self, b),
-        }
-    }
-
-    /// Training loss: MSE on accelerations (LGN, GNS) or on (q̇, ṗ) (HGN,
-    /// targets derived from the batch's velocities and accelerations with the
-    /// true `masses`, one per particle).
-    pub fn loss(&self, b: &Batch, masses: &[f64]) -> Result<Tensor> {
-        self.check(b)?;
-        let Some(t) = &b.target else {
-            bail!("batch has no targets");
-        };
-        match self.hyper.kind {
-            Kind::Hgn => hgn::loss(self, b, masses),
-            _ => Ok((self.acceleration(b)? - t)?.sqr()?.mean_all()?),
-        }
-    }
-
-    fn check(&self, b: &Batch) -> Result<()> {
+    /// Refuses a batch of another dimension.
+    pub(super) fn check(&self, b: &Batch) -> Result<()> {
         if b.dim != self.hyper.dim {
             bail!(
                 "{} was built for {}D systems, got {}D",

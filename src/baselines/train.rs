@@ -67,7 +67,7 @@ pub fn train_baseline(
 /// when they hold several), as [`crate::train::train_from_bags`] does for the
 /// GNODE family (same data, split and loop); returns the file.
 pub fn train_baseline_from_bags(
-    kind: super::Kind,
+    kind: super::net::Kind,
     bags: &[std::path::PathBuf],
     topic: Option<&str>,
     cfg: &TrainConfig,

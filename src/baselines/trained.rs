@@ -3,7 +3,8 @@
 
 use super::file::BaselineFile;
 use super::net::BaselineNet;
-use crate::dynamics::{Dynamics, Forces};
+use crate::dynamics::{Dynamics, DynamicsError, Forces};
+use crate::model::arch::ArchError;
 use crate::model::batch::Batch;
 use crate::model::plan::GraphPlan;
 use crate::system::{Graph, State};
@@ -34,7 +35,7 @@ impl TrainedBaseline {
         Ok(Self { file, net })
     }
 
-    fn accel(&self, graph: &Graph, state: &State) -> Result<Vec<f64>, String> {
+    fn accel(&self, graph: &Graph, state: &State) -> Result<Vec<f64>, DynamicsError> {
         self.supports(graph)?;
         state.validate(graph)?;
         let plan = GraphPlan::new(graph);
@@ -42,7 +43,7 @@ impl TrainedBaseline {
             let b = Batch::new(&plan, &[state], None, self.net.hyper.types)?;
             Ok(self.net.acceleration(&b)?.flatten_all()?.to_vec1::<f64>()?)
         };
-        run().map_err(|e| format!("{e:#}"))
+        run().map_err(|e| DynamicsError::Model(format!("{e:#}")))
     }
 }
 
@@ -55,27 +56,37 @@ impl Dynamics for TrainedBaseline {
         )
     }
 
-    fn supports(&self, graph: &Graph) -> Result<(), String> {
+    fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
         graph.validate()?;
         let h = &self.file.hyper;
         if graph.dim != h.dim {
-            return Err(format!(
-                "{} was trained on {}D systems, the graph is {}D",
-                h.kind, h.dim, graph.dim
-            ));
+            return Err(DynamicsError::Dimension {
+                model: h.kind.to_string(),
+                trained: h.dim,
+                graph: graph.dim,
+            });
         }
         if let Some(t) = graph.types.iter().find(|&&t| t as usize >= h.types) {
-            return Err(format!(
-                "particle type {t} is unknown to the model (it knows {} types)",
-                h.types
-            ));
+            return Err(ArchError::UnknownType {
+                ty: *t,
+                types: h.types,
+            }
+            .into());
         }
         Ok(())
     }
 
-    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
+    fn acceleration(
+        &self,
+        graph: &Graph,
+        state: &State,
+        out: &mut [f64],
+    ) -> Result<(), DynamicsError> {
         if out.len() != graph.ndof() {
-            return Err("output buffer has the wrong size".into());
+            return Err(DynamicsError::OutputSize {
+                got: out.len(),
+                need: graph.ndof(),
+            });
         }
         out.copy_from_slice(&self.accel(graph, state)?);
         Ok(())
@@ -87,7 +98,7 @@ impl Dynamics for TrainedBaseline {
         graph: &Graph,
         states: &[State],
         out: &mut [Vec<f64>],
-    ) -> Result<(), String> {
+    ) -> Result<(), DynamicsError> {
         crate::dynamics::check_batch(states, out)?;
         if states.is_empty() {
             return Ok(());
@@ -100,7 +111,7 @@ impl Dynamics for TrainedBaseline {
             let b = Batch::new(&plan, &refs, None, self.net.hyper.types)?;
             Ok(self.net.acceleration(&b)?.flatten_all()?.to_vec1::<f64>()?)
         };
-        let flat = run().map_err(|e| format!("{e:#}"))?;
+        let flat = run().map_err(|e| DynamicsError::Model(format!("{e:#}")))?;
         for (o, chunk) in out.iter_mut().zip(flat.chunks(nd)) {
             o.copy_from_slice(chunk);
         }
@@ -109,7 +120,7 @@ impl Dynamics for TrainedBaseline {
 
     /// Total force m∘q̈ with the true masses (as for acceleration-predicting
     /// GNODE variants); no pairwise forces.
-    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String> {
+    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, DynamicsError> {
         let a = self.accel(graph, state)?;
         let total = a
             .iter()

@@ -5,7 +5,8 @@
 use super::simulate::simulate_to;
 use crate::data::bag::read_trajectories;
 use crate::evaluate::{evaluate, table, EvalOptions};
-use crate::model::{TrainedModel, Variant};
+use crate::kernel::TrainedModel;
+use crate::model::Variant;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::train::{train_from_bags, ModelOptions, TrainConfig};
 use anyhow::{Context, Result};

@@ -1,7 +1,8 @@
 //! `mcgnode evaluate`.
 
+use super::field::{check_fits, FieldArgs};
 use crate::data::bag::{read_bags, ReadOptions};
-use crate::evaluate::{evaluate, field_from_flags, table, EvalOptions};
+use crate::evaluate::{evaluate, table, EvalOptions};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 
@@ -19,18 +20,8 @@ pub struct Args {
     /// The ParticleState topic to read, when a bag holds several.
     #[arg(long)]
     pub topic: Option<String>,
-    /// Gravity g along −y for the energy error, when the bag does not state
-    /// its field (with --drag; the one not given is 0).
-    #[arg(long)]
-    pub gravity: Option<f64>,
-    /// Linear drag for the energy error, when the bag does not state its field
-    /// (see --gravity).
-    #[arg(long)]
-    pub drag: Option<f64>,
-    /// The system is closed (no gravity, drag or force), when the bag does not
-    /// state its field and its data do not show it.
-    #[arg(long)]
-    pub closed: bool,
+    #[command(flatten)]
+    pub field: FieldArgs,
     /// Print one JSON document on stdout instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -54,7 +45,7 @@ pub struct Args {
 
 /// Runs `evaluate`.
 pub fn run(a: Args) -> Result<()> {
-    let model = crate::baselines::load_any_model(&a.model)?;
+    let model = crate::models::load_any_model(&a.model)?;
     let bag = read_bags(
         &a.bag,
         &ReadOptions {
@@ -62,11 +53,10 @@ pub fn run(a: Args) -> Result<()> {
         },
     )
     .context("reading the test bag")?;
-    let flag_field = field_from_flags(a.gravity, a.drag, a.closed)?;
+    let flag_field = a.field.field()?;
     // Refuse data the model was not trained for (dimension, edges, field).
-    let data_field = crate::evaluate::bag_field(&bag, flag_field.as_ref())?.map(|o| o.field);
-    let trained = crate::compat::TrainedFor::from_model_file(&a.model)?;
-    crate::compat::check_bag(&trained, &bag, data_field.as_ref())?;
+    let trained = crate::models::trained_for(&a.model)?;
+    check_fits(&trained, &bag, flag_field.as_ref())?;
     let opts = EvalOptions {
         dt: a.dt,
         field: flag_field,

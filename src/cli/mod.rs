@@ -4,6 +4,7 @@ mod bag;
 mod bench;
 mod demo;
 mod evaluate;
+mod field;
 mod replay;
 mod reproduce;
 mod rollout;
@@ -73,20 +74,13 @@ pub fn run() -> anyhow::Result<()> {
 pub struct Vector(pub Vec<f64>);
 
 /// Parses "x,y[,z]".
-pub(crate) fn parse_vector(s: &str) -> Result<Vector, String> {
+pub(crate) fn parse_vector(s: &str) -> anyhow::Result<Vector> {
     s.split(',')
-        .map(|x| {
-            x.trim()
-                .parse::<f64>()
-                .map_err(|_| format!("{x:?} is not a number"))
-                .and_then(|v| {
-                    if v.is_finite() {
-                        Ok(v)
-                    } else {
-                        Err("not finite".into())
-                    }
-                })
+        .map(|x| match x.trim().parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            Ok(_) => Err(anyhow::anyhow!("not finite")),
+            Err(_) => Err(anyhow::anyhow!("{x:?} is not a number")),
         })
-        .collect::<Result<Vec<f64>, String>>()
+        .collect::<anyhow::Result<Vec<f64>>>()
         .map(Vector)
 }

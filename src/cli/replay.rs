@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
+use super::field::{check_fits, FieldArgs};
 use crate::data::bag::{read_bags, ReadOptions};
-use crate::evaluate::field_from_flags;
 use crate::replay::{replay, table, ReplayOptions};
 
 /// Options of `replay`.
@@ -40,19 +40,8 @@ pub struct Args {
     /// are regular, else 20); each comparison goes to the nearest.
     #[arg(long)]
     pub bins: Option<usize>,
-    /// Gravity for the energy error (with --drag, replaces the bag's field;
-    /// the one not given is 0). Default: what the bag's messages or
-    /// system_config state, else a closed system when the data show one, else
-    /// refused.
-    #[arg(long)]
-    pub gravity: Option<f64>,
-    /// Linear drag for the energy error (see --gravity).
-    #[arg(long)]
-    pub drag: Option<f64>,
-    /// The system is closed (no gravity, drag or force): for bags that do
-    /// not state their field.
-    #[arg(long)]
-    pub closed: bool,
+    #[command(flatten)]
+    pub field: FieldArgs,
     /// Replay at most this many trajectories.
     #[arg(long)]
     pub trajectories: Option<usize>,
@@ -66,7 +55,7 @@ pub struct Args {
 
 /// Runs `replay`.
 pub fn run(a: Args) -> Result<()> {
-    let model = crate::ros::load_model(&a.model)?;
+    let model = crate::models::load_model(&a.model)?;
     let bag = read_bags(
         &a.bag,
         &ReadOptions {
@@ -74,10 +63,9 @@ pub fn run(a: Args) -> Result<()> {
         },
     )
     .context("reading the bag")?;
-    let field = field_from_flags(a.gravity, a.drag, a.closed)?;
+    let field = a.field.field()?;
     if let Some(t) = model.trained_for() {
-        let data_field = crate::evaluate::bag_field(&bag, field.as_ref())?.map(|o| o.field);
-        crate::compat::check_bag(t, &bag, data_field.as_ref())?;
+        check_fits(t, &bag, field.as_ref())?;
     }
     let opts = ReplayOptions {
         dt: a.dt,

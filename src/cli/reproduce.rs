@@ -36,7 +36,7 @@ pub fn run(a: Args) -> Result<()> {
     }
     let threads = a
         .threads
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, std::num::NonZero::get));
     let opts = Options {
         out: a.out.clone(),
         scale,

@@ -1,8 +1,8 @@
 //! `mcgnode rollout`.
 
-use crate::baselines::load_any_model;
 use crate::data::bag::{read_bags, write_trajectories_with_field, ReadOptions};
-use crate::evaluate::bag_system;
+use crate::data::field::bag_system;
+use crate::models::load_any_model;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::system::{Sample, Trajectory};
 use anyhow::{bail, Context, Result};
@@ -53,39 +53,34 @@ pub struct Args {
 /// Runs `rollout`.
 pub fn run(a: Args) -> Result<()> {
     let model = load_any_model(&a.model)?.dynamics;
-    let trained = crate::compat::TrainedFor::from_model_file(&a.model)?;
-    let (graph, start, system, mut cfg, field, stamp_dt) = match &a.initial {
-        Some(paths) => {
-            let bag = read_bags(
-                paths,
-                &ReadOptions {
-                    topic: a.topic.clone(),
-                },
-            )
-            .context("reading --initial")?;
-            let cfg = bag_system(&bag)?;
-            let field = bag.field.clone().or(cfg.as_ref().map(|c| c.field.clone()));
-            let tr = bag
-                .trajectories
-                .into_iter()
-                .find(|t| t.id == a.trajectory)
-                .with_context(|| format!("--initial has no trajectory {}", a.trajectory))?;
-            let stamp_dt = tr.samples.get(1).map(|s| s.t - tr.samples[0].t);
-            let s0 = tr.samples[0].state.clone();
-            (tr.graph, s0, tr.system, cfg, field, stamp_dt)
-        }
-        None => {
-            let cfg = SystemConfig::new(a.system, a.particles);
-            cfg.validate().map_err(anyhow::Error::msg)?;
-            let g = cfg.graph();
-            let s0 = cfg.start_for(&g, a.seed, 0);
-            let field = Some(cfg.field.clone());
-            (g, s0, a.system.name().to_string(), Some(cfg), field, None)
-        }
+    let trained = crate::models::trained_for(&a.model)?;
+    let (graph, start, system, mut cfg, field, stamp_dt) = if let Some(paths) = &a.initial {
+        let bag = read_bags(
+            paths,
+            &ReadOptions {
+                topic: a.topic.clone(),
+            },
+        )
+        .context("reading --initial")?;
+        let cfg = bag_system(&bag)?;
+        let field = bag.field.clone().or(cfg.as_ref().map(|c| c.field.clone()));
+        let tr = bag
+            .trajectories
+            .into_iter()
+            .find(|t| t.id == a.trajectory)
+            .with_context(|| format!("--initial has no trajectory {}", a.trajectory))?;
+        let stamp_dt = tr.samples.get(1).map(|s| s.t - tr.samples[0].t);
+        let s0 = tr.samples[0].state.clone();
+        (tr.graph, s0, tr.system, cfg, field, stamp_dt)
+    } else {
+        let cfg = SystemConfig::new(a.system, a.particles);
+        cfg.validate()?;
+        let g = cfg.graph();
+        let s0 = cfg.start_for(&g, a.seed, 0);
+        let field = Some(cfg.field.clone());
+        (g, s0, a.system.name().to_string(), Some(cfg), field, None)
     };
-    trained
-        .check(&graph, field.as_ref())
-        .map_err(anyhow::Error::msg)?;
+    trained.check(&graph, field.as_ref())?;
     // Without a flag or a system_config, the step is the recorded interval and
     // every step is saved.
     let (dt, default_every) = match (a.dt, &cfg, stamp_dt) {
@@ -104,16 +99,12 @@ pub fn run(a: Args) -> Result<()> {
     let steps = (a.duration / dt).round() as usize;
     let t0 = std::time::Instant::now();
     // The GNODE family integrates on the allocation-free kernel, baselines on candle.
-    let states = model
-        .rollout_every(&graph, &start, dt, steps, every)
-        .map_err(anyhow::Error::msg)?;
+    let states = model.rollout_every(&graph, &start, dt, steps, every)?;
     let secs = t0.elapsed().as_secs_f64();
     let mut acc = vec![0.0; graph.ndof()];
     let mut samples = Vec::with_capacity(states.len());
     for (k, state) in states.into_iter().enumerate() {
-        model
-            .acceleration(&graph, &state, &mut acc)
-            .map_err(anyhow::Error::msg)?;
+        model.acceleration(&graph, &state, &mut acc)?;
         samples.push(Sample {
             t: (k * every) as f64 * dt,
             state,

@@ -66,7 +66,7 @@ pub fn config(a: &Args) -> Result<SystemConfig> {
         c.field.drag = d;
     }
     if let Some(f) = &a.force {
-        c.field.force = f.0.clone();
+        c.field.force.clone_from(&f.0);
     }
     if let Some(g) = a.gravity {
         c.field.gravity = g;
@@ -80,7 +80,7 @@ pub fn config(a: &Args) -> Result<SystemConfig> {
     if let Some(s) = a.states {
         c.states = s;
     }
-    c.validate().map_err(anyhow::Error::msg)?;
+    c.validate()?;
     Ok(c)
 }
 

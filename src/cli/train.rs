@@ -1,7 +1,7 @@
 //! `mcgnode train`.
 
-use crate::baselines::{train_any_from_bags, ModelKind};
 use crate::model::{ArchPreset, EdgeInput, MessageFn};
+use crate::models::{train_any_from_bags, ModelKind};
 use crate::train::{BodyForce, EngineKind, EpochReport, ModelOptions, TrainConfig};
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -113,8 +113,8 @@ pub struct Args {
 }
 
 /// `EPOCH:LR`.
-fn parse_drop(s: &str) -> Result<(usize, f64), String> {
-    let bad = || format!("expected EPOCH:LR such as 300:1e-3, got {s:?}");
+fn parse_drop(s: &str) -> Result<(usize, f64)> {
+    let bad = || anyhow::anyhow!("expected EPOCH:LR such as 300:1e-3, got {s:?}");
     let (e, lr) = s.split_once(':').ok_or_else(bad)?;
     let e = e.trim().parse::<usize>().map_err(|_| bad())?;
     match lr.trim().parse::<f64>() {
@@ -124,16 +124,16 @@ fn parse_drop(s: &str) -> Result<(usize, f64), String> {
 }
 
 /// `BLOCK=SIZES`, sizes comma-separated (empty: no hidden layer).
-fn parse_block(s: &str) -> Result<(String, Vec<usize>), String> {
+fn parse_block(s: &str) -> Result<(String, Vec<usize>)> {
     let (block, sizes) = s
         .split_once('=')
-        .ok_or_else(|| format!("expected BLOCK=SIZES such as edge_out=16,16, got {s:?}"))?;
+        .ok_or_else(|| anyhow::anyhow!("expected BLOCK=SIZES such as edge_out=16,16, got {s:?}"))?;
     let sizes = sizes
         .split(',')
         .filter(|x| !x.is_empty())
         .map(|x| match x.trim().parse::<usize>() {
             Ok(n) if n > 0 => Ok(n),
-            _ => Err(format!(
+            _ => Err(anyhow::anyhow!(
                 "hidden size {x:?} in {s:?} is not a positive integer"
             )),
         })

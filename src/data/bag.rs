@@ -198,7 +198,7 @@ impl Bag {
 fn check_trajectory(tr: &Trajectory) -> Result<(), DataError> {
     let bad = |m: String| Err(DataError::Trajectory(format!("trajectory {}: {m}", tr.id)));
     if let Err(e) = tr.graph.validate() {
-        return bad(e);
+        return bad(e.to_string());
     }
     if tr.samples.is_empty() {
         return bad("has no samples".into());
@@ -751,14 +751,14 @@ fn read_one(path: &Path, opts: &ReadOptions) -> Result<(Bag, String), DataError>
         if opts.topic.as_deref().is_some_and(|t| t != raw.topic) {
             return Ok(());
         }
-        let layout = match checked_schemas.iter().find(|(s, _)| s == raw.schema_text) {
-            Some((_, l)) => *l,
-            None => {
+        let layout =
+            if let Some((_, l)) = checked_schemas.iter().find(|(s, _)| s == raw.schema_text) {
+                *l
+            } else {
                 let l = check_schema(raw)?;
                 checked_schemas.push((raw.schema_text.to_vec(), l));
                 l
-            }
-        };
+            };
         let msg = ParticleState::from_cdr_as(raw.data, layout)?;
         let field = msg.field()?;
         let (graph, sample, no_v) = msg.to_parts_positions_only()?;

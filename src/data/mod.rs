@@ -5,12 +5,14 @@
 //! - [`bag`]: writing MCAP bags; reading MCAP, rosbag2 directories and .db3.
 //! - [`source`]: the storage files of a bag argument and their compression.
 //! - [`meta`]: the `mcgnode` metadata record, typed.
+//! - [`field`]: what a bag says about its system (configuration, field).
 //! - [`repair`]: rewriting an MCAP file cut short as a complete one.
 //! - [`dataset`]: states and target accelerations for training; bag digests.
 
 pub mod bag;
 pub mod dataset;
 mod error;
+pub mod field;
 pub mod meta;
 pub mod msg;
 pub mod repair;

@@ -429,7 +429,9 @@ impl ParticleState {
                 f[..dim].to_vec()
             },
         };
-        field.validate(dim).map_err(DataError::Invalid)?;
+        field
+            .validate(dim)
+            .map_err(|e| DataError::Invalid(e.to_string()))?;
         Ok(Some(field))
     }
 
@@ -510,9 +512,13 @@ impl ParticleState {
             edges,
             anchors,
         };
-        graph.validate().map_err(DataError::Invalid)?;
+        graph
+            .validate()
+            .map_err(|e| DataError::Invalid(e.to_string()))?;
         let state = State { q, v };
-        state.validate(&graph).map_err(DataError::Invalid)?;
+        state
+            .validate(&graph)
+            .map_err(|e| DataError::Invalid(e.to_string()))?;
         let sample = Sample {
             t: self.header.stamp.as_secs(),
             state,

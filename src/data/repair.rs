@@ -128,17 +128,14 @@ pub fn repair(input: &Path, output: &Path) -> Result<RepairReport, DataError> {
             Record::Channel(c) => {
                 let schema = if c.schema_id == 0 {
                     0
+                } else if let Some(s) = schema_ids.get(&c.schema_id) {
+                    *s
                 } else {
-                    match schema_ids.get(&c.schema_id) {
-                        Some(s) => *s,
-                        None => {
-                            report.stopped = format!(
-                                "channel {} refers to unknown schema {}",
-                                c.topic, c.schema_id
-                            );
-                            break;
-                        }
-                    }
+                    report.stopped = format!(
+                        "channel {} refers to unknown schema {}",
+                        c.topic, c.schema_id
+                    );
+                    break;
                 };
                 let metadata: BTreeMap<String, String> = c.metadata.clone();
                 let id = w

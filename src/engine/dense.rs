@@ -1,6 +1,9 @@
 //! Dense layers and MLPs on a flat parameter vector, feature-major
 //! (`x[f·r + row]`, rows innermost), with the forward pass recording the
 //! hidden activations it needs and a hand-written reverse pass.
+// `#[inline(always)]` on purpose: the loops must be inlined into the AVX2
+// (`target_feature`) copies to be compiled for AVX2 at all.
+#![allow(clippy::inline_always)]
 
 use crate::model::mlp::squareplus_f64;
 

@@ -33,8 +33,8 @@ const CHUNK_ROWS: usize = 1024;
 #[derive(Debug, Error)]
 pub enum EngineError {
     /// The graph does not suit the model.
-    #[error("{0}")]
-    Graph(String),
+    #[error(transparent)]
+    Graph(#[from] crate::model::arch::ArchError),
     /// A thread pool could not be started.
     #[error("cannot start {threads} training threads: {reason}")]
     Threads {
@@ -55,14 +55,14 @@ pub struct Engine {
 
 /// The number of cores, for `--threads` defaults.
 pub fn all_cores() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get())
+    std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
 }
 
 impl Engine {
     /// An engine for `hyper` on `graph`, running on `threads` threads.
     pub fn new(hyper: &Hyper, graph: &Graph, threads: usize) -> Result<Self, EngineError> {
         let arch = Arch::new(hyper);
-        arch.supports(graph).map_err(EngineError::Graph)?;
+        arch.supports(graph)?;
         let threads = threads.max(1);
         let pool = if threads > 1 {
             Some(

@@ -1,6 +1,9 @@
 //! Feature-major dense layers. Activations of `r` rows (all nodes, or all
 //! edges) are stored as `x[f·r + row]`, so the innermost loop runs over rows,
 //! is contiguous and vectorises; the tiny feature widths (5) stay outer.
+// `#[inline(always)]` on purpose: the loops must be inlined into the AVX2
+// (`target_feature`) copies to be compiled for AVX2 at all.
+#![allow(clippy::inline_always)]
 
 use crate::model::mlp::squareplus_f64;
 use crate::model::params::Weights;

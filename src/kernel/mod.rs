@@ -4,8 +4,9 @@
 //! only for training. Tested against candle's forward to 1e-12.
 
 mod dense;
+pub mod trained;
 
-use crate::model::arch::{Arch, Block, LOG_MASS};
+use crate::model::arch::{Arch, ArchError, Block, LOG_MASS};
 use crate::model::mlp::squareplus_f64;
 use crate::model::params::Weights;
 use crate::model::plan::{BarEnd, GraphPlan};
@@ -16,6 +17,7 @@ use crate::system::Graph;
 use anyhow::{bail, Context, Result};
 use dense::Mlp as KMlp;
 use rand::SeedableRng;
+pub use trained::TrainedModel;
 
 /// A trained model's forward pass, ready to run.
 #[derive(Clone, Debug)]
@@ -139,12 +141,12 @@ impl Kernel {
     }
 
     /// Whether the kernel can run on this graph.
-    pub fn supports(&self, graph: &Graph) -> Result<(), String> {
+    pub fn supports(&self, graph: &Graph) -> Result<(), ArchError> {
         self.arch.supports(graph)
     }
 
     /// Allocates the buffers for a graph.
-    pub fn workspace(&self, graph: &Graph) -> Result<Workspace, String> {
+    pub fn workspace(&self, graph: &Graph) -> Result<Workspace, ArchError> {
         self.supports(graph)?;
         let plan = GraphPlan::new(graph);
         let (n, d, em, t) = (plan.n, plan.dim, self.hyper.embed, self.hyper.types);
@@ -161,7 +163,7 @@ impl Kernel {
         let mut width = mlps
             .iter()
             .filter_map(|m| m.as_ref())
-            .map(|m| m.width())
+            .map(dense::Mlp::width)
             .max()
             .unwrap_or(1);
         for (a, b) in &self.rounds {

@@ -158,13 +158,7 @@ impl Arch {
             EdgeInput::Concat => 2 * em,
             EdgeInput::Product => em,
         };
-        if !b.graph {
-            let io = h.particles * d;
-            let mut sizes = vec![2 * io];
-            sizes.extend(std::iter::repeat_n(h.node_hidden, h.node_layers));
-            sizes.push(io);
-            mlps.push((Block::Flat, sizes));
-        } else {
+        if b.graph {
             let node_in = match node_input {
                 NodeInput::TypeOnly => t,
                 NodeInput::Full => t + 2 * d,
@@ -190,6 +184,12 @@ impl Arch {
                     mlps.push(mlp(Block::NodeDecoder, inp, d, true));
                 }
             }
+        } else {
+            let io = h.particles * d;
+            let mut sizes = vec![2 * io];
+            sizes.extend(std::iter::repeat_n(h.node_hidden, h.node_layers));
+            sizes.push(io);
+            mlps.push((Block::Flat, sizes));
         }
         Self {
             dim: d,
@@ -218,23 +218,25 @@ impl Arch {
 
     /// Whether a model of this architecture can run on `graph`: valid, of its
     /// dimension, with known particle types, and (NODE) of its particle count.
-    pub fn supports(&self, graph: &crate::system::Graph) -> Result<(), String> {
+    pub fn supports(&self, graph: &crate::system::Graph) -> Result<(), ArchError> {
         graph.validate()?;
         if graph.dim != self.dim {
-            return Err(format!("model is {}D, system is {}D", self.dim, graph.dim));
+            return Err(ArchError::Dimension {
+                model: self.dim,
+                system: graph.dim,
+            });
         }
         if let Some(t) = graph.types.iter().find(|&&t| t as usize >= self.types) {
-            return Err(format!(
-                "particle type {t} is unknown to the model (it knows {} types)",
-                self.types
-            ));
+            return Err(ArchError::UnknownType {
+                ty: *t,
+                types: self.types,
+            });
         }
         if !self.biases.graph && graph.n() != self.particles {
-            return Err(format!(
-                "NODE model is built for {} particles, system has {} (NODE is not inductive)",
-                self.particles,
-                graph.n()
-            ));
+            return Err(ArchError::Particles {
+                built: self.particles,
+                has: graph.n(),
+            });
         }
         Ok(())
     }
@@ -294,4 +296,36 @@ impl Arch {
     pub fn updates_edges(&self, l: usize) -> bool {
         l + 1 < self.rounds || matches!(self.decoder, Decoder::Pairwise { .. })
     }
+}
+
+/// A graph a GNODE-family model cannot run on.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ArchError {
+    /// The graph is invalid.
+    #[error(transparent)]
+    System(#[from] crate::system::SystemError),
+    /// The model and the system have different dimensions.
+    #[error("model is {model}D, system is {system}D")]
+    Dimension {
+        /// The model's.
+        model: usize,
+        /// The system's.
+        system: usize,
+    },
+    /// A particle type the model has no embedding for.
+    #[error("particle type {ty} is unknown to the model (it knows {types} types)")]
+    UnknownType {
+        /// The type.
+        ty: u32,
+        /// Types the model knows.
+        types: usize,
+    },
+    /// NODE (not inductive) meets another particle count.
+    #[error("NODE model is built for {built} particles, system has {has} (NODE is not inductive)")]
+    Particles {
+        /// The count it was built for.
+        built: usize,
+        /// The graph's.
+        has: usize,
+    },
 }

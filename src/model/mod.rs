@@ -1,5 +1,6 @@
 //! Learned dynamics: the GNODE family and NODE in candle (training), and the
-//! model file that hands trained weights to the inference kernel.
+//! model file that hands trained weights to the inference kernel (where
+//! [`crate::kernel::TrainedModel`] runs them).
 
 pub mod arch;
 pub mod batch;
@@ -14,7 +15,5 @@ pub use arch::{Arch, Block};
 pub use net::Net;
 pub use variant::{ArchPreset, EdgeInput, Hyper, MessageFn, Norm, Variant};
 pub mod file;
-pub mod trained;
 
 pub use file::ModelFile;
-pub use trained::TrainedModel;

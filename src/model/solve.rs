@@ -18,6 +18,11 @@ fn f64_slice<'a>(s: &'a CpuStorage, l: &Layout) -> Result<&'a [f64]> {
     }
 }
 
+/// A singular (or non-finite) matrix met by [`lu_solve_in_place`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("singular constraint matrix")]
+pub struct Singular;
+
 /// Solves `k x = b` in place (b overwritten by x) by LU with partial pivoting.
 /// `k` is `n×n` row-major and is destroyed; `b` is `n×m`.
 pub fn lu_solve_in_place(
@@ -25,7 +30,7 @@ pub fn lu_solve_in_place(
     b: &mut [f64],
     n: usize,
     m: usize,
-) -> std::result::Result<(), String> {
+) -> std::result::Result<(), Singular> {
     for c in 0..n {
         let mut p = c;
         for r in c + 1..n {
@@ -35,7 +40,7 @@ pub fn lu_solve_in_place(
         }
         let piv = k[p * n + c];
         if piv == 0.0 || !piv.is_finite() {
-            return Err("singular constraint matrix".into());
+            return Err(Singular);
         }
         if p != c {
             for j in 0..n {
@@ -97,7 +102,7 @@ impl CustomOp2 for BatchedSolve {
         for i in 0..bk {
             work.copy_from_slice(&kk[i * k * k..(i + 1) * k * k]);
             lu_solve_in_place(&mut work, &mut x[i * k * m..(i + 1) * k * m], k, m)
-                .map_err(Error::Msg)?;
+                .map_err(|e| Error::Msg(e.to_string()))?;
         }
         Ok((CpuStorage::F64(x), l2.shape().clone()))
     }

@@ -4,8 +4,6 @@
 //! CDGNODE (+ decoupled body forces) → MCGNODE (+ pairwise forces, Newton's third law).
 
 use serde::{Deserialize, Serialize};
-use std::fmt;
-use std::str::FromStr;
 
 /// A model of the family.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -69,26 +67,16 @@ impl Variant {
     }
 }
 
-impl fmt::Display for Variant {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+impl crate::names::Named for Variant {
+    const ALL: &'static [Self] = &Variant::ALL;
+    const WHAT: &'static str = "model";
+
+    fn name(self) -> &'static str {
+        Variant::name(self)
     }
 }
 
-impl FromStr for Variant {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        Self::ALL
-            .iter()
-            .copied()
-            .find(|v| v.name() == s.to_ascii_lowercase())
-            .ok_or_else(|| {
-                format!(
-                    "unknown model {s:?}; expected one of node, gnode, cgnode, cdgnode, mcgnode"
-                )
-            })
-    }
-}
+crate::impl_named!(Variant);
 
 /// Message and edge-update functions of a message-passing round.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]

@@ -18,8 +18,8 @@ use sha2::{Digest, Sha256};
 
 use super::constraints::acceleration;
 use super::integrator::Integrator;
-use super::{Field, SystemKind};
-use crate::system::{Edge, EdgeKind, Endpoint, Graph, Sample, State, Trajectory};
+use super::{Field, PhysicsError, SystemKind};
+use crate::system::{Edge, EdgeKind, Endpoint, Graph, Sample, State, SystemError, Trajectory};
 
 /// Peridynamic horizon δ in units of the lattice spacing r0. 1.5 bonds each
 /// particle to its 6 face neighbours (|ξ| = r0) and 12 face diagonals
@@ -101,34 +101,29 @@ impl SystemConfig {
     }
 
     /// Checks every parameter; the error names the offending one.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), PhysicsError> {
         let min = match self.kind {
             SystemKind::Spring => 2,
             SystemKind::Pendulum => 1,
             SystemKind::Peridynamic => {
                 if cube_side(self.particles).is_none() {
-                    return Err(format!(
-                        "a peridynamic solid needs a cube number of particles (8, 27, 64, 125, ...), got {}",
-                        self.particles
-                    ));
+                    return Err(PhysicsError::NotACube(self.particles));
                 }
                 if self.dim != 3 {
-                    return Err(format!(
-                        "a peridynamic solid is 3-dimensional: dimension must be 3, got {}",
-                        self.dim
-                    ));
+                    return Err(PhysicsError::SolidDimension(self.dim));
                 }
                 8
             }
         };
         if self.particles < min {
-            return Err(format!(
-                "a {} system needs at least {min} particles, got {}",
-                self.kind, self.particles
-            ));
+            return Err(PhysicsError::TooFewParticles {
+                kind: self.kind,
+                min,
+                got: self.particles,
+            });
         }
         if self.dim != 2 && self.dim != 3 {
-            return Err(format!("dimension must be 2 or 3, got {}", self.dim));
+            return Err(SystemError::Dimension(self.dim).into());
         }
         let positive = [
             ("stiffness", self.stiffness),
@@ -139,14 +134,14 @@ impl SystemConfig {
         ];
         for (name, x) in positive {
             if !(x.is_finite() && x > 0.0) {
-                return Err(format!("{name} must be a positive finite number, got {x}"));
+                return Err(PhysicsError::NotPositive { name, value: x });
             }
         }
         if self.save_every == 0 {
-            return Err("save_every must be at least 1".into());
+            return Err(PhysicsError::AtLeastOne("save_every"));
         }
         if self.states == 0 {
-            return Err("states must be at least 1".into());
+            return Err(PhysicsError::AtLeastOne("states"));
         }
         self.field.validate(self.dim)
     }
@@ -314,7 +309,7 @@ impl SystemConfig {
                 q[i * d + c] = scale * x + rng.random_range(-0.01..0.01) * r0;
             }
         }
-        for x in v.iter_mut() {
+        for x in &mut v {
             *x = rng.random_range(-0.05..0.05) * vscale;
         }
         let mtot: f64 = graph.masses.iter().sum();
@@ -398,7 +393,7 @@ impl SystemConfig {
                     let ph = rng.random_range(0.0..2.0 * PI);
                     let u = [th.sin() * ph.cos(), -th.cos(), th.sin() * ph.sin()];
                     let mut w = [0.0; 3];
-                    for x in w.iter_mut() {
+                    for x in &mut w {
                         *x = rng.random_range(-1.0..1.0) * wscale * l;
                     }
                     let dot: f64 = (0..3).map(|c| u[c] * w[c]).sum();
@@ -463,7 +458,7 @@ impl SystemConfig {
         graph: &Graph,
         start: State,
         id: u32,
-    ) -> Result<Trajectory, String> {
+    ) -> Result<Trajectory, PhysicsError> {
         self.validate()?;
         let mut it = Integrator::new(graph, &self.field, self.dt, start)?;
         let mut samples = Vec::with_capacity(self.states);
@@ -482,9 +477,7 @@ impl SystemConfig {
             .iter()
             .position(|s| s.state.validate(graph).is_err())
         {
-            return Err(format!(
-                "trajectory {id} diverged (non-finite state) at sample {bad}; try a smaller dt"
-            ));
+            return Err(PhysicsError::Diverged { id, sample: bad });
         }
         Ok(Trajectory {
             id,
@@ -506,20 +499,24 @@ impl SystemConfig {
     }
 
     /// [`SystemConfig::simulate`], returning invalid input as an error.
-    pub fn try_simulate(&self, trajectories: usize, seed: u64) -> Result<Vec<Trajectory>, String> {
+    pub fn try_simulate(
+        &self,
+        trajectories: usize,
+        seed: u64,
+    ) -> Result<Vec<Trajectory>, PhysicsError> {
         self.validate()?;
         if trajectories > u32::MAX as usize {
-            return Err(format!("too many trajectories: {trajectories}"));
+            return Err(PhysicsError::TooManyTrajectories(trajectories));
         }
         let graph = self.graph();
         let threads = std::thread::available_parallelism()
-            .map_or(1, |n| n.get())
+            .map_or(1, std::num::NonZero::get)
             .min(trajectories.max(1));
         let run = |i: usize| {
             let start = self.start_for(&graph, seed, i);
             self.try_simulate_one(&graph, start, i as u32)
         };
-        let mut out: Vec<Option<Result<Trajectory, String>>> = vec![None; trajectories];
+        let mut out: Vec<Option<Result<Trajectory, PhysicsError>>> = vec![None; trajectories];
         std::thread::scope(|s| {
             // Strided split: trajectory i goes to thread i % threads.
             let handles: Vec<_> = (0..threads)
@@ -544,9 +541,7 @@ impl SystemConfig {
         });
         out.into_iter()
             .enumerate()
-            .map(|(i, r)| {
-                r.unwrap_or_else(|| Err(format!("trajectory {i}: worker thread panicked")))
-            })
+            .map(|(i, r)| r.unwrap_or(Err(PhysicsError::WorkerPanicked(i))))
             .collect()
     }
 }

@@ -12,6 +12,7 @@
 use super::forces::applied_forces;
 use super::projection::Projector;
 use super::Field;
+use super::PhysicsError;
 use crate::system::{Graph, State};
 
 /// A velocity-Verlet(+RATTLE) integrator that owns the state it advances.
@@ -38,17 +39,15 @@ impl Integrator {
     pub const MAX_ITER: usize = Projector::MAX_ITER;
 
     /// Checks the inputs and computes the starting acceleration.
-    pub fn new(graph: &Graph, field: &Field, dt: f64, start: State) -> Result<Self, String> {
+    pub fn new(graph: &Graph, field: &Field, dt: f64, start: State) -> Result<Self, PhysicsError> {
         graph.validate()?;
         field.validate(graph.dim)?;
         start.validate(graph)?;
         if !(dt.is_finite() && dt > 0.0) {
-            return Err(format!(
-                "time step must be a positive finite number, got {dt}"
-            ));
+            return Err(PhysicsError::TimeStep(dt));
         }
         if let Some(e) = graph.bars().find(|e| e.rest_length <= 0.0) {
-            return Err(format!("bar from particle {} has non-positive length", e.a));
+            return Err(PhysicsError::BarLength(e.a));
         }
         let mut it = Integrator {
             graph: graph.clone(),

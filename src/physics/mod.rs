@@ -6,27 +6,28 @@
 //! * [`integrator`]: velocity Verlet + SHAKE/RATTLE;
 //! * [`config`]: the paper's spring, pendulum and peridynamic-solid systems,
 //!   initial states, trajectory generation;
-//! * [`truth`]: the physics behind the [`crate::dynamics::Dynamics`] trait.
+//! * [`rk4`]: RK4 on (q, p), the paper's HGN training data.
+//!
+//! The same physics as a model behind [`crate::dynamics::Dynamics`] is
+//! [`crate::models::truth::Truth`], above the trait.
 
 pub mod config;
 pub mod constraints;
+mod error;
 pub mod forces;
 pub mod integrator;
 mod linalg;
 pub mod projection;
-pub mod truth;
-
-use std::fmt;
-use std::str::FromStr;
+pub mod rk4;
 
 use serde::{Deserialize, Serialize};
 
 pub use config::SystemConfig;
 pub use constraints::{acceleration, bar_jacobian, constraint_residual};
+pub use error::PhysicsError;
 pub use forces::{applied_forces, hamiltonian, kinetic_energy, potential_energy};
 pub use integrator::Integrator;
 pub use projection::Projector;
-pub use truth::Truth;
 
 #[cfg(doc)]
 use crate::system::Graph;
@@ -72,29 +73,16 @@ impl SystemKind {
     }
 }
 
-impl fmt::Display for SystemKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+impl crate::names::Named for SystemKind {
+    const ALL: &'static [Self] = &SystemKind::ALL;
+    const WHAT: &'static str = "system kind";
+
+    fn name(self) -> &'static str {
+        SystemKind::name(self)
     }
 }
 
-impl FromStr for SystemKind {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, String> {
-        let t = s.trim().to_ascii_lowercase();
-        SystemKind::ALL
-            .into_iter()
-            .find(|k| k.name() == t)
-            .ok_or_else(|| {
-                let valid: Vec<&str> = SystemKind::ALL.iter().map(|k| k.name()).collect();
-                format!(
-                    "unknown system kind {s:?}; valid kinds are: {}",
-                    valid.join(", ")
-                )
-            })
-    }
-}
+crate::impl_named!(SystemKind);
 
 /// The field every particle sits in. Missing JSON fields default to 0 / empty.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -110,21 +98,21 @@ pub struct Field {
 
 impl Field {
     /// Checks finiteness, a non-negative drag and the force's length.
-    pub fn validate(&self, dim: usize) -> Result<(), String> {
+    pub fn validate(&self, dim: usize) -> Result<(), PhysicsError> {
         if !self.gravity.is_finite() {
-            return Err(format!("gravity {} is not finite", self.gravity));
+            return Err(PhysicsError::Gravity(self.gravity));
         }
         if !(self.drag.is_finite() && self.drag >= 0.0) {
-            return Err(format!("drag {} must be a finite number ≥ 0", self.drag));
+            return Err(PhysicsError::Drag(self.drag));
         }
         if !self.force.is_empty() && self.force.len() != dim {
-            return Err(format!(
-                "external force has {} components, the system is {dim}-dimensional",
-                self.force.len()
-            ));
+            return Err(PhysicsError::ForceLength {
+                components: self.force.len(),
+                dim,
+            });
         }
         if self.force.iter().any(|x| !x.is_finite()) {
-            return Err("external force is not finite".into());
+            return Err(PhysicsError::ForceNotFinite);
         }
         Ok(())
     }

@@ -3,10 +3,10 @@
 //! Each step goes through the same public path as the command line:
 //! simulate → bag → train → model file → evaluate.
 
-use crate::baselines::{load_any_model, train_any_from_bags, ModelKind};
 use crate::data::bag::read_trajectories;
 use crate::evaluate::{evaluate, EvalOptions, Evaluation};
 use crate::model::file::TrainingReport;
+use crate::models::{load_any_model, train_any_from_bags, ModelKind};
 use crate::physics::SystemConfig;
 use crate::simulate::{simulate_with, DataIntegrator};
 use crate::train::{ModelOptions, TrainConfig};
@@ -56,7 +56,7 @@ pub struct TrainSpec {
     pub opts: ModelOptions,
 }
 
-impl<'a> Lab<'a> {
+impl Lab<'_> {
     /// Prints a progress line with the elapsed time.
     pub fn say(&self, m: &str) {
         (self.log)(&format!("[{:6.0} s] {m}", self.t0.elapsed().as_secs_f64()));
@@ -150,7 +150,7 @@ impl<'a> Lab<'a> {
 
     /// Runs jobs on [`Lab::threads`] threads (in order of submission), one
     /// result per job in the same order. A panicking job becomes an error.
-    pub fn pool<'s, T: Send>(&self, jobs: Vec<Job<'s, T>>) -> Vec<Result<T>> {
+    pub fn pool<T: Send>(&self, jobs: Vec<Job<'_, T>>) -> Vec<Result<T>> {
         let n = jobs.len();
         let queue = Mutex::new(jobs.into_iter().enumerate().collect::<Vec<_>>());
         let results: Mutex<Vec<Option<Result<T>>>> = Mutex::new((0..n).map(|_| None).collect());
@@ -158,7 +158,9 @@ impl<'a> Lab<'a> {
             for _ in 0..self.threads.clamp(1, n.max(1)) {
                 s.spawn(|| loop {
                     let next = {
-                        let mut q = queue.lock().unwrap_or_else(|e| e.into_inner());
+                        let mut q = queue
+                            .lock()
+                            .unwrap_or_else(std::sync::PoisonError::into_inner);
                         if q.is_empty() {
                             None
                         } else {
@@ -168,13 +170,15 @@ impl<'a> Lab<'a> {
                     let Some((i, job)) = next else { break };
                     let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(job))
                         .unwrap_or_else(|_| Err(anyhow::anyhow!("job panicked")));
-                    results.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(r);
+                    results
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)[i] = Some(r);
                 });
             }
         });
         results
             .into_inner()
-            .unwrap_or_else(|e| e.into_inner())
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
             .into_iter()
             .map(|r| r.unwrap_or_else(|| Err(anyhow::anyhow!("job did not run"))))
             .collect()

@@ -10,11 +10,16 @@ pub mod lab;
 pub mod report;
 pub mod scale;
 
+use crate::baselines::Kind;
+use crate::model::Variant;
+use crate::models::ModelKind;
 use anyhow::{Context, Result};
 use experiments::Section;
 use lab::Lab;
-use report::{num, Row};
+use report::Experiment::{Baselines, Biases, DragForce, Noise, Peridynamic, Points, Wallclock};
+use report::{num, Experiment, Row};
 use scale::Scale;
+use std::cell::RefCell;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -45,6 +50,9 @@ pub struct Outcome {
 pub fn run(opts: &Options, log: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("creating {}", opts.out.display()))?;
+    // LGN and HGN need candle's grad-of-grad; candle fixes the setting per
+    // thread at its first backward pass, so it is set before any thread starts.
+    crate::baselines::autodiff::request_second_order();
     let lab = Lab {
         dir: opts.out.clone(),
         threads: opts.threads.max(1),
@@ -83,7 +91,7 @@ pub fn run(opts: &Options, log: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
         lab.threads,
         seconds,
         seconds / 60.0,
-        std::thread::available_parallelism().map_or(1, |n| n.get())
+        std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
     );
     md += "Metrics (paper's definitions): RE = ‖q̂ − q‖/(‖q̂‖ + ‖q‖), EE the same for the \
            Hamiltonian, ME for the total momentum; ME scaled = ‖P̂ − P‖/(Σm|v̂| + Σm|v|) \
@@ -127,14 +135,65 @@ pub fn run(opts: &Options, log: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
     })
 }
 
-fn find<'r>(rows: &'r [Row], exp: &str, sys: &str, model: &str, n: usize) -> Option<&'r Row> {
-    rows.iter().find(|r| {
-        r.experiment == exp
-            && r.system == sys
-            && r.model == model
-            && r.particles == n
-            && r.error.is_none()
-    })
+/// The rows the claims read, looked up by experiment, system, model and
+/// size. A lookup that finds no result is remembered, and the claims end by
+/// naming every missing one instead of silently leaving a claim out.
+struct Results<'r> {
+    rows: &'r [Row],
+    trained: &'r [&'r (String, Result<lab::Trained>)],
+    missing: RefCell<Vec<String>>,
+}
+
+impl<'r> Results<'r> {
+    fn new(rows: &'r [Row], trained: &'r [&'r (String, Result<lab::Trained>)]) -> Self {
+        Self {
+            rows,
+            trained,
+            missing: RefCell::new(vec![]),
+        }
+    }
+
+    fn miss(&self, what: String) {
+        let mut m = self.missing.borrow_mut();
+        if !m.contains(&what) {
+            m.push(what);
+        }
+    }
+
+    /// The successful row of `model` in `exp` on the `n`-particle `sys`.
+    fn get(&self, exp: Experiment, sys: &str, model: ModelKind, n: usize) -> Option<&'r Row> {
+        let r = self.rows.iter().find(|r| {
+            r.experiment == exp
+                && r.system == sys
+                && r.model == model.name()
+                && r.particles == n
+                && r.error.is_none()
+        });
+        if r.is_none() {
+            self.miss(format!("{exp}: {model} on the {n}-{sys}"));
+        }
+        r
+    }
+
+    /// RE of `model` in the sweep `exp` at setting `x` (NaN, and remembered,
+    /// when missing).
+    fn at(&self, exp: Experiment, model: ModelKind, x: f64) -> f64 {
+        let r = self.rows.iter().find(|r| {
+            r.experiment == exp && r.model == model.name() && r.x == Some(x) && r.error.is_none()
+        });
+        if r.is_none() {
+            self.miss(format!("{exp}: {model} at {x}"));
+        }
+        r.map_or(f64::NAN, |r| r.averages.re)
+    }
+
+    /// The particle count of `exp`'s first row.
+    fn particles(&self, exp: Experiment) -> usize {
+        self.rows
+            .iter()
+            .find(|r| r.experiment == exp)
+            .map_or(0, |r| r.particles)
+    }
 }
 
 /// Orders of magnitude between two errors (positive: `a` is below `b`).
@@ -152,21 +211,63 @@ fn verdict(ok: bool, partly: bool) -> &'static str {
     }
 }
 
-/// The paper's headline claims next to this run's numbers.
+/// The paper's headline claims, one function each, in the order of the report.
+const CLAIMS: [fn(&Results, &mut String); 8] = [
+    claim_training_cost,
+    claim_energy_error,
+    claim_zero_momentum,
+    claim_bias_ladder,
+    claim_peridynamic,
+    claim_drag_force,
+    claim_noise,
+    claim_data_efficiency,
+];
+
+const MCGNODE: ModelKind = ModelKind::Family(Variant::Mcgnode);
+const GNODE: ModelKind = ModelKind::Family(Variant::Gnode);
+const NODE: ModelKind = ModelKind::Family(Variant::Node);
+const LGN: ModelKind = ModelKind::Baseline(Kind::Lgn);
+const HGN: ModelKind = ModelKind::Baseline(Kind::Hgn);
+const GNS: ModelKind = ModelKind::Baseline(Kind::Gns);
+
+/// The paper's headline claims next to this run's numbers; a claim whose
+/// rows are missing is named at the end ([`Results`]).
 fn claims(rows: &[Row], trained: &[&(String, Result<lab::Trained>)]) -> String {
+    let res = Results::new(rows, trained);
     let mut out = String::new();
-    let mut line = |s: String| out += &format!("- {s}\n");
+    for claim in CLAIMS {
+        claim(&res, &mut out);
+    }
+    let missing = res.missing.into_inner();
+    if !missing.is_empty() {
+        out += &format!(
+            "- **No result** for {}: the claims that need them are not checked (failures are \
+             listed in the sections below).\n",
+            missing.join("; ")
+        );
+    }
+    out
+}
+
+/// The training cost per epoch (MCGNODE fastest, LGN slowest).
+fn claim_training_cost(res: &Results, out: &mut String) {
+    let mut line = |s: String| *out += &format!("- {s}\n");
     for sys in ["pendulum", "spring"] {
-        let per_epoch = |m: &str| {
-            trained
+        let per_epoch = |m: ModelKind| {
+            let t = res
+                .trained
                 .iter()
                 .find(|(l, _)| l.starts_with(&format!("{m}-5-{sys}")))
                 .and_then(|(_, t)| t.as_ref().ok())
-                .map(|t| t.report.seconds / t.report.epochs_run.max(1) as f64)
+                .map(|t| t.report.seconds / t.report.epochs_run.max(1) as f64);
+            if t.is_none() {
+                res.miss(format!("training: {m} on the 5-{sys}"));
+            }
+            t
         };
-        let ms: Vec<(&str, Option<f64>)> = ["mcgnode", "gnode", "hgn", "lgn"]
+        let ms: Vec<(ModelKind, Option<f64>)> = [MCGNODE, GNODE, HGN, LGN]
             .iter()
-            .map(|m| (*m, per_epoch(m)))
+            .map(|&m| (m, per_epoch(m)))
             .collect();
         if ms.iter().all(|(_, t)| t.is_some()) {
             let t = |i: usize| ms[i].1.unwrap_or(f64::NAN);
@@ -182,39 +283,49 @@ fn claims(rows: &[Row], trained: &[&(String, Result<lab::Trained>)]) -> String {
             ));
         }
     }
-    for (exp, budget) in [
-        ("baselines", "equal epochs"),
-        ("wallclock", "equal wall-clock time"),
+}
+
+/// MCGNODE's energy error against LGN and HGN.
+fn claim_energy_error(res: &Results, out: &mut String) {
+    let mut line = |s: String| *out += &format!("- {s}\n");
+    for (exp, budget, sys, paper_orders) in [
+        (Baselines, "equal epochs", "pendulum", 4.0),
+        (Baselines, "equal epochs", "spring", 2.0),
+        (Wallclock, "equal wall-clock time", "pendulum", 4.0),
+        (Wallclock, "equal wall-clock time", "spring", 2.0),
     ] {
-        for (sys, paper_orders) in [("pendulum", 4.0), ("spring", 2.0)] {
-            let m = find(rows, exp, sys, "mcgnode", 5);
-            let l = find(rows, exp, sys, "lgn", 5);
-            let h = find(rows, exp, sys, "hgn", 5);
-            if let (Some(m), Some(l), Some(h)) = (m, l, h) {
-                let (ol, oh) = (
-                    orders(m.averages.ee, l.averages.ee),
-                    orders(m.averages.ee, h.averages.ee),
-                );
-                let worst = ol.min(oh);
-                line(format!(
-                    "Energy error of MCGNODE vs LGN/HGN on the 5-{sys} at {budget} (paper: \
-                     ~{paper_orders:.0} orders of magnitude lower): EE {} vs {} (LGN) and {} \
-                     (HGN), i.e. {ol:.1} and {oh:.1} orders — {}.",
-                    num(m.averages.ee),
-                    num(l.averages.ee),
-                    num(h.averages.ee),
-                    verdict(worst >= paper_orders - 1.0, worst > 0.0)
-                ));
-            } else {
-                line(format!(
-                    "Energy error vs LGN/HGN on the 5-{sys} at {budget}: a model failed, see below."
-                ));
-            }
+        let m = res.get(exp, sys, MCGNODE, 5);
+        let l = res.get(exp, sys, LGN, 5);
+        let h = res.get(exp, sys, HGN, 5);
+        if let (Some(m), Some(l), Some(h)) = (m, l, h) {
+            let (ol, oh) = (
+                orders(m.averages.ee, l.averages.ee),
+                orders(m.averages.ee, h.averages.ee),
+            );
+            let worst = ol.min(oh);
+            line(format!(
+                "Energy error of MCGNODE vs LGN/HGN on the 5-{sys} at {budget} (paper: \
+                 ~{paper_orders:.0} orders of magnitude lower): EE {} vs {} (LGN) and {} (HGN), i.e. {ol:.1} and \
+                 {oh:.1} orders — {}.",
+                num(m.averages.ee),
+                num(l.averages.ee),
+                num(h.averages.ee),
+                verdict(worst >= paper_orders - 1.0, worst > 0.0)
+            ));
+        } else {
+            line(format!(
+                "Energy error vs LGN/HGN on the 5-{sys} at {budget}: a model failed, see below."
+            ));
         }
     }
+}
+
+/// MCGNODE's momentum error on springs.
+fn claim_zero_momentum(res: &Results, out: &mut String) {
+    let mut line = |s: String| *out += &format!("- {s}\n");
     if let (Some(m), Some(g)) = (
-        find(rows, "biases", "spring", "mcgnode", 5),
-        find(rows, "biases", "spring", "gnode", 5),
+        res.get(Biases, "spring", MCGNODE, 5),
+        res.get(Biases, "spring", GNODE, 5),
     ) {
         line(format!(
             "ME of MCGNODE on springs is zero (paper): our spring starts have zero momentum, \
@@ -228,18 +339,23 @@ fn claims(rows: &[Row], trained: &[&(String, Result<lab::Trained>)]) -> String {
             )
         ));
     }
+}
+
+/// Each inductive bias in turn.
+fn claim_bias_ladder(res: &Results, out: &mut String) {
+    let mut line = |s: String| *out += &format!("- {s}\n");
     for sys in ["spring", "pendulum"] {
-        let ladder: Vec<String> = ["node", "gnode", "cgnode", "cdgnode", "mcgnode"]
+        let re = |v: Variant| {
+            res.get(Biases, sys, ModelKind::Family(v), 5)
+                .map_or(f64::NAN, |r| r.averages.re)
+        };
+        let ladder: Vec<String> = Variant::ALL
             .iter()
-            .map(|m| {
-                let v = find(rows, "biases", sys, m, 5).map_or(f64::NAN, |r| r.averages.re);
-                format!("{m} {}", num(v))
-            })
+            .map(|&v| format!("{v} {}", num(re(v))))
             .collect();
-        let re = |m| find(rows, "biases", sys, m, 5).map_or(f64::NAN, |r| r.averages.re);
-        let best = ["node", "gnode", "cgnode", "cdgnode"]
+        let best = Variant::ALL[..4]
             .iter()
-            .all(|m| re("mcgnode") <= re(m));
+            .all(|&v| re(Variant::Mcgnode) <= re(v));
         line(format!(
             "Each bias's effect on the 5-{sys} (paper: each bias helps; MCGNODE best on \
              springs, MCGNODE ≈ CDGNODE on pendulums), RE: {} — MCGNODE lowest: {}.",
@@ -247,16 +363,13 @@ fn claims(rows: &[Row], trained: &[&(String, Result<lab::Trained>)]) -> String {
             if best { "yes" } else { "no" }
         ));
     }
-    let peri = |m| {
-        find(
-            rows,
-            "peridynamic",
-            "peridynamic",
-            m,
-            rows_n(rows, "peridynamic"),
-        )
-    };
-    if let (Some(m), Some(g), Some(s)) = (peri("mcgnode"), peri("gnode"), peri("gns")) {
+}
+
+/// The peridynamic solid: MCGNODE against GNODE and GNS.
+fn claim_peridynamic(res: &Results, out: &mut String) {
+    let mut line = |s: String| *out += &format!("- {s}\n");
+    let peri = |m| res.get(Peridynamic, "peridynamic", m, res.particles(Peridynamic));
+    if let (Some(m), Some(g), Some(s)) = (peri(MCGNODE), peri(GNODE), peri(GNS)) {
         let ok = m.averages.re < g.averages.re && m.averages.re < s.averages.re;
         line(format!(
             "Peridynamic solid (paper: MCGNODE far better than GNODE and GNS; its absolute \
@@ -274,10 +387,15 @@ fn claims(rows: &[Row], trained: &[&(String, Result<lab::Trained>)]) -> String {
             )
         ));
     }
+}
+
+/// Drag and external force: MCGNODE against NODE.
+fn claim_drag_force(res: &Results, out: &mut String) {
+    let mut line = |s: String| *out += &format!("- {s}\n");
     for sys in ["spring+drag", "spring+force"] {
         if let (Some(m), Some(n)) = (
-            find(rows, "drag-force", sys, "mcgnode", 5),
-            find(rows, "drag-force", sys, "node", 5),
+            res.get(DragForce, sys, MCGNODE, 5),
+            res.get(DragForce, sys, NODE, 5),
         ) {
             line(format!(
                 "{sys} (paper: MCGNODE clearly better than NODE): RE {} vs {} — {}.",
@@ -290,44 +408,56 @@ fn claims(rows: &[Row], trained: &[&(String, Result<lab::Trained>)]) -> String {
             ));
         }
     }
-    let at = |exp: &str, m: &str, x: f64| {
-        rows.iter()
-            .find(|r| r.experiment == exp && r.model == m && r.x == Some(x) && r.error.is_none())
-            .map_or(f64::NAN, |r| r.averages.re)
-    };
-    if let Some(top) = rows
+}
+
+/// Robustness to training noise.
+fn claim_noise(res: &Results, out: &mut String) {
+    let mut line = |s: String| *out += &format!("- {s}\n");
+    if let Some(top) = res
+        .rows
         .iter()
-        .filter(|r| r.experiment == "noise")
+        .filter(|r| r.experiment == Noise)
         .filter_map(|r| r.x)
         .max_by(f64::total_cmp)
     {
-        let res: Vec<(String, f64)> = ["gnode", "mcgnode", "lgn", "hgn"]
+        let at: Vec<(ModelKind, f64)> = [GNODE, MCGNODE, LGN, HGN]
             .iter()
-            .map(|m| (m.to_string(), at("noise", m, top)))
+            .map(|&m| (m, res.at(Noise, m, top)))
             .collect();
-        let best = res.iter().all(|(_, v)| res[1].1 <= *v || v.is_nan());
+        let mcgnode = res.at(Noise, MCGNODE, top);
+        let best = at.iter().all(|(_, v)| mcgnode <= *v || v.is_nan());
         line(format!(
             "Noise (paper: MCGNODE the most robust): RE at {top} % noise: {} — MCGNODE lowest: {}.",
-            res.iter()
+            at.iter()
                 .map(|(m, v)| format!("{m} {}", num(*v)))
                 .collect::<Vec<_>>()
                 .join(", "),
             if best { "yes" } else { "no" }
         ));
+    } else {
+        res.miss(format!("{Noise}: every row"));
     }
-    let mut xs: Vec<f64> = rows
+}
+
+/// Data efficiency: MCGNODE against NODE and HGN at every size.
+fn claim_data_efficiency(res: &Results, out: &mut String) {
+    let mut line = |s: String| *out += &format!("- {s}\n");
+    let mut xs: Vec<f64> = res
+        .rows
         .iter()
-        .filter(|r| r.experiment == "points")
+        .filter(|r| r.experiment == Points)
         .filter_map(|r| r.x)
         .collect();
     xs.sort_by(f64::total_cmp);
     xs.dedup();
-    if !xs.is_empty() {
+    if xs.is_empty() {
+        res.miss(format!("{Points}: every row"));
+    } else {
         let wins = xs
             .iter()
             .filter(|&&x| {
-                at("points", "mcgnode", x) < at("points", "node", x)
-                    && at("points", "mcgnode", x) < at("points", "hgn", x)
+                res.at(Points, MCGNODE, x) < res.at(Points, NODE, x)
+                    && res.at(Points, MCGNODE, x) < res.at(Points, HGN, x)
             })
             .count();
         line(format!(
@@ -336,16 +466,9 @@ fn claims(rows: &[Row], trained: &[&(String, Result<lab::Trained>)]) -> String {
              {} (MCGNODE), {} (NODE), {} (HGN).",
             xs.len(),
             xs[0],
-            num(at("points", "mcgnode", xs[0])),
-            num(at("points", "node", xs[0])),
-            num(at("points", "hgn", xs[0]))
+            num(res.at(Points, MCGNODE, xs[0])),
+            num(res.at(Points, NODE, xs[0])),
+            num(res.at(Points, HGN, xs[0]))
         ));
     }
-    out
-}
-
-fn rows_n(rows: &[Row], exp: &str) -> usize {
-    rows.iter()
-        .find(|r| r.experiment == exp)
-        .map_or(0, |r| r.particles)
 }

@@ -5,11 +5,71 @@ use crate::evaluate::Evaluation;
 use crate::metrics::{Averages, Summary, DIVERGED, LOG_FLOOR};
 use serde::Serialize;
 
+/// The experiments of `reproduce`, as named in results.json and file names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Experiment {
+    /// Each inductive bias in turn: the GNODE family.
+    Biases,
+    /// MCGNODE against LGN, HGN and GNS at equal epochs.
+    Baselines,
+    /// MCGNODE against LGN, HGN and GNS at equal wall-clock training time.
+    Wallclock,
+    /// GNODE and MCGNODE with the paper text's architecture.
+    Architecture,
+    /// Zero-shot to large rings.
+    Large,
+    /// The 3D peridynamic solid.
+    Peridynamic,
+    /// Springs under drag or an external force.
+    DragForce,
+    /// Training-data noise sweep.
+    Noise,
+    /// Training-set size sweep (data efficiency).
+    Points,
+}
+
+impl crate::names::Named for Experiment {
+    const ALL: &'static [Self] = &[
+        Experiment::Biases,
+        Experiment::Baselines,
+        Experiment::Wallclock,
+        Experiment::Architecture,
+        Experiment::Large,
+        Experiment::Peridynamic,
+        Experiment::DragForce,
+        Experiment::Noise,
+        Experiment::Points,
+    ];
+    const WHAT: &'static str = "experiment";
+
+    fn name(self) -> &'static str {
+        match self {
+            Experiment::Biases => "biases",
+            Experiment::Baselines => "baselines",
+            Experiment::Wallclock => "wallclock",
+            Experiment::Architecture => "architecture",
+            Experiment::Large => "large",
+            Experiment::Peridynamic => "peridynamic",
+            Experiment::DragForce => "drag-force",
+            Experiment::Noise => "noise",
+            Experiment::Points => "points",
+        }
+    }
+}
+
+crate::impl_named!(Experiment);
+
+impl Serialize for Experiment {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(crate::names::Named::name(*self))
+    }
+}
+
 /// One evaluation in results.json.
 #[derive(Clone, Debug, Serialize)]
 pub struct Row {
-    /// Experiment ("biases", "baselines", "peridynamic", "noise", ...).
-    pub experiment: String,
+    /// Experiment.
+    pub experiment: Experiment,
     /// System ("spring", "pendulum", "peridynamic", "spring+drag", ...).
     pub system: String,
     /// Model label.
@@ -36,7 +96,7 @@ pub struct Row {
 impl Row {
     /// A row from an evaluation, or from its failure.
     pub fn new(
-        experiment: &str,
+        experiment: Experiment,
         system: &str,
         model: &str,
         particles: usize,
@@ -52,7 +112,7 @@ impl Row {
             me_abs: f64::NAN,
         };
         let mut r = Row {
-            experiment: experiment.into(),
+            experiment,
             system: system.into(),
             model: model.into(),
             particles,

@@ -494,7 +494,7 @@ mod tests {
         // Running means over the window of 2 at lead 0.1: (re, re01).
         let sum = t.summary();
         assert_eq!(sum[0].compared, 2);
-        assert!((sum[0].re_mean - (re + re01) / 2.0).abs() < 1e-12);
+        assert!((sum[0].re_mean - f64::midpoint(re, re01)).abs() < 1e-12);
         assert!(
             (sum[0].ee_mean - ee).abs() < 1e-9,
             "EE mean over known ones"

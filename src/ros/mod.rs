@@ -9,7 +9,6 @@
 //! - [`accuracy`]: live accuracy, comparing incoming states with what was
 //!   predicted for them, and the drift alarm (no DDS);
 //! - [`record`]: MCAP recording of states, predictions and forces;
-//! - [`truth`]: the ground-truth physics as a servable model;
 //! - [`handles`]: what the tasks share: parameters, model, diagnostics,
 //!   recorder, each a handle of its own;
 //! - [`qos`]: QoS profiles and ROS names;
@@ -34,16 +33,12 @@ pub mod qos;
 pub mod record;
 pub mod service;
 pub mod training;
-pub mod truth;
 pub mod yaml;
 
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::path::PathBuf;
 
-use anyhow::Context as _;
 use clap::Args;
 
-use crate::dynamics::Dynamics;
 pub use params::NodeParams;
 
 /// Options of `mcgnode serve`.
@@ -72,7 +67,7 @@ pub fn run_serve(args: ServeArgs) -> anyhow::Result<()> {
         print!("{}", params.to_yaml());
         return Ok(());
     }
-    let model = load_model(&params.model)?;
+    let model = crate::models::load_model(&params.model)?;
     let domain_id = domain_id_from_env().map_err(anyhow::Error::msg)?;
     node::serve(params, model, domain_id)
 }
@@ -87,17 +82,6 @@ pub fn effective_params(args: &ServeArgs) -> Result<NodeParams, String> {
         return Err("no model: set the `model` parameter or pass --model".into());
     }
     Ok(p)
-}
-
-/// `truth:<system>`, or a trained model file (GNODE family or baseline).
-pub fn load_model(model: &str) -> anyhow::Result<Arc<dyn Dynamics>> {
-    if truth::is_truth(model) {
-        return truth::load_truth(model).map_err(anyhow::Error::msg);
-    }
-    let m = crate::baselines::load_any_model(Path::new(model))
-        .with_context(|| format!("loading model {model}"))?;
-    let trained = crate::compat::TrainedFor::from_model_file(Path::new(model))?;
-    Ok(Arc::new(crate::compat::Checked::new(m.dynamics, trained)))
 }
 
 /// The DDS domain from `ROS_DOMAIN_ID` (0 when unset), which ros2-client does

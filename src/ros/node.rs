@@ -55,7 +55,7 @@ fn handle_state(
     if let Some(t) = model.trained_for() {
         let (graph, _) = msg.to_parts().map_err(|e| e.to_string())?;
         let field = msg.field().map_err(|e| e.to_string())?;
-        t.check(&graph, field.as_ref())?;
+        t.check(&graph, field.as_ref()).map_err(|e| e.to_string())?;
     }
     let p = predict::predict(
         model.as_ref(),
@@ -318,7 +318,7 @@ fn create_server<Req: Message + Clone + 'static, Resp: Message + Clone + 'static
 
 /// The file a `model` parameter names (`None` for `truth:*`).
 fn model_file(model: &str) -> Option<std::path::PathBuf> {
-    (!super::truth::is_truth(model)).then(|| model.into())
+    (!crate::models::truth::is_truth(model)).then(|| model.into())
 }
 
 /// The handles of a node serving `model`, logging through `node`.
@@ -886,7 +886,7 @@ mod tests {
 
     #[test]
     fn rollout_service_checks_its_request() {
-        let model = crate::ros::truth::load_truth("truth:spring").unwrap();
+        let model = crate::models::truth::load_truth("truth:spring").unwrap();
         let req = RolloutRequest {
             steps: 50,
             ..RolloutRequest::default()

@@ -177,8 +177,8 @@ pub fn predict(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::models::truth::load_truth;
     use crate::physics::{SystemConfig, SystemKind};
-    use crate::ros::truth::load_truth;
 
     fn spring_state() -> ParticleState {
         let cfg = SystemConfig::new(SystemKind::Spring, 5);

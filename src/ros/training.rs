@@ -36,7 +36,8 @@ use ros2_client::{MessageTypeName, Node, Publisher, Server, ServiceMapping, Serv
 
 use crate::data::msg::{Header, Time};
 use crate::dynamics::Dynamics;
-use crate::model::{ModelFile, TrainedModel, Variant};
+use crate::kernel::TrainedModel;
+use crate::model::{ModelFile, Variant};
 use crate::train::{train_from_bags, EpochReport, ModelOptions, TrainConfig};
 
 use super::clock::Clock;
@@ -249,7 +250,10 @@ pub fn request_variant(variant: &str) -> Result<Variant, String> {
     if variant.trim().is_empty() {
         Ok(DEFAULT_VARIANT)
     } else {
-        variant.trim().parse()
+        variant
+            .trim()
+            .parse()
+            .map_err(|e: crate::names::UnknownName| e.to_string())
     }
 }
 
@@ -464,7 +468,7 @@ fn save_and_load(
         .map_err(|e| format!("the trained model does not load: {e:#}"))?;
     Ok((
         path,
-        Arc::new(crate::compat::Checked::new(Arc::new(m), trained_for)),
+        Arc::new(crate::models::Checked::new(Arc::new(m), trained_for)),
     ))
 }
 
@@ -613,11 +617,11 @@ pub fn load_and_swap(shared: &Trainer, path: &str) -> LoadModelResponse {
     if path.trim().is_empty() {
         return fail("no path given".into());
     }
-    match super::load_model(path) {
+    match crate::models::load_model(path) {
         Err(e) => fail(format!("cannot load {path}: {e:#}")),
         Ok(model) => {
             let description = model.describe();
-            let file = (!super::truth::is_truth(path)).then(|| PathBuf::from(path));
+            let file = (!crate::models::truth::is_truth(path)).then(|| PathBuf::from(path));
             let locked = swap(shared, model, file, &format!("LoadModel: model {path}"));
             LoadModelResponse {
                 success: true,

@@ -45,23 +45,22 @@ pub fn run_bounded(cmd: &mut Command, limit: Duration, dir: &Path) -> Outcome {
         std::thread::sleep(Duration::from_millis(50));
     };
     let read = |p: &Path| fs::read_to_string(p).unwrap_or_default();
-    match status {
-        Some(status) => Outcome {
+    if let Some(status) = status {
+        Outcome {
             status,
             stdout: read(&out_path),
             stderr: read(&err_path),
-        },
-        None => {
-            let _ = Command::new("kill")
-                .args(["-KILL", "--", &format!("-{}", child.id())])
-                .status();
-            let _ = child.wait();
-            panic!(
-                "{cmd:?} overran {limit:?} and was killed\n--- stdout\n{}\n--- stderr\n{}",
-                read(&out_path),
-                read(&err_path)
-            );
         }
+    } else {
+        let _ = Command::new("kill")
+            .args(["-KILL", "--", &format!("-{}", child.id())])
+            .status();
+        let _ = child.wait();
+        panic!(
+            "{cmd:?} overran {limit:?} and was killed\n--- stdout\n{}\n--- stderr\n{}",
+            read(&out_path),
+            read(&err_path)
+        );
     }
 }
 
@@ -69,7 +68,9 @@ pub fn run_bounded(cmd: &mut Command, limit: Duration, dir: &Path) -> Outcome {
 /// to run when the venv is missing.
 pub fn ros_env() -> PathBuf {
     static BUILT: Mutex<bool> = Mutex::new(false);
-    let mut built = BUILT.lock().unwrap_or_else(|e| e.into_inner());
+    let mut built = BUILT
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     let root = Path::new(ROOT);
     let venv_ok = root.join(".venv/bin/python3").exists()
         && root.join(".venv/share/rosidl_default_generators").exists();

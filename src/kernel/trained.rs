@@ -1,8 +1,8 @@
 //! A trained model, loaded from its file, running on the inference kernel.
 
-use super::file::ModelFile;
-use crate::dynamics::{Dynamics, EdgeForce, Forces, Rollout};
-use crate::kernel::{Kernel, Workspace};
+use super::{Kernel, Workspace};
+use crate::dynamics::{Dynamics, DynamicsError, EdgeForce, Forces, Rollout};
+use crate::model::file::ModelFile;
 use crate::system::{Graph, State};
 use anyhow::Result;
 use std::path::Path;
@@ -39,12 +39,10 @@ impl TrainedModel {
         steps: usize,
         every: usize,
         visit: impl FnMut(usize, &[f64], &[f64]),
-    ) -> Result<(), String> {
+    ) -> Result<(), DynamicsError> {
         match self.verlet(ws, start, dt, steps, every, visit) {
             None => Ok(()),
-            Some(step) => Err(format!(
-                "rollout diverged (non-finite state) at step {step}"
-            )),
+            Some(step) => Err(DynamicsError::Diverged(step)),
         }
     }
 
@@ -114,21 +112,29 @@ impl Dynamics for TrainedModel {
         )
     }
 
-    fn supports(&self, graph: &Graph) -> Result<(), String> {
-        self.kernel.supports(graph)
+    fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
+        Ok(self.kernel.supports(graph)?)
     }
 
-    fn acceleration(&self, graph: &Graph, state: &State, out: &mut [f64]) -> Result<(), String> {
+    fn acceleration(
+        &self,
+        graph: &Graph,
+        state: &State,
+        out: &mut [f64],
+    ) -> Result<(), DynamicsError> {
         let mut ws = self.kernel.workspace(graph)?;
         state.validate(graph)?;
         if out.len() != graph.ndof() {
-            return Err("output buffer has the wrong size".into());
+            return Err(DynamicsError::OutputSize {
+                got: out.len(),
+                need: graph.ndof(),
+            });
         }
         self.kernel.acceleration(&mut ws, &state.q, &state.v, out);
         Ok(())
     }
 
-    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, String> {
+    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, DynamicsError> {
         let mut ws = self.kernel.workspace(graph)?;
         state.validate(graph)?;
         let mut acc = vec![0.0; graph.ndof()];
@@ -166,11 +172,11 @@ impl Dynamics for TrainedModel {
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<Vec<State>, String> {
+    ) -> Result<Vec<State>, DynamicsError> {
         let mut ws = self.kernel.workspace(graph)?;
         start.validate(graph)?;
         if !(dt.is_finite() && dt > 0.0) {
-            return Err(format!("time step must be positive and finite, got {dt}"));
+            return Err(DynamicsError::TimeStep(dt));
         }
         let mut out = Vec::with_capacity(steps / every.max(1) + 1);
         self.rollout_with(&mut ws, start, dt, steps, every, |_, q, v| {
@@ -193,9 +199,9 @@ impl Dynamics for TrainedModel {
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<Vec<Rollout>, String> {
+    ) -> Result<Vec<Rollout>, DynamicsError> {
         if !(dt.is_finite() && dt > 0.0) {
-            return Err(format!("time step must be positive and finite, got {dt}"));
+            return Err(DynamicsError::TimeStep(dt));
         }
         let ws = self.kernel.workspace(graph)?;
         for start in starts {
@@ -232,11 +238,8 @@ impl Dynamics for TrainedModel {
                 .collect();
             handles
                 .into_iter()
-                .map(|h| {
-                    h.join()
-                        .map_err(|_| "a rollout thread panicked".to_string())
-                })
-                .collect::<Result<_, String>>()
+                .map(|h| h.join().map_err(|_| DynamicsError::ThreadPanicked))
+                .collect::<Result<_, DynamicsError>>()
         })?;
         Ok(groups.into_iter().flatten().collect())
     }

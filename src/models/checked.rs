@@ -1,0 +1,114 @@
+//! A model wrapped with what it was trained on ([`Checked`]), and what a
+//! model path says it was trained on ([`trained_for`], which knows the
+//! reference `still`).
+
+use std::path::Path;
+use std::sync::Arc;
+
+use crate::compat::TrainedFor;
+use crate::dynamics::{Dynamics, DynamicsError, Forces, Rollout};
+use crate::system::{Graph, State};
+
+/// What the model at `path` was trained on: its file's training description
+/// ([`TrainedFor::from_model_file`]), or for the reference `still`
+/// ([`crate::dynamics::Still`]) nothing, since it fits any data.
+pub fn trained_for(path: &Path) -> anyhow::Result<TrainedFor> {
+    if path == Path::new(crate::dynamics::STILL) {
+        // The reference fits any data.
+        return Ok(TrainedFor {
+            model: crate::dynamics::STILL.into(),
+            ..TrainedFor::default()
+        });
+    }
+    TrainedFor::from_model_file(path)
+}
+
+/// A model with what it was trained on: [`Dynamics::supports`] also refuses
+/// graphs the model was not trained for, and
+/// [`Dynamics::trained_for`] lets a caller check the data's field.
+pub struct Checked {
+    inner: Arc<dyn Dynamics>,
+    trained: TrainedFor,
+}
+
+impl Checked {
+    /// Wraps `inner`.
+    pub fn new(inner: Arc<dyn Dynamics>, trained: TrainedFor) -> Checked {
+        Checked { inner, trained }
+    }
+}
+
+impl Dynamics for Checked {
+    fn describe(&self) -> String {
+        self.inner.describe()
+    }
+
+    fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
+        self.trained.check(graph, None)?;
+        self.inner.supports(graph)
+    }
+
+    fn trained_for(&self) -> Option<&TrainedFor> {
+        Some(&self.trained)
+    }
+
+    fn acceleration(
+        &self,
+        graph: &Graph,
+        state: &State,
+        out: &mut [f64],
+    ) -> Result<(), DynamicsError> {
+        self.trained.check(graph, None)?;
+        self.inner.acceleration(graph, state, out)
+    }
+
+    fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, DynamicsError> {
+        self.trained.check(graph, None)?;
+        self.inner.forces(graph, state)
+    }
+
+    fn rollout_every(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<State>, DynamicsError> {
+        self.trained.check(graph, None)?;
+        self.inner.rollout_every(graph, start, dt, steps, every)
+    }
+
+    fn acceleration_batch(
+        &self,
+        graph: &Graph,
+        states: &[State],
+        out: &mut [Vec<f64>],
+    ) -> Result<(), DynamicsError> {
+        self.trained.check(graph, None)?;
+        self.inner.acceleration_batch(graph, states, out)
+    }
+
+    fn rollout_many(
+        &self,
+        graph: &Graph,
+        starts: &[State],
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<Vec<Rollout>, DynamicsError> {
+        self.trained.check(graph, None)?;
+        self.inner.rollout_many(graph, starts, dt, steps, every)
+    }
+
+    fn rollout(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+    ) -> Result<Vec<State>, DynamicsError> {
+        self.trained.check(graph, None)?;
+        self.inner.rollout(graph, start, dt, steps)
+    }
+}

@@ -1,0 +1,71 @@
+//! Loading any model file, GNODE family or baseline, behind [`Dynamics`];
+//! and a model to serve or replay ([`load_model`]: a file checked against its
+//! training data, or the ground truth `truth:<system>`).
+
+use super::truth;
+use crate::baselines::file::FORMAT as BASELINE_FORMAT;
+use crate::baselines::TrainedBaseline;
+use crate::dynamics::Dynamics;
+use crate::kernel::TrainedModel;
+use anyhow::{Context, Result};
+use std::path::Path;
+use std::sync::Arc;
+
+/// A loaded model of either kind.
+pub struct LoadedModel {
+    /// The model.
+    pub dynamics: Arc<dyn Dynamics>,
+    /// Its name ("mcgnode", "lgn", ...).
+    pub name: String,
+    /// Fingerprints of its training starts (empty if unknown).
+    pub start_fingerprints: Vec<String>,
+}
+
+/// Loads a model file of the GNODE family or a baseline, by its `format` field
+/// (or, for the path `still`, the "nothing moves" reference [`crate::dynamics::Still`]).
+pub fn load_any_model(path: &Path) -> Result<LoadedModel> {
+    if path == Path::new(crate::dynamics::STILL) {
+        return Ok(LoadedModel {
+            name: crate::dynamics::STILL.to_string(),
+            start_fingerprints: vec![],
+            dynamics: Arc::new(crate::dynamics::Still),
+        });
+    }
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read model file {}", path.display()))?;
+    let format = serde_json::from_str::<serde_json::Value>(&text)
+        .ok()
+        .and_then(|v| v.get("format").and_then(|f| f.as_str()).map(str::to_string));
+    if format.as_deref() == Some(BASELINE_FORMAT) {
+        let b = TrainedBaseline::load(path)?;
+        let fps = b
+            .file
+            .trained_on
+            .as_ref()
+            .map(|t| t.start_fingerprints.clone())
+            .unwrap_or_default();
+        return Ok(LoadedModel {
+            name: b.file.hyper.kind.name().to_string(),
+            start_fingerprints: fps,
+            dynamics: Arc::new(b),
+        });
+    }
+    let m = TrainedModel::load(path)?;
+    Ok(LoadedModel {
+        name: m.file.hyper.variant.name().to_string(),
+        start_fingerprints: m.file.trained_on.start_fingerprints.clone(),
+        dynamics: Arc::new(m),
+    })
+}
+
+/// `truth:<system>`, or a trained model file (GNODE family or baseline)
+/// wrapped in [`super::Checked`] so it refuses data it was not
+/// trained for: the model the node serves and `replay` rolls out.
+pub fn load_model(model: &str) -> Result<Arc<dyn Dynamics>> {
+    if truth::is_truth(model) {
+        return Ok(truth::load_truth(model)?);
+    }
+    let m = load_any_model(Path::new(model)).with_context(|| format!("loading model {model}"))?;
+    let trained = super::trained_for(Path::new(model))?;
+    Ok(Arc::new(super::Checked::new(m.dynamics, trained)))
+}

@@ -1,0 +1,19 @@
+//! Models of every kind, one home: the kinds ([`ModelKind`]: the GNODE family
+//! of [`crate::model`] and the [`crate::baselines`]), loading a model file of
+//! either kind or the ground truth (`truth:<system>`, [`truth`]), and training
+//! any kind from bags into a model file.
+//!
+//! The CLI, `reproduce` and the ROS node reach models through here, never
+//! through `baselines` or `ros`.
+
+mod checked;
+mod kind;
+mod load;
+mod train;
+pub mod truth;
+
+pub use checked::{trained_for, Checked};
+pub use kind::ModelKind;
+pub use load::{load_any_model, load_model, LoadedModel};
+pub use train::train_any_from_bags;
+pub use truth::Truth;
