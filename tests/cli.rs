@@ -675,3 +675,56 @@ fn evaluate_still_is_the_standing_still_reference() {
         );
     }
 }
+
+/// `evaluate --model truth:<system>` rolls the simulator itself out: at the
+/// bag's own step it reproduces the bag (the evaluation adds no error of its
+/// own), and at a coarser `--dt` its error is the floor that step puts under
+/// every model evaluated with it; a truth of another system is refused.
+#[test]
+fn evaluate_truth_reproduces_its_bag_and_measures_a_step_floor() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(&mcgnode(
+        &[
+            "simulate",
+            "--system",
+            "pendulum",
+            "--particles",
+            "3",
+            "--trajectories",
+            "2",
+            "--states",
+            "11",
+            "--out",
+            "p.mcap",
+        ],
+        d,
+    ));
+    let re = |extra: &[&str]| -> f64 {
+        let mut args = vec![
+            "evaluate",
+            "--model",
+            "truth:pendulum",
+            "--bag",
+            "p.mcap",
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        let e: serde_json::Value = serde_json::from_str(&ok(&mcgnode(&args, d))).unwrap();
+        e["averages"]["re"].as_f64().unwrap()
+    };
+    let own = re(&[]);
+    assert!(own < 1e-12, "truth at the bag's step: RE {own}");
+    let coarse = re(&["--dt", "1e-4"]);
+    assert!(
+        coarse > 1e-14 && coarse < 1e-5,
+        "truth at 10x the bag's step: RE {coarse}"
+    );
+    fails_with(
+        &mcgnode(
+            &["evaluate", "--model", "truth:spring", "--bag", "p.mcap"],
+            d,
+        ),
+        "spring",
+    );
+}

@@ -20,6 +20,14 @@ pub fn trained_for(path: &Path) -> anyhow::Result<TrainedFor> {
             ..TrainedFor::default()
         });
     }
+    if let Some(name) = path.to_str().filter(|p| super::truth::is_truth(p)) {
+        // The simulator fits its own system (the dimension and edges are
+        // checked by the simulator itself; the field is its default's).
+        return super::truth::load_truth(name)?
+            .trained_for()
+            .cloned()
+            .ok_or_else(|| anyhow::anyhow!("{name} does not say what it simulates"));
+    }
     TrainedFor::from_model_file(path)
 }
 

@@ -21,14 +21,24 @@ pub struct LoadedModel {
     pub start_fingerprints: Vec<String>,
 }
 
-/// Loads a model file of the GNODE family or a baseline, by its `format` field
-/// (or, for the path `still`, the "nothing moves" reference [`crate::dynamics::Still`]).
+/// Loads a model file of the GNODE family or a baseline, by its `format` field;
+/// or, for the path `still`, the "nothing moves" reference
+/// [`crate::dynamics::Still`]; or, for `truth:<system>`, the simulator itself,
+/// whose errors at another step (`evaluate --dt`) are the floor that step puts
+/// under every model's.
 pub fn load_any_model(path: &Path) -> Result<LoadedModel> {
     if path == Path::new(crate::dynamics::STILL) {
         return Ok(LoadedModel {
             name: crate::dynamics::STILL.to_string(),
             start_fingerprints: vec![],
             dynamics: Arc::new(crate::dynamics::Still),
+        });
+    }
+    if let Some(name) = path.to_str().filter(|p| truth::is_truth(p)) {
+        return Ok(LoadedModel {
+            name: name.to_string(),
+            start_fingerprints: vec![],
+            dynamics: truth::load_truth(name)?,
         });
     }
     let text = std::fs::read_to_string(path)
