@@ -426,22 +426,30 @@ fn fine_tune_start(
     shared: &Trainer,
     requested: &str,
 ) -> Result<(Variant, ModelFile, PathBuf), String> {
-    let Some(path) = shared.model.file() else {
-        return Err(format!(
-            "the served model ({}) is not a model file (load one with LoadModel, or train              without fine_tune)",
-            shared.model.get().describe()
-        ));
-    };
-    let file = ModelFile::load(&path)
-        .map_err(|e| format!("reading the served model {}: {e:#}", path.display()))?;
+    let (path, file) = served_file(shared)
+        .map_err(|e| format!("{e} (load one with LoadModel, or train without fine_tune)"))?;
     let variant = file.hyper.variant;
     if !requested.trim().is_empty() && request_variant(requested)? != variant {
         return Err(format!(
-            "the served model is {variant}, the request asks for {}; leave variant empty              to fine-tune it",
+            "the served model is {variant}, the request asks for {}; leave variant empty to \
+             fine-tune it",
             requested.trim()
         ));
     }
     Ok((variant, file, path))
+}
+
+/// The file of the served model, read back: what a warm start begins from.
+fn served_file(shared: &Trainer) -> Result<(PathBuf, ModelFile), String> {
+    let Some(path) = shared.model.file() else {
+        return Err(format!(
+            "the served model ({}) is not a model file",
+            shared.model.get().describe()
+        ));
+    };
+    let file = ModelFile::load(&path)
+        .map_err(|e| format!("cannot read the served model {}: {e:#}", path.display()))?;
+    Ok((path, file))
 }
 
 /// Saves a trained model (atomically) to the model folder and loads it as
@@ -500,14 +508,7 @@ fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, 
     let Some(_claim) = claim(trainer) else {
         return Err(BUSY.into());
     };
-    let Some(init_path) = trainer.model.file() else {
-        return Err(format!(
-            "not started: the served model ({}) is not a model file to warm-start",
-            trainer.model.get().describe()
-        ));
-    };
-    let init = ModelFile::load(&init_path)
-        .map_err(|e| format!("not started: cannot read {}: {e:#}", init_path.display()))?;
+    let (init_path, init) = served_file(trainer).map_err(|e| format!("not started: {e}"))?;
     // Close the bag open at the alarm: the bags after it hold only what the
     // system did after the drift was seen.
     let before = match trainer.recorder.finish() {
