@@ -47,7 +47,7 @@ fn handle_state(
     // Refused before anything is recorded or predicted: an oversized state
     // would hold memory and its prediction could not be delivered promptly.
     let params = h.params.get();
-    predict::check_size(&msg, params.max_particles)?;
+    predict::check_size(&msg, params.max_particles).map_err(|e| e.to_string())?;
     h.recorder.record(|r| r.state(received_ns, &msg));
     let model = h.model.get();
     // A state the model was not trained for (another dimension, edge kinds
@@ -63,7 +63,8 @@ fn handle_state(
         params.dt,
         params.horizon,
         params.substeps,
-    )?;
+    )
+    .map_err(|e| e.to_string())?;
     h.recorder
         .record(|r| r.prediction(h.clock.now_log_ns(), &p.trajectory, &p.forces));
     let scored = h.accuracy.update(&params, &msg, &p.trajectory);
@@ -654,12 +655,12 @@ pub fn rollout_response(
         ));
     }
     if let Err(e) = predict::check_size(&req.initial, max_particles) {
-        return fail(e);
+        return fail(e.to_string());
     }
     let dt = if req.dt == 0.0 { default_dt } else { req.dt };
     let (graph, start) = match predict::accept(model, &req.initial) {
         Ok(x) => x,
-        Err(e) => return fail(e),
+        Err(e) => return fail(e.to_string()),
     };
     let substeps = if dt.is_finite() && dt > 0.0 {
         ((dt / fine_dt).round() as u32).max(1)
@@ -672,7 +673,7 @@ pub fn rollout_response(
             message: format!("{} states, dt = {dt}", trajectory.states.len()),
             trajectory,
         },
-        Err(e) => fail(e),
+        Err(e) => fail(e.to_string()),
     }
 }
 

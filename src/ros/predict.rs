@@ -3,10 +3,45 @@
 //! Pure functions, no ROS: the node and the Rollout service both call these.
 
 use crate::data::msg::{Header, ParticleState, Time, Vector3};
-use crate::dynamics::{Dynamics, Forces};
+use crate::data::DataError;
+use crate::dynamics::{Dynamics, DynamicsError, Forces};
 use crate::system::{Graph, Sample, State};
 
 use super::msgs::{ParticleForces, PredictedTrajectory};
+
+/// Why a state gets no prediction; each message says what to change.
+#[derive(Debug, thiserror::Error)]
+pub enum PredictError {
+    /// More particles than `max_particles` allows.
+    #[error(
+        "state too large: {particles} particles, above max_particles = {max} (raise it with \
+         --set max_particles=N if the subscribers can take predictions that large)"
+    )]
+    TooLarge {
+        /// Particles in the state.
+        particles: usize,
+        /// The `max_particles` parameter.
+        max: u32,
+    },
+    /// The message does not describe a valid state.
+    #[error("malformed input: {0}")]
+    Malformed(#[from] DataError),
+    /// The model cannot run this graph.
+    #[error("unsupported system: {0}")]
+    Unsupported(#[source] DynamicsError),
+    /// A step that is not a positive number.
+    #[error("dt = {0} must be finite and > 0")]
+    BadStep(f64),
+    /// The model's rollout failed.
+    #[error("rollout failed: {0}")]
+    Rollout(#[source] DynamicsError),
+    /// The model's forces failed.
+    #[error("forces failed: {0}")]
+    Forces(#[source] DynamicsError),
+    /// The model's forces do not fit the message.
+    #[error("{0}")]
+    ForceShape(String),
+}
 
 /// A prediction for one state.
 #[derive(Clone, Debug, PartialEq)]
@@ -20,7 +55,7 @@ pub struct Prediction {
 /// Refuses a state with more than `max_particles` particles (counted as the
 /// longest per-particle array, so a malformed message cannot slip past),
 /// naming the parameter that allows it.
-pub fn check_size(input: &ParticleState, max_particles: u32) -> Result<(), String> {
+pub fn check_size(input: &ParticleState, max_particles: u32) -> Result<(), PredictError> {
     let n = [
         input.types.len(),
         input.masses.len(),
@@ -32,23 +67,19 @@ pub fn check_size(input: &ParticleState, max_particles: u32) -> Result<(), Strin
     .max()
     .unwrap_or(0);
     if n > max_particles as usize {
-        return Err(format!(
-            "state too large: {n} particles, above max_particles = {max_particles} (raise it with \
-             --set max_particles=N if the subscribers can take predictions that large)"
-        ));
+        return Err(PredictError::TooLarge {
+            particles: n,
+            max: max_particles,
+        });
     }
     Ok(())
 }
 
 /// Checks an input message and converts it for the model; the error says
 /// what is wrong with the message or why the model cannot take it.
-pub fn accept(model: &dyn Dynamics, input: &ParticleState) -> Result<(Graph, State), String> {
-    let (graph, sample) = input
-        .to_parts()
-        .map_err(|e| format!("malformed input: {e}"))?;
-    model
-        .supports(&graph)
-        .map_err(|e| format!("unsupported system: {e}"))?;
+pub fn accept(model: &dyn Dynamics, input: &ParticleState) -> Result<(Graph, State), PredictError> {
+    let (graph, sample) = input.to_parts()?;
+    model.supports(&graph).map_err(PredictError::Unsupported)?;
     Ok((graph, sample.state))
 }
 
@@ -63,14 +94,14 @@ pub fn trajectory(
     dt: f64,
     steps: u32,
     substeps: u32,
-) -> Result<PredictedTrajectory, String> {
+) -> Result<PredictedTrajectory, PredictError> {
     if !(dt.is_finite() && dt > 0.0) {
-        return Err(format!("dt = {dt} must be finite and > 0"));
+        return Err(PredictError::BadStep(dt));
     }
     let sub = substeps.max(1) as usize;
     let states = model
         .rollout_every(graph, start, dt / sub as f64, steps as usize * sub, sub)
-        .map_err(|e| format!("rollout failed: {e}"))?;
+        .map_err(PredictError::Rollout)?;
     let t0 = input.header.stamp.as_nanos();
     let states = states
         .into_iter()
@@ -118,21 +149,20 @@ pub fn forces(
     header: &Header,
     graph: &Graph,
     state: &State,
-) -> Result<ParticleForces, String> {
-    let f = model
-        .forces(graph, state)
-        .map_err(|e| format!("forces failed: {e}"))?;
+) -> Result<ParticleForces, PredictError> {
+    let f = model.forces(graph, state).map_err(PredictError::Forces)?;
     forces_msg(header, graph.dim, &f)
 }
 
 /// Converts [`Forces`] to the wire message (2D forces get z = 0).
-pub fn forces_msg(header: &Header, dim: usize, f: &Forces) -> Result<ParticleForces, String> {
-    let vec3 = |c: &[f64]| -> Result<Vector3, String> {
+pub fn forces_msg(header: &Header, dim: usize, f: &Forces) -> Result<ParticleForces, PredictError> {
+    let shape = PredictError::ForceShape;
+    let vec3 = |c: &[f64]| -> Result<Vector3, PredictError> {
         if c.len() != dim {
-            return Err(format!(
+            return Err(shape(format!(
                 "model gave a {}-component force in {dim}D",
                 c.len()
-            ));
+            )));
         }
         Ok(Vector3 {
             x: c[0],
@@ -141,12 +171,13 @@ pub fn forces_msg(header: &Header, dim: usize, f: &Forces) -> Result<ParticleFor
         })
     };
     if f.total.len() % dim != 0 {
-        return Err(format!(
+        return Err(shape(format!(
             "model gave {} total-force numbers in {dim}D",
             f.total.len()
-        ));
+        )));
     }
-    let idx = |i: usize| u32::try_from(i).map_err(|_| format!("particle index {i} too large"));
+    let idx =
+        |i: usize| u32::try_from(i).map_err(|_| shape(format!("particle index {i} too large")));
     Ok(ParticleForces {
         header: header.clone(),
         total: f.total.chunks(dim).map(vec3).collect::<Result<_, _>>()?,
@@ -167,7 +198,7 @@ pub fn predict(
     dt: f64,
     horizon: u32,
     substeps: u32,
-) -> Result<Prediction, String> {
+) -> Result<Prediction, PredictError> {
     let (graph, start) = accept(model, input)?;
     let trajectory = trajectory(model, input, &graph, &start, dt, horizon, substeps)?;
     let forces = forces(model, &input.header, &graph, &start)?;
@@ -264,9 +295,12 @@ mod tests {
             (dim, "dimension"),
         ] {
             let e = predict(model.as_ref(), &bad, 0.001, 3, 1).unwrap_err();
+            assert!(matches!(e, PredictError::Malformed(_)), "{e}");
+            let e = e.to_string();
             assert!(e.contains("malformed") && e.contains(want), "{e}");
         }
         let e = predict(model.as_ref(), &spring_state(), f64::NAN, 3, 1).unwrap_err();
-        assert!(e.contains("dt"), "{e}");
+        assert!(matches!(e, PredictError::BadStep(_)), "{e}");
+        assert!(e.to_string().contains("dt"), "{e}");
     }
 }
