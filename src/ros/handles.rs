@@ -22,7 +22,7 @@ use super::accuracy::Live;
 use super::clock::Clock;
 use super::msgs::NodeDiagnostics;
 use super::params::{NodeParams, NODE_NAME};
-use super::record::Recorder;
+use super::record::{RecordError, Recorder};
 
 /// The parameters now: those in
 /// [`RUNTIME_SETTABLE`](super::params::RUNTIME_SETTABLE) change at run time.
@@ -303,11 +303,11 @@ impl RecorderHandle {
     }
 
     /// Records with the recorder, if any; failures are warned about.
-    pub fn record(&self, what: impl FnOnce(&mut Recorder) -> Result<(), String>) {
+    pub fn record(&self, what: impl FnOnce(&mut Recorder) -> Result<(), RecordError>) {
         if let Some(r) = &self.recorder {
             let result = what(&mut r.lock().unwrap_or_else(PoisonError::into_inner));
             if let Err(e) = result {
-                self.diag.failed(&e, Warning::Record);
+                self.diag.failed(&e.to_string(), Warning::Record);
             }
         }
     }
@@ -315,7 +315,7 @@ impl RecorderHandle {
     /// Closes the open bag (its footer written, so it reads back whole) and
     /// returns the folder and every bag finished so far; `None` when the node
     /// does not record.
-    pub fn finish(&self) -> Option<Result<(PathBuf, Vec<PathBuf>), String>> {
+    pub fn finish(&self) -> Option<Result<(PathBuf, Vec<PathBuf>), RecordError>> {
         let r = self.recorder.as_ref()?;
         let mut r = r.lock().unwrap_or_else(PoisonError::into_inner);
         Some(

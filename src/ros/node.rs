@@ -332,7 +332,7 @@ fn handles(
     let recorder = if params.record_dir.is_empty() {
         None
     } else {
-        Some(Recorder::new(params, &model.describe()).map_err(anyhow::Error::msg)?)
+        Some(Recorder::new(params, &model.describe())?)
     };
     let diag = Arc::new(Diagnostics::new(
         Logger::new(node.logging_handle()),
@@ -478,7 +478,7 @@ fn finish_recording(h: &Handles) {
             LogLevel::Info,
             &format!("recorded {} bag(s) in {}", finished.len(), dir.display()),
         ),
-        Some(Err(e)) => h.diag.log(LogLevel::Error, &e),
+        Some(Err(e)) => h.diag.log(LogLevel::Error, &e.to_string()),
     }
 }
 

@@ -67,13 +67,46 @@ pub struct Recorder {
     pub finished: Vec<PathBuf>,
 }
 
+/// Why recording failed: the folder, the bag written to, or the message.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// `record_dir` cannot be created.
+    #[error("cannot create record_dir {}: {source}", dir.display())]
+    CreateDir {
+        /// The folder.
+        dir: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// Writing to a bag failed.
+    #[error("recording to {}: {why}", path.display())]
+    Write {
+        /// The bag.
+        path: PathBuf,
+        /// Why.
+        why: String,
+    },
+    /// Closing a bag (summary and footer) failed.
+    #[error("closing {}: {why}", path.display())]
+    Close {
+        /// The bag.
+        path: PathBuf,
+        /// Why.
+        why: String,
+    },
+    /// A message could not be encoded for recording.
+    #[error("encoding a message to record: {0}")]
+    Encode(String),
+}
+
 impl Recorder {
     /// A recorder for `params.record_dir` (created if missing); no file is
     /// opened until the first message.
-    pub fn new(params: &NodeParams, model: &str) -> Result<Recorder, String> {
+    pub fn new(params: &NodeParams, model: &str) -> Result<Recorder, RecordError> {
         let dir = PathBuf::from(&params.record_dir);
-        std::fs::create_dir_all(&dir)
-            .map_err(|e| format!("cannot create record_dir {}: {e}", dir.display()))?;
+        if let Err(source) = std::fs::create_dir_all(&dir) {
+            return Err(RecordError::CreateDir { dir, source });
+        }
         let run = SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .map(|d| d.as_secs())
@@ -104,12 +137,15 @@ impl Recorder {
         })
     }
 
-    fn open_next(&mut self) -> Result<&mut OpenBag, String> {
+    fn open_next(&mut self) -> Result<&mut OpenBag, RecordError> {
         let path = self
             .dir
             .join(format!("mcgnode-{}-{:04}.mcap", self.run, self.index));
         self.index += 1;
-        let ctx = |e: String| format!("recording to {}: {e}", path.display());
+        let ctx = |why: String| RecordError::Write {
+            path: path.clone(),
+            why,
+        };
         let file = File::create(&path).map_err(|e| ctx(e.to_string()))?;
         // Unbuffered on purpose: finished chunks reach the file at once.
         let handle = file.try_clone().map_err(|e| ctx(e.to_string()))?;
@@ -146,7 +182,7 @@ impl Recorder {
     }
 
     /// Closes the open bag if it reached its size or duration limit.
-    fn maybe_split(&mut self) -> Result<(), String> {
+    fn maybe_split(&mut self) -> Result<(), RecordError> {
         let Some(bag) = &self.open else {
             return Ok(());
         };
@@ -159,7 +195,7 @@ impl Recorder {
         Ok(())
     }
 
-    fn write(&mut self, which: usize, log_time_ns: u64, cdr: &[u8]) -> Result<(), String> {
+    fn write(&mut self, which: usize, log_time_ns: u64, cdr: &[u8]) -> Result<(), RecordError> {
         self.maybe_split()?;
         let bag = match self.open {
             Some(ref mut b) => b,
@@ -168,26 +204,33 @@ impl Recorder {
         let channel = [bag.states, bag.trajectories, bag.forces][which];
         bag.writer
             .write(channel, log_time_ns, cdr)
-            .map_err(|e| format!("recording to {}: {e}", bag.path.display()))
+            .map_err(|e| RecordError::Write {
+                path: bag.path.clone(),
+                why: e.to_string(),
+            })
     }
 
     /// The served model changed: later bags name `model`, and the open bag gets
     /// a further metadata record saying so (readers take the last value of a
     /// key).
-    pub fn set_model(&mut self, model: &str) -> Result<(), String> {
+    pub fn set_model(&mut self, model: &str) -> Result<(), RecordError> {
         self.metadata.model = Some(model.to_string());
         if let Some(bag) = &mut self.open {
-            let map = self.metadata.to_map().map_err(|e| e.to_string())?;
+            let write = |why: String| RecordError::Write {
+                path: bag.path.clone(),
+                why,
+            };
+            let map = self.metadata.to_map().map_err(|e| write(e.to_string()))?;
             bag.writer
                 .add_metadata(METADATA_NAME, &map)
-                .map_err(|e| format!("recording to {}: {e}", bag.path.display()))?;
+                .map_err(|e| write(e.to_string()))?;
         }
         Ok(())
     }
 
     /// Records an incoming state, received at `log_time_ns` (ns since the epoch).
-    pub fn state(&mut self, log_time_ns: u64, msg: &ParticleState) -> Result<(), String> {
-        let cdr = encode_cdr(msg).map_err(|e| e.to_string())?;
+    pub fn state(&mut self, log_time_ns: u64, msg: &ParticleState) -> Result<(), RecordError> {
+        let cdr = encode_cdr(msg).map_err(|e| RecordError::Encode(e.to_string()))?;
         self.write(0, log_time_ns, &cdr)
     }
 
@@ -197,19 +240,22 @@ impl Recorder {
         log_time_ns: u64,
         trajectory: &PredictedTrajectory,
         forces: &ParticleForces,
-    ) -> Result<(), String> {
-        let t = encode_cdr(trajectory).map_err(|e| e.to_string())?;
-        let f = encode_cdr(forces).map_err(|e| e.to_string())?;
+    ) -> Result<(), RecordError> {
+        let t = encode_cdr(trajectory).map_err(|e| RecordError::Encode(e.to_string()))?;
+        let f = encode_cdr(forces).map_err(|e| RecordError::Encode(e.to_string()))?;
         self.write(1, log_time_ns, &t)?;
         self.write(2, log_time_ns, &f)
     }
 
     /// Closes the open bag (summary and footer written), if any.
-    pub fn finish(&mut self) -> Result<(), String> {
+    pub fn finish(&mut self) -> Result<(), RecordError> {
         if let Some(bag) = self.open.take() {
-            bag.writer
-                .finish()
-                .map_err(|e| format!("closing {}: {e}", bag.path.display()))?;
+            if let Err(e) = bag.writer.finish() {
+                return Err(RecordError::Close {
+                    path: bag.path,
+                    why: e.to_string(),
+                });
+            }
             self.finished.push(bag.path);
         }
         Ok(())

@@ -286,7 +286,7 @@ fn training_bags(shared: &Trainer, bags: &[String]) -> Result<Vec<PathBuf>, Stri
                 .into(),
         );
     };
-    let (dir, finished) = finished?;
+    let (dir, finished) = finished.map_err(|e| e.to_string())?;
     if finished.is_empty() {
         return Err(format!(
             "no bags given and the node has recorded nothing yet in {}",
@@ -513,7 +513,7 @@ fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, 
     // system did after the drift was seen.
     let before = match trainer.recorder.finish() {
         None => return Err("not started: the node records nothing (set record_dir)".into()),
-        Some(r) => r?.1.len(),
+        Some(r) => r.map_err(|e| e.to_string())?.1.len(),
     };
     trainer.log(
         LogLevel::Info,
@@ -526,7 +526,7 @@ fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, 
     );
     std::thread::sleep(Duration::from_secs_f64(p.accuracy_retrain_after));
     let bags = match trainer.recorder.finish() {
-        Some(r) => r?.1,
+        Some(r) => r.map_err(|e| e.to_string())?.1,
         None => Vec::new(),
     };
     let recent = bags.get(before..).unwrap_or_default();
