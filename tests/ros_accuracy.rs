@@ -57,6 +57,55 @@ fn write_bag(dir: &std::path::Path, after: usize) -> std::path::PathBuf {
     bag
 }
 
+/// Serves with `params` in the network namespace, plays `bag` at its
+/// recorded pace while tests/ros/accuracy_drive.py (with `driver_args`)
+/// collects `count` live-accuracy messages, then waits (bounded, 30 s) for a
+/// node log line matching `wait_for` when one is given; returns the driver's
+/// summary, the node log and a report (bounded by `limit_s` in all).
+#[allow(clippy::too_many_arguments)]
+fn play(
+    dir: &std::path::Path,
+    bag: &std::path::Path,
+    params: &std::path::Path,
+    env_sh: &std::path::Path,
+    count: usize,
+    driver_args: &str,
+    wait_for: &str,
+    limit_s: u64,
+) -> (String, String, String) {
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$PARAMS" 2>"$DIR/node.log" &
+        node=$!
+        python3 tests/ros/accuracy_drive.py --count "$COUNT" $DRIVER_ARGS >"$DIR/drive.out" \
+            2>"$DIR/drive.err" &
+        drive=$!
+        for _ in $(seq 400); do grep -q listening "$DIR/drive.err" && break; sleep 0.05; done
+        grep -q listening "$DIR/drive.err" || { echo "driver never matched"; cat "$DIR/drive.err"; exit 2; }
+        python3 scripts/ros/play_bag.py "$BAG" --rate 10 --timeout 30 2>"$DIR/play.err" \
+            || { cat "$DIR/play.err"; exit 3; }
+        wait $drive; rc=$?
+        cat "$DIR/drive.out"
+        if [ -n "$WAIT_FOR" ]; then
+            for _ in $(seq 300); do grep -qE "$WAIT_FOR" "$DIR/node.log" && break; sleep 0.1; done
+        fi
+        kill -INT $node; wait $node; node_rc=$?
+        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
+    "#;
+    let o = run_bounded(
+        in_netns(script, params, env_sh)
+            .env("DIR", dir)
+            .env("BAG", bag)
+            .env("COUNT", count.to_string())
+            .env("DRIVER_ARGS", driver_args)
+            .env("WAIT_FOR", wait_for),
+        Duration::from_secs(limit_s),
+        dir,
+    );
+    driver_outcome(&o, &dir.join("node.log"), "ACCURACY_SUMMARY ")
+}
+
 #[test]
 fn drift_alarm_follows_a_stiffness_change() {
     let env_sh = ros_env();
@@ -74,33 +123,16 @@ fn drift_alarm_follows_a_stiffness_change() {
     // Every state after the first is compared with a prediction; played at
     // the recorded pace (states 0.1 s apart), so stamps and wall time agree.
     let compared = BEFORE + AFTER - 1;
-    let script = r#"
-        set -u
-        . "$ENV"
-        "$BIN" serve --params "$PARAMS" 2>"$DIR/node.log" &
-        node=$!
-        python3 tests/ros/accuracy_drive.py --count "$COUNT" --timeout 60 >"$DIR/drive.out" \
-            2>"$DIR/drive.err" &
-        drive=$!
-        for _ in $(seq 400); do grep -q listening "$DIR/drive.err" && break; sleep 0.05; done
-        grep -q listening "$DIR/drive.err" || { echo "driver never matched"; cat "$DIR/drive.err"; exit 2; }
-        python3 scripts/ros/play_bag.py "$BAG" --rate 10 --timeout 30 2>"$DIR/play.err" \
-            || { cat "$DIR/play.err"; exit 3; }
-        wait $drive; rc=$?
-        cat "$DIR/drive.out"
-        kill -INT $node; wait $node; node_rc=$?
-        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
-    "#;
-    let o = run_bounded(
-        in_netns(script, &params, &env_sh)
-            .env("DIR", dir.path())
-            .env("BAG", &bag)
-            .env("COUNT", compared.to_string()),
-        Duration::from_secs(150),
+    let (summary, node_log, report) = play(
         dir.path(),
+        &bag,
+        &params,
+        &env_sh,
+        compared,
+        "--timeout 60",
+        "",
+        150,
     );
-    let (summary, node_log, report) =
-        driver_outcome(&o, &dir.path().join("node.log"), "ACCURACY_SUMMARY ");
     let s: serde_json::Value = serde_json::from_str(&summary).expect("ACCURACY_SUMMARY is JSON");
     let live = s["live"].as_array().expect("live");
     assert_eq!(live.len(), compared, "{report}");
@@ -215,37 +247,17 @@ fn drift_alarm_starts_a_warm_start_retraining() {
     )
     .expect("writing params");
     let compared = BEFORE + after - 5;
-    let script = r#"
-        set -u
-        . "$ENV"
-        "$BIN" serve --params "$PARAMS" 2>"$DIR/node.log" &
-        node=$!
-        python3 tests/ros/accuracy_drive.py --count "$COUNT" --timeout 90 --linger 1 \
-            >"$DIR/drive.out" 2>"$DIR/drive.err" &
-        drive=$!
-        for _ in $(seq 400); do grep -q listening "$DIR/drive.err" && break; sleep 0.05; done
-        grep -q listening "$DIR/drive.err" || { echo "driver never matched"; cat "$DIR/drive.err"; exit 2; }
-        python3 scripts/ros/play_bag.py "$BAG" --rate 10 --timeout 30 2>"$DIR/play.err" \
-            || { cat "$DIR/play.err"; exit 3; }
-        wait $drive; rc=$?
-        cat "$DIR/drive.out"
-        # The retraining decides within the playback; wait (bounded) for its verdict.
-        for _ in $(seq 300); do
-            grep -qE "drift retraining: (swapped|kept)" "$DIR/node.log" && break; sleep 0.1
-        done
-        kill -INT $node; wait $node; node_rc=$?
-        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
-    "#;
-    let o = run_bounded(
-        in_netns(script, &params, &env_sh)
-            .env("DIR", dir.path())
-            .env("BAG", &bag)
-            .env("COUNT", compared.to_string()),
-        Duration::from_secs(200),
+    // The retraining decides within the playback; wait (bounded) for its verdict.
+    let (summary, node_log, report) = play(
         dir.path(),
+        &bag,
+        &params,
+        &env_sh,
+        compared,
+        "--timeout 90 --linger 1",
+        "drift retraining: (swapped|kept)",
+        200,
     );
-    let (summary, node_log, report) =
-        driver_outcome(&o, &dir.path().join("node.log"), "ACCURACY_SUMMARY ");
     let s: serde_json::Value = serde_json::from_str(&summary).expect("ACCURACY_SUMMARY is JSON");
     let live = s["live"].as_array().expect("live");
     let num = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);

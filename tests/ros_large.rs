@@ -12,7 +12,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::{driver_outcome, in_netns, ros_env, run_bounded};
+use common::{driver_outcome, expect_success, in_netns, ros_env, run_bounded};
 
 #[test]
 fn large_predictions_arrive_promptly_and_oversized_states_are_refused() {
@@ -132,14 +132,7 @@ fn fragmented_rollout_replies_reach_rclpy() {
         dir.path(),
     );
     let read = |name: &str| fs::read_to_string(dir.path().join(name)).unwrap_or_default();
-    assert!(
-        o.status.success(),
-        "status {}\n{}\n{}\n--- node log\n{}",
-        o.status,
-        o.stdout,
-        o.stderr,
-        read("node.log")
-    );
+    expect_success(&o, &dir.path().join("node.log"));
     for steps in [1000, 3] {
         let r: serde_json::Value =
             serde_json::from_str(read(&format!("out{steps}.json")).trim()).expect("call --json");

@@ -13,7 +13,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::{driver_outcome, in_netns, ros_env, run_bounded, BIN, ROOT};
+use common::{driver_outcome, expect_success, in_netns, ros_env, run_bounded, BIN, ROOT};
 
 /// A parameter file for the tests (short horizon, fast diagnostics);
 /// `record_dir` records with bags split every second.
@@ -285,14 +285,7 @@ fn stand_ins_play_echo_and_call() {
         dir.path(),
     );
     let read = |name: &str| fs::read_to_string(dir.path().join(name)).unwrap_or_default();
-    assert!(
-        o.status.success(),
-        "status {}\n{}\n{}\n--- node log\n{}",
-        o.status,
-        o.stdout,
-        o.stderr,
-        read("node.log")
-    );
+    expect_success(&o, &dir.path().join("node.log"));
     // One prediction per played state, stamped with the state's sample time.
     let stamps: Vec<serde_json::Value> = read("echo.out")
         .lines()
@@ -353,14 +346,7 @@ fn node_refuses_states_its_model_was_not_trained_for() {
         dir.path(),
     );
     let read = |name: &str| fs::read_to_string(dir.path().join(name)).unwrap_or_default();
-    assert!(
-        o.status.success(),
-        "status {}\n{}\n{}\n--- node log\n{}",
-        o.status,
-        o.stdout,
-        o.stderr,
-        read("node.log")
-    );
+    expect_success(&o, &dir.path().join("node.log"));
     assert!(
         read("play.err").contains("published 6 messages"),
         "{}",

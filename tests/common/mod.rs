@@ -108,19 +108,26 @@ pub fn in_netns(script: &str, params: &Path, env_sh: &Path) -> Command {
     c
 }
 
-/// Checks that a driver run (an rclpy script beside the node) succeeded and
-/// returns its summary (the line after `prefix`), the node's log, and a
-/// report of everything both printed, for assertion messages.
-pub fn driver_outcome(o: &Outcome, node_log: &Path, prefix: &str) -> (String, String, String) {
+/// Checks that a run of the node beside rclpy scripts succeeded and returns
+/// the node's log and a report of everything printed, for assertion messages.
+pub fn expect_success(o: &Outcome, node_log: &Path) -> (String, String) {
     let log = fs::read_to_string(node_log).unwrap_or_default();
     let report = format!(
-        "--- stdout\n{}\n--- stderr\n{}\n--- node log\n{log}",
-        o.stdout, o.stderr
+        "--- status {}\n--- stdout\n{}\n--- stderr\n{}\n--- node log\n{log}",
+        o.status, o.stdout, o.stderr
     );
     assert!(
         o.status.success(),
         "the driver or the node failed\n{report}"
     );
+    (log, report)
+}
+
+/// Checks that a driver run (an rclpy script beside the node) succeeded and
+/// returns its summary (the line after `prefix`), the node's log, and a
+/// report of everything both printed, for assertion messages.
+pub fn driver_outcome(o: &Outcome, node_log: &Path, prefix: &str) -> (String, String, String) {
+    let (log, report) = expect_success(o, node_log);
     let summary = o
         .stdout
         .lines()
