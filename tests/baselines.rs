@@ -651,6 +651,9 @@ fn hand_written_potential_gradient_equals_autodiff() {
         (SystemKind::Spring, 5, 2),
         (SystemKind::Pendulum, 4, 2),
         (SystemKind::Spring, 4, 3),
+        // Far from 5 particles, and a 3D lattice with many edges per node.
+        (SystemKind::Spring, 40, 2),
+        (SystemKind::Peridynamic, 27, 3),
     ] {
         let (g, b) = target_batch(sys, n, dim, 4);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
@@ -697,6 +700,7 @@ fn training_gradients_equal_grad_of_grad() {
             (SystemKind::Spring, 5, 2),
             (SystemKind::Pendulum, 3, 2),
             (SystemKind::Spring, 4, 3),
+            (SystemKind::Peridynamic, 8, 3),
         ] {
             let (g, b) = target_batch(sys, n, dim, 3);
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
