@@ -9,7 +9,6 @@
 use super::mechanics::hamilton;
 use super::net::BaselineNet;
 use crate::model::batch::Batch;
-use crate::model::solve::solve;
 use anyhow::{bail, Result};
 use candle_core::{Device, Tensor, Var};
 
@@ -23,30 +22,13 @@ pub fn hamiltonian(net: &BaselineNet, b: &Batch, q: &Tensor, p: &Tensor) -> Resu
 /// (q̇, ṗ) at the batch positions and momenta `p` `(B·n, d)`.
 ///
 /// This H is separable with a diagonal learned mass, so ∂H/∂p = M⁻¹p,
-/// H_pp = M⁻¹ and H_pq = 0 exactly; only ∂V/∂q is left, and it comes from a
-/// backward pass written as candle ops ([`BaselineNet::potential_grad`]), so
-/// training differentiates once. The bars' multipliers follow
-/// [`hamilton`]'s formula with those terms: λ = (A M⁻¹ Aᵀ)⁻¹ (Ȧq̇ − A M⁻¹ ∂V/∂q),
-/// ṗ = −∂V/∂q − Aᵀλ. [`derivatives_generic`] (autodiff twice) is the
-/// reference it is tested against.
+/// H_pp = M⁻¹ and H_pq = 0 exactly, and ṗ is the force
+/// [`BaselineNet::bar_constrained_force`] (Hamilton's multipliers with those
+/// terms). [`derivatives_generic`] (autodiff twice) is the reference it is
+/// tested against.
 pub fn derivatives(net: &BaselineNet, b: &Batch, p: &Tensor) -> Result<(Tensor, Tensor)> {
-    let m = net.row_masses(b)?;
-    let qdot = p.broadcast_div(&m)?;
-    let gq = net.potential_grad(b, &b.q)?;
-    let Some((a, at, adq)) = &b.constraint else {
-        return Ok((qdot, gq.neg()?));
-    };
-    let dd = b.n * b.dim;
-    let minv = m
-        .recip()?
-        .broadcast_as((b.b * b.n, b.dim))?
-        .reshape((b.b, dd, 1))?;
-    let gq3 = gq.reshape((b.b, dd, 1))?;
-    let s = a.matmul(&at.broadcast_mul(&minv)?)?;
-    let rhs = (adq - a.matmul(&(&gq3 * &minv)?)?)?;
-    let lambda = solve(&s, &rhs)?;
-    let pdot = (gq3.neg()? - at.matmul(&lambda)?)?.reshape(b.q.dims())?;
-    Ok((qdot, pdot))
+    let qdot = p.broadcast_div(&net.row_masses(b)?)?;
+    Ok((qdot, net.bar_constrained_force(b)?))
 }
 
 /// The same derivatives through the generic Hamilton code (all derivatives

@@ -8,11 +8,11 @@
 //! generic code ([`super::mechanics::euler_lagrange`], autodiff twice) is the
 //! reference ([`acceleration_generic`]).
 
-use super::mechanics::{euler_lagrange, solve_constrained};
+use super::mechanics::euler_lagrange;
 use super::net::BaselineNet;
 use crate::model::batch::Batch;
 use anyhow::Result;
-use candle_core::{DType, Device, Tensor, Var};
+use candle_core::{Tensor, Var};
 
 /// The learned Lagrangian summed over the batch.
 pub fn lagrangian(net: &BaselineNet, b: &Batch, q: &Tensor, v: &Tensor) -> Result<Tensor> {
@@ -24,25 +24,15 @@ pub fn lagrangian(net: &BaselineNet, b: &Batch, q: &Tensor, v: &Tensor) -> Resul
 /// Accelerations `(B·n, d)` from Euler–Lagrange.
 ///
 /// For this Lagrangian the Hessian ∇_q̇∇_q̇L is the learned diagonal mass M
-/// and the mixed term ∇_q̇∇_q L is zero, exactly; only ∇_q L is left to
-/// autodiff. The generic [`euler_lagrange`] (tested against it, see
+/// and the mixed term ∇_q̇∇_q L is zero, exactly, so q̈ = M⁻¹ f with f the
+/// force [`BaselineNet::bar_constrained_force`] (the same as HGN's ṗ). The
+/// generic [`euler_lagrange`] (tested against it, see
 /// [`acceleration_generic`]) would spend one backward pass per coordinate on
 /// the Hessian and a full one on the mixed term.
 pub fn acceleration(net: &BaselineNet, b: &Batch) -> Result<Tensor> {
-    // ∇_q L = −∂V/∂q, by the hand-written backward pass (candle then
-    // differentiates once in training).
-    let gq = net.potential_grad(b, &b.q)?.neg()?;
-    let dd = b.n * b.dim;
-    let m = net
-        .row_masses(b)?
-        .broadcast_as((b.b * b.n, b.dim))?
-        .reshape((b.b, 1, dd))?;
-    let k = Tensor::eye(dd, DType::F64, &Device::Cpu)?
-        .unsqueeze(0)?
-        .broadcast_mul(&m)?;
-    let n = gq.reshape((b.b, dd, 1))?;
-    let acc = solve_constrained(&k, &n, b.constraint.as_ref())?;
-    Ok(acc.reshape(b.q.dims())?)
+    Ok(net
+        .bar_constrained_force(b)?
+        .broadcast_div(&net.row_masses(b)?)?)
 }
 
 /// The same accelerations through the generic Euler–Lagrange code (Hessian

@@ -192,6 +192,29 @@ impl BaselineNet {
         })
     }
 
+    /// The force −∂V/∂q − Aᵀλ on every particle `(B·n, d)`, the bars'
+    /// multipliers keeping A q̈ + Ȧq̇ = 0 with q̈ = M⁻¹ f:
+    /// λ = (A M⁻¹ Aᵀ)⁻¹ (Ȧq̇ − A M⁻¹ ∂V/∂q). With a diagonal learned mass this
+    /// is HGN's ṗ and LGN's M q̈ alike (Hamilton's and Euler–Lagrange's
+    /// equations agree), and M is never formed as a matrix.
+    pub fn bar_constrained_force(&self, b: &Batch) -> Result<Tensor> {
+        let gq = self.potential_grad(b, &b.q)?;
+        let Some((a, at, adq)) = &b.constraint else {
+            return Ok(gq.neg()?);
+        };
+        let dd = b.n * b.dim;
+        let minv = self
+            .row_masses(b)?
+            .recip()?
+            .broadcast_as((b.b * b.n, b.dim))?
+            .reshape((b.b, dd, 1))?;
+        let gq3 = gq.reshape((b.b, dd, 1))?;
+        let s = a.matmul(&at.broadcast_mul(&minv)?)?;
+        let rhs = (adq - a.matmul(&(&gq3 * &minv)?)?)?;
+        let lambda = crate::model::solve::solve(&s, &rhs)?;
+        Ok((gq3.neg()? - at.matmul(&lambda)?)?.reshape(b.q.dims())?)
+    }
+
     /// Refuses a batch of another dimension.
     pub(super) fn check(&self, b: &Batch) -> Result<()> {
         if b.dim != self.hyper.dim {
