@@ -132,3 +132,55 @@ fn quick_reproduce_writes_a_complete_report() {
         "{peri}"
     );
 }
+
+#[test]
+fn only_runs_the_named_parts_and_names_the_rest() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("repro");
+    let o = common::run_bounded(
+        Command::new(common::BIN)
+            .args([
+                "reproduce",
+                "--quick",
+                "--only",
+                "noise",
+                "--comparison-epochs",
+                "3",
+                "--out",
+            ])
+            .arg(&out),
+        Duration::from_secs(300),
+        dir.path(),
+    );
+    assert!(o.status.success(), "reproduce failed:\n{}", o.stderr);
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(report.contains("## Robustness to noise"), "{report}");
+    assert!(!report.contains("## Data efficiency"), "{report}");
+    assert!(
+        report.contains(
+            "Not run (`--only`): springs, pendulums, peridynamic, drag-force, data-efficiency"
+        ),
+        "{report}"
+    );
+    // The command is shown without the machine's folders.
+    assert!(
+        report.contains(
+            "Command: `mcgnode reproduce --quick --only noise --comparison-epochs 3 --out repro`"
+        ),
+        "{report}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    assert_eq!(json["scale"]["epochs"], 3);
+    assert_eq!(json["parts"], serde_json::json!(["noise"]));
+    assert_eq!(json["pending"], serde_json::json!([]));
+    // A misspelt part is refused with the valid names.
+    let bad = Command::new(common::BIN)
+        .args(["reproduce", "--quick", "--only", "spring", "--out"])
+        .arg(dir.path().join("bad"))
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("springs, pendulums, peridynamic"), "{err}");
+}

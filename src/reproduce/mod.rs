@@ -13,6 +13,7 @@ pub mod scale;
 use crate::baselines::Kind;
 use crate::model::Variant;
 use crate::models::ModelKind;
+use crate::names::Named;
 use anyhow::{Context, Result};
 use experiments::Section;
 use lab::Lab;
@@ -32,8 +33,94 @@ pub struct Options {
     pub scale: Scale,
     /// Worker threads for independent trainings and evaluations.
     pub threads: usize,
-    /// The command line that started the run, for the report.
+    /// The command line that started the run, for the report (absolute
+    /// paths are shortened to their last component: [`shown_command`]).
     pub command: String,
+    /// The parts to run, in this order (default: [`Part::ALL`]).
+    pub parts: Vec<Part>,
+}
+
+/// The parts of `reproduce`, each one section of the report.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    /// The 5-spring: biases, baselines, architecture, zero-shot sizes.
+    Springs,
+    /// The 5-pendulum: the same.
+    Pendulums,
+    /// The 3D peridynamic solid.
+    Peridynamic,
+    /// Springs under drag or an external force.
+    DragForce,
+    /// Training-data noise.
+    Noise,
+    /// Training-set size.
+    DataEfficiency,
+}
+
+impl crate::names::Named for Part {
+    const ALL: &'static [Self] = &[
+        Part::Springs,
+        Part::Pendulums,
+        Part::Peridynamic,
+        Part::DragForce,
+        Part::Noise,
+        Part::DataEfficiency,
+    ];
+    const WHAT: &'static str = "reproduce part";
+
+    fn name(self) -> &'static str {
+        match self {
+            Part::Springs => "springs",
+            Part::Pendulums => "pendulums",
+            Part::Peridynamic => "peridynamic",
+            Part::DragForce => "drag-force",
+            Part::Noise => "noise",
+            Part::DataEfficiency => "data-efficiency",
+        }
+    }
+}
+
+crate::impl_named!(Part);
+
+impl Part {
+    /// Runs this part.
+    fn run(self, lab: &Lab, sc: &Scale) -> Result<Section> {
+        use crate::physics::SystemKind;
+        match self {
+            Part::Springs => experiments::main_comparison(lab, sc, SystemKind::Spring),
+            Part::Pendulums => experiments::main_comparison(lab, sc, SystemKind::Pendulum),
+            Part::Peridynamic => experiments::peridynamic(lab, sc),
+            Part::DragForce => experiments::drag_and_force(lab, sc),
+            Part::Noise => experiments::noise(lab, sc),
+            Part::DataEfficiency => experiments::data_efficiency(lab, sc),
+        }
+    }
+}
+
+/// A command line as the report shows it: the program as `mcgnode` and
+/// every other absolute path by its last component, so that a report names
+/// no folder of the machine it ran on.
+pub fn shown_command(args: &[String]) -> String {
+    let short = |a: &String| {
+        let p = std::path::Path::new(a);
+        if p.is_absolute() {
+            p.file_name()
+                .map_or_else(|| a.clone(), |f| f.to_string_lossy().into_owned())
+        } else {
+            a.clone()
+        }
+    };
+    args.iter()
+        .enumerate()
+        .map(|(i, a)| {
+            if i == 0 {
+                "mcgnode".to_string()
+            } else {
+                short(a)
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// The outcome of a run.
@@ -46,7 +133,8 @@ pub struct Outcome {
     pub seconds: f64,
 }
 
-/// Runs every experiment and writes the report.
+/// Runs the chosen parts and writes the report, rewritten after each part
+/// so that a long run that is stopped keeps what it finished.
 pub fn run(opts: &Options, log: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("creating {}", opts.out.display()))?;
@@ -59,40 +147,62 @@ pub fn run(opts: &Options, log: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
         log,
         t0: Instant::now(),
     };
-    let sc = &opts.scale;
     let mut sections: Vec<Section> = vec![];
-    type Exp = fn(&Lab, &Scale) -> Result<Section>;
-    let exps: [(&str, Exp); 6] = [
-        ("springs", |l, s| {
-            experiments::main_comparison(l, s, crate::physics::SystemKind::Spring)
-        }),
-        ("pendulums", |l, s| {
-            experiments::main_comparison(l, s, crate::physics::SystemKind::Pendulum)
-        }),
-        ("peridynamic solid", experiments::peridynamic),
-        ("drag and force", experiments::drag_and_force),
-        ("noise", experiments::noise),
-        ("data efficiency", experiments::data_efficiency),
-    ];
-    for (name, f) in exps {
-        lab.say(&format!("experiment: {name}"));
-        sections.push(f(&lab, sc).with_context(|| format!("experiment {name}"))?);
+    let mut report = opts.out.join("report.md");
+    for (i, part) in opts.parts.iter().enumerate() {
+        lab.say(&format!("experiment: {part}"));
+        sections.push(
+            part.run(&lab, &opts.scale)
+                .with_context(|| format!("experiment {part}"))?,
+        );
+        report = write_report(opts, &lab, &sections, &opts.parts[i + 1..])?;
     }
+    Ok(Outcome {
+        report,
+        rows: sections.iter().flat_map(|s| s.rows.clone()).collect(),
+        seconds: lab.t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// Writes report.md and results.json from the sections so far; `pending`
+/// are the parts still to run (named in the report while it is partial).
+fn write_report(
+    opts: &Options,
+    lab: &Lab,
+    sections: &[Section],
+    pending: &[Part],
+) -> Result<PathBuf> {
+    let sc = &opts.scale;
     let seconds = lab.t0.elapsed().as_secs_f64();
     let rows: Vec<Row> = sections.iter().flat_map(|s| s.rows.clone()).collect();
+    let names = |ps: &[Part]| {
+        ps.iter()
+            .map(|p| p.to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     let mut md = String::from("# mcgnode reproduction report\n\n");
     md += &format!(
-        "Command: `{}` — scale **{}**, {} worker threads, finished in {:.0} s \
-         ({:.1} min) on {} cores. Every number below was measured in this run; the bags and \
-         model files it made are in `data/` and `models/`, every evaluation in \
+        "Command: `{}` — scale **{}**, {} worker threads, {} in {:.0} s \
+         ({:.1} min) on {} cores. Parts: {}. Every number below was measured in this run; the \
+         bags and model files it made are in `data/` and `models/`, every evaluation in \
          `results.json`.\n\n",
         opts.command,
         sc.name,
         lab.threads,
+        if pending.is_empty() {
+            "finished"
+        } else {
+            "so far"
+        },
         seconds,
         seconds / 60.0,
-        std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
+        std::thread::available_parallelism().map_or(1, std::num::NonZero::get),
+        names(&opts.parts),
     );
+    if !pending.is_empty() {
+        md += &format!("**Partial report**: still to run: {}.\n\n", names(pending));
+    }
     md += "Metrics (paper's definitions): RE = ‖q̂ − q‖/(‖q̂‖ + ‖q‖), EE the same for the \
            Hamiltonian, ME for the total momentum; ME scaled = ‖P̂ − P‖/(Σm|v̂| + Σm|v|) \
            (meaningful when the true momentum is zero, as for our spring starts). \
@@ -103,8 +213,19 @@ pub fn run(opts: &Options, log: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
     let trained: Vec<&(String, Result<lab::Trained>)> =
         sections.iter().flat_map(|s| s.trained.iter()).collect();
     md += &claims(&rows, &trained);
+    let left_out: Vec<Part> = Part::ALL
+        .iter()
+        .filter(|p| !opts.parts.contains(p))
+        .copied()
+        .collect();
+    if !left_out.is_empty() {
+        md += &format!(
+            "- Not run (`--only`): {}; their claims have no result.\n",
+            names(&left_out)
+        );
+    }
     md += "\n";
-    for s in &sections {
+    for s in sections {
         md += &s.markdown;
         md += "\n";
     }
@@ -123,16 +244,14 @@ pub fn run(opts: &Options, log: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
         .collect();
     let json = serde_json::json!({
         "scale": sc,
+        "parts": opts.parts.iter().map(|p| p.to_string()).collect::<Vec<_>>(),
+        "pending": pending.iter().map(|p| p.to_string()).collect::<Vec<_>>(),
         "seconds": seconds,
         "evaluations": rows,
         "training": training,
     });
     crate::model::file::write_json_atomic(&opts.out.join("results.json"), &json)?;
-    Ok(Outcome {
-        report,
-        rows,
-        seconds,
-    })
+    Ok(report)
 }
 
 /// The rows the claims read, looked up by experiment, system, model and
@@ -470,5 +589,37 @@ fn claim_data_efficiency(res: &Results, out: &mut String) {
             num(res.at(Points, NODE, xs[0])),
             num(res.at(Points, HGN, xs[0]))
         ));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shown_command_names_no_folder_of_the_machine() {
+        let args: Vec<String> = [
+            "/work/main/target/release/mcgnode",
+            "reproduce",
+            "--out",
+            "/work/runs/repro",
+            "--epochs",
+            "10",
+            "rel/dir",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        assert_eq!(
+            shown_command(&args),
+            "mcgnode reproduce --out repro --epochs 10 rel/dir"
+        );
+    }
+
+    #[test]
+    fn parts_parse_by_name() {
+        assert_eq!("drag-force".parse::<Part>().unwrap(), Part::DragForce);
+        let e = "spring".parse::<Part>().unwrap_err().to_string();
+        assert!(e.contains("springs, pendulums"), "{e}");
     }
 }
