@@ -415,9 +415,7 @@ pub fn scan_input(
 fn payload(data: &[u8], declared: Option<Codec>) -> Result<Option<Vec<u8>>, DataError> {
     match (Codec::sniff(data), declared) {
         (None, None) => Ok(None),
-        (Some(found), d) if d.is_none_or(|d| d == found) => {
-            found.decompress(data).map(Some).map_err(DataError::Cdr)
-        }
+        (Some(found), d) if d.is_none_or(|d| d == found) => found.decompress(data).map(Some),
         (found, d) => Err(DataError::Cdr(format!(
             "metadata.yaml declares {} message compression, but the message is {}",
             d.map_or("no", Codec::name),

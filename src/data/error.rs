@@ -37,6 +37,14 @@ pub enum DataError {
     /// CDR bytes could not be encoded or decoded.
     #[error("CDR: {0}")]
     Cdr(String),
+    /// A compressed message does not decompress.
+    #[error("CDR: {codec} decompression failed: {source}")]
+    Decompress {
+        /// The codec's name (`zstd`, `lz4`).
+        codec: &'static str,
+        /// Why.
+        source: std::io::Error,
+    },
     /// A message decoded but its contents are inconsistent or out of range.
     #[error("invalid ParticleState: {0}")]
     Invalid(String),

@@ -64,16 +64,18 @@ impl Codec {
     }
 
     /// Decompresses one whole frame (or several concatenated ones).
-    pub fn decompress(self, data: &[u8]) -> Result<Vec<u8>, String> {
+    pub fn decompress(self, data: &[u8]) -> Result<Vec<u8>, DataError> {
         let mut out = Vec::new();
         match self {
-            Codec::Zstd => zstd::stream::read::Decoder::new(data)
-                .and_then(|mut d| d.read_to_end(&mut out))
-                .map_err(|e| format!("zstd decompression failed: {e}"))?,
-            Codec::Lz4 => lz4::Decoder::new(data)
-                .and_then(|mut d| d.read_to_end(&mut out))
-                .map_err(|e| format!("lz4 decompression failed: {e}"))?,
-        };
+            Codec::Zstd => {
+                zstd::stream::read::Decoder::new(data).and_then(|mut d| d.read_to_end(&mut out))
+            }
+            Codec::Lz4 => lz4::Decoder::new(data).and_then(|mut d| d.read_to_end(&mut out)),
+        }
+        .map_err(|source| DataError::Decompress {
+            codec: self.name(),
+            source,
+        })?;
         Ok(out)
     }
 

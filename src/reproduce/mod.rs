@@ -177,7 +177,7 @@ fn write_report(
     let rows: Vec<Row> = sections.iter().flat_map(|s| s.rows.clone()).collect();
     let names = |ps: &[Part]| {
         ps.iter()
-            .map(|p| p.to_string())
+            .map(ToString::to_string)
             .collect::<Vec<_>>()
             .join(", ")
     };
@@ -244,8 +244,8 @@ fn write_report(
         .collect();
     let json = serde_json::json!({
         "scale": sc,
-        "parts": opts.parts.iter().map(|p| p.to_string()).collect::<Vec<_>>(),
-        "pending": pending.iter().map(|p| p.to_string()).collect::<Vec<_>>(),
+        "parts": opts.parts.iter().map(ToString::to_string).collect::<Vec<_>>(),
+        "pending": pending.iter().map(ToString::to_string).collect::<Vec<_>>(),
         "seconds": seconds,
         "evaluations": rows,
         "training": training,
@@ -608,7 +608,7 @@ mod tests {
             "rel/dir",
         ]
         .iter()
-        .map(|s| s.to_string())
+        .map(ToString::to_string)
         .collect();
         assert_eq!(
             shown_command(&args),

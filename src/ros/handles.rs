@@ -44,10 +44,7 @@ impl LiveParams {
     }
 
     /// Replaces the parameters with `f(current)`, unless `f` refuses.
-    pub fn update(
-        &self,
-        f: impl FnOnce(&NodeParams) -> Result<NodeParams, String>,
-    ) -> Result<(), String> {
+    pub fn update<E>(&self, f: impl FnOnce(&NodeParams) -> Result<NodeParams, E>) -> Result<(), E> {
         let mut p = self.0.write().unwrap_or_else(PoisonError::into_inner);
         *p = f(&p)?;
         Ok(())

@@ -39,7 +39,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-pub use params::NodeParams;
+pub use params::{NodeParams, ParamError};
 
 /// Options of `mcgnode serve`.
 #[derive(Args, Debug, Clone)]
@@ -62,31 +62,31 @@ pub struct ServeArgs {
 
 /// Runs the node until SIGINT/SIGTERM.
 pub fn run_serve(args: ServeArgs) -> anyhow::Result<()> {
-    let params = effective_params(&args).map_err(anyhow::Error::msg)?;
+    let params = effective_params(&args)?;
     if args.print_params {
         print!("{}", params.to_yaml());
         return Ok(());
     }
     let model = crate::models::load_model(&params.model)?;
-    let domain_id = domain_id_from_env().map_err(anyhow::Error::msg)?;
+    let domain_id = domain_id_from_env()?;
     node::serve(params, model, domain_id)
 }
 
 /// Parameters from the file, `--set` overrides and `--model`, in that order.
-pub fn effective_params(args: &ServeArgs) -> Result<NodeParams, String> {
+pub fn effective_params(args: &ServeArgs) -> Result<NodeParams, ParamError> {
     let mut p = NodeParams::load(args.params.as_deref(), &args.set)?;
     if let Some(m) = &args.model {
         p.model.clone_from(m);
     }
     if p.model.is_empty() {
-        return Err("no model: set the `model` parameter or pass --model".into());
+        return Err(ParamError::NoModel);
     }
     Ok(p)
 }
 
 /// The DDS domain from `ROS_DOMAIN_ID` (0 when unset), which ros2-client does
 /// not read by itself.
-pub fn domain_id_from_env() -> Result<u16, String> {
+pub fn domain_id_from_env() -> Result<u16, ParamError> {
     match std::env::var("ROS_DOMAIN_ID") {
         Err(_) => Ok(0),
         Ok(s) if s.trim().is_empty() => Ok(0),
@@ -95,6 +95,6 @@ pub fn domain_id_from_env() -> Result<u16, String> {
             .parse::<u16>()
             .ok()
             .filter(|d| *d <= 232)
-            .ok_or_else(|| format!("ROS_DOMAIN_ID={s:?} is not a domain id in 0..=232")),
+            .ok_or(ParamError::DomainId(s)),
     }
 }

@@ -29,7 +29,7 @@ use super::msgs::{
     PredictedTrajectory, ReplayRequest, ReplayResponse, RolloutRequest, RolloutResponse,
     DIAGNOSTIC_OK, DIAGNOSTIC_WARN, PACKAGE,
 };
-use super::params::{NodeParams, NODE_NAME, RUNTIME_SETTABLE};
+use super::params::{NodeParams, ParamError, NODE_NAME, RUNTIME_SETTABLE};
 use super::predict::{self, Prediction};
 use super::qos::{clock_qos, reliable_qos, ros_name, topic_qos};
 use super::record::Recorder;
@@ -43,19 +43,18 @@ fn handle_state(
     h: &Handles,
     msg: ParticleState,
     received_ns: u64,
-) -> Result<(Prediction, accuracy::Update), String> {
+) -> Result<(Prediction, accuracy::Update), predict::PredictError> {
     // Refused before anything is recorded or predicted: an oversized state
     // would hold memory and its prediction could not be delivered promptly.
     let params = h.params.get();
-    predict::check_size(&msg, params.max_particles).map_err(|e| e.to_string())?;
+    predict::check_size(&msg, params.max_particles)?;
     h.recorder.record(|r| r.state(received_ns, &msg));
     let model = h.model.get();
     // A state the model was not trained for (another dimension, edge kinds
     // or field) is refused with the reason, not predicted.
     if let Some(t) = model.trained_for() {
-        let (graph, _) = msg.to_parts().map_err(|e| e.to_string())?;
-        let field = msg.field().map_err(|e| e.to_string())?;
-        t.check(&graph, field.as_ref()).map_err(|e| e.to_string())?;
+        let (graph, _) = msg.to_parts()?;
+        t.check(&graph, msg.field()?.as_ref())?;
     }
     let p = predict::predict(
         model.as_ref(),
@@ -63,8 +62,7 @@ fn handle_state(
         params.dt,
         params.horizon,
         params.substeps,
-    )
-    .map_err(|e| e.to_string())?;
+    )?;
     h.recorder
         .record(|r| r.prediction(h.clock.now_log_ns(), &p.trajectory, &p.forces));
     let scored = h.accuracy.update(&params, &msg, &p.trajectory);
@@ -116,13 +114,9 @@ pub fn check_runtime_change(
     current: &NodeParams,
     name: &str,
     value: &ParameterValue,
-) -> Result<NodeParams, String> {
+) -> Result<NodeParams, ParamError> {
     if !RUNTIME_SETTABLE.contains(&name) {
-        return Err(format!(
-            "parameter {name} cannot change at run time (it shapes topics, services, QoS, \
-             files or the model); restart the node with --set {name}=...; settable now: {}",
-            RUNTIME_SETTABLE.join(", ")
-        ));
+        return Err(ParamError::NotRuntime(name.to_string()));
     }
     let mut p = current.clone();
     p.set(name, &scalar(value), false)?;
@@ -161,7 +155,10 @@ fn declare_parameters(p: &NodeParams, live: LiveParams) -> NodeOptions {
             if initial.iter().any(|(k, v)| *k == name && v == value) {
                 return Ok(());
             }
-            check_runtime_change(&check.get(), name, value).map(|_| ())
+            // ros2-client takes the refusal as text.
+            check_runtime_change(&check.get(), name, value)
+                .map(|_| ())
+                .map_err(|e| e.to_string())
         }))
         // Runs after the validator, and for every declared value at start.
         // Other parameters (read-only ones, ros2-client's use_sim_time) need
@@ -170,7 +167,9 @@ fn declare_parameters(p: &NodeParams, live: LiveParams) -> NodeOptions {
             if !RUNTIME_SETTABLE.contains(&name) {
                 return Ok(());
             }
-            apply.update(|current| check_runtime_change(current, name, value))
+            apply
+                .update(|current| check_runtime_change(current, name, value))
+                .map_err(|e| e.to_string())
         }))
 }
 
@@ -859,9 +858,11 @@ mod tests {
         assert_eq!(q.accuracy_lead_times, vec![0.1, 1.0]);
         let q = set(ParameterValue::IntegerArray(vec![1, 2])).unwrap();
         assert_eq!(q.accuracy_lead_times, vec![1.0, 2.0]);
-        let e = set(ParameterValue::DoubleArray(vec![0.1, 0.0])).unwrap_err();
+        let e = set(ParameterValue::DoubleArray(vec![0.1, 0.0]))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("must be finite and > 0"), "{e}");
-        let e = set(ParameterValue::Double(0.5)).unwrap_err();
+        let e = set(ParameterValue::Double(0.5)).unwrap_err().to_string();
         assert!(e.contains("must be a list"), "{e}");
     }
 

@@ -3,9 +3,151 @@
 //! Unknown keys and ill-typed or out-of-range values are rejected before the
 //! node starts, with a message naming the key, what was given and what is expected.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use super::yaml::{self, Scalar, Value};
+use super::yaml::{self, Scalar, Value, YamlError};
+
+/// Why parameters were refused: each names the key, what was given and what
+/// is expected.
+#[derive(Debug, thiserror::Error)]
+pub enum ParamError {
+    /// The parameter file cannot be read.
+    #[error("cannot read parameter file {}: {source}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// Something in the parameter file `path`.
+    #[error("parameter file {}: {source}", path.display())]
+    File {
+        /// The file.
+        path: PathBuf,
+        /// What.
+        source: Box<ParamError>,
+    },
+    /// Not YAML, or YAML that parameter files do not use.
+    #[error(transparent)]
+    Yaml(#[from] YamlError),
+    /// The file's top level is not a mapping.
+    #[error("expected a mapping at the top level")]
+    NotAMapping,
+    /// No section at all.
+    #[error("no `{NODE_NAME}: ros__parameters:` section")]
+    NoSection,
+    /// A section for another node.
+    #[error(
+        "section {0:?} is for another node; this node is {NODE_NAME:?} (use `{NODE_NAME}:` or `/**:`)"
+    )]
+    OtherNode(String),
+    /// A node section that is not a mapping.
+    #[error("{0}: expected `ros__parameters:` under it")]
+    NoRosParameters(String),
+    /// A key beside `ros__parameters`.
+    #[error("{node}: unexpected key {key:?} (only ros__parameters)")]
+    UnexpectedKey {
+        /// The node section.
+        node: String,
+        /// The key.
+        key: String,
+    },
+    /// A `--set` without `=`.
+    #[error("--set {0:?}: expected key=value")]
+    NotKeyValue(String),
+    /// A refused `--set key=value`.
+    #[error("--set {given:?}: {source}")]
+    Override {
+        /// The argument.
+        given: String,
+        /// Why.
+        source: Box<ParamError>,
+    },
+    /// A key no parameter has.
+    #[error("unknown parameter {0:?}; known parameters: {known}", known = known_parameters())]
+    Unknown(String),
+    /// A value of the wrong type.
+    #[error("parameter {key:?} must be {want}, got {got}")]
+    IllTyped {
+        /// The parameter.
+        key: String,
+        /// What it takes.
+        want: String,
+        /// The value's YAML type and text.
+        got: String,
+    },
+    /// A topic or service name that is not an absolute ROS 2 name.
+    #[error(
+        "parameter {key:?}: {name:?} is not an absolute ROS 2 name like /particle_state (letters, digits, _)"
+    )]
+    BadName {
+        /// The parameter.
+        key: String,
+        /// The name given.
+        name: String,
+    },
+    /// An integer outside its range.
+    #[error("parameter {key:?} = {value} is outside {lo}..={hi}")]
+    OutOfRange {
+        /// The parameter.
+        key: String,
+        /// The value given.
+        value: i64,
+        /// Smallest allowed.
+        lo: u32,
+        /// Largest allowed.
+        hi: u32,
+    },
+    /// A double that is not finite, or not positive where it must be.
+    #[error("parameter {key:?} = {value} must be finite and {want}")]
+    NotPositive {
+        /// The parameter.
+        key: String,
+        /// The value given.
+        value: f64,
+        /// "> 0" or ">= 0".
+        want: &'static str,
+    },
+    /// A list longer than allowed.
+    #[error("parameter {key:?} has {len} entries; at most {max}")]
+    TooLong {
+        /// The parameter.
+        key: String,
+        /// Entries given.
+        len: usize,
+        /// Most allowed.
+        max: usize,
+    },
+    /// A list entry that is not finite and positive.
+    #[error("parameter {key:?}: entry {value} must be finite and > 0")]
+    BadEntry {
+        /// The parameter.
+        key: String,
+        /// The entry.
+        value: f64,
+    },
+    /// A parameter that cannot change while the node runs.
+    #[error(
+        "parameter {0} cannot change at run time (it shapes topics, services, QoS, files or the \
+         model); restart the node with --set {0}=...; settable now: {settable}",
+        settable = RUNTIME_SETTABLE.join(", ")
+    )]
+    NotRuntime(String),
+    /// No model to serve.
+    #[error("no model: set the `model` parameter or pass --model")]
+    NoModel,
+    /// `ROS_DOMAIN_ID` is not a domain id.
+    #[error("ROS_DOMAIN_ID={0:?} is not a domain id in 0..=232")]
+    DomainId(String),
+}
+
+fn known_parameters() -> String {
+    SPECS
+        .iter()
+        .map(|(k, _, _)| *k)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
 
 /// The node's name, which is also the key of its section in parameter files.
 pub const NODE_NAME: &str = "mcgnode";
@@ -304,13 +446,17 @@ fn is_our_section(key: &str) -> bool {
 
 impl NodeParams {
     /// Defaults, then the file (if any), then each `key=value` override in order.
-    pub fn load(file: Option<&Path>, overrides: &[String]) -> Result<NodeParams, String> {
+    pub fn load(file: Option<&Path>, overrides: &[String]) -> Result<NodeParams, ParamError> {
         let mut p = NodeParams::default();
         if let Some(path) = file {
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| format!("cannot read parameter file {}: {e}", path.display()))?;
-            p.apply_file_text(&text)
-                .map_err(|e| format!("parameter file {}: {e}", path.display()))?;
+            let text = std::fs::read_to_string(path).map_err(|source| ParamError::Read {
+                path: path.to_path_buf(),
+                source,
+            })?;
+            p.apply_file_text(&text).map_err(|e| ParamError::File {
+                path: path.to_path_buf(),
+                source: Box::new(e),
+            })?;
         }
         for o in overrides {
             p.apply_override(o)?;
@@ -319,28 +465,26 @@ impl NodeParams {
     }
 
     /// Applies the contents of a ROS 2 parameter file.
-    pub fn apply_file_text(&mut self, text: &str) -> Result<(), String> {
+    pub fn apply_file_text(&mut self, text: &str) -> Result<(), ParamError> {
         let Value::Map(top) = yaml::parse(text)? else {
-            return Err("expected a mapping at the top level".into());
+            return Err(ParamError::NotAMapping);
         };
         if top.is_empty() {
-            return Err(format!("no `{NODE_NAME}: ros__parameters:` section"));
+            return Err(ParamError::NoSection);
         }
         for (node, section) in &top {
             if !is_our_section(node) {
-                return Err(format!(
-                    "section {node:?} is for another node; this node is {NODE_NAME:?} \
-                     (use `{NODE_NAME}:` or `/**:`)"
-                ));
+                return Err(ParamError::OtherNode(node.clone()));
             }
             let Value::Map(entries) = section else {
-                return Err(format!("{node}: expected `ros__parameters:` under it"));
+                return Err(ParamError::NoRosParameters(node.clone()));
             };
             for (k, v) in entries {
                 if k != "ros__parameters" {
-                    return Err(format!(
-                        "{node}: unexpected key {k:?} (only ros__parameters)"
-                    ));
+                    return Err(ParamError::UnexpectedKey {
+                        node: node.clone(),
+                        key: k.clone(),
+                    });
                 }
                 let mut flat = Vec::new();
                 flatten("", v, &mut flat);
@@ -353,29 +497,27 @@ impl NodeParams {
     }
 
     /// Applies one `key=value` command-line override.
-    pub fn apply_override(&mut self, kv: &str) -> Result<(), String> {
+    pub fn apply_override(&mut self, kv: &str) -> Result<(), ParamError> {
         let (k, v) = kv
             .split_once('=')
-            .ok_or_else(|| format!("--set {kv:?}: expected key=value"))?;
+            .ok_or_else(|| ParamError::NotKeyValue(kv.to_string()))?;
         self.set(k.trim(), &Scalar::parse_plain(v), true)
-            .map_err(|e| format!("--set {kv:?}: {e}"))
+            .map_err(|e| ParamError::Override {
+                given: kv.to_string(),
+                source: Box::new(e),
+            })
     }
 
     /// Sets one parameter, checking its name, type and range. Command-line
     /// values for string parameters are taken as text whatever they look like.
-    pub fn set(&mut self, key: &str, value: &Scalar, from_cli: bool) -> Result<(), String> {
+    pub fn set(&mut self, key: &str, value: &Scalar, from_cli: bool) -> Result<(), ParamError> {
         let Some(&(_, kind, _)) = SPECS.iter().find(|(k, _, _)| *k == key) else {
-            let known: Vec<&str> = SPECS.iter().map(|(k, _, _)| *k).collect();
-            return Err(format!(
-                "unknown parameter {key:?}; known parameters: {}",
-                known.join(", ")
-            ));
+            return Err(ParamError::Unknown(key.to_string()));
         };
-        let ill = |want: &str| {
-            format!(
-                "parameter {key:?} must be {want}, got {} {value}",
-                value.type_name()
-            )
+        let ill = |want: &str| ParamError::IllTyped {
+            key: key.to_string(),
+            want: want.to_string(),
+            got: format!("{} {value}", value.type_name()),
         };
         match kind {
             Kind::Str | Kind::Topic => {
@@ -387,8 +529,11 @@ impl NodeParams {
                     }
                     _ => return Err(ill("a string")),
                 };
-                if kind == Kind::Topic {
-                    check_topic(&s).map_err(|e| format!("parameter {key:?}: {e}"))?;
+                if kind == Kind::Topic && !is_absolute_name(&s) {
+                    return Err(ParamError::BadName {
+                        key: key.to_string(),
+                        name: s,
+                    });
                 }
                 self.set_str(key, s);
             }
@@ -405,7 +550,12 @@ impl NodeParams {
                 let v = u32::try_from(*i)
                     .ok()
                     .filter(|v| (lo..=hi).contains(v))
-                    .ok_or_else(|| format!("parameter {key:?} = {i} is outside {lo}..={hi}"))?;
+                    .ok_or_else(|| ParamError::OutOfRange {
+                        key: key.to_string(),
+                        value: *i,
+                        lo,
+                        hi,
+                    })?;
                 self.set_int(key, v);
             }
             Kind::Double(positive) => {
@@ -417,7 +567,11 @@ impl NodeParams {
                 let ok = x.is_finite() && if positive { x > 0.0 } else { x >= 0.0 };
                 if !ok {
                     let want = if positive { "> 0" } else { ">= 0" };
-                    return Err(format!("parameter {key:?} = {x} must be finite and {want}"));
+                    return Err(ParamError::NotPositive {
+                        key: key.to_string(),
+                        value: x,
+                        want,
+                    });
                 }
                 self.set_double(key, x);
             }
@@ -426,10 +580,11 @@ impl NodeParams {
                     return Err(ill(&format!("a list of at most {max} numbers > 0")));
                 };
                 if items.len() > max {
-                    return Err(format!(
-                        "parameter {key:?} has {} entries; at most {max}",
-                        items.len()
-                    ));
+                    return Err(ParamError::TooLong {
+                        key: key.to_string(),
+                        len: items.len(),
+                        max,
+                    });
                 }
                 let mut xs = Vec::with_capacity(items.len());
                 for item in items {
@@ -439,9 +594,10 @@ impl NodeParams {
                         _ => return Err(ill(&format!("a list of at most {max} numbers > 0"))),
                     };
                     if !(x.is_finite() && x > 0.0) {
-                        return Err(format!(
-                            "parameter {key:?}: entry {x} must be finite and > 0"
-                        ));
+                        return Err(ParamError::BadEntry {
+                            key: key.to_string(),
+                            value: x,
+                        });
                     }
                     xs.push(x);
                 }
@@ -581,22 +737,16 @@ fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Scalar)>) {
 
 /// An absolute ROS 2 name: `/` then tokens of `[A-Za-z0-9_]` not starting
 /// with a digit, separated by single slashes.
-fn check_topic(s: &str) -> Result<(), String> {
-    let bad =
-        || format!("{s:?} is not an absolute ROS 2 name like /particle_state (letters, digits, _)");
-    let rest = s.strip_prefix('/').ok_or_else(bad)?;
-    let ok = !rest.is_empty()
-        && rest.split('/').all(|t| {
-            !t.is_empty()
-                && !t.starts_with(|c: char| c.is_ascii_digit())
-                && !t.contains("__")
-                && t.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
-        });
-    if ok {
-        Ok(())
-    } else {
-        Err(bad())
-    }
+fn is_absolute_name(s: &str) -> bool {
+    s.strip_prefix('/').is_some_and(|rest| {
+        !rest.is_empty()
+            && rest.split('/').all(|t| {
+                !t.is_empty()
+                    && !t.starts_with(|c: char| c.is_ascii_digit())
+                    && !t.contains("__")
+                    && t.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+            })
+    })
 }
 
 #[cfg(test)]
@@ -682,7 +832,10 @@ mod tests {
                 "unknown parameter \"a.b\"",
             ),
         ] {
-            let e = NodeParams::default().apply_file_text(text).unwrap_err();
+            let e = NodeParams::default()
+                .apply_file_text(text)
+                .unwrap_err()
+                .to_string();
             assert!(e.contains(want), "{text:?}: {e}");
         }
         for (set, want) in [
@@ -693,15 +846,24 @@ mod tests {
             ),
             ("accuracy_lead_times=[0.1, x]", "must be a list"),
         ] {
-            let e = NodeParams::default().apply_override(set).unwrap_err();
+            let e = NodeParams::default()
+                .apply_override(set)
+                .unwrap_err()
+                .to_string();
             assert!(e.contains(want), "{set}: {e}");
         }
         let mut p = NodeParams::default();
         p.apply_override("accuracy_lead_times=[0.1, 1]").unwrap();
         assert_eq!(p.accuracy_lead_times, vec![0.1, 1.0]);
-        let e = NodeParams::default().apply_override("horizon").unwrap_err();
+        let e = NodeParams::default()
+            .apply_override("horizon")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("key=value"), "{e}");
-        let e = NodeParams::default().apply_override("nope=1").unwrap_err();
+        let e = NodeParams::default()
+            .apply_override("nope=1")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("unknown parameter"), "{e}");
     }
 

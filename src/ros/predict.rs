@@ -26,6 +26,10 @@ pub enum PredictError {
     /// The message does not describe a valid state.
     #[error("malformed input: {0}")]
     Malformed(#[from] DataError),
+    /// The state is not what the model was trained for (dimension, edge
+    /// kinds or parameters, field).
+    #[error(transparent)]
+    NotTrainedFor(#[from] crate::compat::Mismatch),
     /// The model cannot run this graph.
     #[error("unsupported system: {0}")]
     Unsupported(#[source] DynamicsError),

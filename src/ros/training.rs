@@ -203,8 +203,85 @@ pub fn claim(trainer: &Arc<Trainer>) -> Option<Claim> {
         .then(|| Claim(trainer.clone()))
 }
 
+/// Why a training (requested, or after a drift alarm) was refused or failed;
+/// the message goes to the caller's reply and the log.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainingError {
+    /// Another training runs.
+    #[error("refused: a training is already running (one at a time)")]
+    Busy,
+    /// The request names no known variant.
+    #[error(transparent)]
+    Variant(#[from] crate::names::UnknownName),
+    /// The request asks for no epochs.
+    #[error("epochs must be at least 1")]
+    NoEpochs,
+    /// A requested bag is not there.
+    #[error("bag {0:?} does not exist or is not a file")]
+    MissingBag(String),
+    /// No bags given and no recording to train on.
+    #[error("the node records nothing (set record_dir to train on what it sees)")]
+    NoRecording,
+    /// No bags given and nothing recorded yet.
+    #[error("the node has recorded nothing yet in {}", .0.display())]
+    NothingRecorded(PathBuf),
+    /// Closing the recording failed.
+    #[error(transparent)]
+    Record(#[from] super::record::RecordError),
+    /// The served model has no file to start from.
+    #[error("the served model ({0}) is not a model file")]
+    NotAFile(String),
+    /// The served model's file does not read back.
+    #[error("cannot read the served model {}: {source:#}", path.display())]
+    ReadServed {
+        /// Its file.
+        path: PathBuf,
+        /// Why.
+        source: anyhow::Error,
+    },
+    /// A fine-tuning request names another variant than the served one.
+    #[error(
+        "the served model is {served}, the request asks for {requested}; leave variant empty to \
+         fine-tune it"
+    )]
+    OtherVariant {
+        /// The served model's variant.
+        served: Variant,
+        /// The request's.
+        requested: String,
+    },
+    /// Training failed.
+    #[error("training failed: {0:#}")]
+    Train(anyhow::Error),
+    /// The trained model does not save.
+    #[error("saving the model failed: {0:#}")]
+    Save(anyhow::Error),
+    /// The trained model does not load back.
+    #[error("the trained model does not load: {0:#}")]
+    Load(anyhow::Error),
+    /// The held-out bag does not replay.
+    #[error("replaying the held-out bag {bag} failed: {source:#}")]
+    Replay {
+        /// The bag.
+        bag: String,
+        /// Why.
+        source: anyhow::Error,
+    },
+    /// Too few bags recorded after a drift alarm.
+    #[error(
+        "{recorded} bag(s) recorded in the {after} s after the alarm; need 2 (the last is held \
+         out): set record_split_seconds below accuracy_retrain_after"
+    )]
+    TooFewBags {
+        /// Bags recorded.
+        recorded: usize,
+        /// `accuracy_retrain_after`, seconds.
+        after: f64,
+    },
+}
+
 /// Why a second training is refused.
-pub const BUSY: &str = "refused: a training is already running (one at a time)";
+pub const BUSY: TrainingError = TrainingError::Busy;
 
 /// Replaces the served model, announces it on the swap topic and in the log;
 /// returns how long the write lock was held.
@@ -246,25 +323,22 @@ pub fn swap(
 }
 
 /// The variant of a request: empty means [`DEFAULT_VARIANT`].
-pub fn request_variant(variant: &str) -> Result<Variant, String> {
+pub fn request_variant(variant: &str) -> Result<Variant, TrainingError> {
     if variant.trim().is_empty() {
         Ok(DEFAULT_VARIANT)
     } else {
-        variant
-            .trim()
-            .parse()
-            .map_err(|e: crate::names::UnknownName| e.to_string())
+        Ok(variant.trim().parse()?)
     }
 }
 
 /// Checks a request's fields before any work: variant, epochs, bag paths.
-pub fn check_request(req: &TrainRequest) -> Result<Variant, String> {
+pub fn check_request(req: &TrainRequest) -> Result<Variant, TrainingError> {
     let variant = request_variant(&req.variant)?;
     if req.epochs == 0 {
-        return Err("epochs must be at least 1".into());
+        return Err(TrainingError::NoEpochs);
     }
     if let Some(missing) = req.bags.iter().find(|b| !Path::new(b).is_file()) {
-        return Err(format!("bag {missing:?} does not exist or is not a file"));
+        return Err(TrainingError::MissingBag(missing.clone()));
     }
     Ok(variant)
 }
@@ -276,22 +350,16 @@ pub fn model_file_name(variant: Variant, unix_secs: u64, pid: u32, seq: u64) -> 
 
 /// The bags to train on: the request's, or this run's recordings (the open
 /// bag is closed first, so its footer is written and it reads back whole).
-fn training_bags(shared: &Trainer, bags: &[String]) -> Result<Vec<PathBuf>, String> {
+fn training_bags(shared: &Trainer, bags: &[String]) -> Result<Vec<PathBuf>, TrainingError> {
     if !bags.is_empty() {
         return Ok(bags.iter().map(PathBuf::from).collect());
     }
     let Some(finished) = shared.recorder.finish() else {
-        return Err(
-            "no bags given and the node records nothing (set record_dir to train on what it sees)"
-                .into(),
-        );
+        return Err(TrainingError::NoRecording);
     };
-    let (dir, finished) = finished.map_err(|e| e.to_string())?;
+    let (dir, finished) = finished?;
     if finished.is_empty() {
-        return Err(format!(
-            "no bags given and the node has recorded nothing yet in {}",
-            dir.display()
-        ));
+        return Err(TrainingError::NothingRecorded(dir));
     }
     Ok(finished)
 }
@@ -330,6 +398,11 @@ pub fn run_training(
                 );
                 (v, Some(Box::new(f)))
             }
+            Err(e @ (TrainingError::NotAFile(_) | TrainingError::ReadServed { .. })) => {
+                return fail(format!(
+                    "cannot fine-tune: {e} (load one with LoadModel, or train without fine_tune)"
+                ))
+            }
             Err(e) => return fail(format!("cannot fine-tune: {e}")),
         }
     } else {
@@ -337,7 +410,10 @@ pub fn run_training(
     };
     let bags = match training_bags(shared, &req.bags) {
         Ok(b) => b,
-        Err(e) => return fail(e),
+        Err(e @ (TrainingError::NoRecording | TrainingError::NothingRecorded(_))) => {
+            return fail(format!("no bags given and {e}"))
+        }
+        Err(e) => return fail(e.to_string()),
     };
     log(
         LogLevel::Info,
@@ -381,7 +457,7 @@ pub fn run_training(
     );
     let file = match trained {
         Ok(f) => f,
-        Err(e) => return fail(format!("training failed: {e:#}")),
+        Err(e) => return fail(TrainingError::Train(e).to_string()),
     };
     // A cancel after the last epoch still wins: nothing is swapped.
     if cancel.load(Ordering::Acquire) {
@@ -393,7 +469,7 @@ pub fn run_training(
     let epochs_run = file.training.epochs_run;
     let (path, model) = match save_and_load(shared, file, variant) {
         Ok(x) => x,
-        Err(e) => return fail(e),
+        Err(e) => return fail(e.to_string()),
     };
     let took = trained_at.duration_since(start).as_secs_f64();
     let path_s = path.display().to_string();
@@ -425,30 +501,27 @@ pub fn run_training(
 fn fine_tune_start(
     shared: &Trainer,
     requested: &str,
-) -> Result<(Variant, ModelFile, PathBuf), String> {
-    let (path, file) = served_file(shared)
-        .map_err(|e| format!("{e} (load one with LoadModel, or train without fine_tune)"))?;
+) -> Result<(Variant, ModelFile, PathBuf), TrainingError> {
+    let (path, file) = served_file(shared)?;
     let variant = file.hyper.variant;
     if !requested.trim().is_empty() && request_variant(requested)? != variant {
-        return Err(format!(
-            "the served model is {variant}, the request asks for {}; leave variant empty to \
-             fine-tune it",
-            requested.trim()
-        ));
+        return Err(TrainingError::OtherVariant {
+            served: variant,
+            requested: requested.trim().to_string(),
+        });
     }
     Ok((variant, file, path))
 }
 
 /// The file of the served model, read back: what a warm start begins from.
-fn served_file(shared: &Trainer) -> Result<(PathBuf, ModelFile), String> {
+fn served_file(shared: &Trainer) -> Result<(PathBuf, ModelFile), TrainingError> {
     let Some(path) = shared.model.file() else {
-        return Err(format!(
-            "the served model ({}) is not a model file",
-            shared.model.get().describe()
-        ));
+        return Err(TrainingError::NotAFile(shared.model.get().describe()));
     };
-    let file = ModelFile::load(&path)
-        .map_err(|e| format!("cannot read the served model {}: {e:#}", path.display()))?;
+    let file = ModelFile::load(&path).map_err(|source| TrainingError::ReadServed {
+        path: path.clone(),
+        source,
+    })?;
     Ok((path, file))
 }
 
@@ -458,7 +531,7 @@ fn save_and_load(
     shared: &Trainer,
     file: ModelFile,
     variant: Variant,
-) -> Result<(PathBuf, Arc<dyn Dynamics>), String> {
+) -> Result<(PathBuf, Arc<dyn Dynamics>), TrainingError> {
     let seq = shared.seq.fetch_add(1, Ordering::Relaxed);
     let secs = SystemTime::now()
         .duration_since(UNIX_EPOCH)
@@ -467,13 +540,10 @@ fn save_and_load(
     let path = shared
         .model_dir
         .join(model_file_name(variant, secs, std::process::id(), seq));
-    file.save(&path)
-        .map_err(|e| format!("saving the model failed: {e:#}"))?;
-    let v = serde_json::to_value(&file)
-        .map_err(|e| format!("the trained model does not serialise: {e}"))?;
+    file.save(&path).map_err(TrainingError::Save)?;
+    let v = serde_json::to_value(&file).map_err(|e| TrainingError::Save(e.into()))?;
     let trained_for = crate::compat::TrainedFor::from_model_json(&path.display().to_string(), &v);
-    let m = TrainedModel::from_file(file)
-        .map_err(|e| format!("the trained model does not load: {e:#}"))?;
+    let m = TrainedModel::from_file(file).map_err(TrainingError::Load)?;
     Ok((
         path,
         Arc::new(crate::models::Checked::new(Arc::new(m), trained_for)),
@@ -491,29 +561,29 @@ pub fn retrain_on_drift(
     trainer: &Arc<Trainer>,
     p: &NodeParams,
     why: &str,
-) -> Result<String, String> {
+) -> Result<String, TrainingError> {
     const SOURCE: &str = "drift retraining";
     let result = retrain(trainer, p, why);
     match &result {
         Ok(m) => trainer.log(LogLevel::Info, &format!("{SOURCE}: {m}")),
         // A retraining (or a requested training) already runs: expected
         // while the alarm flickers, not worth a warning.
-        Err(e) if e == BUSY => trainer.log(LogLevel::Info, &format!("{SOURCE}: {e}")),
+        Err(e @ TrainingError::Busy) => trainer.log(LogLevel::Info, &format!("{SOURCE}: {e}")),
         Err(e) => trainer.log(LogLevel::Warn, &format!("{SOURCE}: {e}")),
     }
     result
 }
 
-fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, String> {
+fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, TrainingError> {
     let Some(_claim) = claim(trainer) else {
-        return Err(BUSY.into());
+        return Err(TrainingError::Busy);
     };
-    let (init_path, init) = served_file(trainer).map_err(|e| format!("not started: {e}"))?;
+    let (init_path, init) = served_file(trainer)?;
     // Close the bag open at the alarm: the bags after it hold only what the
     // system did after the drift was seen.
     let before = match trainer.recorder.finish() {
-        None => return Err("not started: the node records nothing (set record_dir)".into()),
-        Some(r) => r.map_err(|e| e.to_string())?.1.len(),
+        None => return Err(TrainingError::NoRecording),
+        Some(r) => r?.1.len(),
     };
     trainer.log(
         LogLevel::Info,
@@ -526,17 +596,15 @@ fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, 
     );
     std::thread::sleep(Duration::from_secs_f64(p.accuracy_retrain_after));
     let bags = match trainer.recorder.finish() {
-        Some(r) => r.map_err(|e| e.to_string())?.1,
+        Some(r) => r?.1,
         None => Vec::new(),
     };
     let recent = bags.get(before..).unwrap_or_default();
     let Some((held_out, train)) = recent.split_last().filter(|(_, t)| !t.is_empty()) else {
-        return Err(format!(
-            "{} bag(s) recorded in the {} s after the alarm; need 2 (the last is held out): set \
-             record_split_seconds below accuracy_retrain_after",
-            recent.len(),
-            p.accuracy_retrain_after
-        ));
+        return Err(TrainingError::TooFewBags {
+            recorded: recent.len(),
+            after: p.accuracy_retrain_after,
+        });
     };
     let variant = init.hyper.variant;
     let cfg = TrainConfig {
@@ -552,16 +620,18 @@ fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, 
         |_| {},
         |_| true,
     )
-    .map_err(|e| format!("training failed: {e:#}"))?;
+    .map_err(TrainingError::Train)?;
     let held = held_out.display().to_string();
     let score = |m: &dyn Dynamics| {
         crate::replay::replay_as_node(m, &held, p.dt, p.substeps, p.horizon)
             .map(|(r, _)| r.averages.re)
-            .map_err(|e| format!("replaying the held-out bag {held} failed: {e:#}"))
+            .map_err(|source| TrainingError::Replay {
+                bag: held.clone(),
+                source,
+            })
     };
     let old = trainer.model.get();
-    let candidate = TrainedModel::from_file(file.clone())
-        .map_err(|e| format!("the trained model does not load: {e:#}"))?;
+    let candidate = TrainedModel::from_file(file.clone()).map_err(TrainingError::Load)?;
     let (re_old, re_new) = (score(old.as_ref())?, score(&candidate)?);
     let figures = format!(
         "held-out RE (mean over lead times, {held}) {re_new:.3e} for the retrained model \
@@ -586,7 +656,7 @@ pub fn train_call(shared: &Arc<Trainer>, req: TrainRequest) -> TrainResponse {
         shared.log(LogLevel::Warn, &format!("Train service: {BUSY}"));
         return TrainResponse {
             success: false,
-            message: BUSY.into(),
+            message: BUSY.to_string(),
             ..TrainResponse::default()
         };
     };
@@ -645,29 +715,33 @@ mod tests {
             epochs: 3,
             ..TrainRequest::default()
         };
-        assert_eq!(check_request(&ok), Ok(DEFAULT_VARIANT));
+        assert_eq!(check_request(&ok).unwrap(), DEFAULT_VARIANT);
         let named = TrainRequest {
             variant: "gnode".into(),
             ..ok.clone()
         };
-        assert_eq!(check_request(&named), Ok(Variant::Gnode));
+        assert_eq!(check_request(&named).unwrap(), Variant::Gnode);
         let bad_variant = TrainRequest {
             variant: "lstm".into(),
             ..ok.clone()
         };
         assert!(check_request(&bad_variant)
             .unwrap_err()
+            .to_string()
             .contains("unknown model"));
         let no_epochs = TrainRequest {
             epochs: 0,
             ..ok.clone()
         };
-        assert!(check_request(&no_epochs).unwrap_err().contains("epochs"));
+        assert!(check_request(&no_epochs)
+            .unwrap_err()
+            .to_string()
+            .contains("epochs"));
         let missing = TrainRequest {
             bags: vec!["/nonexistent/x.mcap".into()],
             ..ok
         };
-        let e = check_request(&missing).unwrap_err();
+        let e = check_request(&missing).unwrap_err().to_string();
         assert!(e.contains("/nonexistent/x.mcap"), "{e}");
     }
 

@@ -7,6 +7,30 @@
 
 use std::fmt;
 
+/// Why a parameter file is not one document of nested mappings of scalars.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum YamlError {
+    /// Not YAML.
+    #[error("line {line}: {info}")]
+    Syntax {
+        /// 1-based line of the error.
+        line: usize,
+        /// The parser's description.
+        info: String,
+    },
+    /// Several documents (`---`).
+    #[error("{0} YAML documents; a parameter file has one")]
+    Documents(usize),
+    /// Valid YAML that parameter files do not use, at `path`.
+    #[error("{}: {what}", if path.is_empty() { "the top level" } else { path.as_str() })]
+    Unsupported {
+        /// Dotted key path ("" for the top level).
+        path: String,
+        /// What is wrong there.
+        what: String,
+    },
+}
+
 use yaml_rust2::{Yaml, YamlLoader};
 
 /// A parsed YAML scalar, typed the way YAML 1.2's core schema (and rcl) types it.
@@ -100,26 +124,22 @@ fn scalar(y: &Yaml) -> Option<Scalar> {
 /// Parses a parameter file: one document of nested mappings of scalars (an
 /// empty document is an empty mapping). Syntax errors name the line; nested
 /// lists, aliases and non-string keys name the key.
-pub fn parse(text: &str) -> Result<Value, String> {
-    let docs = YamlLoader::load_from_str(text)
-        .map_err(|e| format!("line {}: {}", e.marker().line(), e.info()))?;
+pub fn parse(text: &str) -> Result<Value, YamlError> {
+    let docs = YamlLoader::load_from_str(text).map_err(|e| YamlError::Syntax {
+        line: e.marker().line(),
+        info: e.info().to_string(),
+    })?;
     match docs.as_slice() {
         [] => Ok(Value::Map(vec![])),
         [doc] => convert(doc, ""),
-        _ => Err(format!(
-            "{} YAML documents; a parameter file has one",
-            docs.len()
-        )),
+        _ => Err(YamlError::Documents(docs.len())),
     }
 }
 
-fn convert(y: &Yaml, path: &str) -> Result<Value, String> {
-    let at = |what: &str| {
-        if path.is_empty() {
-            format!("the top level: {what}")
-        } else {
-            format!("{path}: {what}")
-        }
+fn convert(y: &Yaml, path: &str) -> Result<Value, YamlError> {
+    let at = |what: &str| YamlError::Unsupported {
+        path: path.to_string(),
+        what: what.to_string(),
     };
     match y {
         Yaml::Hash(h) => {
@@ -231,7 +251,7 @@ mod tests {
             ("a:\n\tb: 1\n", "line 2"),
             ("1: x\n", "key 1 is not a string"),
         ] {
-            let e = parse(text).unwrap_err();
+            let e = parse(text).unwrap_err().to_string();
             assert!(e.contains(want), "{text:?}: {e}");
         }
     }
