@@ -728,3 +728,44 @@ fn evaluate_truth_reproduces_its_bag_and_measures_a_step_floor() {
         "spring",
     );
 }
+
+/// The README's first command, at its quick scale with few epochs: bags,
+/// models, the plot and a summary of finite errors for both models on every
+/// size; MCGNODE conserves the rings' momentum where GNODE does not.
+#[test]
+fn demo_quick_runs_end_to_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = ok(&mcgnode(
+        &["demo", "--quick", "--epochs", "5", "--out", "demo-out"],
+        d,
+    ));
+    assert!(out.contains("demo done in"), "{out}");
+    let o = d.join("demo-out");
+    for f in [
+        "demo.png",
+        "data/train-5-spring.mcap",
+        "data/test-50-spring.mcap",
+        "models/gnode-5-spring.json",
+        "models/mcgnode-5-spring.json",
+    ] {
+        assert!(o.join(f).is_file(), "demo wrote no {f}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(o.join("demo.json")).unwrap()).unwrap();
+    let rows = json.as_array().unwrap();
+    assert_eq!(rows.len(), 6, "2 models x 3 sizes: {json}");
+    for n in [5, 20, 50] {
+        let me = |m: &str| {
+            let r = rows
+                .iter()
+                .find(|r| r["model"] == m && r["particles"] == n)
+                .unwrap_or_else(|| panic!("no {m} on {n}: {json}"));
+            let re = r["averages"]["re"].as_f64().unwrap();
+            assert!(re.is_finite() && (0.0..=1.0).contains(&re), "{r}");
+            r["averages"]["me_scaled"].as_f64().unwrap()
+        };
+        let (m, g) = (me("mcgnode"), me("gnode"));
+        assert!(m < 1e-10 && m < g, "momentum error on {n}: MCGNODE {m}, GNODE {g}");
+    }
+}

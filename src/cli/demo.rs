@@ -1,24 +1,24 @@
-//! `mcgnode demo`: the embedded default, no ROS needed. Simulates 5-spring
-//! training data, trains GNODE and MCGNODE side by side (one per core), and
-//! evaluates both on held-out 5-, 20- and 50-spring bags.
+//! `mcgnode demo`: the embedded default, no ROS needed. A small scale of
+//! reproduce's zero-shot experiment, on the same [`Lab`]: simulates 5-spring
+//! training data, trains GNODE and MCGNODE side by side, and evaluates both
+//! on held-out 5-, 20- and 50-spring bags.
 
-use super::simulate::simulate_to;
-use crate::data::bag::read_trajectories;
-use crate::evaluate::{evaluate, table, EvalOptions};
-use crate::kernel::TrainedModel;
+use crate::evaluate::table;
 use crate::model::Variant;
+use crate::models::ModelKind;
 use crate::physics::{SystemConfig, SystemKind};
-use crate::train::{train_from_bags, ModelOptions, TrainConfig};
+use crate::reproduce::lab::{Lab, TrainSpec};
+use crate::train::{ModelOptions, TrainConfig};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 
 /// Options of `demo`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct Args {
-    /// Small and fast (about a minute): fewer trajectories and epochs.
+    /// Small and fast (about 20 s): fewer trajectories and epochs.
     #[arg(long)]
     pub quick: bool,
-    /// Output folder for bags, models, plots and the JSON summary.
+    /// Output folder: demo.png, demo.json, data/ (bags), models/.
     #[arg(long, default_value = "demo-out")]
     pub out: PathBuf,
     /// Training epochs (default: 1500, quick: 60).
@@ -29,101 +29,68 @@ pub struct Args {
     pub seed: u64,
 }
 
+/// Test sizes: the training size and two zero-shot ones.
+const SIZES: [usize; 3] = [5, 20, 50];
+const VARIANTS: [Variant; 2] = [Variant::Gnode, Variant::Mcgnode];
+
 /// Runs `demo`.
 pub fn run(a: Args) -> Result<()> {
-    let t0 = std::time::Instant::now();
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let lab = Lab {
+        dir: a.out.clone(),
+        threads: VARIANTS.len(),
+        log: &|m| eprintln!("{m}"),
+        t0: std::time::Instant::now(),
+    };
     let (n_train, n_test, epochs) = if a.quick {
         (20, 10, 60)
     } else {
         (100, 100, 1500)
     };
     let epochs = a.epochs.unwrap_or(epochs);
-    let train_bag = a.out.join("train-5-spring.mcap");
-    let cfg = SystemConfig::new(SystemKind::Spring, 5);
-    simulate_to(&cfg, n_train, a.seed, &train_bag)?;
-    eprintln!(
-        "[{:5.1} s] simulated {n_train} training trajectories: {}",
-        t0.elapsed().as_secs_f64(),
-        train_bag.display()
-    );
-    let sizes = [5usize, 20, 50];
+    let train = lab.bag(
+        "train-5-spring",
+        &SystemConfig::new(SystemKind::Spring, 5),
+        n_train,
+        a.seed,
+        false,
+    )?;
     let mut tests = vec![];
-    for &n in &sizes {
+    for n in SIZES {
         let mut c = SystemConfig::new(SystemKind::Spring, n);
         c.states = 201; // 20 s, the paper's spring evaluation horizon
-        let p = a.out.join(format!("test-{n}-spring.mcap"));
-        simulate_to(&c, n_test, a.seed + 1000, &p)?;
-        tests.push((n, p));
+        tests.push(lab.bag(&format!("test-{n}-spring"), &c, n_test, a.seed + 1000, false)?);
     }
-    eprintln!(
-        "[{:5.1} s] simulated {n_test} test trajectories of 5, 20 and 50 springs (20 s each)",
-        t0.elapsed().as_secs_f64()
-    );
-    let cfg = TrainConfig {
-        epochs,
-        patience: epochs,
-        seed: a.seed,
-        // The two trainings run side by side.
-        threads: (crate::engine::all_cores() / 2).max(1),
-        ..TrainConfig::default()
-    };
-    let variants = [Variant::Gnode, Variant::Mcgnode];
-    let results: Vec<Result<PathBuf>> = std::thread::scope(|s| {
-        let handles: Vec<_> = variants
-            .iter()
-            .map(|&v| {
-                let (cfg, train_bag, out) = (cfg.clone(), train_bag.clone(), a.out.clone());
-                s.spawn(move || -> Result<PathBuf> {
-                    let every = (cfg.epochs / 5).max(1);
-                    let f = train_from_bags(
-                        v,
-                        &[train_bag],
-                        &ModelOptions::default(),
-                        &cfg,
-                        |m| eprintln!("[{v}] {m}"),
-                        |r| {
-                            if r.epoch % every == 0 {
-                                eprintln!(
-                                    "[{v}] epoch {}/{}  train {:.3e}  val {:.3e}  ({:.0} s)",
-                                    r.epoch, r.epochs, r.train_loss, r.validation_loss, r.elapsed
-                                );
-                            }
-                            true
-                        },
-                    )?;
-                    let p = out.join(format!("{v}-5-spring.json"));
-                    f.save(&p)?;
-                    Ok(p)
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().expect("training thread panicked"))
-            .collect()
-    });
-    let mut models = vec![];
-    for (v, r) in variants.iter().zip(results) {
-        let p = r?;
-        models.push((*v, TrainedModel::load(&p)?));
-    }
-    eprintln!(
-        "[{:5.1} s] trained GNODE and MCGNODE ({epochs} epochs each)",
-        t0.elapsed().as_secs_f64()
-    );
-    let mut panels = vec![];
-    let mut json = vec![];
-    for (n, p) in &tests {
-        let bag = read_trajectories(p)?;
+    lab.say(&format!(
+        "simulated {n_train} training trajectories of 5 springs and {n_test} test trajectories \
+         of 5, 20 and 50 springs (20 s each)"
+    ));
+    let specs: Vec<TrainSpec> = VARIANTS
+        .iter()
+        .map(|&v| TrainSpec {
+            label: format!("{v}-5-spring"),
+            kind: ModelKind::Family(v),
+            bags: vec![train.clone()],
+            cfg: TrainConfig {
+                epochs,
+                patience: epochs,
+                seed: a.seed,
+                // The trainings run side by side.
+                threads: (crate::engine::all_cores() / VARIANTS.len()).max(1),
+                ..TrainConfig::default()
+            },
+            opts: ModelOptions::default(),
+        })
+        .collect();
+    let models = lab
+        .train_all(&specs)
+        .into_iter()
+        .collect::<Result<Vec<_>>>()?;
+    lab.say(&format!("trained GNODE and MCGNODE ({epochs} epochs each)"));
+    let (mut panels, mut json) = (vec![], vec![]);
+    for (n, bag) in SIZES.iter().zip(&tests) {
         let mut curves = vec![];
-        for (v, m) in &models {
-            let e = evaluate(
-                m,
-                &m.file.trained_on.start_fingerprints,
-                &bag,
-                &EvalOptions::default(),
-            )?;
+        for (v, m) in VARIANTS.iter().zip(&models) {
+            let e = lab.evaluate(&m.path, bag, None, n_test)?;
             println!("{}", table(&e, 6));
             json.push(serde_json::json!({
                 "model": v.name(), "particles": n,
@@ -136,15 +103,14 @@ pub fn run(a: Args) -> Result<()> {
     }
     let plot = a.out.join("demo.png");
     crate::plot::plot_summaries(&plot, &panels)?;
-    std::fs::write(
-        a.out.join("demo.json"),
-        serde_json::to_string_pretty(&json)?,
-    )?;
+    let summary = a.out.join("demo.json");
+    std::fs::write(&summary, serde_json::to_string_pretty(&json)?)
+        .with_context(|| format!("writing {}", summary.display()))?;
     println!(
         "demo done in {:.0} s: plot {}, summary {}",
-        t0.elapsed().as_secs_f64(),
+        lab.t0.elapsed().as_secs_f64(),
         plot.display(),
-        a.out.join("demo.json").display()
+        summary.display()
     );
     Ok(())
 }

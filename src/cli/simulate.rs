@@ -1,7 +1,7 @@
 //! `mcgnode simulate`.
 
 use crate::physics::{SystemConfig, SystemKind};
-pub use crate::simulate::{simulate_to, simulate_with, DataIntegrator};
+use crate::simulate::{simulate_with, DataIntegrator};
 use anyhow::Result;
 use std::path::PathBuf;
 
