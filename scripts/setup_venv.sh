@@ -43,7 +43,7 @@ if [ ! -x "$VENV/bin/python3" ]; then
     run python3 -m venv "$VENV"
 fi
 
-# Independent MCAP/ROS 2 bag decoders (tests/bag.rs, scripts/decode_bag.py).
+# Independent MCAP/ROS 2 bag decoders (tests/bag_python.rs, scripts/decode_bag.py).
 ensure_packages mcap==1.6.0 mcap-ros2-support==0.6.0 rosbags==0.11.9 numpy==2.4.6
 
 # ROS 2 Kilted from PyPI: rclpy with std/geometry/std_srvs messages, and what

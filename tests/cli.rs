@@ -766,6 +766,9 @@ fn demo_quick_runs_end_to_end() {
             r["averages"]["me_scaled"].as_f64().unwrap()
         };
         let (m, g) = (me("mcgnode"), me("gnode"));
-        assert!(m < 1e-10 && m < g, "momentum error on {n}: MCGNODE {m}, GNODE {g}");
+        assert!(
+            m < 1e-10 && m < g,
+            "momentum error on {n}: MCGNODE {m}, GNODE {g}"
+        );
     }
 }

@@ -58,7 +58,13 @@ pub fn run(a: Args) -> Result<()> {
     for n in SIZES {
         let mut c = SystemConfig::new(SystemKind::Spring, n);
         c.states = 201; // 20 s, the paper's spring evaluation horizon
-        tests.push(lab.bag(&format!("test-{n}-spring"), &c, n_test, a.seed + 1000, false)?);
+        tests.push(lab.bag(
+            &format!("test-{n}-spring"),
+            &c,
+            n_test,
+            a.seed + 1000,
+            false,
+        )?);
     }
     lab.say(&format!(
         "simulated {n_train} training trajectories of 5 springs and {n_test} test trajectories \

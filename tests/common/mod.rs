@@ -2,6 +2,8 @@
 //! their own process groups, the rclpy environment, the network namespace.
 #![allow(dead_code)] // each test binary uses its own subset
 
+pub mod bags;
+
 use std::fs;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
