@@ -506,58 +506,64 @@ impl<'s> Comparison<'s> {
     /// The section's text, figures and error tables; `mcgnode` is the
     /// bias-ladder model whose training time the wall-clock baselines got.
     fn results(&self, lab: &Lab, sc: &Scale, rows: &[Row], mcgnode: Option<&Trained>) -> String {
-        let (kind, sys, base, sizes, bsizes, states, dt) = (
-            self.kind,
-            self.sys,
-            &self.base,
-            self.sizes,
-            self.bsizes,
-            self.states,
-            self.dt,
-        );
-        let mut md = format!("## {sys}: inductive biases, baselines, zero-shot sizes\n\n");
-        md += &format!(
-            "Trained on {} trajectories of the 5-{sys} ({} states): the GNODE family for {} \
+        let mut md = self.intro(sc);
+        md += &self.figures(lab, rows, mcgnode);
+        md += &architecture_tables(rows);
+        md += &average_tables(rows);
+        md
+    }
+
+    /// The heading and what was trained and evaluated how.
+    fn intro(&self, sc: &Scale) -> String {
+        let sys = self.sys;
+        let horizon = (self.states - 1) as f64
+            * match self.kind {
+                SystemKind::Pendulum => 0.01,
+                _ => 0.1,
+            };
+        format!(
+            "## {sys}: inductive biases, baselines, zero-shot sizes\n\n\
+             Trained on {} trajectories of the 5-{sys} ({} states): the GNODE family for {} \
              epochs, and MCGNODE, LGN, HGN and GNS for {} epochs each (HGN on RK4 data). \
-             Evaluated from held-out starts (seed {TEST_SEED}) over {} s with rollout step {} s \
-             ({} test trajectories for the GNODE family; the baseline comparison uses the first {} \
-             of them for every model). NODE is transductive: it runs only on the size it was \
-             trained on.\n\n",
+             Evaluated from held-out starts (seed {TEST_SEED}) over {horizon} s with rollout step \
+             {} s ({} test trajectories for the GNODE family; the baseline comparison uses the \
+             first {} of them for every model). NODE is transductive: it runs only on the size \
+             it was trained on.\n\n",
             sc.train_trajectories,
-            sc.train_trajectories * base.states,
+            sc.train_trajectories * self.base.states,
             sc.family_epochs,
             sc.epochs,
-            (states - 1) as f64
-                * match kind {
-                    SystemKind::Pendulum => 0.01,
-                    _ => 0.1,
-                },
-            dt.unwrap_or(base.dt),
+            self.dt.unwrap_or(self.base.dt),
             sc.test_trajectories,
             sc.baseline_test_trajectories,
-        );
+        )
+    }
+
+    /// The bias ladder, the baselines at equal epochs and (when MCGNODE
+    /// trained) at equal wall-clock time.
+    fn figures(&self, lab: &Lab, rows: &[Row], mcgnode: Option<&Trained>) -> String {
+        let sys = self.sys;
+        let metrics = [Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled];
         let fam: Vec<String> = FAMILY.iter().map(|v| v.name().to_string()).collect();
-        md += &format!(
-            "### Each bias in turn (paper Figs. 1 and 4)\n\n{}",
-            figure(
-                lab,
-                &format!("biases-{sys}.png"),
-                &panels(rows, Experiment::Biases, sys, sizes, &fam),
-                &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
-            )
-        );
         let bl: Vec<String> = ["mcgnode", "lgn", "hgn", "gns"]
             .iter()
             .map(std::string::ToString::to_string)
             .collect();
-        md += &format!(
-            "### MCGNODE against LGN, HGN and GNS (paper Figs. 2–3)\n\n{}",
+        let fig = |exp: Experiment, file: &str, sizes: &[usize], labels: &[String]| {
             figure(
                 lab,
-                &format!("baselines-{sys}.png"),
-                &panels(rows, Experiment::Baselines, sys, bsizes, &bl),
-                &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
+                &format!("{file}-{sys}.png"),
+                &panels(rows, exp, sys, sizes, labels),
+                &metrics,
             )
+        };
+        let mut md = format!(
+            "### Each bias in turn (paper Figs. 1 and 4)\n\n{}",
+            fig(Experiment::Biases, "biases", self.sizes, &fam)
+        );
+        md += &format!(
+            "### MCGNODE against LGN, HGN and GNS (paper Figs. 2–3)\n\n{}",
+            fig(Experiment::Baselines, "baselines", self.bsizes, &bl)
         );
         if let Some(m) = mcgnode {
             md += &format!(
@@ -566,51 +572,11 @@ impl<'s> Comparison<'s> {
                  this bought are in the timing table below).\n\n{}",
                 m.report.seconds,
                 m.report.epochs_run,
-                figure(
-                    lab,
-                    &format!("wallclock-{sys}.png"),
-                    &panels(rows, Experiment::Wallclock, sys, bsizes, &bl),
-                    &[Metric::Re, Metric::Ee, Metric::Me, Metric::MeScaled],
-                )
+                fig(Experiment::Wallclock, "wallclock", self.bsizes, &bl)
             );
-        }
-        let arch_rows = |exp: Experiment| {
-            let mut r: Vec<&Row> = rows
-                .iter()
-                .filter(|r| r.experiment == exp && ["gnode", "mcgnode"].contains(&r.model.as_str()))
-                .collect();
-            r.sort_by_key(|r| r.particles);
-            r
-        };
-        md += &format!(
-            "### The architecture: the authors' code against the paper's text\n\n\
-             GNODE and MCGNODE as above (the authors' code: two hidden layers of 5 per MLP, MLP \
-             message functions, h_i ⊙ h_j in the edge update) and with the paper text's \
-             architecture (one hidden layer, linear message functions, h_i ‖ h_j), same data, \
-             epochs and seed. Default:\n\n{}\nPaper text:\n\n{}\n",
-            error_table(&arch_rows(Experiment::Biases)),
-            error_table(&arch_rows(Experiment::Architecture)),
-        );
-        for (exp, what) in [
-            (Experiment::Biases, "the GNODE family"),
-            (
-                Experiment::Baselines,
-                "MCGNODE and the baselines at equal epochs",
-            ),
-            (
-                Experiment::Wallclock,
-                "MCGNODE and the baselines at equal wall-clock time",
-            ),
-        ] {
-            let mut sorted: Vec<&Row> = rows.iter().filter(|r| r.experiment == exp).collect();
-            sorted.sort_by_key(|r| r.particles);
-            md += &format!("Time-averaged geometric means (t > 0), {what}:\n\n");
-            md += &error_table(&sorted);
-            md += "\n";
         }
         md
     }
-
     /// The 5-spring models of the family, run unchanged on large rings.
     fn zero_shot_large(
         &self,
@@ -1190,4 +1156,48 @@ pub fn data_efficiency(lab: &Lab, sc: &Scale) -> Result<Section> {
             log_x: true,
         },
     )
+}
+
+/// GNODE and MCGNODE with the authors' architecture against the paper text's.
+fn architecture_tables(rows: &[Row]) -> String {
+    let arch_rows = |exp: Experiment| {
+        let mut r: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.experiment == exp && ["gnode", "mcgnode"].contains(&r.model.as_str()))
+            .collect();
+        r.sort_by_key(|r| r.particles);
+        r
+    };
+    format!(
+        "### The architecture: the authors' code against the paper's text\n\n\
+         GNODE and MCGNODE as above (the authors' code: two hidden layers of 5 per MLP, MLP \
+         message functions, h_i ⊙ h_j in the edge update) and with the paper text's \
+         architecture (one hidden layer, linear message functions, h_i ‖ h_j), same data, \
+         epochs and seed. Default:\n\n{}\nPaper text:\n\n{}\n",
+        error_table(&arch_rows(Experiment::Biases)),
+        error_table(&arch_rows(Experiment::Architecture)),
+    )
+}
+
+/// The time-averaged errors of the family and of both baseline comparisons.
+fn average_tables(rows: &[Row]) -> String {
+    let mut md = String::new();
+    for (exp, what) in [
+        (Experiment::Biases, "the GNODE family"),
+        (
+            Experiment::Baselines,
+            "MCGNODE and the baselines at equal epochs",
+        ),
+        (
+            Experiment::Wallclock,
+            "MCGNODE and the baselines at equal wall-clock time",
+        ),
+    ] {
+        let mut sorted: Vec<&Row> = rows.iter().filter(|r| r.experiment == exp).collect();
+        sorted.sort_by_key(|r| r.particles);
+        md += &format!("Time-averaged geometric means (t > 0), {what}:\n\n");
+        md += &error_table(&sorted);
+        md += "\n";
+    }
+    md
 }
