@@ -717,6 +717,42 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
         }
     }
     let rows = run_evals(lab, jobs);
+    let names: Vec<String> = kinds.iter().map(|k| k.name().to_string()).collect();
+    let mut md = peridynamic_intro(sc, &base, &test_bag)?;
+    md += &figure(
+        lab,
+        "peridynamic.png",
+        &panels(
+            &rows,
+            Experiment::Peridynamic,
+            sys,
+            &[sc.peri_particles],
+            &names,
+        ),
+        &[Metric::Re, Metric::Me, Metric::ReAbs, Metric::MeAbs],
+    );
+    md += &errors_at_seconds(&rows, &names);
+    md += "\nTime averages, with the absolute errors:\n\n";
+    md += &rows_table(
+        &rows,
+        &[
+            ("model", |r| r.model.clone()),
+            ("RE", |r| num(r.averages.re)),
+            ("ME", |r| num(r.averages.me)),
+            ("‖q̂ − q‖", |r| num(r.averages.re_abs)),
+            ("‖P̂ − P‖", |r| num(r.averages.me_abs)),
+            ("diverged", diverged),
+        ],
+    );
+    Ok(section(md, rows, &specs, trained))
+}
+
+/// The solid's heading, setup and the "nothing moves" reference.
+fn peridynamic_intro(
+    sc: &Scale,
+    base: &SystemConfig,
+    test_bag: &std::path::Path,
+) -> Result<String> {
     let k = (sc.peri_particles as f64).cbrt().round() as usize;
     let mut md = "## 3D peridynamic solid (paper Fig. 9 and Appendix tables)\n\n".to_string();
     md += &format!(
@@ -733,7 +769,7 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
     let still = crate::evaluate::evaluate(
         &crate::dynamics::Still,
         &[],
-        &crate::data::bag::read_trajectories(&test_bag)?,
+        &crate::data::bag::read_trajectories(test_bag)?,
         &crate::evaluate::EvalOptions::default(),
     );
     if let Ok(still) = still {
@@ -748,27 +784,18 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
             num(avg.re)
         );
     }
-    let names: Vec<String> = kinds.iter().map(|k| k.name().to_string()).collect();
-    md += &figure(
-        lab,
-        "peridynamic.png",
-        &panels(
-            &rows,
-            Experiment::Peridynamic,
-            sys,
-            &[sc.peri_particles],
-            &names,
-        ),
-        &[Metric::Re, Metric::Me, Metric::ReAbs, Metric::MeAbs],
-    );
-    // The paper's tables: RE and ME at whole seconds.
+    Ok(md)
+}
+
+/// The paper's tables: RE and ME of each model at tenths of the rollout.
+fn errors_at_seconds(rows: &[Row], names: &[String]) -> String {
     let mut body = vec![];
     if let Some(s) = rows.iter().find_map(|r| r.summary.as_ref()) {
         let last = *s.t.last().unwrap_or(&0.0);
         let mut t = 0.0;
         while t <= last + 1e-9 {
             let mut line = vec![format!("{t:.1}")];
-            for m in &names {
+            for m in names {
                 match rows
                     .iter()
                     .find(|r| &r.model == m)
@@ -788,56 +815,19 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
     let header: Vec<String> = std::iter::once("t [s]".to_string())
         .chain(names.iter().map(|m| format!("{m} RE / ME")))
         .collect();
-    md += &table(
+    table(
         &header
             .iter()
             .map(std::string::String::as_str)
             .collect::<Vec<_>>(),
         &body,
-    );
-    md += "\nTime averages, with the absolute errors:\n\n";
-    md += &rows_table(
-        &rows,
-        &[
-            ("model", |r| r.model.clone()),
-            ("RE", |r| num(r.averages.re)),
-            ("ME", |r| num(r.averages.me)),
-            ("‖q̂ − q‖", |r| num(r.averages.re_abs)),
-            ("‖P̂ − P‖", |r| num(r.averages.me_abs)),
-            ("diverged", diverged),
-        ],
-    );
-    Ok(section(md, rows, &specs, trained))
+    )
 }
 
 /// Drag −0.1 q̇ and a constant external force on the 5-spring: MCGNODE vs
 /// NODE (paper appendix "Drag and external force").
 pub fn drag_and_force(lab: &Lab, sc: &Scale) -> Result<Section> {
-    let mut cases = vec![];
-    for (name, drag, force) in [
-        ("spring+drag", 0.1, vec![]),
-        ("spring+force", 0.0, vec![0.5, 0.0]),
-    ] {
-        let mut c = SystemConfig::new(SystemKind::Spring, 5);
-        c.field.drag = drag;
-        c.field.force = force;
-        let train = lab.bag(
-            &format!("train-5-{name}"),
-            &c,
-            sc.sweep_train_trajectories,
-            TRAIN_SEED,
-            false,
-        )?;
-        c.states = sc.sweep_states;
-        let test = lab.bag(
-            &format!("test-5-{name}"),
-            &c,
-            sc.sweep_test_trajectories,
-            TEST_SEED,
-            false,
-        )?;
-        cases.push((name, train, test));
-    }
+    let cases = drag_force_bags(lab, sc)?;
     let mut specs = vec![];
     for (name, train, _) in &cases {
         for v in [Variant::Mcgnode, Variant::Node] {
@@ -868,6 +858,43 @@ pub fn drag_and_force(lab: &Lab, sc: &Scale) -> Result<Section> {
         });
     }
     let rows = run_evals(lab, jobs);
+    let md = drag_force_markdown(lab, sc, &rows);
+    Ok(section(md, rows, &specs, trained))
+}
+
+/// The 5-spring under drag and under a constant force: (name, training bag,
+/// test bag) each.
+fn drag_force_bags(lab: &Lab, sc: &Scale) -> Result<Vec<(&'static str, PathBuf, PathBuf)>> {
+    let mut cases = vec![];
+    for (name, drag, force) in [
+        ("spring+drag", 0.1, vec![]),
+        ("spring+force", 0.0, vec![0.5, 0.0]),
+    ] {
+        let mut c = SystemConfig::new(SystemKind::Spring, 5);
+        c.field.drag = drag;
+        c.field.force = force;
+        let train = lab.bag(
+            &format!("train-5-{name}"),
+            &c,
+            sc.sweep_train_trajectories,
+            TRAIN_SEED,
+            false,
+        )?;
+        c.states = sc.sweep_states;
+        let test = lab.bag(
+            &format!("test-5-{name}"),
+            &c,
+            sc.sweep_test_trajectories,
+            TEST_SEED,
+            false,
+        )?;
+        cases.push((name, train, test));
+    }
+    Ok(cases)
+}
+
+/// The drag/force section's text, figure and table.
+fn drag_force_markdown(lab: &Lab, sc: &Scale, rows: &[Row]) -> String {
     let mut md = "## Drag and external force (paper appendix)\n\n".to_string();
     md += &format!(
         "5-spring with drag −0.1 q̇, and with a constant force (0.5, 0) on every particle; \
@@ -879,9 +906,9 @@ pub fn drag_and_force(lab: &Lab, sc: &Scale) -> Result<Section> {
         (sc.sweep_states - 1) as f64 * 0.1
     );
     let names = vec!["mcgnode".to_string(), "node".to_string()];
-    let mut p = panels(&rows, Experiment::DragForce, "spring+drag", &[5], &names);
+    let mut p = panels(rows, Experiment::DragForce, "spring+drag", &[5], &names);
     p.extend(panels(
-        &rows,
+        rows,
         Experiment::DragForce,
         "spring+force",
         &[5],
@@ -894,7 +921,7 @@ pub fn drag_and_force(lab: &Lab, sc: &Scale) -> Result<Section> {
         &[Metric::Re, Metric::Ee, Metric::Me],
     );
     md += &rows_table(
-        &rows,
+        rows,
         &[
             ("system", |r| r.system.clone()),
             ("model", |r| r.model.clone()),
@@ -904,7 +931,7 @@ pub fn drag_and_force(lab: &Lab, sc: &Scale) -> Result<Section> {
             ("diverged", diverged),
         ],
     );
-    Ok(section(md, rows, &specs, trained))
+    md
 }
 
 /// Lines of a sweep figure: per model, (x, time-averaged gmean, band) of `pick`.
@@ -961,34 +988,7 @@ fn sweep(lab: &Lab, sc: &Scale, w: Sweep<'_>) -> Result<Section> {
         set,
         ..
     } = w;
-    let c = SystemConfig::new(SystemKind::Spring, 5);
-    let train = lab.bag(
-        &format!("train-5-spring-{experiment}"),
-        &c,
-        train_trajectories,
-        TRAIN_SEED,
-        false,
-    )?;
-    let train_rk4 = if models.contains(&ModelKind::Baseline(Kind::Hgn)) {
-        Some(lab.bag(
-            &format!("train-5-spring-{experiment}-rk4"),
-            &c,
-            train_trajectories,
-            TRAIN_SEED,
-            true,
-        )?)
-    } else {
-        None
-    };
-    let mut tc = c.clone();
-    tc.states = sc.sweep_states;
-    let test = lab.bag(
-        &format!("test-5-spring-{experiment}"),
-        &tc,
-        sc.sweep_test_trajectories,
-        TEST_SEED,
-        false,
-    )?;
+    let (train, train_rk4, test) = sweep_bags(lab, sc, experiment, models, train_trajectories)?;
     let mut specs = vec![];
     for &x in xs {
         for &k in models {
@@ -1028,12 +1028,60 @@ fn sweep(lab: &Lab, sc: &Scale, w: Sweep<'_>) -> Result<Section> {
         });
     }
     let rows = run_evals(lab, jobs);
+    let md = sweep_markdown(lab, &w, &rows);
+    Ok(section(md, rows, &plain, trained))
+}
+
+/// The sweep's 5-spring training bag (and its RK4 twin when HGN is among the
+/// models) and its test bag.
+fn sweep_bags(
+    lab: &Lab,
+    sc: &Scale,
+    experiment: Experiment,
+    models: &[ModelKind],
+    train_trajectories: usize,
+) -> Result<(PathBuf, Option<PathBuf>, PathBuf)> {
+    let c = SystemConfig::new(SystemKind::Spring, 5);
+    let train = lab.bag(
+        &format!("train-5-spring-{experiment}"),
+        &c,
+        train_trajectories,
+        TRAIN_SEED,
+        false,
+    )?;
+    let train_rk4 = if models.contains(&ModelKind::Baseline(Kind::Hgn)) {
+        Some(lab.bag(
+            &format!("train-5-spring-{experiment}-rk4"),
+            &c,
+            train_trajectories,
+            TRAIN_SEED,
+            true,
+        )?)
+    } else {
+        None
+    };
+    let mut tc = c.clone();
+    tc.states = sc.sweep_states;
+    let test = lab.bag(
+        &format!("test-5-spring-{experiment}"),
+        &tc,
+        sc.sweep_test_trajectories,
+        TEST_SEED,
+        false,
+    )?;
+    Ok((train, train_rk4, test))
+}
+
+/// The sweep's heading, figure (time-averaged RE and EE against the
+/// setting) and table.
+fn sweep_markdown(lab: &Lab, w: &Sweep<'_>, rows: &[Row]) -> String {
     let Sweep {
         title,
         intro,
         fig,
         x_label,
         log_x,
+        models,
         ..
     } = w;
     let names: Vec<&str> = models.iter().map(|k| k.name()).collect();
@@ -1043,18 +1091,24 @@ fn sweep(lab: &Lab, sc: &Scale, w: Sweep<'_>) -> Result<Section> {
         (
             "5-spring: RE".to_string(),
             "time-averaged RE".to_string(),
-            sweep_lines(&rows, models, |s| &s.re),
+            sweep_lines(rows, models, |s| &s.re),
         ),
         (
             "5-spring: EE".to_string(),
             "time-averaged EE".to_string(),
-            sweep_lines(&rows, models, |s| &s.ee),
+            sweep_lines(rows, models, |s| &s.ee),
         ),
     ];
-    match plot_sweep(&lab.dir.join(fig), x_label, log_x, &panels) {
+    match plot_sweep(&lab.dir.join(fig), x_label, *log_x, &panels) {
         Ok(()) => md += &format!("![{fig}]({fig})\n\n"),
         Err(e) => md += &format!("(figure {fig} could not be drawn: {e:#})\n\n"),
     }
+    md += &sweep_table(rows, models, x_label);
+    md
+}
+
+/// RE / EE of each model at each setting of a sweep.
+fn sweep_table(rows: &[Row], models: &[&str], x_label: &str) -> String {
     let mut xs: Vec<f64> = rows.iter().filter_map(|r| r.x).collect();
     xs.sort_by(f64::total_cmp);
     xs.dedup();
@@ -1077,14 +1131,13 @@ fn sweep(lab: &Lab, sc: &Scale, w: Sweep<'_>) -> Result<Section> {
                 .collect()
         })
         .collect();
-    md += &table(
+    table(
         &header
             .iter()
             .map(std::string::String::as_str)
             .collect::<Vec<_>>(),
         &body,
-    );
-    Ok(section(md, rows, &plain, trained))
+    )
 }
 
 /// Robustness to noise on the training accelerations (paper "Robustness to Noise").

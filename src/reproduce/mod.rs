@@ -164,17 +164,9 @@ pub fn run(opts: &Options, log: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
     })
 }
 
-/// Writes report.md and results.json from the sections so far; `pending`
-/// are the parts still to run (named in the report while it is partial).
-fn write_report(
-    opts: &Options,
-    lab: &Lab,
-    sections: &[Section],
-    pending: &[Part],
-) -> Result<PathBuf> {
+/// The report's title, the run's command, scale and duration, and the metrics' definitions.
+fn report_header(opts: &Options, lab: &Lab, seconds: f64, pending: &[Part]) -> String {
     let sc = &opts.scale;
-    let seconds = lab.t0.elapsed().as_secs_f64();
-    let rows: Vec<Row> = sections.iter().flat_map(|s| s.rows.clone()).collect();
     let names = |ps: &[Part]| {
         ps.iter()
             .map(ToString::to_string)
@@ -209,6 +201,27 @@ fn write_report(
            Figures: geometric mean over test trajectories with the band where 95 % of them \
            lie. Tables: the time average of the geometric-mean curve (t > 0). A rollout that \
            diverges scores the worst value from then on (relative errors 1).\n\n";
+    md
+}
+
+/// Writes report.md and results.json from the sections so far; `pending`
+/// are the parts still to run (named in the report while it is partial).
+fn write_report(
+    opts: &Options,
+    lab: &Lab,
+    sections: &[Section],
+    pending: &[Part],
+) -> Result<PathBuf> {
+    let sc = &opts.scale;
+    let seconds = lab.t0.elapsed().as_secs_f64();
+    let rows: Vec<Row> = sections.iter().flat_map(|s| s.rows.clone()).collect();
+    let names = |ps: &[Part]| {
+        ps.iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let mut md = report_header(opts, lab, seconds, pending);
     md += "## What the paper claims, and what we measured\n\n";
     let trained: Vec<&(String, Result<lab::Trained>)> =
         sections.iter().flat_map(|s| s.trained.iter()).collect();
