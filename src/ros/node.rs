@@ -7,7 +7,7 @@
 
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context as _};
 use ros2_client::log::LogLevel;
@@ -24,6 +24,7 @@ use super::action::{self, TrainActionServer};
 use super::handles::{
     Diagnostics, Handles, LiveParams, Logger, ModelHandle, RecorderHandle, Warning,
 };
+use super::markers::{prediction_markers, MarkerArray};
 use super::msgs::{
     DiagnosticArray, DiagnosticStatus, KeyValue, LiveAccuracy, NodeDiagnostics, ParticleForces,
     PredictedTrajectory, ReplayRequest, ReplayResponse, RolloutRequest, RolloutResponse,
@@ -180,6 +181,7 @@ struct Endpoints {
     trajectory: Publisher<PredictedTrajectory>,
     forces: Publisher<ParticleForces>,
     accuracy: Publisher<LiveAccuracy>,
+    markers: Publisher<MarkerArray>,
     diagnostics: Publisher<NodeDiagnostics>,
     standard_diagnostics: Publisher<DiagnosticArray>,
     rollout: Server<RolloutRequest, RolloutResponse>,
@@ -211,6 +213,12 @@ impl Endpoints {
         let forces_topic = topic(&params.forces_topic, PACKAGE, "ParticleForces", &qos)?;
         let diag_topic = topic(&params.diagnostics_topic, PACKAGE, "NodeDiagnostics", &qos)?;
         let accuracy_topic = topic(LIVE_ACCURACY_TOPIC, PACKAGE, "LiveAccuracy", &qos)?;
+        let markers_topic = topic(
+            &params.markers_topic,
+            "visualization_msgs",
+            "MarkerArray",
+            &qos,
+        )?;
         let std_diag_topic = topic(
             STANDARD_DIAGNOSTICS_TOPIC,
             "diagnostic_msgs",
@@ -243,6 +251,9 @@ impl Endpoints {
             accuracy: node
                 .create_publisher(&accuracy_topic, Some(qos.clone()))
                 .map_err(e("the live accuracy publisher"))?,
+            markers: node
+                .create_publisher(&markers_topic, Some(qos.clone()))
+                .map_err(e("the markers publisher"))?,
             diagnostics: node
                 .create_publisher(&diag_topic, Some(qos))
                 .map_err(e("the diagnostics publisher"))?,
@@ -268,6 +279,7 @@ impl Endpoints {
             trajectory: self.trajectory,
             forces: self.forces,
             accuracy: self.accuracy,
+            markers: self.markers,
         };
         let input = input_loop(h.clone(), self.input, outputs, trainer.clone());
         tokio::spawn(input);
@@ -501,6 +513,22 @@ struct Outputs {
     trajectory: Publisher<PredictedTrajectory>,
     forces: Publisher<ParticleForces>,
     accuracy: Publisher<LiveAccuracy>,
+    markers: Publisher<MarkerArray>,
+}
+
+/// The markers of `p` when they are on and `markers_period` has passed since
+/// the last ones (`last` is then reset).
+fn markers_due(
+    params: &NodeParams,
+    last: &mut Option<Instant>,
+    p: &Prediction,
+) -> Option<MarkerArray> {
+    let due =
+        params.markers && last.is_none_or(|t| t.elapsed().as_secs_f64() >= params.markers_period);
+    due.then(|| {
+        *last = Some(Instant::now());
+        prediction_markers(&p.trajectory, &p.forces)
+    })
 }
 
 /// Logs a change of the drift alarm: at its level, or as news when it clears.
@@ -530,6 +558,7 @@ async fn input_loop(
     let stats = &h.diag.stats;
     // Last sequence number seen from each publisher.
     let mut last_seen: std::collections::HashMap<String, i64> = Default::default();
+    let mut last_markers = None;
     loop {
         let msg = match input.async_take().await {
             Ok((msg, info)) => {
@@ -578,8 +607,16 @@ async fn input_loop(
                 });
             }
         }
+        let markers = markers_due(&h.params.get(), &mut last_markers, &prediction);
         let sent_traj = out.trajectory.async_publish(prediction.trajectory).await;
         let sent_forces = out.forces.async_publish(prediction.forces).await;
+        if let Some(m) = markers {
+            h.recorder.record(|r| r.markers(h.clock.now_log_ns(), &m));
+            if let Err(e) = out.markers.async_publish(m).await {
+                let why = format!("publishing the markers failed: {e:?}");
+                h.diag.failed(&why, Warning::Input);
+            }
+        }
         if let Some(m) = scored.message {
             if let Err(e) = out.accuracy.async_publish(m).await {
                 let why = format!("publishing the live accuracy failed: {e:?}");

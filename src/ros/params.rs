@@ -219,6 +219,12 @@ pub struct NodeParams {
     pub accuracy_retrain_after: f64,
     /// Epochs of a retraining.
     pub accuracy_retrain_epochs: u32,
+    /// Publish (and record) a MarkerArray of predictions for RViz/Foxglove.
+    pub markers: bool,
+    /// Topic of the MarkerArray.
+    pub markers_topic: String,
+    /// Minimum seconds between two MarkerArrays (0: one per prediction).
+    pub markers_period: f64,
 }
 
 impl Default for NodeParams {
@@ -252,6 +258,9 @@ impl Default for NodeParams {
             accuracy_retrain: false,
             accuracy_retrain_after: 5.0,
             accuracy_retrain_epochs: 50,
+            markers: true,
+            markers_topic: "/mcgnode/markers".into(),
+            markers_period: 0.1,
         }
     }
 }
@@ -416,6 +425,18 @@ pub const SPECS: &[(&str, Kind, &str)] = &[
         Kind::Int(1, 1_000_000),
         "epochs of a retraining after a drift alarm",
     ),
+    (
+        "markers",
+        Kind::Bool,
+        "publish and record a visualization_msgs/MarkerArray of predictions (particles, \
+         edges, predicted paths, forces) for RViz and Foxglove",
+    ),
+    ("markers_topic", Kind::Topic, "topic of the MarkerArray"),
+    (
+        "markers_period",
+        Kind::Double(false),
+        "minimum seconds between two MarkerArrays (0 = one per prediction)",
+    ),
 ];
 
 /// Parameters that can be changed while the node runs (through the ROS
@@ -437,6 +458,8 @@ pub const RUNTIME_SETTABLE: &[&str] = &[
     "accuracy_retrain",
     "accuracy_retrain_after",
     "accuracy_retrain_epochs",
+    "markers",
+    "markers_period",
 ];
 
 /// Keys of the node's section that are accepted as node names.
@@ -540,6 +563,7 @@ impl NodeParams {
             Kind::Bool => match value {
                 Scalar::Bool(b) if key == "use_sim_time" => self.use_sim_time = *b,
                 Scalar::Bool(b) if key == "accuracy_retrain" => self.accuracy_retrain = *b,
+                Scalar::Bool(b) if key == "markers" => self.markers = *b,
                 Scalar::Bool(b) => self.qos_reliable = *b,
                 _ => return Err(ill("true or false")),
             },
@@ -617,6 +641,7 @@ impl NodeParams {
             "rollout_service" => self.rollout_service = s,
             "record_dir" => self.record_dir = s,
             "model_dir" => self.model_dir = s,
+            "markers_topic" => self.markers_topic = s,
             _ => unreachable_key(key),
         }
     }
@@ -645,11 +670,12 @@ impl NodeParams {
             "accuracy_warn_re" => self.accuracy_warn_re = x,
             "accuracy_error_re" => self.accuracy_error_re = x,
             "accuracy_retrain_after" => self.accuracy_retrain_after = x,
+            "markers_period" => self.markers_period = x,
             _ => unreachable_key(key),
         }
     }
 
-    /// The parameters as a ROS 2 parameter file (what `--help-params` prints).
+    /// The parameters as a ROS 2 parameter file (what `serve --print-params` prints).
     pub fn to_yaml(&self) -> String {
         let mut s = format!("{NODE_NAME}:\n  ros__parameters:\n");
         for (key, _, doc) in SPECS {
@@ -707,6 +733,9 @@ impl NodeParams {
             "accuracy_retrain" => self.accuracy_retrain.to_string(),
             "accuracy_retrain_after" => format!("{:?}", self.accuracy_retrain_after),
             "accuracy_retrain_epochs" => self.accuracy_retrain_epochs.to_string(),
+            "markers" => self.markers.to_string(),
+            "markers_topic" => self.markers_topic.clone(),
+            "markers_period" => format!("{:?}", self.markers_period),
             _ => String::new(),
         }
     }

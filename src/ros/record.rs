@@ -15,6 +15,7 @@ use crate::data::msg::{
 };
 use crate::data::{BagMetadata, BagWriter, ChannelId, ParticleState, METADATA_NAME};
 
+use super::markers::{marker_array_schema, MarkerArray, MARKER_ARRAY_TYPE};
 use super::msgs::{ParticleForces, PredictedTrajectory, PACKAGE};
 use super::params::NodeParams;
 
@@ -47,15 +48,14 @@ struct OpenBag {
     path: PathBuf,
     file: File,
     opened: Instant,
-    states: ChannelId,
-    trajectories: ChannelId,
-    forces: ChannelId,
+    /// States, trajectories, forces, markers (the order of `Recorder::topics`).
+    channels: [ChannelId; 4],
 }
 
 /// Writes the node's traffic to a sequence of bags in one folder.
 pub struct Recorder {
     dir: PathBuf,
-    topics: [String; 3],
+    topics: [String; 4],
     split_bytes: u64,
     split_after: Option<Duration>,
     metadata: BagMetadata,
@@ -125,6 +125,7 @@ impl Recorder {
                 params.input_topic.clone(),
                 params.trajectory_topic.clone(),
                 params.forces_topic.clone(),
+                params.markers_topic.clone(),
             ],
             split_bytes: u64::from(params.record_split_mb) << 20,
             split_after: (params.record_split_seconds > 0.0)
@@ -150,22 +151,27 @@ impl Recorder {
         // Unbuffered on purpose: finished chunks reach the file at once.
         let handle = file.try_clone().map_err(|e| ctx(e.to_string()))?;
         let mut writer = BagWriter::new(file).map_err(|e| ctx(e.to_string()))?;
-        let mut channel = |topic: &str, ty: &str, schema: &str| {
-            writer
-                .add_channel(topic, &format!("{PACKAGE}/msg/{ty}"), schema)
-                .map_err(|e| ctx(e.to_string()))
-        };
-        let states = channel(
-            &self.topics[0],
-            "ParticleState",
-            &crate::data::msg::particle_state_schema(),
-        )?;
-        let trajectories = channel(
-            &self.topics[1],
-            "PredictedTrajectory",
-            &predicted_trajectory_schema(),
-        )?;
-        let forces = channel(&self.topics[2], "ParticleForces", &particle_forces_schema())?;
+        let types = [
+            (
+                format!("{PACKAGE}/msg/ParticleState"),
+                crate::data::msg::particle_state_schema(),
+            ),
+            (
+                format!("{PACKAGE}/msg/PredictedTrajectory"),
+                predicted_trajectory_schema(),
+            ),
+            (
+                format!("{PACKAGE}/msg/ParticleForces"),
+                particle_forces_schema(),
+            ),
+            (MARKER_ARRAY_TYPE.to_string(), marker_array_schema()),
+        ];
+        let mut channels = [ChannelId(0); 4];
+        for (c, (topic, (ty, schema))) in channels.iter_mut().zip(self.topics.iter().zip(&types)) {
+            *c = writer
+                .add_channel(topic, ty, schema)
+                .map_err(|e| ctx(e.to_string()))?;
+        }
         let metadata = self.metadata.to_map().map_err(|e| ctx(e.to_string()))?;
         writer
             .add_metadata(METADATA_NAME, &metadata)
@@ -175,9 +181,7 @@ impl Recorder {
             path,
             file: handle,
             opened: Instant::now(),
-            states,
-            trajectories,
-            forces,
+            channels,
         }))
     }
 
@@ -201,7 +205,7 @@ impl Recorder {
             Some(ref mut b) => b,
             None => self.open_next()?,
         };
-        let channel = [bag.states, bag.trajectories, bag.forces][which];
+        let channel = bag.channels[which];
         bag.writer
             .write(channel, log_time_ns, cdr)
             .map_err(|e| RecordError::Write {
@@ -245,6 +249,12 @@ impl Recorder {
         let f = encode_cdr(forces).map_err(|e| RecordError::Encode(e.to_string()))?;
         self.write(1, log_time_ns, &t)?;
         self.write(2, log_time_ns, &f)
+    }
+
+    /// Records the markers of a prediction, published at `log_time_ns`.
+    pub fn markers(&mut self, log_time_ns: u64, markers: &MarkerArray) -> Result<(), RecordError> {
+        let m = encode_cdr(markers).map_err(|e| RecordError::Encode(e.to_string()))?;
+        self.write(3, log_time_ns, &m)
     }
 
     /// Closes the open bag (summary and footer written), if any.

@@ -6,8 +6,11 @@ Usage: check_recording.py DIR --horizon N --predictions N --received N
 Every *.mcap in DIR is decoded with mcap + mcap-ros2-support and with rosbags
 (types from the bags' own schemas). Both must see the same messages: `received`
 states on the input topic, `predictions` trajectories (each with `horizon`
-states, stamped like a recorded input) and as many force messages. Prints
-`RECORDING {json}`; exits 1 with "FAIL: ..." otherwise.
+states, stamped like a recorded input) and as many force messages, and between
+1 and `predictions` MarkerArrays (rate-limited by markers_period), each drawing
+the particles of the recorded input it is stamped with and the paths of the
+trajectory predicted from it. Prints `RECORDING {json}`; exits 1 with
+"FAIL: ..." otherwise.
 """
 
 import argparse
@@ -19,6 +22,37 @@ from pathlib import Path
 STATE = "mcgnode_msgs/msg/ParticleState"
 TRAJ = "mcgnode_msgs/msg/PredictedTrajectory"
 FORCES = "mcgnode_msgs/msg/ParticleForces"
+MARKERS = "visualization_msgs/msg/MarkerArray"
+
+
+def xyz(p):
+    return (float(p.x), float(p.y), float(p.z))
+
+
+def check_markers(arr, inputs, trajs):
+    """One recorded MarkerArray against the input and trajectory it draws."""
+    ms = list(arr.markers)
+    if not ms or ms[0].action != 3:
+        raise SystemExit("FAIL: a MarkerArray does not start with DELETEALL")
+    by_ns = {m.ns: m for m in ms[1:]}
+    parts = by_ns.get("particles")
+    if parts is None or parts.type != 7:
+        raise SystemExit(f"FAIL: no SPHERE_LIST of particles among {sorted(by_ns)}")
+    s = inputs.get(stamp(parts))
+    if s is None:
+        raise SystemExit(f"FAIL: markers stamped {stamp(parts)} match no recorded input")
+    if [xyz(p) for p in parts.points] != [xyz(p) for p in s.positions]:
+        raise SystemExit("FAIL: the particles marker is not at the input's positions")
+    paths = by_ns.get("predicted_paths")
+    t = trajs.get(stamp(parts))
+    if paths is None or t is None:
+        raise SystemExit("FAIL: no predicted paths, or no trajectory for the markers' input")
+    n = len(s.positions)
+    ends = [xyz(p) for p in paths.points[1::2]]
+    if ends[-n:] != [xyz(p) for p in t.states[-1].positions]:
+        raise SystemExit("FAIL: the predicted paths do not end at the trajectory's last state")
+    if not any(m.ns == "forces" for m in ms):
+        raise SystemExit("FAIL: no force markers")
 
 
 def stamp(m):
@@ -30,6 +64,11 @@ def summarize(items, horizon):
     counts = Counter(name for name, _ in items)
     inputs = {stamp(m) for name, m in items if name == STATE}
     trajs = [m for name, m in items if name == TRAJ]
+    by_stamp = {stamp(m): m for name, m in items if name == STATE}
+    traj_by_stamp = {stamp(t): t for t in trajs}
+    for name, m in items:
+        if name == MARKERS:
+            check_markers(m, by_stamp, traj_by_stamp)
     for t in trajs:
         if len(t.states) != horizon:
             raise SystemExit(f"FAIL: recorded trajectory has {len(t.states)} states, horizon {horizon}")
@@ -70,9 +109,13 @@ def main():
     a, b = summarize(via_mcap, args.horizon), summarize(via_rosbags, args.horizon)
     if a != b:
         raise SystemExit(f"FAIL: the readers disagree:\nmcap: {a}\nrosbags: {b}")
+    markers = a["counts"].pop(MARKERS, 0)
+    if not 1 <= markers <= args.predictions:
+        raise SystemExit(f"FAIL: {markers} MarkerArrays recorded for {args.predictions} predictions")
     want = {STATE: args.received, TRAJ: args.predictions, FORCES: args.predictions}
     if a["counts"] != dict(sorted(want.items())):
         raise SystemExit(f"FAIL: recorded {a['counts']}, expected {want}")
+    a["counts"][MARKERS] = markers
     if a["trajectory_stamps"] != a["forces_stamps"]:
         raise SystemExit("FAIL: trajectories and forces were recorded for different inputs")
     print("RECORDING " + json.dumps({"bags": len(bags), "counts": a["counts"]}))

@@ -12,6 +12,9 @@ Checks:
     (spring: momentum conserved; pendulum: bar lengths kept);
   * the Rollout service returns the same states as the topic for the same input,
     and refuses too many steps and malformed states;
+  * MarkerArrays (rate-limited by markers_period) draw a predicted input:
+    particles at its positions, one line per edge, paths ending at the
+    predicted last state, force arrows along the predicted total forces;
   * malformed states (wrong lengths, NaN, out-of-range edge, bad dimension) are
     rejected, counted in NodeDiagnostics and warned about on /rosout, and the
     node keeps answering afterwards.
@@ -39,6 +42,7 @@ from mcgnode_msgs.msg import NodeDiagnostics, ParticleForces, ParticleState, Pre
 from mcgnode_msgs.srv import Rollout  # noqa: E402
 from rcl_interfaces.msg import Log  # noqa: E402
 from rcl_interfaces.srv import GetParameters  # noqa: E402
+from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 NS = 1_000_000_000
 
@@ -142,6 +146,8 @@ class Driver:
             self.node.create_subscription(NodeDiagnostics, args.diagnostics_topic, self.diags.append, qos),
         ]
         self.node.create_subscription(Log, "/rosout", self.logs.append, ru.qos_profile(True, 1000))
+        self.markers = []
+        self.node.create_subscription(MarkerArray, "/mcgnode/markers", self.markers.append, qos)
         self.client = self.node.create_client(Rollout, args.rollout_service)
         self.sent = {}  # stamp ns -> (state, monotonic send time)
 
@@ -196,6 +202,35 @@ class Driver:
             err = max(abs(L - 1.0) for L in bar_lengths(last))
             check(err < 1e-6, f"bar lengths drift by {err} (rigid bars)")
 
+    def check_markers(self, arr):
+        """One MarkerArray against the input and prediction it draws."""
+        ms = arr.markers
+        check(ms and ms[0].action == Marker.DELETEALL, "a MarkerArray does not start with DELETEALL")
+        by_ns = {}
+        for m in ms[1:]:
+            by_ns.setdefault(m.ns, []).append(m)
+        (parts,) = by_ns["particles"]
+        k = stamp_ns(parts.header.stamp)
+        check(k in self.sent and k in self.trajs, f"markers stamped {k} match no predicted input")
+        state, traj, forces = self.sent[k][0], self.trajs[k], self.forces[k]
+        check(parts.type == Marker.SPHERE_LIST, f"particles drawn as type {parts.type}")
+        check(plain_vecs(parts.points) == plain_vecs(state.positions), "particles not at the input's positions")
+        (edges,) = by_ns["edges"]
+        check(len(edges.points) == 2 * len(state.edge_a), f"{len(edges.points)} edge points, {len(state.edge_a)} edges")
+        (paths,) = by_ns["predicted_paths"]
+        n = len(state.positions)
+        check(len(paths.points) == 2 * n * len(traj.states), "one path segment per particle and step")
+        check(plain_vecs(paths.points[1::2][-n:]) == plain_vecs(traj.states[-1].positions),
+              "paths do not end at the predicted last state")
+        arrows = by_ns.get("forces", [])
+        check(len(arrows) == n and all(m.type == Marker.ARROW for m in arrows), "one force arrow per particle")
+        for m, p, f in zip(sorted(arrows, key=lambda m: m.id), state.positions, forces.total):
+            d = (m.points[1].x - p.x, m.points[1].y - p.y, m.points[1].z - p.z)
+            cross = (d[1] * f.z - d[2] * f.y, d[2] * f.x - d[0] * f.z, d[0] * f.y - d[1] * f.x)
+            scale = math.hypot(*d) * math.hypot(f.x, f.y, f.z)
+            check(max(map(abs, cross)) <= 1e-9 * max(scale, 1e-300), "a force arrow is not along its force")
+            check(d[0] * f.x + d[1] * f.y + d[2] * f.z >= 0, "a force arrow points against its force")
+
     def run(self):
         a = self.args
         rng = random.Random(a.seed)
@@ -221,6 +256,9 @@ class Driver:
                       f"the prediction for state {i}")
         for k in valid:
             self.check_prediction(k)
+        self.wait(lambda: len(self.markers) >= 1, a.timeout, "a MarkerArray")
+        for arr in self.markers:
+            self.check_markers(arr)
         latencies = [self.recv_time[k] - self.sent[k][1] for k in valid]
         first_prediction_s, latencies = latencies[0], latencies[1:]
 
@@ -315,6 +353,7 @@ class Driver:
             "rejected": d.rejected,
             "undecodable": 1,
             "rosout_warnings": len(warned()),
+            "marker_arrays": len(self.markers),
             "first_prediction_ms": round(1000 * first_prediction_s, 2),
             "prediction_latency_ms": {
                 "median": round(1000 * statistics.median(latencies), 2),
