@@ -418,3 +418,128 @@ fn draw_sweep(
         .draw()?;
     Ok(())
 }
+
+/// A 3D scene of coloured primitives (what a `visualization_msgs/MarkerArray`
+/// draws), for [`draw_scene`]. Sizes are in scene units.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// Title above the picture.
+    pub title: String,
+    /// Line segments: ends, colour, width.
+    pub segments: Vec<([f64; 3], [f64; 3], RGBColor, f64)>,
+    /// Discs (spheres): centre, colour, diameter.
+    pub discs: Vec<([f64; 3], RGBColor, f64)>,
+    /// Squares (cubes): centre, colour, side.
+    pub squares: Vec<([f64; 3], RGBColor, f64)>,
+    /// Arrows: tail, head, colour, shaft width.
+    pub arrows: Vec<([f64; 3], [f64; 3], RGBColor, f64)>,
+}
+
+/// Draws `scene` to a PNG: seen along z when it is flat, else from an oblique
+/// viewpoint (rotated 35° about z, then tilted 30°), scaled to fit with equal
+/// axes; segments first, then squares, discs and arrows on top.
+pub fn draw_scene(path: &Path, scene: &Scene) -> anyhow::Result<()> {
+    ensure_font()?;
+    let flat = scene
+        .segments
+        .iter()
+        .flat_map(|s| [s.0, s.1])
+        .chain(scene.discs.iter().map(|d| d.0))
+        .all(|p| p[2] == 0.0);
+    let (cz, sz, cx, sx) = if flat {
+        (1.0, 0.0, 1.0, 0.0)
+    } else {
+        let (a, b) = (35f64.to_radians(), 60f64.to_radians());
+        (a.cos(), a.sin(), b.cos(), b.sin())
+    };
+    // Rotate about z, then about x; keep (x, y) of the result.
+    let project = |p: [f64; 3]| {
+        let (x, y) = (cz * p[0] - sz * p[1], sz * p[0] + cz * p[1]);
+        (x, cx * y - sx * p[2])
+    };
+    let pts: Vec<(f64, f64)> = scene
+        .segments
+        .iter()
+        .flat_map(|s| [s.0, s.1])
+        .chain(scene.discs.iter().map(|d| d.0))
+        .chain(scene.squares.iter().map(|d| d.0))
+        .chain(scene.arrows.iter().flat_map(|a| [a.0, a.1]))
+        .map(project)
+        .collect();
+    if pts.is_empty() {
+        bail!("nothing to draw: the markers hold no points");
+    }
+    let (mut lo, mut hi) = ((f64::MAX, f64::MAX), (f64::MIN, f64::MIN));
+    for &(x, y) in &pts {
+        lo = (lo.0.min(x), lo.1.min(y));
+        hi = (hi.0.max(x), hi.1.max(y));
+    }
+    let (w, h, margin, top) = (900u32, 800u32, 40.0, 50.0);
+    let span = (hi.0 - lo.0).max(hi.1 - lo.1).max(1e-12);
+    let k = ((f64::from(w) - 2.0 * margin).min(f64::from(h) - margin - top)) / span;
+    let to_px = |p: [f64; 3]| {
+        let (x, y) = project(p);
+        let cx = f64::from(w) / 2.0 + k * (x - f64::midpoint(lo.0, hi.0));
+        let cy = top + (f64::from(h) - margin - top) / 2.0 - k * (y - f64::midpoint(lo.1, hi.1));
+        (cx.round() as i32, cy.round() as i32)
+    };
+    let px = |len: f64| ((k * len).round() as u32).max(1);
+    let root = BitMapBackend::new(path, (w, h)).into_drawing_area();
+    let err = |e: &dyn std::fmt::Display| anyhow!("drawing {}: {e}", path.display());
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    root.draw(&Text::new(
+        scene.title.clone(),
+        (20, 15),
+        (FAMILY, 20).into_font().color(&BLACK),
+    ))
+    .map_err(|e| err(&e))?;
+    for (a, b, c, width) in &scene.segments {
+        let style = c.stroke_width(px(*width));
+        root.draw(&PathElement::new(vec![to_px(*a), to_px(*b)], style))
+            .map_err(|e| err(&e))?;
+    }
+    for (p, c, side) in &scene.squares {
+        let (x, y) = to_px(*p);
+        let r = (px(*side) / 2).max(2) as i32;
+        root.draw(&Rectangle::new(
+            [(x - r, y - r), (x + r, y + r)],
+            c.filled(),
+        ))
+        .map_err(|e| err(&e))?;
+    }
+    for (p, c, d) in &scene.discs {
+        root.draw(&Circle::new(to_px(*p), (px(*d) / 2).max(2), c.filled()))
+            .map_err(|e| err(&e))?;
+        root.draw(&Circle::new(
+            to_px(*p),
+            (px(*d) / 2).max(2),
+            BLACK.stroke_width(1),
+        ))
+        .map_err(|e| err(&e))?;
+    }
+    for (a, b, c, width) in &scene.arrows {
+        let ((x0, y0), (x1, y1)) = (to_px(*a), to_px(*b));
+        let style = c.stroke_width(px(*width).max(2));
+        root.draw(&PathElement::new(vec![(x0, y0), (x1, y1)], style))
+            .map_err(|e| err(&e))?;
+        let (dx, dy) = (f64::from(x1 - x0), f64::from(y1 - y0));
+        let len = dx.hypot(dy);
+        if len >= 4.0 {
+            let (ux, uy) = (dx / len, dy / len);
+            let head = (0.3 * len).min(12.0);
+            let wing = |s: f64| {
+                (
+                    (f64::from(x1) - head * ux + s * 0.5 * head * uy).round() as i32,
+                    (f64::from(y1) - head * uy - s * 0.5 * head * ux).round() as i32,
+                )
+            };
+            root.draw(&Polygon::new(
+                vec![(x1, y1), wing(1.0), wing(-1.0)],
+                c.filled(),
+            ))
+            .map_err(|e| err(&e))?;
+        }
+    }
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}

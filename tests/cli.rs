@@ -772,3 +772,19 @@ fn demo_quick_runs_end_to_end() {
         );
     }
 }
+
+/// `bag draw` on a bag without markers says so and how to get them.
+#[test]
+fn bag_draw_names_the_fix_when_a_bag_has_no_markers() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = Path::new(env!("CARGO_MANIFEST_DIR")).join("bags/spring5-sample.mcap");
+    let o = mcgnode(
+        &["bag", "draw", bag.to_str().unwrap(), "--png", "x.png"],
+        dir.path(),
+    );
+    fails_with(
+        &o,
+        "holds 0 MarkerArray messages; record with `serve` (markers: true)",
+    );
+    assert!(!dir.path().join("x.png").exists());
+}

@@ -364,3 +364,33 @@ fn node_refuses_states_its_model_was_not_trained_for() {
     let log = read("node.log");
     assert!(log.contains("rejected input"), "{log}");
 }
+
+/// scripts/ros_markers.sh, as the README runs it: the node's recording holds
+/// one MarkerArray per played state, and `bag draw` turns the last into a PNG.
+#[test]
+fn markers_script_records_and_draws_what_rviz_would_show() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("markers.png");
+    let rec = dir.path().join("rec");
+    let o = run_bounded(
+        Command::new("scripts/ros_markers.sh")
+            .arg(&png)
+            .args(["--states", "6", "--keep"])
+            .arg(&rec)
+            .env("BIN", BIN)
+            .current_dir(ROOT),
+        Duration::from_secs(180),
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}\n{}", o.stdout, o.stderr);
+    assert!(
+        o.stdout.contains("drew MarkerArray 5 (of 6;"),
+        "{}",
+        o.stdout
+    );
+    let bytes = fs::read(&png).unwrap();
+    assert!(
+        bytes.len() > 5000 && bytes.starts_with(b"\x89PNG"),
+        "not a PNG"
+    );
+}

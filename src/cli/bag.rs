@@ -1,4 +1,4 @@
-//! `mcgnode bag info` and `mcgnode bag repair`.
+//! `mcgnode bag info`, `mcgnode bag repair` and `mcgnode bag draw`.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -25,6 +25,22 @@ enum BagCommand {
     /// torn last record) as a complete, indexed MCAP: every message up to the
     /// last whole record is kept, in order. Like `ros2 bag reindex`.
     Repair(RepairArgs),
+    /// Draw one visualization_msgs/MarkerArray of a recording (what RViz and
+    /// Foxglove show: particles, edges, predicted paths, force arrows) as a PNG.
+    Draw(DrawArgs),
+}
+
+/// Options of `bag draw`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct DrawArgs {
+    /// An MCAP file recorded by `mcgnode serve` (or any with MarkerArray messages).
+    pub bag: PathBuf,
+    /// The PNG to write.
+    #[arg(long)]
+    pub png: PathBuf,
+    /// Which MarkerArray, counted from 0 in log-time order (default: the last).
+    #[arg(long)]
+    pub index: Option<usize>,
 }
 
 /// Options of `bag info`.
@@ -52,6 +68,7 @@ pub fn run(a: Args) -> Result<()> {
     match a.command {
         BagCommand::Info(a) => info(a),
         BagCommand::Repair(a) => repair(a),
+        BagCommand::Draw(a) => draw(&a),
     }
 }
 
@@ -184,5 +201,93 @@ fn repair(a: RepairArgs) -> Result<()> {
     } else {
         println!("reading stopped {}", r.stopped);
     }
+    Ok(())
+}
+
+/// Draws one MarkerArray of `a.bag` to `a.png`.
+fn draw(a: &DrawArgs) -> Result<()> {
+    use crate::ros::markers::{
+        MarkerArray, ARROW, CUBE_LIST, LINE_LIST, MARKER_ARRAY_TYPE, SPHERE_LIST,
+    };
+    let bytes = std::fs::read(&a.bag).with_context(|| format!("reading {}", a.bag.display()))?;
+    let mut arrays = vec![];
+    for m in mcap::MessageStream::new(&bytes)
+        .with_context(|| format!("{} is not MCAP", a.bag.display()))?
+    {
+        let m = m.with_context(|| format!("reading {}", a.bag.display()))?;
+        if m.channel
+            .schema
+            .as_ref()
+            .is_some_and(|s| s.name == MARKER_ARRAY_TYPE)
+        {
+            arrays.push((m.log_time, m.channel.topic.clone(), m.data.into_owned()));
+        }
+    }
+    arrays.sort_by_key(|x| x.0);
+    let n = arrays.len();
+    let i = a.index.unwrap_or(n.saturating_sub(1));
+    let Some((_, topic, data)) = arrays.get(i) else {
+        anyhow::bail!(
+            "{} holds {n} MarkerArray messages{}; record with `serve` (markers: true) or pick \
+             --index below {n}",
+            a.bag.display(),
+            if n == 0 { "" } else { ", not that many" }
+        );
+    };
+    let arr: MarkerArray = crate::data::msg::decode_cdr(data)
+        .with_context(|| format!("decoding MarkerArray {i} of {}", a.bag.display()))?;
+    let v = |p: &crate::data::msg::Point| [p.x, p.y, p.z];
+    let rgb = |c: &crate::ros::markers::ColorRgba| {
+        let u = |x: f32| (x.clamp(0.0, 1.0) * 255.0).round() as u8;
+        plotters::style::RGBColor(u(c.r), u(c.g), u(c.b))
+    };
+    let mut scene = crate::plot::Scene::default();
+    let mut stamp = None;
+    for m in arr
+        .markers
+        .iter()
+        .filter(|m| m.action == crate::ros::markers::ADD)
+    {
+        stamp.get_or_insert((
+            m.header.stamp.sec,
+            m.header.stamp.nanosec,
+            m.header.frame_id.clone(),
+        ));
+        let color_at = |k: usize| m.colors.get(k).map_or_else(|| rgb(&m.color), rgb);
+        match m.kind {
+            LINE_LIST => {
+                for (k, pair) in m.points.chunks_exact(2).enumerate() {
+                    scene
+                        .segments
+                        .push((v(&pair[0]), v(&pair[1]), color_at(2 * k), m.scale.x));
+                }
+            }
+            SPHERE_LIST => {
+                for (k, p) in m.points.iter().enumerate() {
+                    scene.discs.push((v(p), color_at(k), m.scale.x));
+                }
+            }
+            CUBE_LIST => {
+                for (k, p) in m.points.iter().enumerate() {
+                    scene.squares.push((v(p), color_at(k), m.scale.x));
+                }
+            }
+            ARROW if m.points.len() == 2 => {
+                scene
+                    .arrows
+                    .push((v(&m.points[0]), v(&m.points[1]), rgb(&m.color), m.scale.x));
+            }
+            _ => {}
+        }
+    }
+    let (sec, nanosec, frame) = stamp.unwrap_or_default();
+    scene.title =
+        format!("{topic}, MarkerArray {i} (of {n}): stamp {sec}.{nanosec:09} s, frame {frame}");
+    crate::plot::draw_scene(&a.png, &scene)?;
+    println!(
+        "drew MarkerArray {i} (of {n}; {} markers) to {}",
+        arr.markers.len(),
+        a.png.display()
+    );
     Ok(())
 }

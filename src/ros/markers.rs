@@ -406,7 +406,11 @@ mod tests {
     use crate::physics::{SystemConfig, SystemKind};
     use crate::system::Sample;
 
-    fn predicted(kind: SystemKind, n: usize, horizon: u32) -> (PredictedTrajectory, ParticleForces) {
+    fn predicted(
+        kind: SystemKind,
+        n: usize,
+        horizon: u32,
+    ) -> (PredictedTrajectory, ParticleForces) {
         let cfg = SystemConfig::new(kind, n);
         let graph = cfg.graph();
         let state = cfg.start_for(&graph, 3, 0);
@@ -457,12 +461,19 @@ mod tests {
         for (a, (p, fo)) in arrows.iter().zip(s.positions.iter().zip(&f.total)) {
             assert_eq!(a.kind, ARROW);
             assert_eq!(a.points[0], point(p));
-            let d = [a.points[1].x - p.x, a.points[1].y - p.y, a.points[1].z - p.z];
+            let d = [
+                a.points[1].x - p.x,
+                a.points[1].y - p.y,
+                a.points[1].z - p.z,
+            ];
             let fv = [fo.x, fo.y, fo.z];
             let dot: f64 = d.iter().zip(&fv).map(|(x, y)| x * y).sum();
             let nd = d.iter().map(|x| x * x).sum::<f64>().sqrt();
             let nf = fv.iter().map(|x| x * x).sum::<f64>().sqrt();
-            assert!((dot - nd * nf).abs() <= 1e-12 * nd * nf, "arrow not along its force");
+            assert!(
+                (dot - nd * nf).abs() <= 1e-12 * nd * nf,
+                "arrow not along its force"
+            );
             longest = longest.max(nd);
         }
         assert!((longest - 0.5 * l).abs() < 1e-12 * l, "{longest} vs {l}");
