@@ -394,3 +394,42 @@ fn markers_script_records_and_draws_what_rviz_would_show() {
         "not a PNG"
     );
 }
+
+/// With `lifecycle: true` the node is a managed node that rclpy drives
+/// through configure, activate and deactivate (tests/ros/lifecycle_drive.py).
+#[test]
+fn managed_lifecycle_gates_the_predictions() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let params = write_params(dir.path(), None);
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$PARAMS" --set lifecycle=true 2>"$LOG" &
+        node=$!
+        timeout 90 python3 tests/ros/lifecycle_drive.py
+        rc=$?
+        kill -INT $node; wait $node
+        exit $rc
+    "#;
+    let log = dir.path().join("node.log");
+    let o = run_bounded(
+        in_netns(script, &params, &env_sh).env("LOG", &log),
+        Duration::from_secs(150),
+        dir.path(),
+    );
+    let (summary, node_log, report) = driver_outcome(&o, &log, "LIFECYCLE_SUMMARY ");
+    println!("lifecycle driver summary: {summary}");
+    assert!(
+        node_log.contains("lifecycle: unconfigured -> inactive (configure)"),
+        "{report}"
+    );
+    assert!(
+        node_log.contains("lifecycle transition 0 \"activate\" is not available from unconfigured"),
+        "{report}"
+    );
+    assert!(
+        node_log.contains("rejected input: the node is unconfigured"),
+        "{report}"
+    );
+}

@@ -337,6 +337,8 @@ pub struct Handles {
     pub clock: Arc<Clock>,
     /// Live accuracy of the predictions.
     pub accuracy: Arc<Live>,
+    /// The managed-node state: only an active node predicts.
+    pub lifecycle: Arc<super::lifecycle::Lifecycle>,
 }
 
 #[cfg(test)]

@@ -25,6 +25,7 @@ pub mod accuracy;
 pub mod action;
 pub mod clock;
 pub mod handles;
+pub mod lifecycle;
 pub mod markers;
 pub mod msgs;
 pub mod node;

@@ -47,6 +47,9 @@ fn handle_state(
 ) -> Result<(Prediction, accuracy::Update), predict::PredictError> {
     // Refused before anything is recorded or predicted: an oversized state
     // would hold memory and its prediction could not be delivered promptly.
+    if let Some(why) = h.lifecycle.refusal() {
+        return Err(predict::PredictError::Inactive(why));
+    }
     let params = h.params.get();
     predict::check_size(&msg, params.max_particles)?;
     h.recorder.record(|r| r.state(received_ns, &msg));
@@ -356,6 +359,11 @@ fn handles(
         diag,
         clock: Arc::new(super::clock::Clock::new(params.use_sim_time)),
         accuracy: Arc::new(accuracy::Live::default()),
+        lifecycle: Arc::new(super::lifecycle::Lifecycle::new(if params.lifecycle {
+            super::lifecycle::Primary::Unconfigured
+        } else {
+            super::lifecycle::Primary::Active
+        })),
     })
 }
 
@@ -377,6 +385,7 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
     let h = handles(&node, &params, live, model)?;
     let (trainer, servers) = training::create(&mut node, &params, trainer_handles(&h))?;
     let action_server = action::create(&mut node)?;
+    let lifecycle = super::lifecycle::create(&mut node, NODE_NAME)?;
     let spinner = node
         .spinner()
         .map_err(|e| anyhow!("the node spinner: {e:?}"))?;
@@ -389,6 +398,12 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         });
         endpoints.spawn(&h, &trainer);
         spawn_training(trainer, servers, action_server);
+        super::lifecycle::spawn(
+            h.lifecycle.clone(),
+            h.diag.clone(),
+            h.clock.clone(),
+            lifecycle,
+        );
         wait_for_shutdown().await
     });
     h.diag
@@ -456,6 +471,13 @@ fn log_start(h: &Handles, domain_id: u16) {
             p.rollout_service
         ),
     );
+    if p.lifecycle {
+        h.diag.log(
+            LogLevel::Info,
+            "managed lifecycle: unconfigured, predicting nothing until configure and activate \
+             (/mcgnode/change_state)",
+        );
+    }
     if !p.accuracy_lead_times.is_empty() {
         let t = accuracy::Tracker::new(&p.accuracy_lead_times, 1, 1);
         let reachable: Vec<f64> = t
@@ -641,6 +663,13 @@ async fn input_loop(
 
 /// The Rollout service's work with the node's current parameters.
 fn rollout_call(h: &Handles, req: RolloutRequest) -> RolloutResponse {
+    if let Some(why) = h.lifecycle.refusal() {
+        return RolloutResponse {
+            success: false,
+            message: why,
+            ..RolloutResponse::default()
+        };
+    }
     let p = h.params.get();
     let limits = RolloutLimits {
         default_dt: p.dt,

@@ -225,6 +225,9 @@ pub struct NodeParams {
     pub markers_topic: String,
     /// Minimum seconds between two MarkerArrays (0: one per prediction).
     pub markers_period: f64,
+    /// Start as an unconfigured managed node (predict only after configure
+    /// and activate through the lifecycle services); read at start.
+    pub lifecycle: bool,
 }
 
 impl Default for NodeParams {
@@ -261,6 +264,7 @@ impl Default for NodeParams {
             markers: true,
             markers_topic: "/mcgnode/markers".into(),
             markers_period: 0.1,
+            lifecycle: false,
         }
     }
 }
@@ -437,6 +441,12 @@ pub const SPECS: &[(&str, Kind, &str)] = &[
         Kind::Double(false),
         "minimum seconds between two MarkerArrays (0 = one per prediction)",
     ),
+    (
+        "lifecycle",
+        Kind::Bool,
+        "start as an unconfigured managed node: predict only after configure and activate \
+         (lifecycle_msgs services /mcgnode/change_state ...); false: start active. Read at start",
+    ),
 ];
 
 /// Parameters that can be changed while the node runs (through the ROS
@@ -564,6 +574,7 @@ impl NodeParams {
                 Scalar::Bool(b) if key == "use_sim_time" => self.use_sim_time = *b,
                 Scalar::Bool(b) if key == "accuracy_retrain" => self.accuracy_retrain = *b,
                 Scalar::Bool(b) if key == "markers" => self.markers = *b,
+                Scalar::Bool(b) if key == "lifecycle" => self.lifecycle = *b,
                 Scalar::Bool(b) => self.qos_reliable = *b,
                 _ => return Err(ill("true or false")),
             },
@@ -736,6 +747,7 @@ impl NodeParams {
             "markers" => self.markers.to_string(),
             "markers_topic" => self.markers_topic.clone(),
             "markers_period" => format!("{:?}", self.markers_period),
+            "lifecycle" => self.lifecycle.to_string(),
             _ => String::new(),
         }
     }

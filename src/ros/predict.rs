@@ -12,6 +12,9 @@ use super::msgs::{ParticleForces, PredictedTrajectory};
 /// Why a state gets no prediction; each message says what to change.
 #[derive(Debug, thiserror::Error)]
 pub enum PredictError {
+    /// The node is not active (managed lifecycle).
+    #[error("{0}")]
+    Inactive(String),
     /// More particles than `max_particles` allows.
     #[error(
         "state too large: {particles} particles, above max_particles = {max} (raise it with \

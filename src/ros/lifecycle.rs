@@ -1,0 +1,502 @@
+//! The managed-node lifecycle (ROS 2 design "Managed nodes"), served with
+//! ros2-client's plain services since it has no lifecycle node: the node
+//! answers `lifecycle_msgs` `change_state`, `get_state`,
+//! `get_available_states`, `get_available_transitions` and
+//! `get_transition_graph` under its name, as rclcpp's lifecycle nodes do, and
+//! announces each transition on `~/transition_event`. Only an active node
+//! predicts; inactive and unconfigured ones refuse states and Rollout calls
+//! with the reason. Transitions are immediate (the node holds no resource
+//! that configuring would allocate: the model is loaded, and checked, at
+//! start), so the intermediate states are never observed.
+
+use std::sync::atomic::{AtomicU8, Ordering};
+
+use serde::{Deserialize, Serialize};
+
+/// Package of the lifecycle interfaces.
+pub const LIFECYCLE_PACKAGE: &str = "lifecycle_msgs";
+
+/// `lifecycle_msgs/msg/State`.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StateMsg {
+    /// `PRIMARY_STATE_*` id.
+    pub id: u8,
+    /// Its label (`unconfigured`, `inactive`, `active`, `finalized`).
+    pub label: String,
+}
+
+/// `lifecycle_msgs/msg/Transition`.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TransitionMsg {
+    /// `TRANSITION_*` id (0: pick by label).
+    pub id: u8,
+    /// Its label (`configure`, `cleanup`, `activate`, `deactivate`, `shutdown`).
+    pub label: String,
+}
+
+/// `lifecycle_msgs/msg/TransitionDescription`.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TransitionDescription {
+    /// The transition.
+    pub transition: TransitionMsg,
+    /// Where it starts.
+    pub start_state: StateMsg,
+    /// Where it ends.
+    pub goal_state: StateMsg,
+}
+
+/// `lifecycle_msgs/msg/TransitionEvent`.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TransitionEvent {
+    /// Nanoseconds since the epoch (the node's clock).
+    pub timestamp: u64,
+    /// The transition taken.
+    pub transition: TransitionMsg,
+    /// From.
+    pub start_state: StateMsg,
+    /// To.
+    pub goal_state: StateMsg,
+}
+
+/// `lifecycle_msgs/srv/ChangeState` request.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ChangeStateRequest {
+    /// The transition asked for.
+    pub transition: TransitionMsg,
+}
+
+/// `lifecycle_msgs/srv/ChangeState` response.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ChangeStateResponse {
+    /// Whether the transition was taken.
+    pub success: bool,
+}
+
+/// The request of the `Get*` lifecycle services, which has no fields (CDR
+/// carries one placeholder byte, as rosidl generates).
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct EmptyRequest {
+    /// rosidl's `structure_needs_at_least_one_member`.
+    pub structure_needs_at_least_one_member: u8,
+}
+
+/// `lifecycle_msgs/srv/GetState` response.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GetStateResponse {
+    /// The state now.
+    pub current_state: StateMsg,
+}
+
+/// `lifecycle_msgs/srv/GetAvailableStates` response.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GetAvailableStatesResponse {
+    /// Every primary state.
+    pub available_states: Vec<StateMsg>,
+}
+
+/// `lifecycle_msgs/srv/GetAvailableTransitions` response (also what `get_transition_graph` answers).
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GetAvailableTransitionsResponse {
+    /// Transitions from the state now (or every transition, for the graph).
+    pub available_transitions: Vec<TransitionDescription>,
+}
+
+macro_rules! messages {
+    ($($t:ty),*) => {$( impl ros2_client::Message for $t {} )*};
+}
+messages!(
+    StateMsg,
+    TransitionMsg,
+    TransitionDescription,
+    TransitionEvent,
+    ChangeStateRequest,
+    ChangeStateResponse,
+    EmptyRequest,
+    GetStateResponse,
+    GetAvailableStatesResponse,
+    GetAvailableTransitionsResponse
+);
+
+/// A primary state of a managed node.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Primary {
+    /// Created, not configured: refuses work.
+    Unconfigured = 1,
+    /// Configured, not active: refuses work.
+    Inactive = 2,
+    /// Predicting and serving.
+    Active = 3,
+    /// Shut down: refuses work until the process ends.
+    Finalized = 4,
+}
+
+impl Primary {
+    const ALL: [Primary; 4] = [
+        Primary::Unconfigured,
+        Primary::Inactive,
+        Primary::Active,
+        Primary::Finalized,
+    ];
+
+    /// The label rclcpp gives it.
+    pub fn label(self) -> &'static str {
+        match self {
+            Primary::Unconfigured => "unconfigured",
+            Primary::Inactive => "inactive",
+            Primary::Active => "active",
+            Primary::Finalized => "finalized",
+        }
+    }
+
+    fn msg(self) -> StateMsg {
+        StateMsg {
+            id: self as u8,
+            label: self.label().into(),
+        }
+    }
+
+    fn from_id(id: u8) -> Primary {
+        Primary::ALL
+            .into_iter()
+            .find(|p| *p as u8 == id)
+            .unwrap_or(Primary::Finalized)
+    }
+}
+
+/// The transitions between primary states: (id, label, from, to), with
+/// `lifecycle_msgs/msg/Transition`'s ids.
+const TRANSITIONS: [(u8, &str, Primary, Primary); 7] = [
+    (1, "configure", Primary::Unconfigured, Primary::Inactive),
+    (2, "cleanup", Primary::Inactive, Primary::Unconfigured),
+    (3, "activate", Primary::Inactive, Primary::Active),
+    (4, "deactivate", Primary::Active, Primary::Inactive),
+    (5, "shutdown", Primary::Unconfigured, Primary::Finalized),
+    (6, "shutdown", Primary::Inactive, Primary::Finalized),
+    (7, "shutdown", Primary::Active, Primary::Finalized),
+];
+
+fn describe(t: &(u8, &str, Primary, Primary)) -> TransitionDescription {
+    TransitionDescription {
+        transition: TransitionMsg {
+            id: t.0,
+            label: t.1.into(),
+        },
+        start_state: t.2.msg(),
+        goal_state: t.3.msg(),
+    }
+}
+
+/// Why a transition was refused.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("lifecycle transition {asked} is not available from {from} (available: {available})")]
+pub struct Refused {
+    /// The transition asked for (id and label).
+    pub asked: String,
+    /// The state the node is in.
+    pub from: &'static str,
+    /// The labels available from there.
+    pub available: String,
+}
+
+/// The node's lifecycle state, shared by the input loop, the services and
+/// the lifecycle services.
+#[derive(Debug)]
+pub struct Lifecycle(AtomicU8);
+
+impl Lifecycle {
+    /// A node in `start`.
+    pub fn new(start: Primary) -> Self {
+        Lifecycle(AtomicU8::new(start as u8))
+    }
+
+    /// The state now.
+    pub fn state(&self) -> Primary {
+        Primary::from_id(self.0.load(Ordering::Acquire))
+    }
+
+    /// Why work is refused now (`None` when active).
+    pub fn refusal(&self) -> Option<String> {
+        match self.state() {
+            Primary::Active => None,
+            s => Some(format!(
+                "the node is {} (managed lifecycle); activate it with /mcgnode/change_state \
+                 (configure, then activate)",
+                s.label()
+            )),
+        }
+    }
+
+    /// Takes the transition `t` (by id, or by label when the id is 0) and
+    /// returns its description, or why not.
+    pub fn transition(&self, t: &TransitionMsg) -> Result<TransitionDescription, Refused> {
+        let from = self.state();
+        let found = TRANSITIONS
+            .iter()
+            .find(|x| x.2 == from && (x.0 == t.id || (t.id == 0 && x.1 == t.label.trim())));
+        match found {
+            Some(x) => {
+                self.0.store(x.3 as u8, Ordering::Release);
+                Ok(describe(x))
+            }
+            None => Err(Refused {
+                asked: format!("{} {:?}", t.id, t.label),
+                from: from.label(),
+                available: self
+                    .available()
+                    .iter()
+                    .map(|d| d.transition.label.clone())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            }),
+        }
+    }
+
+    /// The transitions from the state now.
+    pub fn available(&self) -> Vec<TransitionDescription> {
+        let from = self.state();
+        TRANSITIONS
+            .iter()
+            .filter(|x| x.2 == from)
+            .map(describe)
+            .collect()
+    }
+}
+
+/// Every transition of the graph.
+pub fn transition_graph() -> GetAvailableTransitionsResponse {
+    GetAvailableTransitionsResponse {
+        available_transitions: TRANSITIONS.iter().map(describe).collect(),
+    }
+}
+
+/// Every primary state.
+pub fn available_states() -> GetAvailableStatesResponse {
+    GetAvailableStatesResponse {
+        available_states: Primary::ALL.iter().map(|p| p.msg()).collect(),
+    }
+}
+
+/// The current state as `get_state` answers it.
+pub fn get_state(l: &Lifecycle) -> GetStateResponse {
+    GetStateResponse {
+        current_state: l.state().msg(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn by_label(l: &str) -> TransitionMsg {
+        TransitionMsg {
+            id: 0,
+            label: l.into(),
+        }
+    }
+
+    #[test]
+    fn transitions_follow_the_managed_node_graph() {
+        let l = Lifecycle::new(Primary::Unconfigured);
+        assert!(l.refusal().unwrap().contains("unconfigured"));
+        let e = l.transition(&by_label("activate")).unwrap_err();
+        assert_eq!(e.available, "configure, shutdown");
+        assert_eq!(l.state(), Primary::Unconfigured);
+        let d = l.transition(&by_label("configure")).unwrap();
+        assert_eq!((d.start_state.id, d.goal_state.id), (1, 2));
+        let ids: Vec<u8> = l.available().iter().map(|d| d.transition.id).collect();
+        assert_eq!(ids, vec![2, 3, 6]);
+        l.transition(&TransitionMsg {
+            id: 3,
+            label: String::new(),
+        })
+        .unwrap();
+        assert_eq!(l.state(), Primary::Active);
+        assert!(l.refusal().is_none());
+        l.transition(&by_label("deactivate")).unwrap();
+        assert!(l.refusal().unwrap().contains("inactive"));
+        l.transition(&by_label("shutdown")).unwrap();
+        assert_eq!(l.state(), Primary::Finalized);
+        assert!(l.available().is_empty());
+        assert!(l.transition(&by_label("configure")).is_err());
+        assert_eq!(transition_graph().available_transitions.len(), 7);
+        assert_eq!(available_states().available_states.len(), 4);
+    }
+}
+
+/// The lifecycle services and the transition-event publisher.
+pub struct LifecycleServers {
+    change: ros2_client::Server<ChangeStateRequest, ChangeStateResponse>,
+    get: ros2_client::Server<EmptyRequest, GetStateResponse>,
+    states: ros2_client::Server<EmptyRequest, GetAvailableStatesResponse>,
+    transitions: ros2_client::Server<EmptyRequest, GetAvailableTransitionsResponse>,
+    graph: ros2_client::Server<EmptyRequest, GetAvailableTransitionsResponse>,
+    events: ros2_client::Publisher<TransitionEvent>,
+}
+
+/// Creates the lifecycle services under `/<node>/`, as rclcpp names them.
+pub fn create(node: &mut ros2_client::Node, node_name: &str) -> anyhow::Result<LifecycleServers> {
+    use super::qos::{reliable_qos, ros_name};
+    use anyhow::anyhow;
+    use ros2_client::{MessageTypeName, ServiceMapping, ServiceTypeName};
+    macro_rules! server {
+        ($srv:literal, $ty:literal) => {
+            node.create_server(
+                ServiceMapping::Enhanced,
+                &ros_name(&format!("/{node_name}/{}", $srv))?,
+                &ServiceTypeName::new(LIFECYCLE_PACKAGE, $ty),
+                reliable_qos(),
+                reliable_qos(),
+            )
+            .map_err(|e| anyhow!("creating the lifecycle service {}: {e:?}", $srv))?
+        };
+    }
+    let topic = node
+        .create_topic(
+            &ros_name(&format!("/{node_name}/transition_event"))?,
+            MessageTypeName::new(LIFECYCLE_PACKAGE, "TransitionEvent"),
+            &reliable_qos(),
+        )
+        .map_err(|e| anyhow!("creating the transition_event topic: {e:?}"))?;
+    Ok(LifecycleServers {
+        change: server!("change_state", "ChangeState"),
+        get: server!("get_state", "GetState"),
+        states: server!("get_available_states", "GetAvailableStates"),
+        transitions: server!("get_available_transitions", "GetAvailableTransitions"),
+        // rclcpp serves the graph with the GetAvailableTransitions type too.
+        graph: server!("get_transition_graph", "GetAvailableTransitions"),
+        events: node
+            .create_publisher(&topic, Some(reliable_qos()))
+            .map_err(|e| anyhow!("creating the transition_event publisher: {e:?}"))?,
+    })
+}
+
+impl super::service::Reply for ChangeStateResponse {
+    fn failure(_message: String) -> Self {
+        ChangeStateResponse { success: false }
+    }
+    fn failure_reason(&self) -> Option<&str> {
+        None
+    }
+}
+
+macro_rules! no_failure_reply {
+    ($($t:ty),*) => {$(
+        impl super::service::Reply for $t {
+            fn failure(_message: String) -> Self {
+                Self::default()
+            }
+            fn failure_reason(&self) -> Option<&str> {
+                None
+            }
+        }
+    )*};
+}
+no_failure_reply!(
+    GetStateResponse,
+    GetAvailableStatesResponse,
+    GetAvailableTransitionsResponse
+);
+
+/// What a transition works with: the state, where to announce it, the log
+/// and the clock.
+#[derive(Clone)]
+struct Ctx {
+    lifecycle: std::sync::Arc<Lifecycle>,
+    events: std::sync::Arc<ros2_client::Publisher<TransitionEvent>>,
+    diag: std::sync::Arc<super::handles::Diagnostics>,
+    clock: std::sync::Arc<super::clock::Clock>,
+}
+
+/// Serves the lifecycle services (inside the runtime).
+pub fn spawn(
+    lifecycle: std::sync::Arc<Lifecycle>,
+    diag: std::sync::Arc<super::handles::Diagnostics>,
+    clock: std::sync::Arc<super::clock::Clock>,
+    s: LifecycleServers,
+) {
+    use super::service::{serve, OnFailure::Quiet};
+    let ctx = Ctx {
+        lifecycle,
+        events: std::sync::Arc::new(s.events),
+        diag: diag.clone(),
+        clock,
+    };
+    let d = || diag.clone();
+    tokio::spawn(serve(
+        ctx.clone(),
+        d(),
+        s.change,
+        "ChangeState",
+        Quiet,
+        change_state,
+    ));
+    tokio::spawn(serve(
+        ctx.clone(),
+        d(),
+        s.get,
+        "GetState",
+        Quiet,
+        |c: &Ctx, _| get_state(&c.lifecycle),
+    ));
+    tokio::spawn(serve(
+        ctx.clone(),
+        d(),
+        s.states,
+        "GetAvailableStates",
+        Quiet,
+        |_: &Ctx, _| available_states(),
+    ));
+    tokio::spawn(serve(
+        ctx.clone(),
+        d(),
+        s.transitions,
+        "GetAvailableTransitions",
+        Quiet,
+        |c: &Ctx, _| GetAvailableTransitionsResponse {
+            available_transitions: c.lifecycle.available(),
+        },
+    ));
+    tokio::spawn(serve(
+        ctx,
+        d(),
+        s.graph,
+        "get_transition_graph",
+        Quiet,
+        |_: &Ctx, _| transition_graph(),
+    ));
+}
+
+/// Takes a requested transition, logs it and announces it on
+/// `transition_event`; a refused one is logged with the reason.
+fn change_state(c: &Ctx, req: ChangeStateRequest) -> ChangeStateResponse {
+    use ros2_client::log::LogLevel;
+    match c.lifecycle.transition(&req.transition) {
+        Ok(d) => {
+            c.diag.log(
+                LogLevel::Info,
+                &format!(
+                    "lifecycle: {} -> {} ({})",
+                    d.start_state.label, d.goal_state.label, d.transition.label
+                ),
+            );
+            let event = TransitionEvent {
+                timestamp: c.clock.now_log_ns(),
+                transition: d.transition,
+                start_state: d.start_state,
+                goal_state: d.goal_state,
+            };
+            if let Err(e) = c.events.publish(event) {
+                c.diag.log(
+                    LogLevel::Warn,
+                    &format!("announcing a lifecycle transition failed: {e:?}"),
+                );
+            }
+            ChangeStateResponse { success: true }
+        }
+        Err(e) => {
+            c.diag.log(LogLevel::Warn, &e.to_string());
+            ChangeStateResponse { success: false }
+        }
+    }
+}
