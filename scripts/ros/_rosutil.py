@@ -112,3 +112,23 @@ def spin_until(rclpy, node, predicate, timeout, step=0.05):
             return False
         rclpy.spin_once(node, timeout_sec=step)
     return True
+
+
+def predicted_states(traj):
+    """The states of a compact mcgnode_msgs/PredictedTrajectory, each with the
+    graph of `traj.initial` (types, masses, edges, anchors), its positions and
+    velocities, its stamp in ns and its step number."""
+    from types import SimpleNamespace
+
+    init, n = traj.initial, len(traj.initial.positions)
+    t0 = traj.header.stamp.sec * 1_000_000_000 + traj.header.stamp.nanosec
+    return [
+        SimpleNamespace(
+            positions=list(traj.positions[k * n:(k + 1) * n]),
+            velocities=list(traj.velocities[k * n:(k + 1) * n]),
+            types=init.types, masses=init.masses, edge_a=init.edge_a, edge_b=init.edge_b,
+            anchors=init.anchors, system=init.system,
+            stamp_ns=t0 + round((k + 1) * traj.dt * 1e9), step=init.step + k + 1,
+        )
+        for k in range(traj.steps)
+    ]

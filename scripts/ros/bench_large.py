@@ -157,7 +157,7 @@ def main():
             ms = (time.perf_counter() - t0) * 1000
             r = fut.result() if ok else None
             calls[name] = {"answered": bool(ok), "ms": round(ms, 1),
-                           "success": bool(r and r.success), "states": len(r.trajectory.states) if r else 0,
+                           "success": bool(r and r.success), "states": r.trajectory.steps if r else 0,
                            "message": r.message if r else ""}
         result.update(calls)
 

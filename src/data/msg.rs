@@ -279,7 +279,8 @@ pub enum Layout {
 
 /// Flat `dim`-vectors to 3-vectors (z = 0 in 2D). Tolerates a bad `dim`: the
 /// result is then inconsistent, which [`ParticleState::to_parts`] reports.
-fn to_vec3(flat: &[f64], dim: usize) -> Vec<Vector3> {
+/// Flat coordinates (`dim` per particle) as 3D vectors, z = 0 in 2D.
+pub fn to_vec3(flat: &[f64], dim: usize) -> Vec<Vector3> {
     if dim == 0 {
         return Vec::new();
     }

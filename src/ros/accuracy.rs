@@ -382,11 +382,11 @@ impl Live {
         let ahead: Vec<(usize, State)> = tracker
             .steps(
                 predicted.dt,
-                u32::try_from(predicted.states.len()).unwrap_or(u32::MAX),
+                predicted.steps,
             )
             .into_iter()
             .filter_map(|(lead, k)| {
-                let (_, s) = predicted.states.get(k - 1)?.to_parts().ok()?;
+                let (_, s) = predicted.state(k - 1)?.to_parts().ok()?;
                 Some((lead, s.state))
             })
             .collect();

@@ -341,8 +341,8 @@ pub fn prediction_markers(
     }
     let mut paths = base("predicted_paths", 0, LINE_LIST, 0.03 * l, PATH);
     let mut prev: Vec<Point> = s.positions.iter().map(point).collect();
-    for st in &trajectory.states {
-        for (p, q) in prev.iter_mut().zip(&st.positions) {
+    for k in 0..trajectory.steps as usize {
+        for (p, q) in prev.iter_mut().zip(trajectory.positions_at(k)) {
             let q = point(q);
             paths.points.extend([*p, q]);
             *p = q;
@@ -449,7 +449,7 @@ mod tests {
         // Paths: per step, one segment per particle from where it was.
         let paths = by_ns(&m, "predicted_paths")[0];
         assert_eq!(paths.points.len(), 2 * 4 * 7);
-        let last: Vec<Point> = t.states[6].positions.iter().map(point).collect();
+        let last: Vec<Point> = t.positions_at(6).iter().map(point).collect();
         let ends: Vec<Point> = paths.points.iter().skip(1).step_by(2).copied().collect();
         assert_eq!(&ends[ends.len() - 4..], &last[..]);
         assert_eq!(&paths.points[0], &pos[0]);

@@ -10,7 +10,8 @@ use crate::data::msg::{Header, ParticleState, Vector3};
 /// ROS package of our interfaces.
 pub const PACKAGE: &str = "mcgnode_msgs";
 
-/// `mcgnode_msgs/msg/PredictedTrajectory`.
+/// `mcgnode_msgs/msg/PredictedTrajectory`: the graph once (in `initial`),
+/// then positions and velocities per predicted step.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PredictedTrajectory {
     /// Copied from the input state.
@@ -19,8 +20,50 @@ pub struct PredictedTrajectory {
     pub initial: ParticleState,
     /// Time step between states, seconds.
     pub dt: f64,
-    /// `states[k]` is the prediction `k + 1` steps after `initial`.
-    pub states: Vec<ParticleState>,
+    /// Predicted states: state `k` is `k + 1` steps after `initial`.
+    pub steps: u32,
+    /// `positions[k * n + i]`: particle `i` in state `k`.
+    pub positions: Vec<Vector3>,
+    /// `velocities[k * n + i]`: particle `i` in state `k`.
+    pub velocities: Vec<Vector3>,
+}
+
+impl PredictedTrajectory {
+    /// Particles per state.
+    pub fn particles(&self) -> usize {
+        self.initial.positions.len()
+    }
+
+    /// Positions of state `k` (empty when there is no such state).
+    pub fn positions_at(&self, k: usize) -> &[Vector3] {
+        let n = self.particles();
+        self.positions.get(k * n..(k + 1) * n).unwrap_or_default()
+    }
+
+    /// State `k` as a full message: `initial`'s graph and field, the
+    /// predicted positions and velocities, stamped `(k + 1)·dt` after the
+    /// input (in integer nanoseconds) with step `initial.step + k + 1`.
+    pub fn state(&self, k: usize) -> Option<ParticleState> {
+        let n = self.particles();
+        if k >= self.steps as usize {
+            return None;
+        }
+        let mut s = self.initial.clone();
+        s.positions = self.positions.get(k * n..(k + 1) * n)?.to_vec();
+        s.velocities = self.velocities.get(k * n..(k + 1) * n)?.to_vec();
+        s.accelerations.clear();
+        let k1 = u32::try_from(k + 1).unwrap_or(u32::MAX);
+        s.step = self.initial.step.saturating_add(k1);
+        // f64 seconds since the epoch would lose sub-microsecond steps.
+        let offset = (f64::from(k1) * self.dt * 1e9).round() as i64;
+        s.header = Header {
+            stamp: crate::data::msg::Time::from_nanos(
+                self.header.stamp.as_nanos().saturating_add(offset),
+            ),
+            frame_id: self.header.frame_id.clone(),
+        };
+        Some(s)
+    }
 }
 
 /// `mcgnode_msgs/msg/ParticleForces`.
@@ -258,7 +301,9 @@ mod tests {
                 },
                 initial: state.clone(),
                 dt: 0.5,
-                states: vec![state.clone(), state],
+                steps: 2,
+                positions: [state.positions.clone(), state.positions.clone()].concat(),
+                velocities: [state.velocities.clone(), state.velocities].concat(),
             },
         };
         let back: RolloutResponse = decode_cdr(&encode_cdr(&resp).unwrap()).unwrap();

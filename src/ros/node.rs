@@ -735,7 +735,7 @@ pub fn rollout_response(
     match predict::trajectory(model, &req.initial, &graph, &start, dt, req.steps, substeps) {
         Ok(trajectory) => RolloutResponse {
             success: true,
-            message: format!("{} states, dt = {dt}", trajectory.states.len()),
+            message: format!("{} states, dt = {dt}", trajectory.steps),
             trajectory,
         },
         Err(e) => fail(e.to_string()),

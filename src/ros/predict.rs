@@ -2,10 +2,10 @@
 //! asks the model for a rollout and forces, and builds the reply messages.
 //! Pure functions, no ROS: the node and the Rollout service both call these.
 
-use crate::data::msg::{Header, ParticleState, Time, Vector3};
+use crate::data::msg::{to_vec3, Header, ParticleState, Vector3};
 use crate::data::DataError;
 use crate::dynamics::{Dynamics, DynamicsError, Forces};
-use crate::system::{Graph, Sample, State};
+use crate::system::{Graph, State};
 
 use super::msgs::{ParticleForces, PredictedTrajectory};
 
@@ -91,8 +91,8 @@ pub fn accept(model: &dyn Dynamics, input: &ParticleState) -> Result<(Graph, Sta
 }
 
 /// Rolls the model out `steps` steps of `dt` from `input` (already accepted
-/// as `graph` + `start`), integrating with `dt / substeps`; the states are
-/// stamped `k·dt` after the input.
+/// as `graph` + `start`), integrating with `dt / substeps`; state `k` is
+/// `(k + 1)·dt` after the input ([`PredictedTrajectory::state`]).
 pub fn trajectory(
     model: &dyn Dynamics,
     input: &ParticleState,
@@ -109,44 +109,20 @@ pub fn trajectory(
     let states = model
         .rollout_every(graph, start, dt / sub as f64, steps as usize * sub, sub)
         .map_err(PredictError::Rollout)?;
-    let t0 = input.header.stamp.as_nanos();
-    let states = states
-        .into_iter()
-        .skip(1)
-        .zip(1u32..)
-        .map(|(state, k)| {
-            let sample = Sample {
-                t: 0.0,
-                state,
-                acc: None,
-            };
-            let mut msg = ParticleState::from_sample(
-                input.trajectory_id,
-                input.step.saturating_add(k),
-                &input.system,
-                graph,
-                &sample,
-            );
-            // Stamp in integer nanoseconds: f64 seconds since the epoch would
-            // lose sub-microsecond steps.
-            let offset = (f64::from(k) * dt * 1e9).round() as i64;
-            msg.header = Header {
-                stamp: Time::from_nanos(t0.saturating_add(offset)),
-                frame_id: input.header.frame_id.clone(),
-            };
-            // The predicted states move in the field the input states.
-            msg.field_status = input.field_status;
-            msg.gravity = input.gravity;
-            msg.drag = input.drag;
-            msg.force = input.force;
-            msg
-        })
-        .collect();
+    let n = graph.n();
+    let (mut positions, mut velocities) =
+        (Vec::with_capacity(n * steps as usize), Vec::with_capacity(n * steps as usize));
+    for state in states.iter().skip(1) {
+        positions.extend(to_vec3(&state.q, graph.dim));
+        velocities.extend(to_vec3(&state.v, graph.dim));
+    }
     Ok(PredictedTrajectory {
         header: input.header.clone(),
         initial: input.clone(),
         dt,
-        states,
+        steps: u32::try_from(states.len().saturating_sub(1)).unwrap_or(u32::MAX),
+        positions,
+        velocities,
     })
 }
 
@@ -215,8 +191,10 @@ pub fn predict(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::msg::Time;
     use crate::models::truth::load_truth;
     use crate::physics::{SystemConfig, SystemKind};
+    use crate::system::Sample;
 
     fn spring_state() -> ParticleState {
         let cfg = SystemConfig::new(SystemKind::Spring, 5);
@@ -251,8 +229,13 @@ mod tests {
         assert_eq!(p.trajectory.header, input.header);
         assert_eq!(p.forces.header, input.header);
         assert_eq!(p.trajectory.initial, input);
-        assert_eq!(p.trajectory.states.len(), 7);
-        let s3 = &p.trajectory.states[2];
+        assert_eq!(p.trajectory.steps, 7);
+        assert_eq!(p.trajectory.positions.len(), 7 * 5);
+        assert_eq!(p.trajectory.velocities.len(), 7 * 5);
+        assert!(p.trajectory.state(7).is_none());
+        let s3 = &p.trajectory.state(2).unwrap();
+        assert_eq!(s3.positions, p.trajectory.positions_at(2));
+        assert_eq!(s3.edge_a, input.edge_a);
         assert_eq!(s3.step, 13);
         assert_eq!(s3.trajectory_id, 4);
         assert_eq!(s3.header.frame_id, "lab");
@@ -275,13 +258,13 @@ mod tests {
         let model = load_truth("truth:spring").unwrap();
         let input = spring_state().with_field(Some(&crate::physics::Field::default()));
         let p = predict(model.as_ref(), &input, 0.001, 3, 1).unwrap();
-        for s in &p.trajectory.states {
+        for s in (0..3).filter_map(|k| p.trajectory.state(k)) {
             assert_eq!(s.field_status, crate::data::msg::FIELD_KNOWN);
             assert_eq!(s.field().unwrap(), Some(crate::physics::Field::default()));
         }
         // Without a field stated, the predictions do not invent one.
         let p = predict(model.as_ref(), &spring_state(), 0.001, 3, 1).unwrap();
-        assert!(p.trajectory.states.iter().all(|s| s.field_status == 0));
+        assert!((0..3).all(|k| p.trajectory.state(k).unwrap().field_status == 0));
     }
 
     #[test]

@@ -288,6 +288,7 @@ pub fn now_ns() -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::msg::Vector3;
     use crate::data::scan_bag;
 
     #[test]
@@ -305,7 +306,7 @@ mod tests {
         };
         let traj = PredictedTrajectory {
             initial: state.clone(),
-            states: vec![state.clone(); 3],
+            steps: 3,
             ..PredictedTrajectory::default()
         };
         r.state(1, &state).unwrap();
@@ -398,7 +399,10 @@ mod tests {
             ..ParticleState::default()
         };
         let traj = PredictedTrajectory {
-            states: vec![state; 100],
+            initial: state,
+            steps: 100,
+            positions: vec![Vector3::default(); 500],
+            velocities: vec![Vector3::default(); 500],
             ..PredictedTrajectory::default()
         };
         let size = encode_cdr(&traj).unwrap().len();

@@ -49,7 +49,7 @@ def check_markers(arr, inputs, trajs):
         raise SystemExit("FAIL: no predicted paths, or no trajectory for the markers' input")
     n = len(s.positions)
     ends = [xyz(p) for p in paths.points[1::2]]
-    if ends[-n:] != [xyz(p) for p in t.states[-1].positions]:
+    if ends[-n:] != [xyz(p) for p in t.positions[-n:]]:
         raise SystemExit("FAIL: the predicted paths do not end at the trajectory's last state")
     if not any(m.ns == "forces" for m in ms):
         raise SystemExit("FAIL: no force markers")
@@ -70,8 +70,10 @@ def summarize(items, horizon):
         if name == MARKERS:
             check_markers(m, by_stamp, traj_by_stamp)
     for t in trajs:
-        if len(t.states) != horizon:
-            raise SystemExit(f"FAIL: recorded trajectory has {len(t.states)} states, horizon {horizon}")
+        n = len(t.initial.positions)
+        if t.steps != horizon or len(t.positions) != horizon * n or len(t.velocities) != horizon * n:
+            raise SystemExit(f"FAIL: recorded trajectory has {t.steps} states ({len(t.positions)} "
+                             f"positions of {n} particles), horizon {horizon}")
         if stamp(t) not in inputs:
             raise SystemExit(f"FAIL: recorded trajectory stamped {stamp(t)} matches no recorded input")
     return {

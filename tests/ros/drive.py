@@ -180,15 +180,19 @@ class Driver:
         a = self.args
         check(traj.header == state.header, f"trajectory header {traj.header} != input {state.header}")
         check(forces.header == state.header, "forces header differs from the input's")
-        check(len(traj.states) == a.horizon, f"{len(traj.states)} predicted states, horizon is {a.horizon}")
+        states = ru.predicted_states(traj)
+        check(traj.steps == a.horizon and len(states) == a.horizon,
+              f"{traj.steps} predicted states, horizon is {a.horizon}")
+        n = len(state.positions)
+        check(len(traj.positions) == len(traj.velocities) == a.horizon * n,
+              f"{len(traj.positions)} positions for {a.horizon} states of {n} particles")
         check(abs(traj.dt - a.dt) < 1e-15, f"trajectory dt {traj.dt} != {a.dt}")
         check(plain_vecs(traj.initial.positions) == plain_vecs(state.positions), "initial state altered")
-        for i, s in enumerate(traj.states):
+        for i, s in enumerate(states):
             want = k + round((i + 1) * a.dt * NS)
-            check(stamp_ns(s.header.stamp) == want, f"state {i} stamped {stamp_ns(s.header.stamp)}, want {want}")
+            check(s.stamp_ns == want, f"state {i} at {s.stamp_ns}, want {want}")
             check(s.step == state.step + i + 1, f"state {i} has step {s.step}")
-            check(len(s.positions) == len(state.positions), f"state {i} has {len(s.positions)} particles")
-        last = traj.states[-1]
+        last = states[-1]
         check(plain_vecs(last.positions) != plain_vecs(state.positions), "the prediction did not move")
         n = len(state.types)
         check(len(forces.total) == n, f"{len(forces.total)} total forces for {n} particles")
@@ -219,8 +223,8 @@ class Driver:
         check(len(edges.points) == 2 * len(state.edge_a), f"{len(edges.points)} edge points, {len(state.edge_a)} edges")
         (paths,) = by_ns["predicted_paths"]
         n = len(state.positions)
-        check(len(paths.points) == 2 * n * len(traj.states), "one path segment per particle and step")
-        check(plain_vecs(paths.points[1::2][-n:]) == plain_vecs(traj.states[-1].positions),
+        check(len(paths.points) == 2 * n * traj.steps, "one path segment per particle and step")
+        check(plain_vecs(paths.points[1::2][-n:]) == plain_vecs(traj.positions[-n:]),
               "paths do not end at the predicted last state")
         arrows = by_ns.get("forces", [])
         check(len(arrows) == n and all(m.type == Marker.ARROW for m in arrows), "one force arrow per particle")
@@ -267,13 +271,13 @@ class Driver:
         req = Rollout.Request(initial=first, steps=a.horizon, dt=0.0)
         resp, first_call_s = self.call(req, a.timeout)
         check(resp.success, f"Rollout failed: {resp.message}")
-        got = [plain_vecs(s.positions) for s in resp.trajectory.states]
-        want = [plain_vecs(s.positions) for s in self.trajs[valid[0]].states]
+        got = plain_vecs(resp.trajectory.positions)
+        want = plain_vecs(self.trajs[valid[0]].positions)
         check(got == want, "Rollout and the topic disagree for the same input")
         call_s = []
         for _ in range(a.calls):
             resp, took = self.call(Rollout.Request(initial=first, steps=a.horizon, dt=0.002), a.timeout)
-            check(resp.success and len(resp.trajectory.states) == a.horizon, f"Rollout: {resp.message}")
+            check(resp.success and resp.trajectory.steps == a.horizon, f"Rollout: {resp.message}")
             call_s.append(took)
         resp, _ = self.call(Rollout.Request(initial=first, steps=a.max_rollout_steps + 1), a.timeout)
         check(not resp.success and "max_rollout_steps" in resp.message, f"too many steps accepted: {resp.message}")

@@ -106,7 +106,7 @@ def main():
         check(state().label == "active", "not active after activate")
         check(predicts(TIMEOUT), "an active node did not predict")
         r = call("rollout", Rollout.Request(initial=publish(), steps=5, dt=0.0))
-        check(r.success and len(r.trajectory.states) == 5, f"Rollout while active: {r.message}")
+        check(r.success and r.trajectory.steps == 5, f"Rollout while active: {r.message}")
         check(change(label="deactivate"), "deactivate refused")
         check(not predicts(1.5), "a deactivated node predicted")
         check(ru.spin_until(rclpy, node, lambda: len(events) >= 3, TIMEOUT), f"{len(events)} transition events")

@@ -86,7 +86,7 @@ def main():
         state.header.stamp = Time(sec=sec, nanosec=0)
         pub.publish(state)
         if ru.spin_until(rclpy, node, lambda: sec in trajs, 0.2, step=0.01):
-            states = len(trajs[sec].states)
+            states = trajs[sec].steps
             break
     if states is None:
         fail("no prediction after setting horizon")

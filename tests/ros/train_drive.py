@@ -65,7 +65,7 @@ def read_states(path):
 
 
 def positions(traj):
-    return [(p.x, p.y, p.z) for s in traj.states for p in s.positions]
+    return [(p.x, p.y, p.z) for p in traj.positions]
 
 
 def max_diff(a, b):
