@@ -33,6 +33,11 @@ pub const DELETEALL: i32 = 3;
 /// of one arrow marker each (an arrow costs a whole marker on the wire).
 pub const MAX_ARROWS: usize = 200;
 
+/// Most path segments drawn: larger predictions draw every k-th step (and
+/// the last), so that a 1,000-particle, 100-step prediction does not double
+/// the node's traffic with a 5 MB picture.
+pub const MAX_PATH_SEGMENTS: usize = 20_000;
+
 /// `builtin_interfaces/Duration`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Duration {
@@ -271,7 +276,8 @@ fn length_scale(s: &ParticleState) -> f64 {
 /// The markers of one prediction: a DELETEALL (so that markers of an earlier,
 /// larger graph disappear), then the particles (a sphere list coloured by
 /// type), the edges (springs grey, bars dark), anchors (cubes), every
-/// particle's predicted path, and the total force on each particle (arrows
+/// particle's predicted path (every k-th step above [`MAX_PATH_SEGMENTS`]
+/// segments), and the total force on each particle (arrows
 /// scaled so the largest is half the median edge length; one line list above
 /// [`MAX_ARROWS`] particles).
 pub fn prediction_markers(
@@ -341,7 +347,10 @@ pub fn prediction_markers(
     }
     let mut paths = base("predicted_paths", 0, LINE_LIST, 0.03 * l, PATH);
     let mut prev: Vec<Point> = s.positions.iter().map(point).collect();
-    for k in 0..trajectory.steps as usize {
+    let steps = trajectory.steps as usize;
+    let stride = (s.positions.len() * steps).div_ceil(MAX_PATH_SEGMENTS).max(1);
+    let drawn = (0..steps).filter(|k| (k + 1) % stride == 0 || k + 1 == steps);
+    for k in drawn {
         for (p, q) in prev.iter_mut().zip(trajectory.positions_at(k)) {
             let q = point(q);
             paths.points.extend([*p, q]);
@@ -493,6 +502,14 @@ mod tests {
         assert_eq!(forces[0].kind, LINE_LIST);
         assert_eq!(forces[0].points.len(), 2 * (MAX_ARROWS + 1));
         assert!(m.markers.iter().all(|x| x.header.frame_id == "lab"));
+        // 1,000 particles x 100 steps: every 5th step, ending at the last.
+        let (t, f) = predicted(SystemKind::Spring, 1000, 100);
+        let m = prediction_markers(&t, &f);
+        let paths = by_ns(&m, "predicted_paths")[0];
+        assert_eq!(paths.points.len(), 2 * MAX_PATH_SEGMENTS);
+        let last: Vec<Point> = t.positions_at(99).iter().map(point).collect();
+        let ends: Vec<Point> = paths.points.iter().skip(1).step_by(2).copied().collect();
+        assert_eq!(&ends[ends.len() - 1000..], &last[..]);
     }
 
     #[test]
