@@ -880,14 +880,7 @@ fn drag_force_bags(lab: &Lab, sc: &Scale) -> Result<Vec<(&'static str, PathBuf, 
             TRAIN_SEED,
             false,
         )?;
-        c.states = sc.sweep_states;
-        let test = lab.bag(
-            &format!("test-5-{name}"),
-            &c,
-            sc.sweep_test_trajectories,
-            TEST_SEED,
-            false,
-        )?;
+        let test = sweep_test_bag(lab, sc, name, &c)?;
         cases.push((name, train, test));
     }
     Ok(cases)
@@ -1060,16 +1053,21 @@ fn sweep_bags(
     } else {
         None
     };
+    let test = sweep_test_bag(lab, sc, &format!("spring-{experiment}"), &c)?;
+    Ok((train, train_rk4, test))
+}
+
+/// The held-out test bag `test-5-<name>` of a 5-spring case of the sweeps.
+fn sweep_test_bag(lab: &Lab, sc: &Scale, name: &str, c: &SystemConfig) -> Result<PathBuf> {
     let mut tc = c.clone();
     tc.states = sc.sweep_states;
-    let test = lab.bag(
-        &format!("test-5-spring-{experiment}"),
+    lab.bag(
+        &format!("test-5-{name}"),
         &tc,
         sc.sweep_test_trajectories,
         TEST_SEED,
         false,
-    )?;
-    Ok((train, train_rk4, test))
+    )
 }
 
 /// The sweep's heading, figure (time-averaged RE and EE against the

@@ -28,18 +28,9 @@ from mcgnode_msgs.msg import ParticleState, PredictedTrajectory  # noqa: E402
 from mcgnode_msgs.srv import Rollout  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from drive import spring_state  # noqa: E402
+from drive import Fail, check, spring_state  # noqa: E402
 
 TIMEOUT = 20.0
-
-
-class Fail(Exception):
-    pass
-
-
-def check(cond, what):
-    if not cond:
-        raise Fail(what)
 
 
 def main():
