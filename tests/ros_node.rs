@@ -305,9 +305,13 @@ fn stand_ins_play_echo_and_call() {
     assert_eq!(diag["predicted"], 12, "{diag}");
     let call: serde_json::Value = serde_json::from_str(read("call.out").trim()).expect("call");
     assert_eq!(call["success"], true, "{call}");
-    let states = call["trajectory"]["states"].as_array().expect("states");
-    assert_eq!(states.len(), 3, "{call}");
-    let x1 = states[2]["positions"][1]["x"].as_f64().expect("x");
+    assert_eq!(call["trajectory"]["steps"], 3, "{call}");
+    let positions = call["trajectory"]["positions"]
+        .as_array()
+        .expect("positions");
+    assert_eq!(positions.len(), 3 * 2, "{call}");
+    // State 2 (the last), particle 1: positions[2 * n + 1].
+    let x1 = positions[2 * 2 + 1]["x"].as_f64().expect("x");
     assert!(
         x1 < 1.5,
         "the stretched spring should pull particle 1 back: x = {x1}"

@@ -380,10 +380,7 @@ impl Live {
         }
         let compared = tracker.observe(id, t, tolerance, &graph, field.as_ref(), &sample.state);
         let ahead: Vec<(usize, State)> = tracker
-            .steps(
-                predicted.dt,
-                predicted.steps,
-            )
+            .steps(predicted.dt, predicted.steps)
             .into_iter()
             .filter_map(|(lead, k)| {
                 let (_, s) = predicted.state(k - 1)?.to_parts().ok()?;

@@ -348,7 +348,9 @@ pub fn prediction_markers(
     let mut paths = base("predicted_paths", 0, LINE_LIST, 0.03 * l, PATH);
     let mut prev: Vec<Point> = s.positions.iter().map(point).collect();
     let steps = trajectory.steps as usize;
-    let stride = (s.positions.len() * steps).div_ceil(MAX_PATH_SEGMENTS).max(1);
+    let stride = (s.positions.len() * steps)
+        .div_ceil(MAX_PATH_SEGMENTS)
+        .max(1);
     let drawn = (0..steps).filter(|k| (k + 1) % stride == 0 || k + 1 == steps);
     for k in drawn {
         for (p, q) in prev.iter_mut().zip(trajectory.positions_at(k)) {

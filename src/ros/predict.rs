@@ -110,8 +110,10 @@ pub fn trajectory(
         .rollout_every(graph, start, dt / sub as f64, steps as usize * sub, sub)
         .map_err(PredictError::Rollout)?;
     let n = graph.n();
-    let (mut positions, mut velocities) =
-        (Vec::with_capacity(n * steps as usize), Vec::with_capacity(n * steps as usize));
+    let (mut positions, mut velocities) = (
+        Vec::with_capacity(n * steps as usize),
+        Vec::with_capacity(n * steps as usize),
+    );
     for state in states.iter().skip(1) {
         positions.extend(to_vec3(&state.q, graph.dim));
         velocities.extend(to_vec3(&state.v, graph.dim));
