@@ -302,7 +302,13 @@ impl<'r> Results<'r> {
                 && r.error.is_none()
         });
         if r.is_none() {
-            self.miss(format!("{exp}: {model} on the {n}-{sys}"));
+            // n = 0: the experiment has no rows at all (e.g. not run).
+            let what = if n == 0 {
+                sys.to_string()
+            } else {
+                format!("{n}-{sys}")
+            };
+            self.miss(format!("{exp}: {model} on the {what}"));
         }
         r
     }
