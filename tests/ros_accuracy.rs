@@ -239,7 +239,7 @@ fn drift_alarm_starts_a_warm_start_retraining() {
              accuracy_lead_times: [0.5, 1.0]\n    accuracy_window: 3\n    \
              accuracy_warn_re: 5.0e-3\n    accuracy_error_re: 1.0e-2\n    \
              accuracy_retrain: true\n    accuracy_retrain_after: 6.0\n    \
-             accuracy_retrain_epochs: 200\n    record_dir: {:?}\n    \
+             accuracy_retrain_epochs: 3000\n    record_dir: {:?}\n    \
              record_split_seconds: 1.0\n    model_dir: {:?}\n",
             dir.path().join("rec").display(),
             dir.path().join("models").display()

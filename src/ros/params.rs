@@ -260,7 +260,7 @@ impl Default for NodeParams {
             accuracy_error_re: 0.05,
             accuracy_retrain: false,
             accuracy_retrain_after: 5.0,
-            accuracy_retrain_epochs: 50,
+            accuracy_retrain_epochs: 3000,
             markers: true,
             markers_topic: "/mcgnode/markers".into(),
             markers_period: 0.1,
