@@ -283,6 +283,7 @@ impl Endpoints {
             forces: self.forces,
             accuracy: self.accuracy,
             markers: self.markers,
+            last_markers: None,
         };
         let input = input_loop(h.clone(), self.input, outputs, trainer.clone());
         tokio::spawn(input);
@@ -536,6 +537,8 @@ struct Outputs {
     forces: Publisher<ParticleForces>,
     accuracy: Publisher<LiveAccuracy>,
     markers: Publisher<MarkerArray>,
+    /// When the last markers went out (`markers_period`).
+    last_markers: Option<Instant>,
 }
 
 /// The markers of `p` when they are on and `markers_period` has passed since
@@ -574,25 +577,17 @@ fn log_alarm(h: &Handles, level: Level, why: &str) {
 async fn input_loop(
     h: Handles,
     input: Subscription<ParticleState>,
-    out: Outputs,
+    mut out: Outputs,
     trainer: Arc<Trainer>,
 ) {
     let stats = &h.diag.stats;
     // Last sequence number seen from each publisher.
     let mut last_seen: std::collections::HashMap<String, i64> = Default::default();
-    let mut last_markers = None;
     loop {
         let msg = match input.async_take().await {
             Ok((msg, info)) => {
-                let publisher = format!("{:?}", info.publisher_gid());
-                let sn = info.sequence_number();
-                if let Some(prev) = last_seen.insert(publisher, sn) {
-                    let gap = sn.saturating_sub(prev).saturating_sub(1);
-                    if gap > 0 {
-                        let gap = u64::try_from(gap).unwrap_or(0);
-                        stats.dropped.fetch_add(gap, Ordering::Relaxed);
-                    }
-                }
+                let gap = sequence_gap(&mut last_seen, &info);
+                stats.dropped.fetch_add(gap, Ordering::Relaxed);
                 msg
             }
             Err(e) => {
@@ -629,34 +624,54 @@ async fn input_loop(
                 });
             }
         }
-        let markers = markers_due(&h.params.get(), &mut last_markers, &prediction);
-        let sent_traj = out.trajectory.async_publish(prediction.trajectory).await;
-        let sent_forces = out.forces.async_publish(prediction.forces).await;
+        out.publish(&h, prediction, scored.message).await;
+    }
+}
+
+/// States a publisher sent that never reached us: the gap in its DDS
+/// sequence numbers since the last sample taken from it.
+fn sequence_gap(
+    last_seen: &mut std::collections::HashMap<String, i64>,
+    info: &ros2_client::MessageInfo,
+) -> u64 {
+    let publisher = format!("{:?}", info.publisher_gid());
+    let sn = info.sequence_number();
+    last_seen.insert(publisher, sn).map_or(0, |prev| {
+        u64::try_from(sn.saturating_sub(prev).saturating_sub(1)).unwrap_or(0)
+    })
+}
+
+impl Outputs {
+    /// Publishes a prediction (trajectory, forces, the markers when due) and
+    /// the live accuracy; counts it as predicted when trajectory and forces
+    /// went out, else warns.
+    async fn publish(&mut self, h: &Handles, p: Prediction, accuracy: Option<LiveAccuracy>) {
+        let markers = markers_due(&h.params.get(), &mut self.last_markers, &p);
+        let sent_traj = self.trajectory.async_publish(p.trajectory).await;
+        let sent_forces = self.forces.async_publish(p.forces).await;
         if let Some(m) = markers {
             h.recorder.record(|r| r.markers(h.clock.now_log_ns(), &m));
-            if let Err(e) = out.markers.async_publish(m).await {
+            if let Err(e) = self.markers.async_publish(m).await {
                 let why = format!("publishing the markers failed: {e:?}");
                 h.diag.failed(&why, Warning::Input);
             }
         }
-        if let Some(m) = scored.message {
-            if let Err(e) = out.accuracy.async_publish(m).await {
+        if let Some(m) = accuracy {
+            if let Err(e) = self.accuracy.async_publish(m).await {
                 let why = format!("publishing the live accuracy failed: {e:?}");
                 h.diag.failed(&why, Warning::Input);
             }
         }
-        match (sent_traj, sent_forces) {
-            (Ok(()), Ok(())) => {
-                stats.predicted.fetch_add(1, Ordering::Relaxed);
+        let failed = match (sent_traj, sent_forces) {
+            (Ok(()), Ok(())) => None,
+            (Err(e), _) => Some(format!("publishing the trajectory failed: {e:?}")),
+            (_, Err(e)) => Some(format!("publishing the forces failed: {e:?}")),
+        };
+        match failed {
+            None => {
+                h.diag.stats.predicted.fetch_add(1, Ordering::Relaxed);
             }
-            (Err(e), _) => h.diag.failed(
-                &format!("publishing the trajectory failed: {e:?}"),
-                Warning::Input,
-            ),
-            (_, Err(e)) => h.diag.failed(
-                &format!("publishing the forces failed: {e:?}"),
-                Warning::Input,
-            ),
+            Some(why) => h.diag.failed(&why, Warning::Input),
         }
     }
 }
