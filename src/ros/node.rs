@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context as _};
 use ros2_client::log::LogLevel;
+use ros2_client::parameters::{NumericRange, ParameterDescriptor, ParameterType};
 use ros2_client::{
     Context, ContextOptions, Message, MessageTypeName, Node, NodeName, NodeOptions, ParameterValue,
     Publisher, QosProfile, Server, ServiceMapping, ServiceTypeName, Subscription,
@@ -127,6 +128,55 @@ pub fn check_runtime_change(
     Ok(p)
 }
 
+/// What `describe_parameters` (`ros2 param describe`) answers for a
+/// parameter of the one table: its documentation, whether it can change at
+/// run time, and its range.
+fn descriptor(key: &str, kind: super::params::Kind, doc: &str) -> ParameterDescriptor {
+    use super::params::Kind;
+    let range = match kind {
+        Kind::Int(lo, hi) => NumericRange::IntegerRange {
+            from_value: i64::from(lo),
+            to_value: i64::from(hi),
+            step: 1,
+        },
+        Kind::Double(_) => NumericRange::FloatingPointRange {
+            from_value: 0.0,
+            to_value: f64::MAX,
+            step: 0.0,
+        },
+        _ => NumericRange::NotSpecified,
+    };
+    let constraints = match kind {
+        Kind::Topic => "an absolute ROS 2 name".to_string(),
+        Kind::Double(true) => "finite and > 0".to_string(),
+        Kind::Double(false) => "finite and >= 0".to_string(),
+        Kind::Doubles(max) => format!("at most {max} finite numbers > 0"),
+        _ => String::new(),
+    };
+    ParameterDescriptor {
+        name: key.to_string(),
+        param_type: ParameterType::NotSet,
+        description: doc.to_string(),
+        additional_constraints: constraints,
+        read_only: !RUNTIME_SETTABLE.contains(&key),
+        dynamic_typing: false,
+        range,
+    }
+}
+
+/// Adds the descriptors of every parameter of the table.
+trait FoldDescriptors {
+    fn fold_descriptors(self) -> Self;
+}
+
+impl FoldDescriptors for NodeOptions {
+    fn fold_descriptors(self) -> Self {
+        super::params::SPECS.iter().fold(self, |o, (k, kind, doc)| {
+            o.describe_parameter(descriptor(k, *kind, doc))
+        })
+    }
+}
+
 /// Every parameter of [`SPECS`](super::params::SPECS) as a ROS parameter, so
 /// rclpy can list and get them all; those in [`RUNTIME_SETTABLE`] can be set
 /// (validated, then applied to `live`), the others refuse with the reason.
@@ -154,6 +204,7 @@ fn declare_parameters(p: &NodeParams, live: LiveParams) -> NodeOptions {
         .fold(NodeOptions::new().enable_rosout(true), |o, (k, v)| {
             o.declare_parameter(k, v)
         })
+        .fold_descriptors()
         // Declaring goes through the validator too: the start values pass.
         .parameter_validator(Box::new(move |name, value| {
             if initial.iter().any(|(k, v)| *k == name && v == value) {

@@ -62,6 +62,19 @@ def main():
     for want in ("substeps", "model_dir", "max_particles", "horizon", "dt", "use_sim_time"):
         if want not in names:
             fail(f"{want} not listed: {names}")
+    # describe_parameters (`ros2 param describe`) gives the one table's text,
+    # ranges and which parameters are read-only.
+    desc = {d.name: d for d in call(client.describe_parameters(["horizon", "input_topic", "dt"]),
+                                    "describe_parameters").descriptors}
+    h, t, d = desc["horizon"], desc["input_topic"], desc["dt"]
+    if h.description != "steps predicted per incoming state" or h.read_only:
+        fail(f"horizon described as {h}")
+    if [(r.from_value, r.to_value, r.step) for r in h.integer_range] != [(1, 100000, 1)]:
+        fail(f"horizon range {h.integer_range}")
+    if not t.read_only or t.additional_constraints != "an absolute ROS 2 name":
+        fail(f"input_topic described as {t}")
+    if d.additional_constraints != "finite and > 0" or d.floating_point_range[0].from_value != 0.0:
+        fail(f"dt described as {d}")
     got = call(client.get_parameters(["horizon", "substeps", "model"]), "get_parameters").values
     before = {"horizon": got[0].integer_value, "substeps": got[1].integer_value, "model": got[2].string_value}
 
