@@ -3,9 +3,56 @@
 use super::params::Weights;
 use super::variant::Hyper;
 use crate::system::{EdgeKind, Graph};
-use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// Why a model file (or another JSON file written atomically) could not be
+/// read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelFileError {
+    /// The file cannot be read.
+    #[error("cannot read model file {}: {source}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file is not the JSON of a model file.
+    #[error("{} is not a valid mcgnode model file: {source}", path.display())]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// Where and why.
+        source: serde_json::Error,
+    },
+    /// A model file of another format version.
+    #[error("{}: unsupported model format {found:?} (expected {FORMAT})", path.display())]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// Its format tag.
+        found: String,
+    },
+    /// Writing failed at step `what`.
+    #[error("writing {}: {what}: {source}", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The step (creating the folder, the temporary file, syncing, renaming).
+        what: &'static str,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The value does not encode as JSON.
+    #[error("writing {}: encoding JSON: {source}", path.display())]
+    Encode {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: serde_json::Error,
+    },
+}
 
 /// Format tag written in every model file.
 pub const FORMAT: &str = "mcgnode-model/1";
@@ -161,23 +208,25 @@ pub struct AdamState {
 
 impl ModelFile {
     /// Writes the file atomically (temporary file in the same folder, then rename).
-    pub fn save(&self, path: &Path) -> Result<()> {
+    pub fn save(&self, path: &Path) -> Result<(), ModelFileError> {
         write_json_atomic(path, self)
-            .with_context(|| format!("writing model file {}", path.display()))
     }
 
     /// Reads and checks a model file.
-    pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read model file {}", path.display()))?;
-        let m: ModelFile = serde_json::from_str(&text)
-            .with_context(|| format!("{} is not a valid mcgnode model file", path.display()))?;
+    pub fn load(path: &Path) -> Result<Self, ModelFileError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ModelFileError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let m: ModelFile = serde_json::from_str(&text).map_err(|source| ModelFileError::Parse {
+            path: path.to_path_buf(),
+            source,
+        })?;
         if m.format != FORMAT {
-            bail!(
-                "{}: unsupported model format {:?} (expected {FORMAT})",
-                path.display(),
-                m.format
-            );
+            return Err(ModelFileError::Format {
+                path: path.to_path_buf(),
+                found: m.format,
+            });
         }
         Ok(m)
     }
@@ -186,24 +235,35 @@ impl ModelFile {
 /// Writes `value` as pretty JSON to `path` atomically: a temporary file in the
 /// same folder, synced, made 0644 (tempfile creates 0600; model files are
 /// ordinary shareable files), then renamed over `path`.
-pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<(), ModelFileError> {
     use std::io::Write;
+    let at = |what: &'static str| {
+        move |source| ModelFileError::Write {
+            path: path.to_path_buf(),
+            what,
+            source,
+        }
+    };
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("creating a temporary file in {}", dir.display()))?;
-    serde_json::to_writer_pretty(&mut tmp, value)?;
-    tmp.write_all(b"\n")?;
-    tmp.as_file().sync_all()?;
+    std::fs::create_dir_all(dir).map_err(at("creating its folder"))?;
+    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(at("creating a temporary file"))?;
+    serde_json::to_writer_pretty(&mut tmp, value).map_err(|source| ModelFileError::Encode {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    tmp.write_all(b"\n").map_err(at("writing"))?;
+    tmp.as_file().sync_all().map_err(at("syncing"))?;
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
         tmp.as_file()
-            .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+            .set_permissions(std::fs::Permissions::from_mode(0o644))
+            .map_err(at("setting permissions"))?;
     }
-    tmp.persist(path)?;
+    tmp.persist(path)
+        .map_err(|e| at("renaming into place")(e.error))?;
     Ok(())
 }

@@ -232,12 +232,12 @@ pub enum TrainingError {
     #[error("the served model ({0}) is not a model file")]
     NotAFile(String),
     /// The served model's file does not read back.
-    #[error("cannot read the served model {}: {source:#}", path.display())]
+    #[error("cannot read the served model {}: {source}", path.display())]
     ReadServed {
         /// Its file.
         path: PathBuf,
         /// Why.
-        source: anyhow::Error,
+        source: crate::model::file::ModelFileError,
     },
     /// A fine-tuning request names another variant than the served one.
     #[error(
@@ -540,7 +540,8 @@ fn save_and_load(
     let path = shared
         .model_dir
         .join(model_file_name(variant, secs, std::process::id(), seq));
-    file.save(&path).map_err(TrainingError::Save)?;
+    file.save(&path)
+        .map_err(|e| TrainingError::Save(e.into()))?;
     let v = serde_json::to_value(&file).map_err(|e| TrainingError::Save(e.into()))?;
     let trained_for = crate::compat::TrainedFor::from_model_json(&path.display().to_string(), &v);
     let m = TrainedModel::from_file(file).map_err(TrainingError::Load)?;
