@@ -236,23 +236,26 @@ fn point(v: &Vector3) -> Point {
     }
 }
 
+/// Where edge end `i` is: particle `i`, or anchor `i - n` (`None` when out
+/// of range).
+fn endpoint(s: &ParticleState, i: u32) -> Option<Point> {
+    let (i, n) = (i as usize, s.positions.len());
+    if i < n {
+        Some(point(&s.positions[i]))
+    } else {
+        s.anchors.get(i - n).copied()
+    }
+}
+
 /// The length markers are sized by: the median edge length, else the
 /// spread of the positions, else 1.
 fn length_scale(s: &ParticleState) -> f64 {
-    let ends = |i: usize| -> Option<Point> {
-        let n = s.positions.len();
-        if i < n {
-            Some(point(&s.positions[i]))
-        } else {
-            s.anchors.get(i - n).copied()
-        }
-    };
     let mut lengths: Vec<f64> = s
         .edge_a
         .iter()
         .zip(&s.edge_b)
         .filter_map(|(&a, &b)| {
-            let (p, q) = (ends(a as usize)?, ends(b as usize)?);
+            let (p, q) = (endpoint(s, a)?, endpoint(s, b)?);
             let d = ((p.x - q.x).powi(2) + (p.y - q.y).powi(2) + (p.z - q.z).powi(2)).sqrt();
             (d > 0.0 && d.is_finite()).then_some(d)
         })
@@ -316,18 +319,9 @@ pub fn prediction_markers(
         particles.colors.clear();
     }
     out.push(particles);
-    let n = s.positions.len();
-    let end = |i: u32| -> Option<Point> {
-        let i = i as usize;
-        if i < n {
-            Some(point(&s.positions[i]))
-        } else {
-            s.anchors.get(i - n).copied()
-        }
-    };
     let mut edges = base("edges", 0, LINE_LIST, 0.05 * l, GREY);
     for (k, (&a, &b)) in s.edge_a.iter().zip(&s.edge_b).enumerate() {
-        if let (Some(p), Some(q)) = (end(a), end(b)) {
+        if let (Some(p), Some(q)) = (endpoint(s, a), endpoint(s, b)) {
             let c = if s.edge_kind.get(k) == Some(&crate::data::msg::EDGE_BAR) {
                 DARK
             } else {

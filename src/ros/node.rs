@@ -164,19 +164,6 @@ fn descriptor(key: &str, kind: super::params::Kind, doc: &str) -> ParameterDescr
     }
 }
 
-/// Adds the descriptors of every parameter of the table.
-trait FoldDescriptors {
-    fn fold_descriptors(self) -> Self;
-}
-
-impl FoldDescriptors for NodeOptions {
-    fn fold_descriptors(self) -> Self {
-        super::params::SPECS.iter().fold(self, |o, (k, kind, doc)| {
-            o.describe_parameter(descriptor(k, *kind, doc))
-        })
-    }
-}
-
 /// Every parameter of [`SPECS`](super::params::SPECS) as a ROS parameter, so
 /// rclpy can list and get them all; those in [`RUNTIME_SETTABLE`] can be set
 /// (validated, then applied to `live`), the others refuse with the reason.
@@ -199,12 +186,13 @@ fn declare_parameters(p: &NodeParams, live: LiveParams) -> NodeOptions {
         .collect();
     let initial = values.clone();
     let (check, apply) = (live.clone(), live);
+    let described = SPECS.iter().fold(
+        NodeOptions::new().enable_rosout(true),
+        |o, (k, kind, doc)| o.describe_parameter(descriptor(k, *kind, doc)),
+    );
     values
         .into_iter()
-        .fold(NodeOptions::new().enable_rosout(true), |o, (k, v)| {
-            o.declare_parameter(k, v)
-        })
-        .fold_descriptors()
+        .fold(described, |o, (k, v)| o.declare_parameter(k, v))
         // Declaring goes through the validator too: the start values pass.
         .parameter_validator(Box::new(move |name, value| {
             if initial.iter().any(|(k, v)| *k == name && v == value) {
