@@ -117,11 +117,27 @@ fn quick_reproduce_writes_a_complete_report() {
         .iter()
         .filter(|t| t["training"]["time_budget"].as_f64().is_some())
         .collect();
-    assert_eq!(budgeted.len(), 6, "LGN, HGN, GNS per system");
+    assert_eq!(
+        budgeted.len(),
+        7,
+        "LGN, HGN, GNS per system; GNS on the cube"
+    );
     assert!(budgeted
         .iter()
         .all(|t| t["training"]["out_of_time"] == true
             && t["training"]["epochs_run"].as_u64() >= Some(1)));
+    // GNS on the cube gets the seconds MCGNODE's cube training took.
+    let seconds = |model: &str| {
+        let t = training.iter().find(|t| t["model"] == model).unwrap();
+        (
+            t["training"]["seconds"].as_f64(),
+            t["training"]["time_budget"].as_f64(),
+        )
+    };
+    assert_eq!(
+        seconds("gns-peridynamic").1,
+        seconds("mcgnode-peridynamic").0
+    );
     // MCGNODE without body forces conserves the peridynamic cube's momentum.
     let peri = evals
         .iter()

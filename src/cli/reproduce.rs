@@ -20,6 +20,9 @@ pub struct Args {
     /// Epochs of MCGNODE, LGN, HGN and GNS in the equal-epoch comparison only, after --epochs (LGN and HGN cost 20x MCGNODE per epoch; the equal-wall-clock comparison gives them MCGNODE's time).
     #[arg(long)]
     pub comparison_epochs: Option<usize>,
+    /// Epochs of the peridynamic cube's models, after --epochs (a cube epoch of MCGNODE costs about 0.4 s on 2 cores, 50x a 5-spring epoch; GNS trains for the seconds MCGNODE took).
+    #[arg(long)]
+    pub peridynamic_epochs: Option<usize>,
     /// Parts to run, comma-separated, in this order (default: all): springs, pendulums, peridynamic, drag-force, noise, data-efficiency.
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<Part>,
@@ -46,6 +49,12 @@ pub fn run(a: Args) -> Result<()> {
             anyhow::bail!("--comparison-epochs must be at least 1");
         }
         scale.epochs = e;
+    }
+    if let Some(e) = a.peridynamic_epochs {
+        if e == 0 {
+            anyhow::bail!("--peridynamic-epochs must be at least 1");
+        }
+        scale.peri_epochs = e;
     }
     let threads = a
         .threads
