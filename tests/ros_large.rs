@@ -12,7 +12,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::{driver_outcome, expect_success, in_netns, ros_env, run_bounded};
+use common::{beside_node, driver_outcome, expect_success, in_netns, ros_env, run_bounded};
 
 #[test]
 fn large_predictions_arrive_promptly_and_oversized_states_are_refused() {
@@ -25,20 +25,12 @@ fn large_predictions_arrive_promptly_and_oversized_states_are_refused() {
          diagnostics_period: 0.25\n    warn_period: 1.0\n    max_particles: 2000\n",
     )
     .expect("writing params");
-    let script = r#"
-        set -u
-        . "$ENV"
-        "$BIN" serve --params "$PARAMS" 2>"$LOG" &
-        node=$!
+    let script = &beside_node(
+        r"
         timeout 150 python3 scripts/ros/bench_large.py --particles 1000 --messages 3 --small 3 \
             --oversized 3000 --timeout 20
-        rc=$?
-        kill -INT $node
-        for _ in $(seq 100); do kill -0 $node 2>/dev/null || break; sleep 0.1; done
-        if kill -0 $node 2>/dev/null; then echo "node ignored SIGINT"; kill -KILL $node; exit 3; fi
-        wait $node; node_rc=$?
-        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
-    "#;
+    ",
+    );
     let log = dir.path().join("node.log");
     let o = run_bounded(
         in_netns(script, &params, &env_sh).env("LOG", &log),

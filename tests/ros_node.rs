@@ -13,7 +13,9 @@ use std::time::Duration;
 
 mod common;
 
-use common::{driver_outcome, expect_success, in_netns, ros_env, run_bounded, BIN, ROOT};
+use common::{
+    beside_node, driver_outcome, expect_success, in_netns, ros_env, run_bounded, BIN, ROOT,
+};
 
 /// A parameter file for the tests (short horizon, fast diagnostics);
 /// `record_dir` records with bags split every second.
@@ -55,21 +57,12 @@ fn node_serves_rclpy_clients() {
     let params = write_params(dir.path(), Some(&rec));
     // The node logs to a file so its stderr can be checked separately; it is
     // stopped with SIGINT and must exit 0.
-    let script = r#"
-        set -u
-        . "$ENV"
-        "$BIN" serve --params "$PARAMS" 2>"$LOG" &
-        node=$!
+    let script = &beside_node(
+        r"
         timeout 90 python3 tests/ros/drive.py --horizon 25 --dt 0.001 \
             --max-rollout-steps 1000 --warn-period 1.0
-        rc=$?
-        kill -INT $node
-        for _ in $(seq 100); do kill -0 $node 2>/dev/null || break; sleep 0.1; done
-        if kill -0 $node 2>/dev/null; then echo "node ignored SIGINT"; kill -KILL $node; exit 3; fi
-        wait $node; node_rc=$?
-        echo "node exit code $node_rc"
-        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
-    "#;
+    ",
+    );
     let log = dir.path().join("node.log");
     let o = run_bounded(
         in_netns(script, &params, &env_sh).env("LOG", &log),
@@ -406,19 +399,12 @@ fn managed_lifecycle_gates_the_predictions() {
     let env_sh = ros_env();
     let dir = tempfile::tempdir().expect("tempdir");
     let params = write_params(dir.path(), None);
-    let script = r#"
-        set -u
-        . "$ENV"
-        "$BIN" serve --params "$PARAMS" --set lifecycle=true 2>"$LOG" &
-        node=$!
-        timeout 90 python3 tests/ros/lifecycle_drive.py
-        rc=$?
-        kill -INT $node; wait $node
-        exit $rc
-    "#;
+    let script = &beside_node("timeout 90 python3 tests/ros/lifecycle_drive.py");
     let log = dir.path().join("node.log");
     let o = run_bounded(
-        in_netns(script, &params, &env_sh).env("LOG", &log),
+        in_netns(script, &params, &env_sh)
+            .env("LOG", &log)
+            .env("NODE_ARGS", "--set lifecycle=true"),
         Duration::from_secs(150),
         dir.path(),
     );

@@ -12,7 +12,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::{driver_outcome, in_netns, ros_env, run_bounded};
+use common::{beside_node, driver_outcome, in_netns, ros_env, run_bounded};
 
 #[test]
 fn rclpy_lists_gets_and_sets_parameters() {
@@ -24,16 +24,11 @@ fn rclpy_lists_gets_and_sets_parameters() {
         "mcgnode:\n  ros__parameters:\n    model: truth:spring\n    horizon: 25\n    substeps: 2\n",
     )
     .expect("writing params");
-    let script = r#"
-        set -u
-        . "$ENV"
-        "$BIN" serve --params "$PARAMS" 2>"$LOG" &
-        node=$!
+    let script = &beside_node(
+        r"
         timeout 90 python3 tests/ros/params_drive.py --timeout 20
-        rc=$?
-        kill -INT $node; wait $node; node_rc=$?
-        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
-    "#;
+    ",
+    );
     let log = dir.path().join("node.log");
     let o = run_bounded(
         in_netns(script, &params, &env_sh).env("LOG", &log),
@@ -94,16 +89,11 @@ fn use_sim_time_stamps_diagnostics_from_clock() {
          diagnostics_period: 0.2\n",
     )
     .expect("writing params");
-    let script = r#"
-        set -u
-        . "$ENV"
-        "$BIN" serve --params "$PARAMS" 2>"$LOG" &
-        node=$!
+    let script = &beside_node(
+        r"
         timeout 60 python3 tests/ros/clock_drive.py --sec 4242 --timeout 20
-        rc=$?
-        kill -INT $node; wait $node; node_rc=$?
-        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
-    "#;
+    ",
+    );
     let log = dir.path().join("node.log");
     let o = run_bounded(
         in_netns(script, &params, &env_sh).env("LOG", &log),

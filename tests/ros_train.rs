@@ -14,7 +14,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::{driver_outcome, in_netns, ros_env, run_bounded, BIN};
+use common::{beside_node, driver_outcome, in_netns, ros_env, run_bounded, BIN};
 
 /// `mcgnode <args>`, which must succeed.
 fn mcgnode(args: &[&str], dir: &Path) {
@@ -95,21 +95,12 @@ fn node_retrains_and_swaps_models() {
         ),
     )
     .expect("writing params");
-    let script = r#"
-        set -u
-        . "$ENV"
-        "$BIN" serve --params "$PARAMS" 2>"$LOG" &
-        node=$!
+    let script = &beside_node(
+        r#"
         timeout 150 python3 tests/ros/train_drive.py --model "$M0" --state-bag "$A" \
             --train-bag "$B" --record-dir "$REC" --work "$WORK"
-        rc=$?
-        kill -INT $node
-        for _ in $(seq 100); do kill -0 $node 2>/dev/null || break; sleep 0.1; done
-        if kill -0 $node 2>/dev/null; then echo "node ignored SIGINT"; kill -KILL $node; exit 3; fi
-        wait $node; node_rc=$?
-        echo "node exit code $node_rc"
-        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
-    "#;
+    "#,
+    );
     let log = d.join("node.log");
     let o = run_bounded(
         in_netns(script, &params, &env_sh)

@@ -98,6 +98,29 @@ pub fn ros_env() -> PathBuf {
     root.join("build/msgs/env.sh")
 }
 
+/// The script that starts the node on `$PARAMS` (log in `$LOG`, further
+/// arguments in `$NODE_ARGS`), runs
+/// `driver` (shell) beside it, stops the node with SIGINT (killing it after
+/// 10 s) and succeeds when both exited 0.
+pub fn beside_node(driver: &str) -> String {
+    format!(
+        r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$PARAMS" ${{NODE_ARGS:-}} 2>"$LOG" &
+        node=$!
+        {driver}
+        rc=$?
+        kill -INT $node
+        for _ in $(seq 100); do kill -0 $node 2>/dev/null || break; sleep 0.1; done
+        if kill -0 $node 2>/dev/null; then echo "node ignored SIGINT"; kill -KILL $node; exit 3; fi
+        wait $node; node_rc=$?
+        echo "node exit code $node_rc"
+        [ $rc -eq 0 ] && [ $node_rc -eq 0 ]
+    "#
+    )
+}
+
 /// `scripts/netns.sh bash -c script` with BIN, ENV, PARAMS exported.
 pub fn in_netns(script: &str, params: &Path, env_sh: &Path) -> Command {
     let mut c = Command::new("bash");
