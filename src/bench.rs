@@ -2,12 +2,12 @@
 //! times of training steps and rollouts, next to the authors' JAX figures
 //! measured on this same 2-core machine.
 
+use crate::error::Result;
 use crate::model::{Hyper, Variant};
 use crate::physics::{SystemConfig, SystemKind};
 use crate::system::{Graph, State};
 use crate::testing::random_model;
 use crate::train::{EngineKind, TrainConfig};
-use anyhow::Result;
 use serde::Serialize;
 use std::time::Instant;
 
@@ -110,13 +110,13 @@ pub fn rollout_seconds(
     let g = cfg.graph();
     let (_, m) = random_model(variant, &g, 0)?;
     let s0 = cfg.start_for(&g, 5, 0);
-    let mut ws = m.kernel.workspace(&g).map_err(anyhow::Error::msg)?;
+    let mut ws = m.kernel.workspace(&g).map_err(crate::error::Error::msg)?;
     let mut times = vec![];
     for _ in 0..repeats {
         let t = Instant::now();
         let r = m.rollout_with(&mut ws, &s0, cfg.dt, steps, steps, |_, _, _| {});
         times.push(t.elapsed().as_secs_f64());
-        r.map_err(anyhow::Error::msg)?;
+        r.map_err(crate::error::Error::msg)?;
     }
     Ok(median(times))
 }

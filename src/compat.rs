@@ -123,11 +123,11 @@ impl TrainedFor {
     }
 
     /// Reads a model file's training description.
-    pub fn from_model_file(path: &Path) -> anyhow::Result<TrainedFor> {
+    pub fn from_model_file(path: &Path) -> crate::error::Result<TrainedFor> {
         let text = std::fs::read_to_string(path)
-            .map_err(|e| anyhow::anyhow!("cannot read model file {}: {e}", path.display()))?;
+            .map_err(|e| crate::error::err!("cannot read model file {}: {e}", path.display()))?;
         let v: serde_json::Value = serde_json::from_str(&text)
-            .map_err(|e| anyhow::anyhow!("model file {} is not JSON: {e}", path.display()))?;
+            .map_err(|e| crate::error::err!("model file {} is not JSON: {e}", path.display()))?;
         Ok(Self::from_model_json(&path.display().to_string(), &v))
     }
 
@@ -286,7 +286,7 @@ pub fn check_bag(
     trained: &TrainedFor,
     bag: &crate::data::Bag,
     field: Option<&Field>,
-) -> anyhow::Result<()> {
+) -> crate::error::Result<()> {
     let mut seen: Vec<&Graph> = vec![];
     for tr in &bag.trajectories {
         if seen.contains(&&tr.graph) {
@@ -294,7 +294,7 @@ pub fn check_bag(
         }
         trained
             .check(&tr.graph, field)
-            .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", tr.id))?;
+            .map_err(|e| crate::error::err!("trajectory {}: {e}", tr.id))?;
         seen.push(&tr.graph);
     }
     Ok(())

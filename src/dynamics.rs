@@ -375,3 +375,5 @@ pub enum DynamicsError {
     #[error("{0}")]
     Model(String),
 }
+
+crate::error::typed_errors!(DynamicsError);

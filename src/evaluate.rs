@@ -4,10 +4,10 @@
 use crate::data::bag::Bag;
 use crate::data::field::{bag_field, bag_system, stamp_interval, unknown_field_error};
 use crate::dynamics::Dynamics;
+use crate::error::{bail, Result};
 use crate::metrics::{error_curves, summarize, ErrorCurves, Summary};
 use crate::physics::Field;
 use crate::system::{fingerprint, State};
-use anyhow::{bail, Result};
 use serde::Serialize;
 use std::time::Instant;
 
@@ -147,7 +147,7 @@ pub fn evaluate(
             .collect();
         let rollouts = model
             .rollout_many(g, &starts, dt, *steps, *every)
-            .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", trajs[members[0]].id))?;
+            .map_err(|e| crate::error::err!("trajectory {}: {e}", trajs[members[0]].id))?;
         steps_total = *steps;
         for (&i, r) in members.iter().zip(rollouts) {
             let tr = trajs[i];
@@ -155,7 +155,7 @@ pub fn evaluate(
             let k = r.states.len().min(times.len());
             let truth: Vec<State> = tr.samples[..k].iter().map(|s| s.state.clone()).collect();
             let c = error_curves(g, &field, &truth, &r.states[..k], &times[..k])
-                .map_err(|e| anyhow::anyhow!("trajectory {}: {e}", tr.id))?;
+                .map_err(|e| crate::error::err!("trajectory {}: {e}", tr.id))?;
             curves[i] = Some(if r.diverged_at.is_some() {
                 diverged += 1;
                 ErrorCurves::diverged(c, &times)

@@ -19,6 +19,7 @@ pub mod compat;
 pub mod data;
 pub mod dynamics;
 pub mod engine;
+pub mod error;
 pub mod evaluate;
 pub mod kernel;
 pub mod metrics;
@@ -35,3 +36,5 @@ pub mod system;
 #[doc(hidden)]
 pub mod testing;
 pub mod train;
+
+pub use error::{Error, Result};

@@ -103,6 +103,8 @@ pub enum MetricsError {
     },
 }
 
+crate::error::typed_errors!(MetricsError);
+
 /// Error curves of one predicted trajectory against the truth.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ErrorCurves {

@@ -5,7 +5,7 @@
 use std::path::Path;
 use std::sync::OnceLock;
 
-use anyhow::{anyhow, bail, Context};
+use crate::error::{bail, err, Context};
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
@@ -16,18 +16,23 @@ use crate::metrics::{Band, Summary, DIVERGED, LOG_FLOOR};
 const FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 const FAMILY: &str = "sans-serif";
 
+/// A failure of plotters on a PNG bitmap.
+type DrawError = DrawingAreaErrorKind<<BitMapBackend<'static> as DrawingBackend>::ErrorType>;
+
+crate::error::typed_errors!(DrawError);
+
 /// Pixels per panel.
 const CELL: (u32, u32) = (460, 300);
 
 /// Registers the embedded font with plotters once per process.
-fn ensure_font() -> anyhow::Result<()> {
+fn ensure_font() -> crate::error::Result<()> {
     static LOADED: OnceLock<bool> = OnceLock::new();
     let loaded = *LOADED
         .get_or_init(|| plotters::style::register_font(FAMILY, FontStyle::Normal, FONT).is_ok());
     if loaded {
         Ok(())
     } else {
-        Err(anyhow!("the embedded DejaVu Sans font could not be loaded"))
+        Err(err!("the embedded DejaVu Sans font could not be loaded"))
     }
 }
 
@@ -142,7 +147,7 @@ fn y_range(models: &[(String, Summary)], pick: Pick) -> (f64, f64) {
 pub fn plot_summaries(
     path: &Path,
     panels: &[(String, Vec<(String, Summary)>)],
-) -> anyhow::Result<()> {
+) -> crate::error::Result<()> {
     plot_metrics(path, panels, &ROWS)
 }
 
@@ -151,7 +156,7 @@ pub fn plot_metrics(
     path: &Path,
     panels: &[(String, Vec<(String, Summary)>)],
     rows: &[Metric],
-) -> anyhow::Result<()> {
+) -> crate::error::Result<()> {
     if rows.is_empty() {
         bail!("nothing to plot: no metrics");
     }
@@ -218,7 +223,7 @@ fn draw_cell(
     names: &[&str],
     top: bool,
     bottom: bool,
-) -> anyhow::Result<()> {
+) -> crate::error::Result<()> {
     let t0 = models
         .iter()
         .map(|m| m.1.t[0])
@@ -299,7 +304,7 @@ pub fn plot_sweep(
     x_label: &str,
     log_x: bool,
     panels: &[(String, String, Vec<SweepLine>)],
-) -> anyhow::Result<()> {
+) -> crate::error::Result<()> {
     if panels.is_empty() || panels.iter().any(|p| p.2.iter().all(|l| l.1.is_empty())) {
         bail!("nothing to plot: a sweep panel has no points");
     }
@@ -324,7 +329,7 @@ fn draw_sweep(
     x_label: &str,
     log_x: bool,
     lines: &[SweepLine],
-) -> anyhow::Result<()> {
+) -> crate::error::Result<()> {
     let pts = || lines.iter().flat_map(|l| l.1.iter());
     let usable = |y: f64| y.is_finite() && y > LOG_FLOOR * 10.0 && y < DIVERGED / 10.0;
     let (mut ylo, mut yhi) = (f64::INFINITY, 0.0_f64);
@@ -438,7 +443,7 @@ pub struct Scene {
 /// Draws `scene` to a PNG: seen along z when it is flat, else from an oblique
 /// viewpoint (rotated 35° about z, then tilted 30°), scaled to fit with equal
 /// axes; segments first, then squares, discs and arrows on top.
-pub fn draw_scene(path: &Path, scene: &Scene) -> anyhow::Result<()> {
+pub fn draw_scene(path: &Path, scene: &Scene) -> crate::error::Result<()> {
     ensure_font()?;
     let flat = scene
         .segments
@@ -485,7 +490,7 @@ pub fn draw_scene(path: &Path, scene: &Scene) -> anyhow::Result<()> {
     };
     let px = |len: f64| ((k * len).round() as u32).max(1);
     let root = BitMapBackend::new(path, (w, h)).into_drawing_area();
-    let err = |e: &dyn std::fmt::Display| anyhow!("drawing {}: {e}", path.display());
+    let err = |e: &dyn std::fmt::Display| err!("drawing {}: {e}", path.display());
     root.fill(&WHITE).map_err(|e| err(&e))?;
     root.draw(&Text::new(
         scene.title.clone(),

@@ -21,7 +21,7 @@
 
 use std::time::Instant;
 
-use anyhow::{bail, Context as _, Result};
+use crate::error::{bail, Context as _, Result};
 use serde::Serialize;
 
 use crate::data::bag::Bag;
@@ -302,7 +302,7 @@ fn replay_trajectory(
 ) -> Result<()> {
     model
         .supports(&tr.graph)
-        .map_err(|e| anyhow::anyhow!("trajectory {}: the model cannot take it: {e}", tr.id))?;
+        .map_err(|e| crate::error::err!("trajectory {}: the model cannot take it: {e}", tr.id))?;
     // Leads a little past the horizon (stamp round-off) still count.
     let limit = p.horizon + 1e-6 * p.bin_width;
     let s = &tr.samples;
@@ -345,7 +345,7 @@ fn replay_trajectory(
         let bin_of = |lead: f64| ((lead / p.bin_width).round() as usize).clamp(1, p.bins);
         if !pred.is_empty() {
             let c = error_curves(&tr.graph, &p.field, &truth, &pred, &leads)
-                .map_err(|e| anyhow::anyhow!("trajectory {}, start {k}: {e}", tr.id))?;
+                .map_err(|e| crate::error::err!("trajectory {}, start {k}: {e}", tr.id))?;
             for i in 0..leads.len() {
                 bins[bin_of(leads[i])].push(leads[i], [c.re[i], c.ee[i], c.me[i], c.me_scaled[i]]);
             }

@@ -3,8 +3,8 @@
 //! were made. Used by `mcgnode simulate`, `demo` and `reproduce`.
 
 use crate::data::bag::write_trajectories_with_field;
+use crate::error::{bail, Context, Result};
 use crate::physics::{constraint_residual, SystemConfig};
-use anyhow::{bail, Context, Result};
 use std::path::Path;
 
 /// Largest bar-length residual |r − l| accepted in RK4 data. RK4 integrates the

@@ -281,3 +281,5 @@ pub enum SystemError {
     #[error("state contains NaN or infinite values")]
     NonFinite,
 }
+
+crate::error::typed_errors!(SystemError);

@@ -1,10 +1,10 @@
 //! Support for tests and benches, not part of the library's interface
 //! (hidden from the docs): models with random weights.
 
+use crate::error::Result;
 use crate::kernel::TrainedModel;
 use crate::model::{Hyper, Net, Variant};
 use crate::system::Graph;
-use anyhow::Result;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 

@@ -3,6 +3,7 @@
 
 use crate::data::dataset::Dataset;
 use crate::engine::Engine;
+use crate::error::{bail, Result};
 use crate::model::batch::Batch;
 use crate::model::file::AdamState;
 use crate::model::file::TrainingReport;
@@ -10,7 +11,6 @@ use crate::model::params::ParamStore;
 use crate::model::plan::GraphPlan;
 use crate::model::{ArchPreset, EdgeInput, Hyper, MessageFn, Net, Variant};
 use crate::system::{Graph, State};
-use anyhow::{bail, Result};
 use candle_core::Tensor;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
@@ -374,7 +374,7 @@ pub fn check_data(
     graph.validate()?;
     for (i, (s, a)) in states.iter().zip(acc).enumerate() {
         s.validate(graph)
-            .map_err(|e| anyhow::anyhow!("state {i}: {e}"))?;
+            .map_err(|e| crate::error::err!("state {i}: {e}"))?;
         if a.len() != graph.ndof() || a.iter().any(|x| !x.is_finite()) {
             bail!("accelerations of state {i} have the wrong size or are not finite");
         }

@@ -138,7 +138,7 @@ fn vars(b: &Batch) -> (Var, Var) {
 }
 
 /// Σ ½k(|q_a − q_b| − r)² over the forward particle edges (all springs here).
-fn spring_energy(g: &Graph, b: &Batch, q: &Tensor) -> anyhow::Result<Tensor> {
+fn spring_energy(g: &Graph, b: &Batch, q: &Tensor) -> mcgnode::Result<Tensor> {
     let e = b.n_directed / 2;
     if e == 0 {
         return Ok(Tensor::zeros((), candle_core::DType::F64, &Device::Cpu)?);
@@ -155,7 +155,7 @@ fn masses(g: &Graph, b: &Batch) -> Tensor {
     Tensor::from_vec(m, (b.b * b.n, 1), &Device::Cpu).unwrap()
 }
 
-fn gravity_energy(c: &SystemConfig, m: &Tensor, q: &Tensor) -> anyhow::Result<Tensor> {
+fn gravity_energy(c: &SystemConfig, m: &Tensor, q: &Tensor) -> mcgnode::Result<Tensor> {
     Ok((q.narrow(1, 1, 1)? * m)?
         .sum_all()?
         .affine(c.field.gravity, 0.0)?)
@@ -179,7 +179,7 @@ fn euler_lagrange_matches_physics() {
         let b = Batch::new(&plan, &refs, None, 1).unwrap();
         let (q, v) = vars(&b);
         let m = masses(&g, &b);
-        let lag = |q: &Tensor, v: &Tensor| -> anyhow::Result<Tensor> {
+        let lag = |q: &Tensor, v: &Tensor| -> mcgnode::Result<Tensor> {
             let t = (v.sqr()?.broadcast_mul(&m)?.sum_all()? * 0.5)?;
             Ok(((t - spring_energy(&g, &b, q)?)? - gravity_energy(&c, &m, q)?)?)
         };
@@ -207,13 +207,13 @@ fn euler_lagrange_handles_velocity_dependent_lagrangians() {
         Var::from_tensor(&Tensor::from_vec(qs.to_vec(), (3, 2), &Device::Cpu).unwrap()).unwrap();
     let v =
         Var::from_tensor(&Tensor::from_vec(vs.to_vec(), (3, 2), &Device::Cpu).unwrap()).unwrap();
-    let jq = |q: &Tensor| -> anyhow::Result<Tensor> {
+    let jq = |q: &Tensor| -> mcgnode::Result<Tensor> {
         Ok(Tensor::cat(
             &[q.narrow(1, 1, 1)?.neg()?, q.narrow(1, 0, 1)?],
             1,
         )?)
     };
-    let lag = |q: &Tensor, v: &Tensor| -> anyhow::Result<Tensor> {
+    let lag = |q: &Tensor, v: &Tensor| -> mcgnode::Result<Tensor> {
         let u = (v + (jq(q)? * w)?)?;
         Ok(((u.sqr()?.sum_all()? * (0.5 * m))? - (q.sqr()?.sum_all()? * (0.5 * kap))?)?)
     };
@@ -245,7 +245,7 @@ fn hamilton_matches_physics() {
         let m = masses(&g, &b);
         let q = Var::from_tensor(&b.q).unwrap();
         let p = Var::from_tensor(&b.v.broadcast_mul(&m).unwrap()).unwrap();
-        let ham = |q: &Tensor, p: &Tensor| -> anyhow::Result<Tensor> {
+        let ham = |q: &Tensor, p: &Tensor| -> mcgnode::Result<Tensor> {
             let t = (p.sqr()?.broadcast_div(&m)?.sum_all()? * 0.5)?;
             Ok(((t + spring_energy(&g, &b, q)?)? + gravity_energy(&c, &m, q)?)?)
         };
@@ -519,7 +519,7 @@ impl Dynamics for NetDyn {
         out: &mut [f64],
     ) -> Result<(), DynamicsError> {
         let plan = GraphPlan::new(graph);
-        let model = |e: anyhow::Error| DynamicsError::Model(e.to_string());
+        let model = |e: mcgnode::Error| DynamicsError::Model(e.to_string());
         let b = Batch::new(&plan, &[state], None, 1).map_err(model)?;
         let a = self.0.forward(&b).map_err(model)?.acc;
         out.copy_from_slice(&a.flatten_all().unwrap().to_vec1::<f64>().unwrap());

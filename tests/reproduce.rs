@@ -178,6 +178,29 @@ fn only_runs_the_named_parts_and_names_the_rest() {
         ),
         "{report}"
     );
+    // Only the noise claim is checked: the claims of parts not run are left
+    // out, not reported as failed or missing.
+    let claims = report
+        .split("## What the paper claims")
+        .nth(1)
+        .and_then(|c| c.split("\n## ").next())
+        .unwrap();
+    assert!(
+        claims.contains("Noise (paper: MCGNODE the most robust)"),
+        "{claims}"
+    );
+    for absent in [
+        "a model failed",
+        "No result",
+        "Energy error",
+        "Each bias",
+        "Peridynamic",
+    ] {
+        assert!(
+            !claims.contains(absent),
+            "{absent:?} in the claims of a noise run:\n{claims}"
+        );
+    }
     // The command is shown without the machine's folders.
     assert!(
         report.contains(

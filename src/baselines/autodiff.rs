@@ -12,7 +12,7 @@
 //! set keeps the old behaviour for its lifetime, and that must be an error, not
 //! silently zero gradients).
 
-use anyhow::{bail, Result};
+use crate::error::{bail, Result};
 use candle_core::{Device, Tensor, Var};
 use std::cell::Cell;
 

@@ -2,9 +2,9 @@
 //! own format tag so neither loader mistakes one for the other.
 
 use super::net::BaselineHyper;
+use crate::error::{bail, Context, Result};
 use crate::model::file::{TrainedOn, TrainingReport};
 use crate::model::params::Weights;
-use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 

@@ -4,8 +4,8 @@
 
 use super::net::{BaselineNet, Kind};
 use super::{gns, hgn, lgn};
+use crate::error::{bail, Result};
 use crate::model::batch::Batch;
-use anyhow::{bail, Result};
 use candle_core::Tensor;
 
 impl BaselineNet {

@@ -10,8 +10,8 @@
 //! two hidden layers, LayerNorm, 10 steps) to match this project's scale.
 
 use super::net::BaselineNet;
+use crate::error::Result;
 use crate::model::batch::Batch;
-use anyhow::Result;
 use candle_core::Tensor;
 
 /// Accelerations `(B·n, d)`.

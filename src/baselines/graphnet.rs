@@ -7,10 +7,10 @@
 //! embeddings and the node update sees sender + edge), the full GN's edge
 //! update reads its own edge state, and node updates aggregate updated edges.
 
+use crate::error::Result;
 use crate::model::batch::Batch;
 use crate::model::mlp::{squareplus, squareplus_grad, Mlp};
 use crate::model::params::ParamStore;
-use anyhow::Result;
 use candle_core::{DType, Device, Tensor};
 use rand::Rng;
 

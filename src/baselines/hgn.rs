@@ -8,8 +8,8 @@
 
 use super::mechanics::hamilton;
 use super::net::BaselineNet;
+use crate::error::{bail, Result};
 use crate::model::batch::Batch;
-use anyhow::{bail, Result};
 use candle_core::{Device, Tensor, Var};
 
 /// The learned Hamiltonian summed over the batch.

@@ -10,8 +10,8 @@
 
 use super::mechanics::euler_lagrange;
 use super::net::BaselineNet;
+use crate::error::Result;
 use crate::model::batch::Batch;
-use anyhow::Result;
 use candle_core::{Tensor, Var};
 
 /// The learned Lagrangian summed over the batch.

@@ -4,8 +4,8 @@
 //! hand-written Lagrangians and Hamiltonians and then used for the networks.
 
 use super::autodiff::{grads, hessian};
+use crate::error::Result;
 use crate::model::solve::solve;
-use anyhow::Result;
 use candle_core::{Tensor, Var};
 
 /// Constraint rows of a batch: A `(B, k, D)`, Aᵀ `(B, D, k)`, Ȧq̇ `(B, k, 1)`.

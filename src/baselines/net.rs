@@ -3,10 +3,10 @@
 //! [`super::forward`], above the three.
 
 use super::graphnet::{GraphNet, GraphNetSpec};
+use crate::error::{bail, Result};
 use crate::model::batch::Batch;
 use crate::model::mlp::Mlp;
 use crate::model::params::ParamStore;
-use anyhow::{bail, Result};
 use candle_core::{DType, Device, Tensor};
 use rand::Rng;
 use serde::{Deserialize, Serialize};

@@ -7,13 +7,13 @@
 use super::file::{BaselineFile, FORMAT};
 use super::net::{BaselineHyper, BaselineNet};
 use super::trained::TrainedBaseline;
+use crate::error::{bail, Result};
 use crate::model::batch::Batch;
 use crate::model::plan::GraphPlan;
 use crate::system::{Graph, State};
 use crate::train::{
     check_data, fit, flat_params, set_flat_params, CandleObjective, EpochReport, TrainConfig,
 };
-use anyhow::{bail, Result};
 use candle_core::Tensor;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

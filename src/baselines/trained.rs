@@ -4,11 +4,11 @@
 use super::file::BaselineFile;
 use super::net::BaselineNet;
 use crate::dynamics::{Dynamics, DynamicsError, Forces};
+use crate::error::Result;
 use crate::model::arch::ArchError;
 use crate::model::batch::Batch;
 use crate::model::plan::GraphPlan;
 use crate::system::{Graph, State};
-use anyhow::Result;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::path::Path;

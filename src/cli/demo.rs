@@ -90,7 +90,7 @@ pub fn run(a: Args) -> Result<()> {
     let models = lab
         .train_all(&specs)
         .into_iter()
-        .collect::<Result<Vec<_>>>()?;
+        .collect::<crate::Result<Vec<_>>>()?;
     lab.say(&format!("trained GNODE and MCGNODE ({epochs} epochs each)"));
     let (mut panels, mut json) = (vec![], vec![]);
     for (n, bag) in SIZES.iter().zip(&tests) {

@@ -49,5 +49,5 @@ impl FieldArgs {
 /// field its data state, the flags' `field` first).
 pub fn check_fits(trained: &TrainedFor, bag: &Bag, field: Option<&Field>) -> Result<()> {
     let data_field = bag_field(bag, field)?.map(|o| o.field);
-    check_bag(trained, bag, data_field.as_ref())
+    Ok(check_bag(trained, bag, data_field.as_ref())?)
 }

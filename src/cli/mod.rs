@@ -63,7 +63,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Bench(a) => bench::run(a),
         Command::Replay(a) => replay::run(a),
         Command::Reproduce(a) => reproduce::run(a),
-        Command::Serve(a) => crate::ros::run_serve(a),
+        Command::Serve(a) => Ok(crate::ros::run_serve(a)?),
         Command::Bag(a) => bag::run(a),
     }
 }

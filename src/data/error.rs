@@ -73,6 +73,8 @@ pub enum DataError {
     Trajectory(String),
 }
 
+crate::error::typed_errors!(DataError);
+
 impl DataError {
     pub(crate) fn io(path: impl Into<PathBuf>, what: &'static str, err: std::io::Error) -> Self {
         DataError::Io {

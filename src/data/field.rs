@@ -4,8 +4,8 @@
 //! Read by training, evaluation and replay alike.
 
 use super::bag::Bag;
+use crate::error::{bail, Result};
 use crate::physics::{Field, SystemConfig};
-use anyhow::{bail, Result};
 
 /// The simulator configuration a bag was made with, if it says.
 pub fn bag_system(bag: &Bag) -> Result<Option<SystemConfig>> {
@@ -111,8 +111,8 @@ pub fn bag_field(bag: &Bag, flag: Option<&Field>) -> Result<Option<FieldOrigin>>
 }
 
 /// The message for a field that cannot be known, naming the flags.
-pub fn unknown_field_error(what: &str) -> anyhow::Error {
-    anyhow::anyhow!(
+pub fn unknown_field_error(what: &str) -> crate::error::Error {
+    crate::error::err!(
         "the bag does not say what acts on the particles (its messages leave the field \
          unknown, it has no system_config metadata, and the data are not those of a closed \
          system), so {what} cannot be computed: pass --gravity G and/or --drag C (the \

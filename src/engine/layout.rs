@@ -34,6 +34,8 @@ pub enum LayoutError {
     },
 }
 
+crate::error::typed_errors!(LayoutError);
+
 /// Names, shapes and offsets of every parameter.
 #[derive(Clone, Debug)]
 pub struct Layout {

@@ -45,6 +45,8 @@ pub enum EngineError {
     },
 }
 
+crate::error::typed_errors!(EngineError);
+
 /// Loss and gradients of one model on states of one graph.
 pub struct Engine {
     model: Model,

@@ -5,9 +5,9 @@
 // (`target_feature`) copies to be compiled for AVX2 at all.
 #![allow(clippy::inline_always)]
 
+use crate::error::{bail, Result};
 use crate::model::mlp::squareplus_f64;
 use crate::model::params::Weights;
-use anyhow::{bail, Result};
 
 /// One linear layer, weights `[inputs, outputs]` row-major (as the model stores them).
 #[derive(Clone, Debug)]

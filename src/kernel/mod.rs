@@ -6,6 +6,7 @@
 mod dense;
 pub mod trained;
 
+use crate::error::{bail, Context, Result};
 use crate::model::arch::{Arch, ArchError, Block, LOG_MASS};
 use crate::model::mlp::squareplus_f64;
 use crate::model::params::Weights;
@@ -14,7 +15,6 @@ use crate::model::solve::lu_solve_in_place;
 use crate::model::variant::{EdgeInput, Hyper};
 use crate::physics::Projector;
 use crate::system::Graph;
-use anyhow::{bail, Context, Result};
 use dense::Mlp as KMlp;
 use rand::SeedableRng;
 pub use trained::TrainedModel;

@@ -2,9 +2,9 @@
 
 use super::{Kernel, Workspace};
 use crate::dynamics::{Dynamics, DynamicsError, EdgeForce, Forces, Rollout};
+use crate::error::Result;
 use crate::model::file::ModelFile;
 use crate::system::{Graph, State};
-use anyhow::Result;
 use std::path::Path;
 
 /// A trained model ready for rollouts and serving.

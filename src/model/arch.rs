@@ -329,3 +329,5 @@ pub enum ArchError {
         has: usize,
     },
 }
+
+crate::error::typed_errors!(ArchError);

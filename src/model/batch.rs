@@ -1,8 +1,8 @@
 //! A batch of states of one graph, as candle tensors.
 
 use super::plan::GraphPlan;
+use crate::error::{bail, Result};
 use crate::system::State;
-use anyhow::{bail, Result};
 use candle_core::{Device, Tensor};
 
 /// Inputs (and optionally targets) for `B` states of one graph.

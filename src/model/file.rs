@@ -54,6 +54,8 @@ pub enum ModelFileError {
     },
 }
 
+crate::error::typed_errors!(ModelFileError);
+
 /// Format tag written in every model file.
 pub const FORMAT: &str = "mcgnode-model/1";
 

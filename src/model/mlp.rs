@@ -1,7 +1,7 @@
 //! Multilayer perceptrons with squareplus activations, on candle tensors.
 
 use super::params::ParamStore;
-use anyhow::Result;
+use crate::error::Result;
 use candle_core::Tensor;
 use rand::Rng;
 

@@ -6,7 +6,7 @@ use super::mlp::{squareplus, Mlp};
 use super::params::ParamStore;
 use super::solve::solve;
 use super::variant::{EdgeInput, Hyper, Variant};
-use anyhow::{bail, Result};
+use crate::error::{bail, Result};
 use candle_core::{DType, Device, Tensor};
 use rand::Rng;
 
@@ -40,7 +40,7 @@ impl Parts {
 
     fn need(&self, block: Block) -> Result<&Mlp> {
         self.mlp(block)
-            .ok_or_else(|| anyhow::anyhow!("architecture has no {block} block"))
+            .ok_or_else(|| crate::error::err!("architecture has no {block} block"))
     }
 }
 

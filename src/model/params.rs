@@ -1,7 +1,7 @@
 //! Named, seeded parameters shared by the candle model (training) and the
 //! hand-written kernel (inference).
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 use candle_core::{Device, Tensor, Var};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};

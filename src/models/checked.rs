@@ -12,7 +12,7 @@ use crate::system::{Graph, State};
 /// What the model at `path` was trained on: its file's training description
 /// ([`TrainedFor::from_model_file`]), or for the reference `still`
 /// ([`crate::dynamics::Still`]) nothing, since it fits any data.
-pub fn trained_for(path: &Path) -> anyhow::Result<TrainedFor> {
+pub fn trained_for(path: &Path) -> crate::error::Result<TrainedFor> {
     if path == Path::new(crate::dynamics::STILL) {
         // The reference fits any data.
         return Ok(TrainedFor {
@@ -26,7 +26,7 @@ pub fn trained_for(path: &Path) -> anyhow::Result<TrainedFor> {
         return super::truth::load_truth(name)?
             .trained_for()
             .cloned()
-            .ok_or_else(|| anyhow::anyhow!("{name} does not say what it simulates"));
+            .ok_or_else(|| crate::error::err!("{name} does not say what it simulates"));
     }
     TrainedFor::from_model_file(path)
 }

@@ -6,8 +6,8 @@ use super::truth;
 use crate::baselines::file::FORMAT as BASELINE_FORMAT;
 use crate::baselines::TrainedBaseline;
 use crate::dynamics::Dynamics;
+use crate::error::{Context, Result};
 use crate::kernel::TrainedModel;
-use anyhow::{Context, Result};
 use std::path::Path;
 use std::sync::Arc;
 

@@ -1,7 +1,7 @@
 //! Training a model of any kind from bags and saving its model file.
 
 use super::ModelKind;
-use anyhow::{Context, Result};
+use crate::error::{Context, Result};
 use std::path::Path;
 
 /// Trains any model from bags (the GNODE family with `opts`; baselines use

@@ -191,6 +191,8 @@ pub enum TruthError {
     UnknownSystem(#[from] crate::names::UnknownName),
 }
 
+crate::error::typed_errors!(TruthError);
+
 /// [`Truth`] under the name it was selected by, so diagnostics say which.
 struct TruthModel {
     name: String,

@@ -85,3 +85,5 @@ pub enum PhysicsError {
     #[error("bar from particle {0} has non-positive length")]
     BarLength(usize),
 }
+
+crate::error::typed_errors!(PhysicsError);

@@ -5,13 +5,13 @@ use super::lab::{Job, Lab, TrainSpec, Trained};
 use super::report::{error_table, num, table, Experiment, Row};
 use super::scale::Scale;
 use crate::baselines::Kind;
+use crate::error::Result;
 use crate::evaluate::Evaluation;
 use crate::model::{ArchPreset, Variant};
 use crate::models::ModelKind;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::plot::{plot_metrics, plot_sweep, Metric, SweepLine};
 use crate::train::{ModelOptions, TrainConfig};
-use anyhow::Result;
 use std::path::PathBuf;
 
 /// Seed of every training set; test sets use [`TEST_SEED`] (disjoint starts).
@@ -20,7 +20,7 @@ const TRAIN_SEED: u64 = 1;
 const TEST_SEED: u64 = 1001;
 
 /// Trained models by label, failures kept.
-pub type TrainedList = Vec<(String, anyhow::Result<Trained>)>;
+pub type TrainedList = Vec<(String, crate::error::Result<Trained>)>;
 
 /// A section of the report.
 pub struct Section {
@@ -193,7 +193,7 @@ fn section(
     mut md: String,
     rows: Vec<Row>,
     specs: &[TrainSpec],
-    trained: Vec<anyhow::Result<Trained>>,
+    trained: Vec<crate::error::Result<Trained>>,
 ) -> Section {
     let trained: TrainedList = specs.iter().map(|s| s.label.clone()).zip(trained).collect();
     md += "\n";
@@ -205,7 +205,7 @@ fn section(
     }
 }
 
-fn failures(trained: &[(String, anyhow::Result<Trained>)]) -> String {
+fn failures(trained: &[(String, crate::error::Result<Trained>)]) -> String {
     let mut s = String::new();
     for (label, t) in trained {
         if let Err(e) = t {

@@ -4,13 +4,13 @@
 //! simulate → bag → train → model file → evaluate.
 
 use crate::data::bag::read_trajectories;
+use crate::error::{Context, Result};
 use crate::evaluate::{evaluate, EvalOptions, Evaluation};
 use crate::model::file::TrainingReport;
 use crate::models::{load_any_model, train_any_from_bags, ModelKind};
 use crate::physics::SystemConfig;
 use crate::simulate::{simulate_with, DataIntegrator};
 use crate::train::{ModelOptions, TrainConfig};
-use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -169,7 +169,7 @@ impl Lab<'_> {
                     };
                     let Some((i, job)) = next else { break };
                     let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(job))
-                        .unwrap_or_else(|_| Err(anyhow::anyhow!("job panicked")));
+                        .unwrap_or_else(|_| Err(crate::error::err!("job panicked")));
                     results
                         .lock()
                         .unwrap_or_else(std::sync::PoisonError::into_inner)[i] = Some(r);
@@ -180,7 +180,7 @@ impl Lab<'_> {
             .into_inner()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .into_iter()
-            .map(|r| r.unwrap_or_else(|| Err(anyhow::anyhow!("job did not run"))))
+            .map(|r| r.unwrap_or_else(|| Err(crate::error::err!("job did not run"))))
             .collect()
     }
 }

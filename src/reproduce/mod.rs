@@ -11,10 +11,10 @@ pub mod report;
 pub mod scale;
 
 use crate::baselines::Kind;
+use crate::error::{Context, Result};
 use crate::model::Variant;
 use crate::models::ModelKind;
 use crate::names::Named;
-use anyhow::{Context, Result};
 use experiments::Section;
 use lab::Lab;
 use report::Experiment::{Baselines, Biases, DragForce, Noise, Peridynamic, Points, Wallclock};
@@ -225,7 +225,7 @@ fn write_report(
     md += "## What the paper claims, and what we measured\n\n";
     let trained: Vec<&(String, Result<lab::Trained>)> =
         sections.iter().flat_map(|s| s.trained.iter()).collect();
-    md += &claims(&rows, &trained);
+    md += &claims(&opts.parts, &rows, &trained);
     let left_out: Vec<Part> = Part::ALL
         .iter()
         .filter(|p| !opts.parts.contains(p))
@@ -271,18 +271,36 @@ fn write_report(
 /// size. A lookup that finds no result is remembered, and the claims end by
 /// naming every missing one instead of silently leaving a claim out.
 struct Results<'r> {
+    /// The parts this run ran; claims of the others are left out (the
+    /// report names those parts once).
+    ran: &'r [Part],
     rows: &'r [Row],
     trained: &'r [&'r (String, Result<lab::Trained>)],
     missing: RefCell<Vec<String>>,
 }
 
 impl<'r> Results<'r> {
-    fn new(rows: &'r [Row], trained: &'r [&'r (String, Result<lab::Trained>)]) -> Self {
+    fn new(
+        ran: &'r [Part],
+        rows: &'r [Row],
+        trained: &'r [&'r (String, Result<lab::Trained>)],
+    ) -> Self {
         Self {
+            ran,
             rows,
             trained,
             missing: RefCell::new(vec![]),
         }
+    }
+
+    /// Whether the part with the 5-`sys` ("spring", "pendulum") ran.
+    fn ran_system(&self, sys: &str) -> bool {
+        let part = if sys == "pendulum" {
+            Part::Pendulums
+        } else {
+            Part::Springs
+        };
+        self.ran.contains(&part)
     }
 
     fn miss(&self, what: String) {
@@ -370,8 +388,8 @@ const GNS: ModelKind = ModelKind::Baseline(Kind::Gns);
 
 /// The paper's headline claims next to this run's numbers; a claim whose
 /// rows are missing is named at the end ([`Results`]).
-fn claims(rows: &[Row], trained: &[&(String, Result<lab::Trained>)]) -> String {
-    let res = Results::new(rows, trained);
+fn claims(ran: &[Part], rows: &[Row], trained: &[&(String, Result<lab::Trained>)]) -> String {
+    let res = Results::new(ran, rows, trained);
     let mut out = String::new();
     for claim in CLAIMS {
         claim(&res, &mut out);
@@ -391,6 +409,9 @@ fn claims(rows: &[Row], trained: &[&(String, Result<lab::Trained>)]) -> String {
 fn claim_training_cost(res: &Results, out: &mut String) {
     let mut line = |s: String| *out += &format!("- {s}\n");
     for sys in ["pendulum", "spring"] {
+        if !res.ran_system(sys) {
+            continue;
+        }
         let per_epoch = |m: ModelKind| {
             let t = res
                 .trained
@@ -432,6 +453,9 @@ fn claim_energy_error(res: &Results, out: &mut String) {
         (Wallclock, "equal wall-clock time", "pendulum", 4.0),
         (Wallclock, "equal wall-clock time", "spring", 2.0),
     ] {
+        if !res.ran_system(sys) {
+            continue;
+        }
         let m = res.get(exp, sys, MCGNODE, 5);
         let l = res.get(exp, sys, LGN, 5);
         let h = res.get(exp, sys, HGN, 5);
@@ -461,6 +485,9 @@ fn claim_energy_error(res: &Results, out: &mut String) {
 /// MCGNODE's momentum error on springs.
 fn claim_zero_momentum(res: &Results, out: &mut String) {
     let mut line = |s: String| *out += &format!("- {s}\n");
+    if !res.ran_system("spring") {
+        return;
+    }
     if let (Some(m), Some(g)) = (
         res.get(Biases, "spring", MCGNODE, 5),
         res.get(Biases, "spring", GNODE, 5),
@@ -483,6 +510,9 @@ fn claim_zero_momentum(res: &Results, out: &mut String) {
 fn claim_bias_ladder(res: &Results, out: &mut String) {
     let mut line = |s: String| *out += &format!("- {s}\n");
     for sys in ["spring", "pendulum"] {
+        if !res.ran_system(sys) {
+            continue;
+        }
         let re = |v: Variant| {
             res.get(Biases, sys, ModelKind::Family(v), 5)
                 .map_or(f64::NAN, |r| r.averages.re)
@@ -506,6 +536,9 @@ fn claim_bias_ladder(res: &Results, out: &mut String) {
 /// The peridynamic solid: MCGNODE against GNODE and GNS.
 fn claim_peridynamic(res: &Results, out: &mut String) {
     let mut line = |s: String| *out += &format!("- {s}\n");
+    if !res.ran.contains(&Part::Peridynamic) {
+        return;
+    }
     let peri = |m| res.get(Peridynamic, "peridynamic", m, res.particles(Peridynamic));
     if let (Some(m), Some(g), Some(s)) = (peri(MCGNODE), peri(GNODE), peri(GNS)) {
         let ok = m.averages.re < g.averages.re && m.averages.re < s.averages.re;
@@ -530,6 +563,9 @@ fn claim_peridynamic(res: &Results, out: &mut String) {
 /// Drag and external force: MCGNODE against NODE.
 fn claim_drag_force(res: &Results, out: &mut String) {
     let mut line = |s: String| *out += &format!("- {s}\n");
+    if !res.ran.contains(&Part::DragForce) {
+        return;
+    }
     for sys in ["spring+drag", "spring+force"] {
         if let (Some(m), Some(n)) = (
             res.get(DragForce, sys, MCGNODE, 5),
@@ -551,6 +587,9 @@ fn claim_drag_force(res: &Results, out: &mut String) {
 /// Robustness to training noise.
 fn claim_noise(res: &Results, out: &mut String) {
     let mut line = |s: String| *out += &format!("- {s}\n");
+    if !res.ran.contains(&Part::Noise) {
+        return;
+    }
     if let Some(top) = res
         .rows
         .iter()
@@ -580,6 +619,9 @@ fn claim_noise(res: &Results, out: &mut String) {
 /// Data efficiency: MCGNODE against NODE and HGN at every size.
 fn claim_data_efficiency(res: &Results, out: &mut String) {
     let mut line = |s: String| *out += &format!("- {s}\n");
+    if !res.ran.contains(&Part::DataEfficiency) {
+        return;
+    }
     let mut xs: Vec<f64> = res
         .rows
         .iter()

@@ -101,7 +101,7 @@ impl Row {
         model: &str,
         particles: usize,
         x: Option<f64>,
-        e: &anyhow::Result<Evaluation>,
+        e: &crate::error::Result<Evaluation>,
     ) -> Row {
         let nan = Averages {
             re: f64::NAN,

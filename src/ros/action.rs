@@ -8,7 +8,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 
-use anyhow::anyhow;
+use crate::error::err;
 use ros2_client::action::{
     ActionServerQosPolicies, AsyncActionServer, ExecutingGoalHandle, GoalEndStatus,
 };
@@ -109,7 +109,7 @@ type Running = Arc<Mutex<Option<(GoalId, Arc<AtomicBool>)>>>;
 
 /// Creates the action server (QoS as rclpy's action defaults: reliable,
 /// volatile services and feedback; transient-local status).
-pub fn create(node: &mut Node) -> anyhow::Result<TrainActionServer> {
+pub fn create(node: &mut Node) -> crate::error::Result<TrainActionServer> {
     let status = QosProfile::publisher_default()
         .durability(Durability::TransientLocal)
         .history(History::KeepLast { depth: 1 });
@@ -120,7 +120,7 @@ pub fn create(node: &mut Node) -> anyhow::Result<TrainActionServer> {
         feedback_publisher: reliable_qos(),
         status_publisher: status,
     };
-    let name = Name::parse(TRAIN_ACTION).map_err(|e| anyhow!("action name: {e:?}"))?;
+    let name = Name::parse(TRAIN_ACTION).map_err(|e| err!("action name: {e:?}"))?;
     let server = node
         .create_action_server(
             ServiceMapping::Enhanced,
@@ -128,7 +128,7 @@ pub fn create(node: &mut Node) -> anyhow::Result<TrainActionServer> {
             &ActionTypeName::new(PACKAGE, "Train"),
             qos,
         )
-        .map_err(|e| anyhow!("creating the Train action: {e:?}"))?;
+        .map_err(|e| err!("creating the Train action: {e:?}"))?;
     Ok(TrainActionServer(AsyncActionServer::new(server)))
 }
 

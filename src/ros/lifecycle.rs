@@ -335,9 +335,12 @@ pub struct LifecycleServers {
 }
 
 /// Creates the lifecycle services under `/<node>/`, as rclcpp names them.
-pub fn create(node: &mut ros2_client::Node, node_name: &str) -> anyhow::Result<LifecycleServers> {
+pub fn create(
+    node: &mut ros2_client::Node,
+    node_name: &str,
+) -> crate::error::Result<LifecycleServers> {
     use super::qos::{reliable_qos, ros_name};
-    use anyhow::anyhow;
+    use crate::error::err;
     use ros2_client::{MessageTypeName, ServiceMapping, ServiceTypeName};
     macro_rules! server {
         ($srv:literal, $ty:literal) => {
@@ -348,7 +351,7 @@ pub fn create(node: &mut ros2_client::Node, node_name: &str) -> anyhow::Result<L
                 reliable_qos(),
                 reliable_qos(),
             )
-            .map_err(|e| anyhow!("creating the lifecycle service {}: {e:?}", $srv))?
+            .map_err(|e| err!("creating the lifecycle service {}: {e:?}", $srv))?
         };
     }
     let topic = node
@@ -357,7 +360,7 @@ pub fn create(node: &mut ros2_client::Node, node_name: &str) -> anyhow::Result<L
             MessageTypeName::new(LIFECYCLE_PACKAGE, "TransitionEvent"),
             &reliable_qos(),
         )
-        .map_err(|e| anyhow!("creating the transition_event topic: {e:?}"))?;
+        .map_err(|e| err!("creating the transition_event topic: {e:?}"))?;
     Ok(LifecycleServers {
         change: server!("change_state", "ChangeState"),
         get: server!("get_state", "GetState"),
@@ -367,7 +370,7 @@ pub fn create(node: &mut ros2_client::Node, node_name: &str) -> anyhow::Result<L
         graph: server!("get_transition_graph", "GetAvailableTransitions"),
         events: node
             .create_publisher(&topic, Some(reliable_qos()))
-            .map_err(|e| anyhow!("creating the transition_event publisher: {e:?}"))?,
+            .map_err(|e| err!("creating the transition_event publisher: {e:?}"))?,
     })
 }
 

@@ -63,7 +63,7 @@ pub struct ServeArgs {
 }
 
 /// Runs the node until SIGINT/SIGTERM.
-pub fn run_serve(args: ServeArgs) -> anyhow::Result<()> {
+pub fn run_serve(args: ServeArgs) -> crate::error::Result<()> {
     let params = effective_params(&args)?;
     if args.print_params {
         print!("{}", params.to_yaml());

@@ -9,7 +9,7 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, Context as _};
+use crate::error::{err, Context as _};
 use ros2_client::log::LogLevel;
 use ros2_client::parameters::{NumericRange, ParameterDescriptor, ParameterType};
 use ros2_client::{
@@ -234,11 +234,11 @@ struct Endpoints {
 
 impl Endpoints {
     /// Topics, publishers, subscriptions and servers as the parameters say.
-    fn create(node: &mut Node, params: &NodeParams) -> anyhow::Result<Endpoints> {
-        let e = |what: &'static str| move |err| anyhow!("creating {what}: {err:?}");
+    fn create(node: &mut Node, params: &NodeParams) -> crate::error::Result<Endpoints> {
+        let e = |what: &'static str| move |err| err!("creating {what}: {err:?}");
         let topic = |name: &str, pkg: &str, ty: &str, qos: &QosProfile| {
             node.create_topic(&ros_name(name)?, MessageTypeName::new(pkg, ty), qos)
-                .map_err(|e| anyhow!("creating topic {name}: {e:?}"))
+                .map_err(|e| err!("creating topic {name}: {e:?}"))
         };
         let qos = topic_qos(params);
         let state_type = PARTICLE_STATE_TYPE
@@ -360,7 +360,7 @@ fn create_server<Req: Message + Clone + 'static, Resp: Message + Clone + 'static
     node: &mut Node,
     name: &str,
     ty: &str,
-) -> anyhow::Result<Server<Req, Resp>> {
+) -> crate::error::Result<Server<Req, Resp>> {
     node.create_server(
         ServiceMapping::Enhanced,
         &ros_name(name)?,
@@ -368,7 +368,7 @@ fn create_server<Req: Message + Clone + 'static, Resp: Message + Clone + 'static
         reliable_qos(),
         reliable_qos(),
     )
-    .map_err(|err| anyhow!("creating the {ty} service: {err:?}"))
+    .map_err(|err| err!("creating the {ty} service: {err:?}"))
 }
 
 /// The file a `model` parameter names (`None` for `truth:*`).
@@ -382,7 +382,7 @@ fn handles(
     params: &NodeParams,
     live: LiveParams,
     model: Arc<dyn Dynamics>,
-) -> anyhow::Result<Handles> {
+) -> crate::error::Result<Handles> {
     let recorder = if params.record_dir.is_empty() {
         None
     } else {
@@ -408,7 +408,11 @@ fn handles(
 }
 
 /// Runs the node in `domain_id` until SIGINT or SIGTERM.
-pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> anyhow::Result<()> {
+pub fn serve(
+    params: NodeParams,
+    model: Arc<dyn Dynamics>,
+    domain_id: u16,
+) -> crate::error::Result<()> {
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -416,11 +420,11 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
         .context("starting the async runtime")?;
     let live = LiveParams::new(params.clone());
     let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
-        .map_err(|e| anyhow!("creating the DDS participant in domain {domain_id}: {e:?}"))?;
-    let name = NodeName::new("/", NODE_NAME).map_err(|e| anyhow!("node name: {e:?}"))?;
+        .map_err(|e| err!("creating the DDS participant in domain {domain_id}: {e:?}"))?;
+    let name = NodeName::new("/", NODE_NAME).map_err(|e| err!("node name: {e:?}"))?;
     let mut node = context
         .new_node(name, declare_parameters(&params, live.clone()))
-        .map_err(|e| anyhow!("creating the node: {e:?}"))?;
+        .map_err(|e| err!("creating the node: {e:?}"))?;
     let endpoints = Endpoints::create(&mut node, &params)?;
     let h = handles(&node, &params, live, model)?;
     let (trainer, servers) = training::create(&mut node, &params, trainer_handles(&h))?;
@@ -428,7 +432,7 @@ pub fn serve(params: NodeParams, model: Arc<dyn Dynamics>, domain_id: u16) -> an
     let lifecycle = super::lifecycle::create(&mut node, NODE_NAME)?;
     let spinner = node
         .spinner()
-        .map_err(|e| anyhow!("the node spinner: {e:?}"))?;
+        .map_err(|e| err!("the node spinner: {e:?}"))?;
     log_start(&h, domain_id);
     let result = runtime.block_on(async {
         tokio::spawn(async move {
@@ -556,7 +560,7 @@ fn finish_recording(h: &Handles) {
 }
 
 /// Resolves on the first SIGINT or SIGTERM.
-async fn wait_for_shutdown() -> anyhow::Result<()> {
+async fn wait_for_shutdown() -> crate::error::Result<()> {
     use tokio::signal::unix::{signal, SignalKind};
     let mut term = signal(SignalKind::terminate()).context("installing the SIGTERM handler")?;
     let mut int = signal(SignalKind::interrupt()).context("installing the SIGINT handler")?;

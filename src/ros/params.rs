@@ -141,6 +141,8 @@ pub enum ParamError {
     DomainId(String),
 }
 
+crate::error::typed_errors!(ParamError);
+
 fn known_parameters() -> String {
     SPECS
         .iter()

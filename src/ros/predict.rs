@@ -50,6 +50,8 @@ pub enum PredictError {
     ForceShape(String),
 }
 
+crate::error::typed_errors!(PredictError);
+
 /// A prediction for one state.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Prediction {

@@ -1,7 +1,7 @@
 //! QoS profiles and ROS names, shared by every module that creates DDS
 //! entities (one definition each, so topics and services stay compatible).
 
-use anyhow::anyhow;
+use crate::error::err;
 use ros2_client::qos::{Durability, History, WhenFull};
 use ros2_client::{Name, QosProfile};
 
@@ -40,6 +40,6 @@ pub fn reliable_qos() -> QosProfile {
 }
 
 /// A ROS name, or an error naming it.
-pub fn ros_name(s: &str) -> anyhow::Result<Name> {
-    Name::parse(s).map_err(|e| anyhow!("invalid ROS name {s:?}: {e:?}"))
+pub fn ros_name(s: &str) -> crate::error::Result<Name> {
+    Name::parse(s).map_err(|e| err!("invalid ROS name {s:?}: {e:?}"))
 }

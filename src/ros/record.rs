@@ -99,6 +99,8 @@ pub enum RecordError {
     Encode(String),
 }
 
+crate::error::typed_errors!(RecordError);
+
 impl Recorder {
     /// A recorder for `params.record_dir` (created if missing); no file is
     /// opened until the first message.

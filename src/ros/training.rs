@@ -30,7 +30,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use anyhow::anyhow;
+use crate::error::err;
 use ros2_client::log::LogLevel;
 use ros2_client::{MessageTypeName, Node, Publisher, Server, ServiceMapping, ServiceTypeName};
 
@@ -116,7 +116,7 @@ pub fn create(
     node: &mut Node,
     params: &NodeParams,
     handles: TrainerHandles,
-) -> anyhow::Result<(Arc<Trainer>, TrainingServers)> {
+) -> crate::error::Result<(Arc<Trainer>, TrainingServers)> {
     let qos = reliable_qos();
     let topic = node
         .create_topic(
@@ -124,10 +124,10 @@ pub fn create(
             MessageTypeName::new(PACKAGE, "ModelSwap"),
             &qos,
         )
-        .map_err(|e| anyhow!("creating topic {MODEL_SWAP_TOPIC}: {e:?}"))?;
+        .map_err(|e| err!("creating topic {MODEL_SWAP_TOPIC}: {e:?}"))?;
     let swap = node
         .create_publisher(&topic, Some(qos.clone()))
-        .map_err(|e| anyhow!("creating the model swap publisher: {e:?}"))?;
+        .map_err(|e| err!("creating the model swap publisher: {e:?}"))?;
     let train = node
         .create_server(
             ServiceMapping::Enhanced,
@@ -136,7 +136,7 @@ pub fn create(
             qos.clone(),
             qos.clone(),
         )
-        .map_err(|e| anyhow!("creating the Train service: {e:?}"))?;
+        .map_err(|e| err!("creating the Train service: {e:?}"))?;
     let load = node
         .create_server(
             ServiceMapping::Enhanced,
@@ -145,7 +145,7 @@ pub fn create(
             qos.clone(),
             qos,
         )
-        .map_err(|e| anyhow!("creating the LoadModel service: {e:?}"))?;
+        .map_err(|e| err!("creating the LoadModel service: {e:?}"))?;
     let TrainerHandles {
         model,
         recorder,
@@ -252,20 +252,20 @@ pub enum TrainingError {
     },
     /// Training failed.
     #[error("training failed: {0:#}")]
-    Train(anyhow::Error),
+    Train(crate::error::Error),
     /// The trained model does not save.
     #[error("saving the model failed: {0:#}")]
-    Save(anyhow::Error),
+    Save(crate::error::Error),
     /// The trained model does not load back.
     #[error("the trained model does not load: {0:#}")]
-    Load(anyhow::Error),
+    Load(crate::error::Error),
     /// The held-out bag does not replay.
     #[error("replaying the held-out bag {bag} failed: {source:#}")]
     Replay {
         /// The bag.
         bag: String,
         /// Why.
-        source: anyhow::Error,
+        source: crate::error::Error,
     },
     /// Too few bags recorded after a drift alarm.
     #[error(
@@ -279,6 +279,8 @@ pub enum TrainingError {
         after: f64,
     },
 }
+
+crate::error::typed_errors!(TrainingError);
 
 /// Why a second training is refused.
 pub const BUSY: TrainingError = TrainingError::Busy;

@@ -31,6 +31,8 @@ pub enum YamlError {
     },
 }
 
+crate::error::typed_errors!(YamlError);
+
 use yaml_rust2::{Yaml, YamlLoader};
 
 /// A parsed YAML scalar, typed the way YAML 1.2's core schema (and rcl) types it.
