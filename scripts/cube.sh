@@ -5,12 +5,15 @@
 # GNODE family also with wider edge MLPs, 16,16), and evaluate it and the "nothing
 # moves" reference. Training wall, user and system times go to times.txt.
 # Usage: scripts/cube.sh OUT [TRAINING_TRAJECTORIES (10)] [MODEL ... (mcgnode)]
-# MCGNODE=path/to/mcgnode uses that binary instead of building one.
+# MCGNODE=path/to/mcgnode uses that binary instead of building one; EPOCHS=N
+# trains N epochs instead of 300, the rate stepped down after two thirds of them.
 set -euo pipefail
 OUT="${1:?usage: scripts/cube.sh OUT [TRAJECTORIES] [MODEL ...]}"
 TRAJ="${2:-10}"
 shift $(( $# < 2 ? $# : 2 ))
 MODELS=("${@:-mcgnode}")
+EPOCHS="${EPOCHS:-300}"
+DROP=$(( EPOCHS * 2 / 3 ))
 cd "$(dirname "$0")/.."
 if [ -z "${MCGNODE:-}" ]; then
     cargo build --release -q
@@ -32,7 +35,7 @@ for model in "${MODELS[@]}"; do
     start=$(date +%s.%N)
     /usr/bin/time -f "$model: %e s wall, %U s user, %S s system (load before: $(cut -d' ' -f1-3 /proc/loadavg))" \
         -a -o times.txt "$M" train --model "$model" --data train.mcap --batch 10 --lr 1e-2 \
-        --lr-drop 200:1e-3 --epochs 300 "${extra[@]}" --out "$model.json" --quiet
+        --lr-drop "$DROP:1e-3" --epochs "$EPOCHS" "${extra[@]}" --out "$model.json" --quiet
     echo "$model trained in $(echo "$(date +%s.%N) - $start" | bc) s"
     "$M" evaluate --model "$model.json" --bag test.mcap --rows 11 | tee "eval-$model.txt"
 done

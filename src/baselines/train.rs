@@ -30,7 +30,7 @@ pub fn train_baseline(
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainedBaseline> {
     check_data(graph, states, acc, cfg)?;
-    crate::alloc::keep_freed_memory();
+    crate::alloc::prepare_for_candle();
     if cfg.init.is_some() {
         bail!("--init (warm start) is for the GNODE family; baselines train from scratch");
     }

@@ -48,11 +48,7 @@ enum Command {
 
 /// Parses the command line and runs the subcommand.
 pub fn run() -> anyhow::Result<()> {
-    // One thread: deterministic, and the models are too small to gain from more.
-    if std::env::var_os("RAYON_NUM_THREADS").is_none() {
-        std::env::set_var("RAYON_NUM_THREADS", "1");
-    }
-    crate::alloc::keep_freed_memory();
+    crate::alloc::prepare_for_candle();
     let cli = Cli::parse();
     match cli.command {
         Command::Simulate(a) => simulate::run(a),
