@@ -290,6 +290,20 @@ fn model_file_round_trip_and_bad_files() {
         "weights must survive the JSON round trip bit for bit"
     );
 
+    std::fs::write(dir.path().join("junk.json"), "{ not json").unwrap();
+    // The typed cause is found again through the context: a caller can
+    // branch on a missing file without matching the message.
+    let Err(e) = mcgnode::models::load_any_model(&dir.path().join("junk.json")) else {
+        panic!("junk.json loaded");
+    };
+    assert!(
+        matches!(
+            e.find::<mcgnode::model::file::ModelFileError>(),
+            Some(mcgnode::model::file::ModelFileError::Parse { .. })
+        ),
+        "{e:?}"
+    );
+    assert!(e.find::<mcgnode::data::DataError>().is_none());
     let err = |p: &std::path::Path| format!("{:#}", TrainedModel::load(p).unwrap_err());
     assert!(err(&dir.path().join("missing.json")).contains("cannot read model file"));
     std::fs::write(dir.path().join("junk.json"), "{ not json").unwrap();
