@@ -4,7 +4,7 @@ fn main() -> std::process::ExitCode {
     match mcgnode::cli::run() {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", mcgnode::cli::error_report(&e));
             std::process::ExitCode::FAILURE
         }
     }

@@ -788,3 +788,35 @@ fn bag_draw_names_the_fix_when_a_bag_has_no_markers() {
     );
     assert!(!dir.path().join("x.png").exists());
 }
+
+#[test]
+fn errors_state_each_cause_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = mcgnode(
+        &[
+            "train",
+            "--model",
+            "mcgnode",
+            "--data",
+            &format!("{}/bags/spring5-sample.mcap", env!("CARGO_MANIFEST_DIR")),
+            "--init",
+            "/nonexistent/m.json",
+            "--epochs",
+            "1",
+            "--out",
+            "m.json",
+        ],
+        dir.path(),
+    );
+    fails_with(&o, "cannot read model file /nonexistent/m.json");
+    let err = String::from_utf8_lossy(&o.stderr);
+    // The io error's text (it names the OS error) appears once, not twice.
+    let cause = "(os error 2)";
+    assert_eq!(err.matches(cause).count(), 1, "{err}");
+    // A context added at the edge still shows with the library's message.
+    let o = mcgnode(&["bag", "info", "/nonexistent/b.mcap"], dir.path());
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("/nonexistent/b.mcap"), "{err}");
+    assert!(err.matches(cause).count() <= 1, "{err}");
+}

@@ -46,6 +46,21 @@ enum Command {
     Bag(bag::Args),
 }
 
+/// An error as the binary prints it: the message, then each cause that the
+/// messages before it do not already state (the library's errors carry their
+/// causes in their messages; anyhow's `{:#}` would print those twice).
+pub fn error_report(e: &anyhow::Error) -> String {
+    let mut out = e.to_string();
+    for cause in e.chain().skip(1) {
+        let c = cause.to_string();
+        if !out.contains(&c) {
+            out += ": ";
+            out += &c;
+        }
+    }
+    out
+}
+
 /// Parses the command line and runs the subcommand.
 pub fn run() -> anyhow::Result<()> {
     crate::alloc::prepare_for_candle();
