@@ -788,3 +788,33 @@ fn graph_network_input_gradients_equal_autodiff() {
         );
     }
 }
+
+/// The baselines (candle) share the training loop and its checkpoints: GNS
+/// stopped after epoch 2 and resumed ends with the weights of a straight run.
+#[test]
+fn baseline_training_resumes_from_its_checkpoint() {
+    use mcgnode::train::Checkpointing;
+    let (g, s, a) = dataset(SystemKind::Spring, 5, 2, 3);
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = TrainConfig {
+        threads: 1,
+        ..quick_cfg(5)
+    };
+    let hy = BaselineHyper::new(Kind::Gns, 2, 1);
+    let straight = train_baseline(hy.clone(), &g, &s, &a, &cfg, |_| true).unwrap();
+    let ck = TrainConfig {
+        checkpoint: Some(Checkpointing {
+            path: dir.path().join("gns.json"),
+            every: 0.0,
+        }),
+        ..cfg
+    };
+    assert!(train_baseline(hy.clone(), &g, &s, &a, &ck, |r| r.epoch < 2).is_err());
+    let resumed = train_baseline(hy, &g, &s, &a, &ck, |r| r.epoch > 2).unwrap();
+    assert_eq!(resumed.file.weights, straight.file.weights);
+    assert_eq!(resumed.file.training.resumed_at, Some(2));
+    assert_eq!(
+        resumed.file.training.validation_loss,
+        straight.file.training.validation_loss
+    );
+}

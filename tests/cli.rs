@@ -516,6 +516,20 @@ fn train_engine_arch_and_warm_start_options() {
     );
     assert!((ln - lc).abs() <= 1e-6 * lc, "native {ln} vs candle {lc}");
     assert!(n["optimizer"]["step"].as_i64().unwrap() > 0);
+    // A checkpointed run gives the same model; run again, it resumes from
+    // the finished checkpoint; another seed's run is refused with the fix.
+    let ck = ["--model", "mcgnode", "--checkpoint", "ck.json"];
+    ok(&run(&[&ck[..], &["--out", "ck1.json"]].concat()));
+    ok(&run(&[&ck[..], &["--out", "ck2.json"]].concat()));
+    let (c1, c2) = (read("ck1.json"), read("ck2.json"));
+    assert_eq!(c1["weights"], n["weights"]);
+    assert_eq!(c2["weights"], n["weights"]);
+    assert!(c1["training"].get("resumed_at").is_none());
+    assert_eq!(c2["training"]["resumed_at"], 4);
+    fails_with(
+        &run(&[&ck[..], &["--seed", "1", "--out", "x.json"]].concat()),
+        "remove it to train afresh",
+    );
     ok(&run(&[
         "--model",
         "gnode",

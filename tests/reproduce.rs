@@ -213,6 +213,50 @@ fn only_runs_the_named_parts_and_names_the_rest() {
     assert_eq!(json["scale"]["epochs"], 3);
     assert_eq!(json["parts"], serde_json::json!(["noise"]));
     assert_eq!(json["pending"], serde_json::json!([]));
+    // --resume takes every training up from its checkpoint: finished ones
+    // are not trained again, and the results are the same.
+    let resumed = common::run_bounded(
+        Command::new(common::BIN)
+            .args([
+                "reproduce",
+                "--quick",
+                "--only",
+                "noise",
+                "--comparison-epochs",
+                "3",
+                "--resume",
+                "--out",
+            ])
+            .arg(&out),
+        Duration::from_secs(300),
+        dir.path(),
+    );
+    assert!(
+        resumed.status.success(),
+        "resume failed:\n{}",
+        resumed.stderr
+    );
+    let again: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let trainings = again["training"].as_array().unwrap();
+    assert!(!trainings.is_empty());
+    for t in trainings {
+        assert_eq!(
+            t["training"]["resumed_at"], t["training"]["epochs_run"],
+            "{t}"
+        );
+    }
+    let scores = |j: &serde_json::Value| -> Vec<serde_json::Value> {
+        j["evaluations"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|e| serde_json::json!([e["model"], e["x"], e["averages"]]))
+            .collect()
+    };
+    assert_eq!(scores(&again), scores(&json));
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(report.contains("**Resumed** (`--resume`)"), "{report}");
     // A misspelt part is refused with the valid names.
     let bad = Command::new(common::BIN)
         .args(["reproduce", "--quick", "--only", "spring", "--out"])

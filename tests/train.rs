@@ -600,3 +600,106 @@ fn time_budget_stops_training_and_is_recorded() {
         assert!(msg.contains("time budget"), "{msg}");
     }
 }
+
+/// A run stopped part-way (here by a cancel, as a crash or the end of a
+/// session would stop it) and started again on the same checkpoint ends bit
+/// for bit where an uninterrupted run ends: weights, Adam's state, best
+/// epoch and losses. A finished run is not trained again, a longer one goes
+/// on from it, and a checkpoint of another run is refused with its fix.
+#[test]
+fn checkpointed_training_resumes_exactly() {
+    use mcgnode::train::{Checkpoint, Checkpointing};
+    let (g, s, a) = data(SystemKind::Spring, 5, 4, 1);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.ckpt.json");
+    let cfg = TrainConfig {
+        epochs: 10,
+        seed: 5,
+        threads: 2,
+        lr: 3e-3,
+        lr_drops: vec![(6, 1e-3)],
+        ..TrainConfig::default()
+    };
+    let hy = Hyper::new(Variant::Mcgnode, 2, 1, 5);
+    let weights = |t: &mcgnode::train::Trained| t.net.store.weights().unwrap();
+    let straight = train(hy.clone(), &g, &s, &a, &cfg, |_| true).unwrap();
+    let ck = TrainConfig {
+        checkpoint: Some(Checkpointing {
+            path: path.clone(),
+            every: 0.0,
+        }),
+        ..cfg.clone()
+    };
+    let err = train(hy.clone(), &g, &s, &a, &ck, |r| r.epoch < 4)
+        .err()
+        .expect("cancelled");
+    assert!(format!("{err}").contains("cancelled at epoch 4"), "{err}");
+    let saved: Checkpoint = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    assert_eq!(saved.epoch, 4);
+    let mut epochs = vec![];
+    let resumed = train(hy.clone(), &g, &s, &a, &ck, |r| {
+        epochs.push(r.epoch);
+        true
+    })
+    .unwrap();
+    assert_eq!(
+        epochs,
+        (5..=10).collect::<Vec<_>>(),
+        "went on after epoch 4"
+    );
+    assert_eq!(weights(&resumed), weights(&straight), "same weights");
+    assert_eq!(resumed.optimizer, straight.optimizer, "same Adam state");
+    let (r, q) = (&resumed.report, &straight.report);
+    assert_eq!(
+        (r.epochs_run, r.best_epoch, r.validation_loss, r.train_loss),
+        (q.epochs_run, q.best_epoch, q.validation_loss, q.train_loss)
+    );
+    assert_eq!(r.resumed_at, Some(4));
+    assert!(r.seconds >= saved.seconds, "seconds count every session");
+    // Finished: nothing is trained again, the result is the same.
+    let again = train(hy.clone(), &g, &s, &a, &ck, |_| {
+        panic!("a finished run trained again")
+    })
+    .unwrap();
+    assert_eq!(weights(&again), weights(&straight));
+    // Longer: goes on from epoch 10 to where a straight 14-epoch run ends.
+    let longer = |c: &TrainConfig| TrainConfig {
+        epochs: 14,
+        ..c.clone()
+    };
+    let straight14 = train(hy.clone(), &g, &s, &a, &longer(&cfg), |_| true).unwrap();
+    let went_on = train(hy.clone(), &g, &s, &a, &longer(&ck), |_| true).unwrap();
+    assert_eq!(weights(&went_on), weights(&straight14));
+    assert_eq!(went_on.report.resumed_at, Some(10));
+    // Another seed, or other data: refused, naming what differs and the fix.
+    for (other, what) in [
+        (
+            TrainConfig {
+                seed: 6,
+                ..ck.clone()
+            },
+            "seed",
+        ),
+        (
+            TrainConfig {
+                batch: 50,
+                ..ck.clone()
+            },
+            "batch",
+        ),
+    ] {
+        let e = train(hy.clone(), &g, &s, &a, &other, |_| true)
+            .err()
+            .expect("refused");
+        let msg = format!("{e}");
+        assert!(
+            msg.contains("another training run") && msg.contains(what) && msg.contains("remove it"),
+            "{msg}"
+        );
+    }
+    let half = s.len() / 2;
+    let e = train(hy, &g, &s[..half], &a[..half], &ck, |_| true)
+        .err()
+        .expect("refused");
+    assert!(format!("{e}").contains("training samples"), "{e}");
+}

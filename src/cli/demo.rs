@@ -40,6 +40,7 @@ pub fn run(a: Args) -> Result<()> {
         threads: VARIANTS.len(),
         log: &|m| eprintln!("{m}"),
         t0: std::time::Instant::now(),
+        resume: false,
     };
     let (n_train, n_test, epochs) = if a.quick {
         (20, 10, 60)

@@ -26,6 +26,12 @@ pub struct Args {
     /// Parts to run, comma-separated, in this order (default: all): springs, pendulums, peridynamic, drag-force, noise, data-efficiency.
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<Part>,
+    /// Go on with a run stopped part-way in the same --out folder, with the
+    /// same options: every training resumes from its checkpoint in
+    /// checkpoints/ (finished ones are not repeated; training seconds count
+    /// every session). Without it, old checkpoints are removed.
+    #[arg(long)]
+    pub resume: bool,
     /// Trainings and evaluations run side by side (default: the number of cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -63,6 +69,7 @@ pub fn run(a: Args) -> Result<()> {
         out: a.out.clone(),
         scale,
         threads,
+        resume: a.resume,
         command: shown_command(&std::env::args().collect::<Vec<_>>()),
         parts: if a.only.is_empty() {
             Part::ALL.to_vec()

@@ -2,7 +2,7 @@
 
 use crate::model::{ArchPreset, EdgeInput, MessageFn};
 use crate::models::{train_any_from_bags, ModelKind};
-use crate::train::{BodyForce, EngineKind, EpochReport, ModelOptions, TrainConfig};
+use crate::train::{BodyForce, Checkpointing, EngineKind, EpochReport, ModelOptions, TrainConfig};
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
@@ -107,6 +107,20 @@ pub struct Args {
     /// state, when the file has one); its architecture is kept.
     #[arg(long, value_name = "MODEL")]
     pub init: Option<PathBuf>,
+    /// Save the run's state to FILE as it goes (every --checkpoint-every
+    /// seconds and at the end); when FILE exists, training resumes from it
+    /// and ends where an uninterrupted run would. A checkpoint of another
+    /// run (other data, seed or settings) is refused.
+    #[arg(long, value_name = "FILE")]
+    pub checkpoint: Option<PathBuf>,
+    /// Seconds between checkpoint saves.
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        default_value_t = 60.0,
+        requires = "checkpoint"
+    )]
+    pub checkpoint_every: f64,
     /// Print nothing but errors.
     #[arg(long)]
     pub quiet: bool,
@@ -192,6 +206,10 @@ pub fn run(a: Args) -> Result<()> {
         engine: a.engine,
         lr_drops: a.lr_drop.clone(),
         time_budget: a.max_seconds,
+        checkpoint: a.checkpoint.clone().map(|path| Checkpointing {
+            path,
+            every: a.checkpoint_every,
+        }),
         threads: a.threads.unwrap_or_else(crate::engine::all_cores),
         normalize: !a.no_normalize,
         init: a
@@ -226,9 +244,12 @@ pub fn run(a: Args) -> Result<()> {
     let t = &train_any_from_bags(a.model, &a.data, &opts, &cfg, log, progress, &a.out)?;
     if !a.quiet {
         eprintln!(
-            "wrote {}: {} epochs{} in {:.1} s, best epoch {}, train MSE {:.3e}, validation MSE {:.3e}",
+            "wrote {}: {} epochs{}{} in {:.1} s, best epoch {}, train MSE {:.3e}, validation MSE {:.3e}",
             a.out.display(),
             t.epochs_run,
+            t.resumed_at
+                .map(|e| format!(" (resumed from the checkpoint of epoch {e})"))
+                .unwrap_or_default(),
             match (t.stopped_early, t.out_of_time) {
                 (true, _) => " (early stop)",
                 (_, true) => " (time budget reached)",

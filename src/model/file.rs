@@ -174,6 +174,10 @@ pub struct TrainingReport {
     /// Whether the time budget ended training.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub out_of_time: bool,
+    /// The epoch of the checkpoint training resumed from, if it did (the
+    /// seconds then count every session).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resumed_at: Option<usize>,
 }
 
 /// A trained model on disk.

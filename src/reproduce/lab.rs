@@ -1,7 +1,8 @@
 //! The bench every experiment works on: bags in `data/`, model files in
 //! `models/`, figures in the output folder; jobs spread over a few threads.
 //! Each step goes through the same public path as the command line:
-//! simulate → bag → train → model file → evaluate.
+//! simulate → bag → train → model file → evaluate. Trainings save checkpoints
+//! in `checkpoints/`, so a stopped run can be resumed.
 
 use crate::data::bag::read_trajectories;
 use crate::error::{Context, Result};
@@ -10,7 +11,7 @@ use crate::model::file::TrainingReport;
 use crate::models::{load_any_model, train_any_from_bags, ModelKind};
 use crate::physics::SystemConfig;
 use crate::simulate::{simulate_with, DataIntegrator};
-use crate::train::{ModelOptions, TrainConfig};
+use crate::train::{Checkpointing, ModelOptions, TrainConfig};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -25,7 +26,13 @@ pub struct Lab<'a> {
     pub log: &'a (dyn Fn(&str) + Sync),
     /// Start of the run.
     pub t0: Instant,
+    /// Take up trainings from their checkpoints (`checkpoints/<label>.json`);
+    /// when false, a checkpoint left by an earlier run is removed first.
+    pub resume: bool,
 }
+
+/// Seconds between checkpoint saves of a training.
+const CHECKPOINT_EVERY: f64 = 120.0;
 
 /// A job for [`Lab::pool`].
 pub type Job<'s, T> = Box<dyn FnOnce() -> Result<T> + Send + 's>;
@@ -90,11 +97,32 @@ impl Lab<'_> {
         std::fs::create_dir_all(&dir)?;
         let path = dir.join(format!("{}.json", spec.label));
         let every = (spec.cfg.epochs / 4).max(1);
+        let checkpoint = self
+            .dir
+            .join("checkpoints")
+            .join(format!("{}.json", spec.label));
+        if !self.resume {
+            match std::fs::remove_file(&checkpoint) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(e).with_context(|| {
+                        format!("removing the old checkpoint {}", checkpoint.display())
+                    })
+                }
+                _ => {}
+            }
+        }
+        let cfg = TrainConfig {
+            checkpoint: Some(Checkpointing {
+                path: checkpoint,
+                every: CHECKPOINT_EVERY,
+            }),
+            ..spec.cfg.clone()
+        };
         let report = train_any_from_bags(
             spec.kind,
             &spec.bags,
             &spec.opts,
-            &spec.cfg,
+            &cfg,
             |_| {},
             |r| {
                 if r.epoch % every == 0 {

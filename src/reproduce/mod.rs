@@ -38,6 +38,10 @@ pub struct Options {
     pub command: String,
     /// The parts to run, in this order (default: [`Part::ALL`]).
     pub parts: Vec<Part>,
+    /// Take up every training from its checkpoint in `checkpoints/` (a run
+    /// stopped part-way goes on; finished trainings are not repeated);
+    /// without it, checkpoints of earlier runs are removed first.
+    pub resume: bool,
 }
 
 /// The parts of `reproduce`, each one section of the report.
@@ -146,6 +150,7 @@ pub fn run(opts: &Options, log: &(dyn Fn(&str) + Sync)) -> Result<Outcome> {
         threads: opts.threads.max(1),
         log,
         t0: Instant::now(),
+        resume: opts.resume,
     };
     let mut sections: Vec<Section> = vec![];
     let mut report = opts.out.join("report.md");
@@ -194,6 +199,11 @@ fn report_header(opts: &Options, lab: &Lab, seconds: f64, pending: &[Part]) -> S
     );
     if !pending.is_empty() {
         md += &format!("**Partial report**: still to run: {}.\n\n", names(pending));
+    }
+    if opts.resume {
+        md += "**Resumed** (`--resume`): the duration above is this session's; trainings went \
+               on from their checkpoints in `checkpoints/`, and their training seconds (and \
+               the time budgets derived from them) count every session.\n\n";
     }
     md += "Metrics (paper's definitions): RE = ‖q̂ − q‖/(‖q̂‖ + ‖q‖), EE the same for the \
            Hamiltonian, ME for the total momentum; ME scaled = ‖P̂ − P‖/(Σm|v̂| + Σm|v|) \

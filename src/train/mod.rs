@@ -18,6 +18,10 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use std::time::Instant;
 
+pub mod checkpoint;
+pub use checkpoint::{Checkpoint, CheckpointError, Checkpointing};
+use checkpoint::{RngState, RunKey};
+
 /// Training settings.
 #[derive(Clone, Debug)]
 pub struct TrainConfig {
@@ -60,6 +64,9 @@ pub struct TrainConfig {
     /// robot retraining between tasks has, and what `reproduce` gives the
     /// baselines to compare them with MCGNODE at equal time.
     pub time_budget: Option<f64>,
+    /// Save the run's state as it goes, and resume from the file when it
+    /// exists (see [`checkpoint`]).
+    pub checkpoint: Option<Checkpointing>,
 }
 
 impl TrainConfig {
@@ -90,6 +97,7 @@ impl Default for TrainConfig {
             normalize: true,
             lr_drops: vec![],
             time_budget: None,
+            checkpoint: None,
         }
     }
 }
@@ -408,6 +416,11 @@ pub fn split(n: usize, cfg: &TrainConfig, rng: &mut ChaCha8Rng) -> Split {
 /// parameters `theta` (from `adam`'s state, which is left as the last epoch
 /// made it), validation after every epoch, early stopping; the best parameters
 /// are left in `theta`. `on_epoch` returns false to cancel.
+///
+/// With [`TrainConfig::checkpoint`], the run's state is saved as it goes and,
+/// when the file exists, taken up from it: the result is the one an
+/// uninterrupted run gives, and the seconds and time budget count every
+/// session.
 pub fn fit(
     theta: &mut [f64],
     split: Split,
@@ -419,7 +432,7 @@ pub fn fit(
 ) -> Result<TrainingReport> {
     let Split {
         validation: val_idx,
-        train: mut train_idx,
+        train: train_idx,
     } = split;
     let val_idx = val_idx.as_slice();
     if adam.m.len() != theta.len() {
@@ -429,24 +442,54 @@ pub fn fit(
             theta.len()
         );
     }
-    let mut grad = vec![0.0; theta.len()];
-    let start = Instant::now();
-    let mut best = f64::INFINITY;
-    let mut best_theta = theta.to_vec();
-    let (mut best_epoch, mut best_train) = (0, f64::NAN);
-    let mut epochs_run = 0;
-    let mut stopped_early = false;
-    let mut out_of_time = false;
     if let Some(b) = cfg.time_budget {
         if !(b > 0.0 && b.is_finite()) {
             bail!("the time budget must be a positive number of seconds, got {b}");
         }
     }
-    for epoch in 1..=cfg.epochs {
+    if let Some(ck) = &cfg.checkpoint {
+        if !(ck.every >= 0.0 && ck.every.is_finite()) {
+            bail!(
+                "the checkpoint interval must be a number of seconds >= 0, got {}",
+                ck.every
+            );
+        }
+    }
+    let mut run = Run::fresh(theta, train_idx);
+    let key = match &cfg.checkpoint {
+        Some(ck) => {
+            let key = RunKey {
+                parameters: theta.len(),
+                train: run.train_idx.len(),
+                validation: val_idx.len(),
+                seed: cfg.seed,
+                batch: cfg.batch,
+                lr: cfg.lr,
+                lr_drops: cfg.lr_drops.clone(),
+                patience: cfg.patience,
+                time_budget: cfg.time_budget,
+                initial_loss: objective.loss(theta, val_idx)?,
+            };
+            if let Some(c) = Checkpoint::load_for(&ck.path, &key)? {
+                run.resume(c, &ck.path, theta, rng, adam, cfg.lr)?;
+            }
+            Some(key)
+        }
+        None => None,
+    };
+    let mut grad = vec![0.0; theta.len()];
+    let start = Instant::now();
+    let mut last_save = Instant::now();
+    let seconds = |run: &Run| run.seconds_before + start.elapsed().as_secs_f64();
+    let first = run.epoch + 1;
+    for epoch in first..=cfg.epochs {
+        if run.stopped_early || run.out_of_time {
+            break;
+        }
         adam.set_lr(cfg.lr_at(epoch));
-        train_idx.shuffle(rng);
+        run.train_idx.shuffle(rng);
         let (mut sum, mut count) = (0.0, 0usize);
-        for chunk in train_idx.chunks(cfg.batch) {
+        for chunk in run.train_idx.chunks(cfg.batch) {
             let lv = objective.loss_grad(theta, chunk, &mut grad)?;
             if !lv.is_finite() {
                 bail!("training diverged at epoch {epoch} (loss {lv})");
@@ -457,46 +500,49 @@ pub fn fit(
         }
         let train_loss = sum / count as f64;
         let val = objective.loss(theta, val_idx)?;
-        epochs_run = epoch;
+        run.epoch = epoch;
         if !val.is_finite() {
             bail!("validation loss is not finite at epoch {epoch}");
         }
-        if val < best {
-            best = val;
-            best_epoch = epoch;
-            best_train = train_loss;
-            best_theta.copy_from_slice(theta);
+        if val < run.best {
+            run.best = val;
+            run.best_epoch = epoch;
+            run.best_train = train_loss;
+            run.best_theta.copy_from_slice(theta);
         }
         let report = EpochReport {
             epoch,
             epochs: cfg.epochs,
             train_loss,
             validation_loss: val,
-            best,
-            elapsed: start.elapsed().as_secs_f64(),
+            best: run.best,
+            elapsed: seconds(&run),
         };
+        run.stopped_early = epoch - run.best_epoch >= cfg.patience;
+        run.out_of_time =
+            !run.stopped_early && cfg.time_budget.is_some_and(|b| report.elapsed >= b);
+        if let (Some(ck), Some(key)) = (&cfg.checkpoint, &key) {
+            let last = epoch == cfg.epochs || run.stopped_early || run.out_of_time;
+            if last || last_save.elapsed().as_secs_f64() >= ck.every {
+                run.checkpoint(key, report.elapsed, theta, rng, adam)
+                    .save(&ck.path)?;
+                last_save = Instant::now();
+            }
+        }
         if !on_epoch(&report) {
             bail!("training cancelled at epoch {epoch}");
         }
-        if epoch - best_epoch >= cfg.patience {
-            stopped_early = true;
-            break;
-        }
-        if cfg.time_budget.is_some_and(|b| report.elapsed >= b) {
-            out_of_time = true;
-            break;
-        }
     }
-    theta.copy_from_slice(&best_theta);
+    theta.copy_from_slice(&run.best_theta);
     Ok(TrainingReport {
         seed: cfg.seed,
         epochs_requested: cfg.epochs,
-        epochs_run,
-        best_epoch,
-        train_loss: best_train,
-        validation_loss: best,
-        stopped_early,
-        seconds: start.elapsed().as_secs_f64(),
+        epochs_run: run.epoch,
+        best_epoch: run.best_epoch,
+        train_loss: run.best_train,
+        validation_loss: run.best,
+        stopped_early: run.stopped_early,
+        seconds: seconds(&run),
         batch: cfg.batch,
         lr: cfg.lr,
         patience: cfg.patience,
@@ -504,8 +550,107 @@ pub fn fit(
         points: cfg.points,
         lr_drops: cfg.lr_drops.clone(),
         time_budget: cfg.time_budget,
-        out_of_time,
+        out_of_time: run.out_of_time,
+        resumed_at: run.resumed_at,
     })
+}
+
+/// What [`fit`] carries from epoch to epoch besides the parameters, Adam and
+/// the RNG: what a [`Checkpoint`] holds.
+struct Run {
+    epoch: usize,
+    train_idx: Vec<usize>,
+    best: f64,
+    best_epoch: usize,
+    best_train: f64,
+    best_theta: Vec<f64>,
+    stopped_early: bool,
+    out_of_time: bool,
+    seconds_before: f64,
+    resumed_at: Option<usize>,
+}
+
+impl Run {
+    fn fresh(theta: &[f64], train_idx: Vec<usize>) -> Self {
+        Self {
+            epoch: 0,
+            train_idx,
+            best: f64::INFINITY,
+            best_epoch: 0,
+            best_train: f64::NAN,
+            best_theta: theta.to_vec(),
+            stopped_early: false,
+            out_of_time: false,
+            seconds_before: 0.0,
+            resumed_at: None,
+        }
+    }
+
+    /// Takes up a checkpoint (already checked against the run's key).
+    fn resume(
+        &mut self,
+        c: Checkpoint,
+        path: &std::path::Path,
+        theta: &mut [f64],
+        rng: &mut ChaCha8Rng,
+        adam: &mut Adam,
+        lr: f64,
+    ) -> Result<()> {
+        let (mut have, mut want) = (c.train_order.clone(), self.train_idx.clone());
+        have.sort_unstable();
+        want.sort_unstable();
+        if have != want {
+            bail!(
+                "checkpoint {} holds another training split; remove it to train afresh",
+                path.display()
+            );
+        }
+        *rng = c.rng(path)?;
+        *adam = Adam::resume(lr, c.adam_step, c.adam_m, c.adam_v);
+        theta.copy_from_slice(&c.theta);
+        *self = Self {
+            epoch: c.epoch,
+            train_idx: c.train_order,
+            best: c.best,
+            best_epoch: c.best_epoch,
+            best_train: c.best_train,
+            best_theta: c.best_theta,
+            stopped_early: c.stopped_early,
+            out_of_time: c.out_of_time,
+            seconds_before: c.seconds,
+            resumed_at: Some(c.epoch),
+        };
+        Ok(())
+    }
+
+    fn checkpoint(
+        &self,
+        key: &RunKey,
+        seconds: f64,
+        theta: &[f64],
+        rng: &ChaCha8Rng,
+        adam: &Adam,
+    ) -> Checkpoint {
+        let (step, m, v) = adam.state();
+        Checkpoint {
+            format: checkpoint::FORMAT.into(),
+            key: key.clone(),
+            epoch: self.epoch,
+            seconds,
+            theta: theta.to_vec(),
+            adam_step: step,
+            adam_m: m.to_vec(),
+            adam_v: v.to_vec(),
+            rng: RngState::of(rng),
+            train_order: self.train_idx.clone(),
+            best: self.best,
+            best_epoch: self.best_epoch,
+            best_train: self.best_train,
+            best_theta: self.best_theta.clone(),
+            stopped_early: self.stopped_early,
+            out_of_time: self.out_of_time,
+        }
+    }
 }
 
 /// Mixed into [`TrainConfig::seed`] for the subsample's stream ("points"), so

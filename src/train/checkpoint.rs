@@ -1,0 +1,298 @@
+//! Checkpoints of a training run: everything [`super::fit`] needs to go on
+//! exactly where it stopped (parameters, Adam's moments, the shuffling RNG and
+//! the order it left, the best weights so far, the seconds spent), written
+//! atomically every few minutes. A run of hours survives a stop or a crash
+//! and, resumed, ends bit for bit where an uninterrupted run would.
+
+use crate::model::file::{write_json_atomic, ModelFileError};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Format tag of a checkpoint file.
+pub const FORMAT: &str = "mcgnode-checkpoint-1";
+
+/// Where and how often [`super::fit`] saves its state.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Checkpointing {
+    /// The checkpoint file (JSON). When it exists, training resumes from it.
+    pub path: PathBuf,
+    /// Seconds between saves; the last epoch is always saved.
+    pub every: f64,
+}
+
+/// Why a checkpoint could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    /// The file exists but cannot be read.
+    #[error("cannot read checkpoint {}: {source}", path.display())]
+    Read {
+        /// The checkpoint.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The file is not a checkpoint of this format.
+    #[error("{} is not an mcgnode checkpoint ({FORMAT}): {why}; remove it to train afresh", path.display())]
+    Parse {
+        /// The checkpoint.
+        path: PathBuf,
+        /// Cause.
+        why: String,
+    },
+    /// The checkpoint belongs to another training run.
+    #[error(
+        "checkpoint {} is of another training run ({what}: {found} there, {expected} in this one); \
+         remove it to train afresh, or give this run another checkpoint path",
+        path.display()
+    )]
+    Mismatch {
+        /// The checkpoint.
+        path: PathBuf,
+        /// What differs.
+        what: &'static str,
+        /// The checkpoint's value.
+        found: String,
+        /// This run's value.
+        expected: String,
+    },
+    /// Saving failed.
+    #[error(transparent)]
+    Write(#[from] ModelFileError),
+}
+
+crate::error::typed_errors!(CheckpointError);
+
+/// What identifies a training run: a checkpoint resumes only the run it
+/// came from. The epochs asked for are not part of it, so a finished run can
+/// be extended.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunKey {
+    /// Trainable parameters.
+    pub parameters: usize,
+    /// Training samples.
+    pub train: usize,
+    /// Validation samples.
+    pub validation: usize,
+    /// Seed of initialisation, split and shuffling.
+    pub seed: u64,
+    /// Batch size.
+    pub batch: usize,
+    /// Adam's learning rate.
+    pub lr: f64,
+    /// Learning-rate steps.
+    pub lr_drops: Vec<(usize, f64)>,
+    /// Early-stopping patience.
+    pub patience: usize,
+    /// Wall-clock budget, seconds.
+    pub time_budget: Option<f64>,
+    /// Validation loss of the initial parameters: a digest of the data, the
+    /// architecture, its normalisation and its initialisation at once.
+    pub initial_loss: f64,
+}
+
+impl RunKey {
+    /// The first field in which `found` (a checkpoint's) differs from `self`.
+    fn first_difference(&self, found: &RunKey) -> Option<(&'static str, String, String)> {
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs());
+        let fields: [(&'static str, bool, String, String); 10] = [
+            (
+                "parameters",
+                self.parameters == found.parameters,
+                found.parameters.to_string(),
+                self.parameters.to_string(),
+            ),
+            (
+                "training samples",
+                self.train == found.train,
+                found.train.to_string(),
+                self.train.to_string(),
+            ),
+            (
+                "validation samples",
+                self.validation == found.validation,
+                found.validation.to_string(),
+                self.validation.to_string(),
+            ),
+            (
+                "seed",
+                self.seed == found.seed,
+                found.seed.to_string(),
+                self.seed.to_string(),
+            ),
+            (
+                "batch",
+                self.batch == found.batch,
+                found.batch.to_string(),
+                self.batch.to_string(),
+            ),
+            (
+                "learning rate",
+                self.lr == found.lr,
+                found.lr.to_string(),
+                self.lr.to_string(),
+            ),
+            (
+                "learning-rate steps",
+                self.lr_drops == found.lr_drops,
+                format!("{:?}", found.lr_drops),
+                format!("{:?}", self.lr_drops),
+            ),
+            (
+                "patience",
+                self.patience == found.patience,
+                found.patience.to_string(),
+                self.patience.to_string(),
+            ),
+            (
+                "time budget",
+                self.time_budget == found.time_budget,
+                format!("{:?}", found.time_budget),
+                format!("{:?}", self.time_budget),
+            ),
+            (
+                "initial validation loss (data, architecture or initialisation)",
+                close(self.initial_loss, found.initial_loss),
+                format!("{:e}", found.initial_loss),
+                format!("{:e}", self.initial_loss),
+            ),
+        ];
+        fields
+            .into_iter()
+            .find(|(_, same, _, _)| !same)
+            .map(|(what, _, f, e)| (what, f, e))
+    }
+}
+
+/// The shuffling RNG's position.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RngState {
+    /// Seed, 32 bytes.
+    pub seed: Vec<u8>,
+    /// Stream.
+    pub stream: u64,
+    /// Word position (a u128, as a decimal string: JSON numbers stop at 2^64).
+    pub word_pos: String,
+}
+
+impl RngState {
+    /// The state of `rng`.
+    pub fn of(rng: &ChaCha8Rng) -> Self {
+        Self {
+            seed: rng.get_seed().to_vec(),
+            stream: rng.get_stream(),
+            word_pos: rng.get_word_pos().to_string(),
+        }
+    }
+
+    /// The RNG at this state.
+    fn restore(&self, path: &Path) -> Result<ChaCha8Rng, CheckpointError> {
+        use rand::SeedableRng;
+        let bad = |why: &str| CheckpointError::Parse {
+            path: path.to_path_buf(),
+            why: why.to_string(),
+        };
+        let seed: [u8; 32] = self
+            .seed
+            .as_slice()
+            .try_into()
+            .map_err(|_| bad("the RNG seed is not 32 bytes"))?;
+        let pos: u128 = self
+            .word_pos
+            .parse()
+            .map_err(|_| bad("the RNG position is not a number"))?;
+        let mut rng = ChaCha8Rng::from_seed(seed);
+        rng.set_stream(self.stream);
+        rng.set_word_pos(pos);
+        Ok(rng)
+    }
+}
+
+/// The state of a training run after an epoch.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Checkpoint {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// The run it belongs to.
+    pub key: RunKey,
+    /// Last epoch completed.
+    pub epoch: usize,
+    /// Training seconds spent so far, over every session.
+    pub seconds: f64,
+    /// Parameters after that epoch.
+    pub theta: Vec<f64>,
+    /// Adam's step count.
+    pub adam_step: i32,
+    /// Adam's first moments.
+    pub adam_m: Vec<f64>,
+    /// Adam's second moments.
+    pub adam_v: Vec<f64>,
+    /// The shuffling RNG.
+    pub rng: RngState,
+    /// Training samples in the order the last shuffle left them (each
+    /// epoch shuffles this order again).
+    pub train_order: Vec<usize>,
+    /// Lowest validation loss so far.
+    pub best: f64,
+    /// Its epoch.
+    pub best_epoch: usize,
+    /// Training loss of that epoch.
+    pub best_train: f64,
+    /// Parameters of that epoch.
+    pub best_theta: Vec<f64>,
+    /// Early stopping has ended the run.
+    pub stopped_early: bool,
+    /// The time budget has ended the run.
+    pub out_of_time: bool,
+}
+
+impl Checkpoint {
+    /// The checkpoint at `path` if there is one, checked against `key`.
+    pub fn load_for(path: &Path, key: &RunKey) -> Result<Option<Self>, CheckpointError> {
+        let text = match std::fs::read_to_string(path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(source) => {
+                return Err(CheckpointError::Read {
+                    path: path.to_path_buf(),
+                    source,
+                })
+            }
+        };
+        let parse = |why: String| CheckpointError::Parse {
+            path: path.to_path_buf(),
+            why,
+        };
+        let c: Checkpoint = serde_json::from_str(&text).map_err(|e| parse(e.to_string()))?;
+        if c.format != FORMAT {
+            return Err(parse(format!("format {:?}", c.format)));
+        }
+        if let Some((what, found, expected)) = key.first_difference(&c.key) {
+            return Err(CheckpointError::Mismatch {
+                path: path.to_path_buf(),
+                what,
+                found,
+                expected,
+            });
+        }
+        let n = key.parameters;
+        if [&c.theta, &c.adam_m, &c.adam_v, &c.best_theta]
+            .iter()
+            .any(|v| v.len() != n)
+            || c.train_order.len() != key.train
+        {
+            return Err(parse("its vectors do not have the run's sizes".into()));
+        }
+        Ok(Some(c))
+    }
+
+    /// The shuffling RNG as it was.
+    pub fn rng(&self, path: &Path) -> Result<ChaCha8Rng, CheckpointError> {
+        self.rng.restore(path)
+    }
+
+    /// Writes the checkpoint atomically.
+    pub fn save(&self, path: &Path) -> Result<(), CheckpointError> {
+        Ok(write_json_atomic(path, self)?)
+    }
+}
