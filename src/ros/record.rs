@@ -13,7 +13,8 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use crate::data::msg::{
     encode_cdr, ros2msg_schema, DEP_HEADER, DEP_POINT, DEP_TIME, DEP_VECTOR3, PARTICLE_STATE_MSG,
 };
-use crate::data::{BagMetadata, BagWriter, ChannelId, ParticleState, METADATA_NAME};
+use crate::data::{BagMetadata, BagWriter, ChannelId, DataError, ParticleState, METADATA_NAME};
+use crate::error::BoxedError;
 
 use super::markers::{marker_array_schema, MarkerArray, MARKER_ARRAY_TYPE};
 use super::msgs::{ParticleForces, PredictedTrajectory, PACKAGE};
@@ -79,24 +80,24 @@ pub enum RecordError {
         source: std::io::Error,
     },
     /// Writing to a bag failed.
-    #[error("recording to {}: {why}", path.display())]
+    #[error("recording to {}: {source}", path.display())]
     Write {
         /// The bag.
         path: PathBuf,
-        /// Why.
-        why: String,
+        /// Why (an I/O or MCAP error).
+        source: BoxedError,
     },
     /// Closing a bag (summary and footer) failed.
-    #[error("closing {}: {why}", path.display())]
+    #[error("closing {}: {source}", path.display())]
     Close {
         /// The bag.
         path: PathBuf,
         /// Why.
-        why: String,
+        source: DataError,
     },
     /// A message could not be encoded for recording.
     #[error("encoding a message to record: {0}")]
-    Encode(String),
+    Encode(#[source] DataError),
 }
 
 crate::error::typed_errors!(RecordError);
@@ -145,14 +146,14 @@ impl Recorder {
             .dir
             .join(format!("mcgnode-{}-{:04}.mcap", self.run, self.index));
         self.index += 1;
-        let ctx = |why: String| RecordError::Write {
+        let ctx = |e: BoxedError| RecordError::Write {
             path: path.clone(),
-            why,
+            source: e,
         };
-        let file = File::create(&path).map_err(|e| ctx(e.to_string()))?;
+        let file = File::create(&path).map_err(|e| ctx(e.into()))?;
         // Unbuffered on purpose: finished chunks reach the file at once.
-        let handle = file.try_clone().map_err(|e| ctx(e.to_string()))?;
-        let mut writer = BagWriter::new(file).map_err(|e| ctx(e.to_string()))?;
+        let handle = file.try_clone().map_err(|e| ctx(e.into()))?;
+        let mut writer = BagWriter::new(file).map_err(|e| ctx(e.into()))?;
         let types = [
             (
                 format!("{PACKAGE}/msg/ParticleState"),
@@ -172,12 +173,12 @@ impl Recorder {
         for (c, (topic, (ty, schema))) in channels.iter_mut().zip(self.topics.iter().zip(&types)) {
             *c = writer
                 .add_channel(topic, ty, schema)
-                .map_err(|e| ctx(e.to_string()))?;
+                .map_err(|e| ctx(e.into()))?;
         }
-        let metadata = self.metadata.to_map().map_err(|e| ctx(e.to_string()))?;
+        let metadata = self.metadata.to_map().map_err(|e| ctx(e.into()))?;
         writer
             .add_metadata(METADATA_NAME, &metadata)
-            .map_err(|e| ctx(e.to_string()))?;
+            .map_err(|e| ctx(e.into()))?;
         Ok(self.open.insert(OpenBag {
             writer,
             path,
@@ -212,7 +213,7 @@ impl Recorder {
             .write(channel, log_time_ns, cdr)
             .map_err(|e| RecordError::Write {
                 path: bag.path.clone(),
-                why: e.to_string(),
+                source: e.into(),
             })
     }
 
@@ -222,21 +223,21 @@ impl Recorder {
     pub fn set_model(&mut self, model: &str) -> Result<(), RecordError> {
         self.metadata.model = Some(model.to_string());
         if let Some(bag) = &mut self.open {
-            let write = |why: String| RecordError::Write {
+            let write = |e: DataError| RecordError::Write {
                 path: bag.path.clone(),
-                why,
+                source: e.into(),
             };
-            let map = self.metadata.to_map().map_err(|e| write(e.to_string()))?;
+            let map = self.metadata.to_map().map_err(write)?;
             bag.writer
                 .add_metadata(METADATA_NAME, &map)
-                .map_err(|e| write(e.to_string()))?;
+                .map_err(write)?;
         }
         Ok(())
     }
 
     /// Records an incoming state, received at `log_time_ns` (ns since the epoch).
     pub fn state(&mut self, log_time_ns: u64, msg: &ParticleState) -> Result<(), RecordError> {
-        let cdr = encode_cdr(msg).map_err(|e| RecordError::Encode(e.to_string()))?;
+        let cdr = encode_cdr(msg).map_err(RecordError::Encode)?;
         self.write(0, log_time_ns, &cdr)
     }
 
@@ -247,15 +248,15 @@ impl Recorder {
         trajectory: &PredictedTrajectory,
         forces: &ParticleForces,
     ) -> Result<(), RecordError> {
-        let t = encode_cdr(trajectory).map_err(|e| RecordError::Encode(e.to_string()))?;
-        let f = encode_cdr(forces).map_err(|e| RecordError::Encode(e.to_string()))?;
+        let t = encode_cdr(trajectory).map_err(RecordError::Encode)?;
+        let f = encode_cdr(forces).map_err(RecordError::Encode)?;
         self.write(1, log_time_ns, &t)?;
         self.write(2, log_time_ns, &f)
     }
 
     /// Records the markers of a prediction, published at `log_time_ns`.
     pub fn markers(&mut self, log_time_ns: u64, markers: &MarkerArray) -> Result<(), RecordError> {
-        let m = encode_cdr(markers).map_err(|e| RecordError::Encode(e.to_string()))?;
+        let m = encode_cdr(markers).map_err(RecordError::Encode)?;
         self.write(3, log_time_ns, &m)
     }
 
@@ -265,7 +266,7 @@ impl Recorder {
             if let Err(e) = bag.writer.finish() {
                 return Err(RecordError::Close {
                     path: bag.path,
-                    why: e.to_string(),
+                    source: e,
                 });
             }
             self.finished.push(bag.path);
@@ -292,6 +293,23 @@ mod tests {
     use super::*;
     use crate::data::msg::Vector3;
     use crate::data::scan_bag;
+
+    /// A bag that cannot be created says which, and keeps the I/O error as
+    /// its source (not only its text).
+    #[test]
+    fn write_errors_keep_their_source() {
+        let dir = tempfile::tempdir().unwrap();
+        let params = NodeParams {
+            record_dir: dir.path().join("rec").to_string_lossy().into_owned(),
+            ..NodeParams::default()
+        };
+        let mut r = Recorder::new(&params, "m.json").unwrap();
+        std::fs::remove_dir(dir.path().join("rec")).unwrap();
+        let e = r.write(0, 0, &[0, 1, 0, 0]).unwrap_err();
+        assert!(e.to_string().starts_with("recording to "), "{e}");
+        let source = std::error::Error::source(&e).expect("a source");
+        assert!(source.downcast_ref::<std::io::Error>().is_some(), "{source:?}");
+    }
 
     #[test]
     fn records_three_topics_and_splits_by_duration() {
