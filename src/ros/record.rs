@@ -308,7 +308,10 @@ mod tests {
         let e = r.write(0, 0, &[0, 1, 0, 0]).unwrap_err();
         assert!(e.to_string().starts_with("recording to "), "{e}");
         let source = std::error::Error::source(&e).expect("a source");
-        assert!(source.downcast_ref::<std::io::Error>().is_some(), "{source:?}");
+        assert!(
+            source.downcast_ref::<std::io::Error>().is_some(),
+            "{source:?}"
+        );
     }
 
     #[test]
