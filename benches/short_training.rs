@@ -6,6 +6,7 @@
 //! reproduce` makes the full comparison; this is the quick look.
 
 use mcgnode::baselines::{train_baseline, BaselineHyper, Kind};
+use mcgnode::data::dataset::Dataset;
 use mcgnode::dynamics::{Dynamics, DynamicsError};
 use mcgnode::model::batch::Batch;
 use mcgnode::model::plan::GraphPlan;
@@ -13,29 +14,6 @@ use mcgnode::physics::rk4::rk4_trajectories;
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State};
 use mcgnode::train::TrainConfig;
-
-fn dataset(
-    kind: SystemKind,
-    n: usize,
-    traj: usize,
-    seed: u64,
-) -> (Graph, Vec<State>, Vec<Vec<f64>>) {
-    let c = SystemConfig::new(kind, n);
-    let t = c.simulate(traj, seed);
-    let mut s = vec![];
-    let mut a = vec![];
-    for tr in &t {
-        for x in &tr.samples {
-            s.push(x.state.clone());
-            a.push(
-                x.acc
-                    .clone()
-                    .expect("simulated samples carry accelerations"),
-            );
-        }
-    }
-    (t[0].graph.clone(), s, a)
-}
 
 /// MCGNODE's candle net behind `Dynamics`, for the comparison below.
 struct NetDyn(mcgnode::model::Net);
@@ -72,7 +50,8 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(200);
     let c = SystemConfig::new(SystemKind::Spring, 5);
-    let (g, s, a) = dataset(SystemKind::Spring, 5, 10, 1);
+    let ds = Dataset::from_trajectories(&c.simulate(10, 1)).expect("a training set");
+    let (g, s, a) = (ds.graph, ds.states, ds.acc);
     let rk: Vec<_> = rk4_trajectories(&c, 10, 1).unwrap();
     let (rs, ra): (Vec<State>, Vec<Vec<f64>>) = rk
         .iter()

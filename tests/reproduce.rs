@@ -153,21 +153,20 @@ fn quick_reproduce_writes_a_complete_report() {
 fn only_runs_the_named_parts_and_names_the_rest() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("repro");
-    let o = common::run_bounded(
-        Command::new(common::BIN)
-            .args([
-                "reproduce",
-                "--quick",
-                "--only",
-                "noise",
-                "--comparison-epochs",
-                "3",
-                "--out",
-            ])
-            .arg(&out),
-        Duration::from_secs(300),
-        dir.path(),
-    );
+    // The noise part at toy scale, with `extra` options.
+    let noise = |extra: &[&str]| {
+        common::run_bounded(
+            Command::new(common::BIN)
+                .args(["reproduce", "--quick", "--only", "noise"])
+                .args(["--comparison-epochs", "3"])
+                .args(extra)
+                .arg("--out")
+                .arg(&out),
+            Duration::from_secs(300),
+            dir.path(),
+        )
+    };
+    let o = noise(&[]);
     assert!(o.status.success(), "reproduce failed:\n{}", o.stderr);
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("## Robustness to noise"), "{report}");
@@ -215,22 +214,7 @@ fn only_runs_the_named_parts_and_names_the_rest() {
     assert_eq!(json["pending"], serde_json::json!([]));
     // --resume takes every training up from its checkpoint: finished ones
     // are not trained again, and the results are the same.
-    let resumed = common::run_bounded(
-        Command::new(common::BIN)
-            .args([
-                "reproduce",
-                "--quick",
-                "--only",
-                "noise",
-                "--comparison-epochs",
-                "3",
-                "--resume",
-                "--out",
-            ])
-            .arg(&out),
-        Duration::from_secs(300),
-        dir.path(),
-    );
+    let resumed = noise(&["--resume"]);
     assert!(
         resumed.status.success(),
         "resume failed:\n{}",
