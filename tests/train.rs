@@ -662,6 +662,10 @@ fn checkpointed_training_resumes_exactly() {
     })
     .unwrap();
     assert_eq!(weights(&again), weights(&straight));
+    assert_eq!(
+        again.report.seconds, resumed.report.seconds,
+        "a finished run states the seconds it had (budgets derived from them match)"
+    );
     // Longer: goes on from epoch 10 to where a straight 14-epoch run ends.
     let longer = |c: &TrainConfig| TrainConfig {
         epochs: 14,

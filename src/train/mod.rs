@@ -480,7 +480,7 @@ pub fn fit(
     let mut grad = vec![0.0; theta.len()];
     let start = Instant::now();
     let mut last_save = Instant::now();
-    let seconds = |run: &Run| run.seconds_before + start.elapsed().as_secs_f64();
+    let before = run.seconds;
     let first = run.epoch + 1;
     for epoch in first..=cfg.epochs {
         if run.stopped_early || run.out_of_time {
@@ -516,16 +516,19 @@ pub fn fit(
             train_loss,
             validation_loss: val,
             best: run.best,
-            elapsed: seconds(&run),
+            elapsed: before + start.elapsed().as_secs_f64(),
         };
+        // Seconds to the end of the last epoch: the report, the checkpoint
+        // and a resumed finished run state the same figure, so a budget
+        // derived from it matches exactly.
+        run.seconds = report.elapsed;
         run.stopped_early = epoch - run.best_epoch >= cfg.patience;
         run.out_of_time =
             !run.stopped_early && cfg.time_budget.is_some_and(|b| report.elapsed >= b);
         if let (Some(ck), Some(key)) = (&cfg.checkpoint, &key) {
             let last = epoch == cfg.epochs || run.stopped_early || run.out_of_time;
             if last || last_save.elapsed().as_secs_f64() >= ck.every {
-                run.checkpoint(key, report.elapsed, theta, rng, adam)
-                    .save(&ck.path)?;
+                run.checkpoint(key, theta, rng, adam).save(&ck.path)?;
                 last_save = Instant::now();
             }
         }
@@ -542,7 +545,7 @@ pub fn fit(
         train_loss: run.best_train,
         validation_loss: run.best,
         stopped_early: run.stopped_early,
-        seconds: seconds(&run),
+        seconds: run.seconds,
         batch: cfg.batch,
         lr: cfg.lr,
         patience: cfg.patience,
@@ -566,7 +569,8 @@ struct Run {
     best_theta: Vec<f64>,
     stopped_early: bool,
     out_of_time: bool,
-    seconds_before: f64,
+    /// Training seconds to the end of the last epoch, over every session.
+    seconds: f64,
     resumed_at: Option<usize>,
 }
 
@@ -581,7 +585,7 @@ impl Run {
             best_theta: theta.to_vec(),
             stopped_early: false,
             out_of_time: false,
-            seconds_before: 0.0,
+            seconds: 0.0,
             resumed_at: None,
         }
     }
@@ -617,26 +621,19 @@ impl Run {
             best_theta: c.best_theta,
             stopped_early: c.stopped_early,
             out_of_time: c.out_of_time,
-            seconds_before: c.seconds,
+            seconds: c.seconds,
             resumed_at: Some(c.epoch),
         };
         Ok(())
     }
 
-    fn checkpoint(
-        &self,
-        key: &RunKey,
-        seconds: f64,
-        theta: &[f64],
-        rng: &ChaCha8Rng,
-        adam: &Adam,
-    ) -> Checkpoint {
+    fn checkpoint(&self, key: &RunKey, theta: &[f64], rng: &ChaCha8Rng, adam: &Adam) -> Checkpoint {
         let (step, m, v) = adam.state();
         Checkpoint {
             format: checkpoint::FORMAT.into(),
             key: key.clone(),
             epoch: self.epoch,
-            seconds,
+            seconds: self.seconds,
             theta: theta.to_vec(),
             adam_step: step,
             adam_m: m.to_vec(),
