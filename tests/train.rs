@@ -635,7 +635,13 @@ fn checkpointed_training_resumes_exactly() {
         .expect("cancelled");
     assert!(format!("{err}").contains("cancelled at epoch 4"), "{err}");
     let saved: Checkpoint = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-    assert_eq!(saved.epoch, 4);
+    assert_eq!(saved.progress.epoch, 4);
+    // The file is flat: the progress fields sit beside the parameters (as
+    // in checkpoints written before they were grouped).
+    let raw: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    assert_eq!(raw["epoch"], 4);
+    assert!(raw["best_theta"].is_array() && raw.get("progress").is_none());
     let mut epochs = vec![];
     let resumed = train(hy.clone(), &g, &s, &a, &ck, |r| {
         epochs.push(r.epoch);
@@ -655,7 +661,10 @@ fn checkpointed_training_resumes_exactly() {
         (q.epochs_run, q.best_epoch, q.validation_loss, q.train_loss)
     );
     assert_eq!(r.resumed_at, Some(4));
-    assert!(r.seconds >= saved.seconds, "seconds count every session");
+    assert!(
+        r.seconds >= saved.progress.seconds,
+        "seconds count every session"
+    );
     // Finished: nothing is trained again, the result is the same.
     let again = train(hy.clone(), &g, &s, &a, &ck, |_| {
         panic!("a finished run trained again")

@@ -179,27 +179,14 @@ impl RngState {
     }
 }
 
-/// The state of a training run after an epoch.
+/// How far a training run has come: what [`super::fit`] carries from epoch
+/// to epoch besides the parameters, Adam and the RNG.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Checkpoint {
-    /// Always [`FORMAT`].
-    pub format: String,
-    /// The run it belongs to.
-    pub key: RunKey,
+pub struct Progress {
     /// Last epoch completed.
     pub epoch: usize,
-    /// Training seconds spent so far, over every session.
+    /// Training seconds to the end of that epoch, over every session.
     pub seconds: f64,
-    /// Parameters after that epoch.
-    pub theta: Vec<f64>,
-    /// Adam's step count.
-    pub adam_step: i32,
-    /// Adam's first moments.
-    pub adam_m: Vec<f64>,
-    /// Adam's second moments.
-    pub adam_v: Vec<f64>,
-    /// The shuffling RNG.
-    pub rng: RngState,
     /// Training samples in the order the last shuffle left them (each
     /// epoch shuffles this order again).
     pub train_order: Vec<usize>,
@@ -215,6 +202,45 @@ pub struct Checkpoint {
     pub stopped_early: bool,
     /// The time budget has ended the run.
     pub out_of_time: bool,
+}
+
+impl Progress {
+    /// A run about to start from `theta`, its samples in `train_order`.
+    pub fn fresh(theta: &[f64], train_order: Vec<usize>) -> Self {
+        Self {
+            epoch: 0,
+            seconds: 0.0,
+            train_order,
+            best: f64::INFINITY,
+            best_epoch: 0,
+            best_train: f64::NAN,
+            best_theta: theta.to_vec(),
+            stopped_early: false,
+            out_of_time: false,
+        }
+    }
+}
+
+/// The state of a training run after an epoch.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Checkpoint {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// The run it belongs to.
+    pub key: RunKey,
+    /// How far it has come.
+    #[serde(flatten)]
+    pub progress: Progress,
+    /// Parameters after that epoch.
+    pub theta: Vec<f64>,
+    /// Adam's step count.
+    pub adam_step: i32,
+    /// Adam's first moments.
+    pub adam_m: Vec<f64>,
+    /// Adam's second moments.
+    pub adam_v: Vec<f64>,
+    /// The shuffling RNG.
+    pub rng: RngState,
 }
 
 impl Checkpoint {
@@ -247,10 +273,10 @@ impl Checkpoint {
             });
         }
         let n = key.parameters;
-        if [&c.theta, &c.adam_m, &c.adam_v, &c.best_theta]
+        if [&c.theta, &c.adam_m, &c.adam_v, &c.progress.best_theta]
             .iter()
             .any(|v| v.len() != n)
-            || c.train_order.len() != key.train
+            || c.progress.train_order.len() != key.train
         {
             return Err(parse("its vectors do not have the run's sizes".into()));
         }

@@ -20,7 +20,7 @@ use std::time::Instant;
 
 pub mod checkpoint;
 pub use checkpoint::{Checkpoint, CheckpointError, Checkpointing};
-use checkpoint::{RngState, RunKey};
+use checkpoint::{Progress, RngState, RunKey};
 
 /// Training settings.
 #[derive(Clone, Debug)]
@@ -455,12 +455,13 @@ pub fn fit(
             );
         }
     }
-    let mut run = Run::fresh(theta, train_idx);
+    let mut run = Progress::fresh(theta, train_idx);
+    let mut resumed_at = None;
     let key = match &cfg.checkpoint {
         Some(ck) => {
             let key = RunKey {
                 parameters: theta.len(),
-                train: run.train_idx.len(),
+                train: run.train_order.len(),
                 validation: val_idx.len(),
                 seed: cfg.seed,
                 batch: cfg.batch,
@@ -471,7 +472,8 @@ pub fn fit(
                 initial_loss: objective.loss(theta, val_idx)?,
             };
             if let Some(c) = Checkpoint::load_for(&ck.path, &key)? {
-                run.resume(c, &ck.path, theta, rng, adam, cfg.lr)?;
+                run = resume(c, &ck.path, &run, theta, rng, adam, cfg.lr)?;
+                resumed_at = Some(run.epoch);
             }
             Some(key)
         }
@@ -487,9 +489,9 @@ pub fn fit(
             break;
         }
         adam.set_lr(cfg.lr_at(epoch));
-        run.train_idx.shuffle(rng);
+        run.train_order.shuffle(rng);
         let (mut sum, mut count) = (0.0, 0usize);
-        for chunk in run.train_idx.chunks(cfg.batch) {
+        for chunk in run.train_order.chunks(cfg.batch) {
             let lv = objective.loss_grad(theta, chunk, &mut grad)?;
             if !lv.is_finite() {
                 bail!("training diverged at epoch {epoch} (loss {lv})");
@@ -528,7 +530,18 @@ pub fn fit(
         if let (Some(ck), Some(key)) = (&cfg.checkpoint, &key) {
             let last = epoch == cfg.epochs || run.stopped_early || run.out_of_time;
             if last || last_save.elapsed().as_secs_f64() >= ck.every {
-                run.checkpoint(key, theta, rng, adam).save(&ck.path)?;
+                let (adam_step, m, v) = adam.state();
+                let c = Checkpoint {
+                    format: checkpoint::FORMAT.into(),
+                    key: key.clone(),
+                    progress: run.clone(),
+                    theta: theta.to_vec(),
+                    adam_step,
+                    adam_m: m.to_vec(),
+                    adam_v: v.to_vec(),
+                    rng: RngState::of(rng),
+                };
+                c.save(&ck.path)?;
                 last_save = Instant::now();
             }
         }
@@ -554,100 +567,34 @@ pub fn fit(
         lr_drops: cfg.lr_drops.clone(),
         time_budget: cfg.time_budget,
         out_of_time: run.out_of_time,
-        resumed_at: run.resumed_at,
+        resumed_at,
     })
 }
 
-/// What [`fit`] carries from epoch to epoch besides the parameters, Adam and
-/// the RNG: what a [`Checkpoint`] holds.
-struct Run {
-    epoch: usize,
-    train_idx: Vec<usize>,
-    best: f64,
-    best_epoch: usize,
-    best_train: f64,
-    best_theta: Vec<f64>,
-    stopped_early: bool,
-    out_of_time: bool,
-    /// Training seconds to the end of the last epoch, over every session.
-    seconds: f64,
-    resumed_at: Option<usize>,
-}
-
-impl Run {
-    fn fresh(theta: &[f64], train_idx: Vec<usize>) -> Self {
-        Self {
-            epoch: 0,
-            train_idx,
-            best: f64::INFINITY,
-            best_epoch: 0,
-            best_train: f64::NAN,
-            best_theta: theta.to_vec(),
-            stopped_early: false,
-            out_of_time: false,
-            seconds: 0.0,
-            resumed_at: None,
-        }
+/// Takes up a checkpoint (already checked against the run's key): the
+/// parameters, Adam and the RNG as it left them, and its progress.
+fn resume(
+    c: Checkpoint,
+    path: &std::path::Path,
+    fresh: &Progress,
+    theta: &mut [f64],
+    rng: &mut ChaCha8Rng,
+    adam: &mut Adam,
+    lr: f64,
+) -> Result<Progress> {
+    let (mut have, mut want) = (c.progress.train_order.clone(), fresh.train_order.clone());
+    have.sort_unstable();
+    want.sort_unstable();
+    if have != want {
+        bail!(
+            "checkpoint {} holds another training split; remove it to train afresh",
+            path.display()
+        );
     }
-
-    /// Takes up a checkpoint (already checked against the run's key).
-    fn resume(
-        &mut self,
-        c: Checkpoint,
-        path: &std::path::Path,
-        theta: &mut [f64],
-        rng: &mut ChaCha8Rng,
-        adam: &mut Adam,
-        lr: f64,
-    ) -> Result<()> {
-        let (mut have, mut want) = (c.train_order.clone(), self.train_idx.clone());
-        have.sort_unstable();
-        want.sort_unstable();
-        if have != want {
-            bail!(
-                "checkpoint {} holds another training split; remove it to train afresh",
-                path.display()
-            );
-        }
-        *rng = c.rng(path)?;
-        *adam = Adam::resume(lr, c.adam_step, c.adam_m, c.adam_v);
-        theta.copy_from_slice(&c.theta);
-        *self = Self {
-            epoch: c.epoch,
-            train_idx: c.train_order,
-            best: c.best,
-            best_epoch: c.best_epoch,
-            best_train: c.best_train,
-            best_theta: c.best_theta,
-            stopped_early: c.stopped_early,
-            out_of_time: c.out_of_time,
-            seconds: c.seconds,
-            resumed_at: Some(c.epoch),
-        };
-        Ok(())
-    }
-
-    fn checkpoint(&self, key: &RunKey, theta: &[f64], rng: &ChaCha8Rng, adam: &Adam) -> Checkpoint {
-        let (step, m, v) = adam.state();
-        Checkpoint {
-            format: checkpoint::FORMAT.into(),
-            key: key.clone(),
-            epoch: self.epoch,
-            seconds: self.seconds,
-            theta: theta.to_vec(),
-            adam_step: step,
-            adam_m: m.to_vec(),
-            adam_v: v.to_vec(),
-            rng: RngState::of(rng),
-            train_order: self.train_idx.clone(),
-            best: self.best,
-            best_epoch: self.best_epoch,
-            best_train: self.best_train,
-            best_theta: self.best_theta.clone(),
-            stopped_early: self.stopped_early,
-            out_of_time: self.out_of_time,
-        }
-    }
+    *rng = c.rng(path)?;
+    *adam = Adam::resume(lr, c.adam_step, c.adam_m, c.adam_v);
+    theta.copy_from_slice(&c.theta);
+    Ok(c.progress)
 }
 
 /// Mixed into [`TrainConfig::seed`] for the subsample's stream ("points"), so
