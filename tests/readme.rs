@@ -105,3 +105,75 @@ fn readme_simulate_and_bag_info_commands_run_as_written() {
     }
     assert!(ran >= 8, "ran only {ran} simulate/bag info commands");
 }
+
+/// Every relative link target in a markdown text (`](target)`), without an
+/// anchor; web links are left out.
+fn relative_links(text: &str) -> Vec<String> {
+    text.split("](")
+        .skip(1)
+        .filter_map(|rest| rest.split(')').next())
+        .map(|t| t.split('#').next().unwrap_or(t).to_string())
+        .filter(|t| !t.is_empty() && !t.contains("://"))
+        .collect()
+}
+
+#[test]
+fn readme_links_and_committed_reports_hold() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let links = relative_links(&readme);
+    assert!(
+        links.len() >= 5,
+        "found only {} links: {links:?}",
+        links.len()
+    );
+    for link in &links {
+        assert!(
+            root.join(link).exists(),
+            "the README links to `{link}`, which does not exist"
+        );
+    }
+    // Each committed reproduce report: its links resolve, its command parses as
+    // written, and it names no path of the machine it ran on.
+    let mut reports = 0;
+    for entry in std::fs::read_dir(root.join("docs")).unwrap() {
+        let dir = entry.unwrap().path();
+        let report = dir.join("report.md");
+        if !report.exists() {
+            continue;
+        }
+        reports += 1;
+        let text = std::fs::read_to_string(&report).unwrap();
+        for link in relative_links(&text) {
+            assert!(
+                dir.join(&link).exists(),
+                "{} links to missing `{link}`",
+                report.display()
+            );
+        }
+        assert!(
+            dir.join("results.json").exists(),
+            "{} has no results.json beside it",
+            report.display()
+        );
+        let cmd = text
+            .lines()
+            .find_map(|l| l.strip_prefix("Command: `"))
+            .and_then(|l| l.split('`').next())
+            .unwrap_or_else(|| panic!("{} states no command", report.display()));
+        if let Err(e) = mcgnode::cli::Cli::try_parse_from(words(cmd)) {
+            panic!("{}: command `{cmd}` does not parse:\n{e}", report.display());
+        }
+        for prefix in ["/work/", "/home/", "/tmp/", "/root/", "/usr/"] {
+            assert!(
+                !text.contains(prefix),
+                "{} names a path of the machine it ran on ({prefix}…)",
+                report.display()
+            );
+        }
+    }
+    assert!(
+        reports >= 3,
+        "found only {reports} committed reports under docs/"
+    );
+}
