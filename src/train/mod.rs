@@ -472,7 +472,7 @@ pub fn fit(
                 initial_loss: objective.loss(theta, val_idx)?,
             };
             if let Some(c) = Checkpoint::load_for(&ck.path, &key)? {
-                run = resume(c, &ck.path, &run, theta, rng, adam, cfg.lr)?;
+                run = resume(c, &ck.path, &run.train_order, theta, rng, adam, cfg.lr)?;
                 resumed_at = Some(run.epoch);
             }
             Some(key)
@@ -571,18 +571,19 @@ pub fn fit(
     })
 }
 
-/// Takes up a checkpoint (already checked against the run's key): the
-/// parameters, Adam and the RNG as it left them, and its progress.
+/// Takes up a checkpoint (already checked against the run's key) for a run
+/// whose training samples are `train_order`: the parameters, Adam and the
+/// RNG as it left them, and its progress.
 fn resume(
     c: Checkpoint,
     path: &std::path::Path,
-    fresh: &Progress,
+    train_order: &[usize],
     theta: &mut [f64],
     rng: &mut ChaCha8Rng,
     adam: &mut Adam,
     lr: f64,
 ) -> Result<Progress> {
-    let (mut have, mut want) = (c.progress.train_order.clone(), fresh.train_order.clone());
+    let (mut have, mut want) = (c.progress.train_order.clone(), train_order.to_vec());
     have.sort_unstable();
     want.sort_unstable();
     if have != want {
