@@ -28,6 +28,12 @@ pub struct TrainedFor {
     /// The edge kinds (rest length, stiffness) it was trained on, when it
     /// cannot read them as inputs (no edge physics): other edges are refused.
     pub edge_params: Option<Vec<crate::model::file::EdgeParams>>,
+    /// The file records neither its training edges nor a system they follow
+    /// from, and the model cannot read edges: graphs with particle edges are
+    /// refused, naming the fix.
+    pub edges_unrecorded: bool,
+    /// The inputs it saw in training (`None`: its file stores no scales).
+    pub range: Option<InputRange>,
 }
 
 /// The kinds of edge in a graph.
@@ -107,18 +113,30 @@ impl TrainedFor {
             (Some("mcgnode"), Some(false)) => Some(true),
             _ => None,
         };
+        let edge_physics = v["hyper"]["edge_physics"].as_bool().unwrap_or(false);
+        // The edges it was trained on: as recorded, else (files written before
+        // the record) those of the simulator's system it was trained on.
         let edge_params: Option<Vec<crate::model::file::EdgeParams>> = t
             .get("edge_params")
             .and_then(|e| serde_json::from_value(e.clone()).ok())
             .filter(|e: &Vec<_>| !e.is_empty())
-            .filter(|_| !v["hyper"]["edge_physics"].as_bool().unwrap_or(false));
+            .or_else(|| {
+                cfg.as_ref()
+                    .map(|c| crate::model::file::EdgeParams::of(&c.graph()))
+                    .filter(|e| !e.is_empty())
+            })
+            .filter(|_| !edge_physics);
+        // NODE is not a graph model: it reads no edges, so none can mislead it.
+        let graph_model = v["hyper"]["variant"].as_str() != Some("node");
         TrainedFor {
             model: model.to_string(),
             dim,
             field: cfg.as_ref().map(|c| c.field.normalized()),
             edges: cfg.as_ref().map(|c| EdgeKinds::of_kind(c.kind)),
             closed,
+            edges_unrecorded: edge_params.is_none() && !edge_physics && graph_model,
             edge_params,
+            range: InputRange::from_model_json(v),
         }
     }
 
@@ -181,6 +199,9 @@ impl TrainedFor {
                     data: words(p),
                 });
             }
+        }
+        if self.edges_unrecorded && graph.particle_edges().next().is_some() {
+            return Err(Mismatch::EdgesUnrecorded { model: m.clone() });
         }
         if self.closed == Some(true) && have.anchors {
             return Err(Mismatch::NotClosed {
@@ -245,6 +266,19 @@ pub enum Mismatch {
         /// The data's unknown edge.
         data: String,
     },
+    /// A model file that records neither the edges it was trained on nor a
+    /// system they follow from, and cannot read edges: any stiffness or rest
+    /// length would be predicted as if it were the training one.
+    #[error(
+        "model {model} does not record the edges (rest lengths, stiffnesses) it was trained \
+         on and cannot read them, so it would predict any edge as if it were a training one: \
+         retrain it with this version (`mcgnode train` records them), or train with \
+         --edge-physics so the model reads each edge"
+    )]
+    EdgesUnrecorded {
+        /// The model.
+        model: String,
+    },
     /// A closed-system model on data with anchors or a field.
     #[error(
         "model {model} assumes a closed system (MCGNODE without its body-force branch); \
@@ -298,4 +332,165 @@ pub fn check_bag(
         seen.push(&tr.graph);
     }
     Ok(())
+}
+
+/// Training scales beyond which an input counts as out of range, by default.
+pub const OUT_OF_RANGE_SIGMAS: f64 = 10.0;
+
+/// The range of inputs a model saw in training, from the scales its file
+/// stores ([`crate::model::Norm`]: RMS position about the mean, velocity,
+/// edge vector, stiffness): an input many scales beyond them is outside
+/// anything it learned from, and its prediction is an extrapolation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InputRange {
+    /// The training scales.
+    pub norm: crate::model::Norm,
+    /// The model reads absolute positions (GNODE-style node inputs, or a
+    /// body-force branch); otherwise only differences, and positions are
+    /// not checked.
+    pub reads_positions: bool,
+    /// The model reads each edge's rest length and stiffness.
+    pub edge_physics: bool,
+}
+
+/// An input outside a model's training range.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error(
+    "{what} {value:.3e} is {times:.3e} training scales (scale {scale:.3e}; the limit is {limit}): \
+     outside anything the model was trained on"
+)]
+pub struct OutOfRange {
+    /// Which input ("velocity component of particle 3", ...).
+    pub what: String,
+    /// Its value.
+    pub value: f64,
+    /// The training scale it is measured in.
+    pub scale: f64,
+    /// `value / scale`.
+    pub times: f64,
+    /// The limit, in training scales.
+    pub limit: f64,
+}
+
+impl InputRange {
+    /// The range a model file states (`None`: no scales stored, as in files
+    /// trained with --no-normalize or before scales existed, and baselines).
+    pub fn from_model_json(v: &serde_json::Value) -> Option<InputRange> {
+        let hyper: crate::model::Hyper = serde_json::from_value(v["hyper"].clone()).ok()?;
+        let norm = hyper.norm.clone()?;
+        let arch = crate::model::Arch::new(&hyper);
+        let reads_positions = arch.node_input == crate::model::arch::NodeInput::Full
+            || arch
+                .mlps
+                .iter()
+                .any(|(b, _)| *b == crate::model::arch::Block::GlobalEmbed);
+        Some(InputRange {
+            norm,
+            reads_positions,
+            edge_physics: hyper.edge_physics,
+        })
+    }
+
+    /// The first input of `state` on `graph` more than `limit` training
+    /// scales out, if any (`limit` ≤ 0: none is checked). Non-finite inputs
+    /// count as infinitely far.
+    pub fn check(
+        &self,
+        graph: &Graph,
+        state: &crate::system::State,
+        limit: f64,
+    ) -> Option<OutOfRange> {
+        if limit.is_nan() || limit <= 0.0 {
+            return None;
+        }
+        let d = graph.dim.max(1);
+        let n = &self.norm;
+        // The description is built only for the input reported: the node
+        // checks every state, and most are in range.
+        let far = |value: f64, scale: f64, what: &dyn Fn() -> String| {
+            let times = (value / scale).abs();
+            // NaN compares false: a non-finite input is never in range.
+            let inside = times <= limit;
+            (!inside).then(|| OutOfRange {
+                what: what(),
+                value,
+                scale,
+                times,
+                limit,
+            })
+        };
+        for (k, &x) in state.v.iter().enumerate() {
+            let what = || format!("velocity component of particle {}", k / d);
+            if let Some(o) = far(x, n.v_scale, &what) {
+                return Some(o);
+            }
+        }
+        if self.reads_positions {
+            for (k, &x) in state.q.iter().enumerate() {
+                let mean = n.q_mean.get(k % d).copied().unwrap_or(0.0);
+                let what = || {
+                    format!(
+                        "position component of particle {} (about the training mean)",
+                        k / d
+                    )
+                };
+                if let Some(o) = far(x - mean, n.q_scale, &what) {
+                    return Some(o);
+                }
+            }
+        }
+        for (i, (a, b, e)) in graph.particle_edges().enumerate() {
+            for c in 0..d {
+                let w = state.q.get(a * d + c).copied().unwrap_or(0.0)
+                    - state.q.get(b * d + c).copied().unwrap_or(0.0);
+                let what = || format!("edge vector component of edge {i} ({a}-{b})");
+                if let Some(o) = far(w, n.w_scale, &what) {
+                    return Some(o);
+                }
+            }
+            if !self.edge_physics {
+                continue;
+            }
+            if e.kind == EdgeKind::Spring {
+                if e.stiffness <= 0.0 {
+                    return Some(OutOfRange {
+                        what: format!("stiffness of edge {i} ({a}-{b}), not positive,"),
+                        value: e.stiffness,
+                        scale: n.k_scale,
+                        times: e.stiffness / n.k_scale,
+                        limit,
+                    });
+                }
+                let what = || format!("stiffness of edge {i} ({a}-{b})");
+                if let Some(o) = far(e.stiffness, n.k_scale, &what) {
+                    return Some(o);
+                }
+            }
+            let what = || format!("rest length of edge {i} ({a}-{b})");
+            if let Some(o) = far(e.rest_length, n.w_scale, &what) {
+                return Some(o);
+            }
+        }
+        None
+    }
+}
+
+/// How many states of a bag lie outside a model's training range, with the
+/// first one's trajectory, step and reason.
+pub fn count_out_of_range(
+    range: &InputRange,
+    bag: &crate::data::Bag,
+    limit: f64,
+) -> (usize, usize, Option<String>) {
+    let (mut count, mut total, mut first) = (0, 0, None);
+    for tr in &bag.trajectories {
+        for (k, s) in tr.samples.iter().enumerate() {
+            total += 1;
+            if let Some(o) = range.check(&tr.graph, &s.state, limit) {
+                count += 1;
+                first.get_or_insert_with(|| format!("trajectory {}, state {k}: {o}", tr.id));
+            }
+        }
+    }
+    (count, total, first)
 }

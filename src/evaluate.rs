@@ -5,7 +5,7 @@ use crate::data::bag::Bag;
 use crate::data::field::{bag_field, bag_system, stamp_interval, unknown_field_error};
 use crate::dynamics::Dynamics;
 use crate::error::{bail, Result};
-use crate::metrics::{error_curves, summarize, ErrorCurves, Summary};
+use crate::metrics::{error_curves, summarize, ErrorCurves, StillReference, Summary};
 use crate::physics::Field;
 use crate::system::{fingerprint, State};
 use serde::Serialize;
@@ -55,6 +55,9 @@ pub struct Evaluation {
     pub summary: Summary,
     /// Time averages of the geometric-mean curves (t > 0).
     pub averages: crate::metrics::Averages,
+    /// The "nothing moves" reference on the same trajectories (`None` when
+    /// the model is that reference).
+    pub still: Option<StillReference>,
     /// Per-trajectory curves.
     #[serde(skip)]
     pub curves: Vec<ErrorCurves>,
@@ -111,7 +114,7 @@ pub fn evaluate(
     }
     // Trajectories on the same graph with the same sampling are rolled out
     // together (the candle baselines batch them; see Dynamics::rollout_many).
-    let mut groups: Vec<(usize, usize, Vec<usize>)> = vec![]; // (every, steps, members)
+    let mut groups: Vec<Group> = vec![];
     for (i, tr) in trajs.iter().enumerate() {
         let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
         let interval = if times.len() > 1 {
@@ -135,11 +138,55 @@ pub fn evaluate(
             None => groups.push((every, steps, vec![i])),
         }
     }
+    let start = Instant::now();
+    let (curves, diverged, steps_total) = score(model, &trajs, &groups, dt, &field)?;
+    let rollout_seconds = start.elapsed().as_secs_f64();
+    let summary = summarize(&curves)?;
+    let averages = summary.time_average();
+    let reference = crate::dynamics::Still;
+    let still = if model.describe() == reference.describe() {
+        None
+    } else {
+        let (c, _, _) = score(&reference, &trajs, &groups, dt, &field)?;
+        let s = summarize(&c)?;
+        Some(StillReference::new(&s, averages.re))
+    };
+    Ok(Evaluation {
+        averages,
+        model: model.describe(),
+        system: trajs[0].system.clone(),
+        particles: trajs[0].graph.n(),
+        trajectories: trajs.len(),
+        dt,
+        dt_source: dt_source.to_string(),
+        field,
+        field_source: origin.source,
+        steps: steps_total,
+        rollout_seconds,
+        diverged,
+        summary,
+        still,
+        curves,
+    })
+}
+
+/// One rollout group: (save every, steps, members of `trajs`).
+type Group = (usize, usize, Vec<usize>);
+
+/// Rolls `model` out over every group and scores each trajectory: the
+/// curves in trajectory order, how many diverged, and the steps of the last
+/// group.
+fn score(
+    model: &dyn Dynamics,
+    trajs: &[&crate::system::Trajectory],
+    groups: &[Group],
+    dt: f64,
+    field: &Field,
+) -> Result<(Vec<ErrorCurves>, usize, usize)> {
     let mut curves: Vec<Option<ErrorCurves>> = vec![None; trajs.len()];
     let mut steps_total = 0;
     let mut diverged = 0;
-    let start = Instant::now();
-    for (every, steps, members) in &groups {
+    for (every, steps, members) in groups {
         let g = &trajs[members[0]].graph;
         let starts: Vec<State> = members
             .iter()
@@ -154,7 +201,7 @@ pub fn evaluate(
             let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
             let k = r.states.len().min(times.len());
             let truth: Vec<State> = tr.samples[..k].iter().map(|s| s.state.clone()).collect();
-            let c = error_curves(g, &field, &truth, &r.states[..k], &times[..k])
+            let c = error_curves(g, field, &truth, &r.states[..k], &times[..k])
                 .map_err(|e| crate::error::err!("trajectory {}: {e}", tr.id))?;
             curves[i] = Some(if r.diverged_at.is_some() {
                 diverged += 1;
@@ -164,35 +211,37 @@ pub fn evaluate(
             });
         }
     }
-    let curves: Vec<ErrorCurves> = curves.into_iter().flatten().collect();
-    let rollout_seconds = start.elapsed().as_secs_f64();
-    let summary = summarize(&curves)?;
-    Ok(Evaluation {
-        averages: summary.time_average(),
-        model: model.describe(),
-        system: trajs[0].system.clone(),
-        particles: trajs[0].graph.n(),
-        trajectories: trajs.len(),
-        dt,
-        dt_source: dt_source.to_string(),
-        field,
-        field_source: origin.source,
-        steps: steps_total,
-        rollout_seconds,
+    Ok((
+        curves.into_iter().flatten().collect(),
         diverged,
-        summary,
-        curves,
-    })
+        steps_total,
+    ))
 }
 
 /// A plain-text table of a summary at a few times.
 pub fn table(e: &Evaluation, rows: usize) -> String {
     let s = &e.summary;
-    let mut out =
-        format!(
-        "{} on {}-particle {} ({} trajectories, dt {}):\n{:>8}  {:>10}  {:>10}  {:>10}  {:>10}\n",
-        e.model, e.particles, e.system, e.trajectories, e.dt, "t [s]", "RE", "EE", "ME", "ME scaled"
+    let still = e.still.as_ref();
+    let mut out = format!(
+        "{} on {}-particle {} ({} trajectories, dt {}):\n{:>8}  {:>10}  {:>10}  {:>10}  {:>10}{}\n",
+        e.model,
+        e.particles,
+        e.system,
+        e.trajectories,
+        e.dt,
+        "t [s]",
+        "RE",
+        "EE",
+        "ME",
+        "ME scaled",
+        if still.is_some() { "  RE still" } else { "" }
     );
+    let still_at = |i: usize| {
+        still.map_or(String::new(), |r| {
+            r.re.get(i)
+                .map_or(String::new(), |x| format!("  {x:>8.3e}"))
+        })
+    };
     let n = s.t.len();
     let picks: Vec<usize> = if n <= rows {
         (0..n).collect()
@@ -201,8 +250,13 @@ pub fn table(e: &Evaluation, rows: usize) -> String {
     };
     for i in picks {
         out += &format!(
-            "{:>8.3}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}\n",
-            s.t[i], s.re.gmean[i], s.ee.gmean[i], s.me.gmean[i], s.me_scaled.gmean[i]
+            "{:>8.3}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}{}\n",
+            s.t[i],
+            s.re.gmean[i],
+            s.ee.gmean[i],
+            s.me.gmean[i],
+            s.me_scaled.gmean[i],
+            still_at(i)
         );
     }
     let a = s.time_average();
@@ -213,9 +267,23 @@ pub fn table(e: &Evaluation, rows: usize) -> String {
         );
     }
     out += &format!(
-        "{:>8}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}\n",
-        "mean", a.re, a.ee, a.me, a.me_scaled
+        "{:>8}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}{}\n",
+        "mean",
+        a.re,
+        a.ee,
+        a.me,
+        a.me_scaled,
+        still.map_or(String::new(), |r| format!("  {:>8.3e}", r.re_mean))
     );
+    if let Some(r) = still {
+        out += &match r.warning(a.re) {
+            Some(w) => format!("{w}\n"),
+            None => format!(
+                "mean RE {:.1}x below standing still (`--model still`: {:.3e})\n",
+                r.times_better, r.re_mean
+            ),
+        };
+    }
     out += &format!(
         "(dt from {}; field for EE from {})\n",
         e.dt_source, e.field_source

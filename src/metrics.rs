@@ -429,3 +429,48 @@ impl Summary {
         }
     }
 }
+
+/// How a model compares with predicting that nothing moves
+/// ([`crate::dynamics::Still`]) on the same trajectories: the one reference
+/// every model must beat, shown beside it always.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct StillReference {
+    /// The reference's RE (geometric mean over trajectories) at each time of
+    /// the model's summary.
+    pub re: Vec<f64>,
+    /// Its RE time average (t > 0).
+    pub re_mean: f64,
+    /// The reference's time-average RE over the model's: how many times
+    /// better than standing still the model is (below 1: worse).
+    pub times_better: f64,
+    /// The model's RE time average is above the reference's.
+    pub worse: bool,
+}
+
+impl StillReference {
+    /// The reference's summary `still` beside a model whose RE time average
+    /// is `model_re` (on the same times).
+    pub fn new(still: &Summary, model_re: f64) -> StillReference {
+        let re_mean = still.time_average().re;
+        StillReference {
+            re: still.re.gmean.clone(),
+            re_mean,
+            times_better: re_mean / model_re,
+            // A NaN model error (diverged everywhere) counts as worse.
+            worse: model_re.is_nan() || model_re > re_mean,
+        }
+    }
+
+    /// The warning a model worse than standing still gets, else `None`.
+    pub fn warning(&self, model_re: f64) -> Option<String> {
+        self.worse.then(|| {
+            format!(
+                "WARNING: the model is worse than predicting that nothing moves (mean RE \
+                 {model_re:.3e} against {:.3e} for `--model still`): its predictions are \
+                 not to be trusted; retrain it (mcgnode train's default recipe, more epochs \
+                 or more data)",
+                self.re_mean
+            )
+        })
+    }
+}

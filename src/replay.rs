@@ -27,7 +27,7 @@ use serde::Serialize;
 use crate::data::bag::Bag;
 use crate::data::field::bag_system;
 use crate::dynamics::{Dynamics, DynamicsError};
-use crate::metrics::{error_curves, floored_ln, log_band, Averages, Band, Summary};
+use crate::metrics::{error_curves, floored_ln, log_band, Averages, Band, StillReference, Summary};
 use crate::physics::Field;
 use crate::system::{State, Trajectory};
 
@@ -111,6 +111,9 @@ pub struct ReplayReport {
     pub averages: Averages,
     /// Wall time of the replay, seconds.
     pub seconds: f64,
+    /// The "nothing moves" reference replayed on the same starts and leads
+    /// (`None` when the model is that reference).
+    pub still: Option<StillReference>,
 }
 
 /// The largest value of each metric per grid point.
@@ -368,6 +371,17 @@ fn replay_trajectory(
 /// graph the model cannot take, bad options, or when no state has a later
 /// one within the horizon.
 pub fn replay(model: &dyn Dynamics, bag: &Bag, opts: &ReplayOptions) -> Result<ReplayReport> {
+    let mut report = replay_model(model, bag, opts)?;
+    let reference = crate::dynamics::Still;
+    if model.describe() != reference.describe() {
+        let still = replay_model(&reference, bag, opts)?;
+        report.still = Some(StillReference::new(&still.summary, report.averages.re));
+    }
+    Ok(report)
+}
+
+/// [`replay`] without the reference.
+fn replay_model(model: &dyn Dynamics, bag: &Bag, opts: &ReplayOptions) -> Result<ReplayReport> {
     let started = Instant::now();
     let trajs: Vec<&Trajectory> = bag
         .trajectories
@@ -418,6 +432,7 @@ pub fn replay(model: &dyn Dynamics, bag: &Bag, opts: &ReplayOptions) -> Result<R
             me_abs: f64::NAN,
         },
         seconds: 0.0,
+        still: None,
     };
     for tr in &trajs {
         replay_trajectory(model, tr, &p, opts.stride.max(1), &mut bins, &mut report)?;
@@ -538,10 +553,23 @@ pub fn table(r: &ReplayReport, rows: usize) -> String {
         secs(r.horizon),
         secs(r.bin_width)
     );
+    let still = r.still.as_ref();
     out += &format!(
-        "{:>9}  {:>8}  {:>10}  {:>10}  {:>10}  {:>10}\n",
-        "lead [s]", "pairs", "RE", "EE", "ME", "ME scaled"
+        "{:>9}  {:>8}  {:>10}  {:>10}  {:>10}  {:>10}{}\n",
+        "lead [s]",
+        "pairs",
+        "RE",
+        "EE",
+        "ME",
+        "ME scaled",
+        if still.is_some() { "  RE still" } else { "" }
     );
+    let still_at = |i: usize| {
+        still.map_or(String::new(), |x| {
+            x.re.get(i)
+                .map_or(String::new(), |v| format!("  {v:>8.3e}"))
+        })
+    };
     let n = s.t.len();
     let rows = rows.max(2);
     let picks: Vec<usize> = if n <= rows {
@@ -551,15 +579,36 @@ pub fn table(r: &ReplayReport, rows: usize) -> String {
     };
     for i in picks {
         out += &format!(
-            "{:>9.4}  {:>8}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}\n",
-            s.t[i], r.counts[i], s.re.gmean[i], s.ee.gmean[i], s.me.gmean[i], s.me_scaled.gmean[i]
+            "{:>9.4}  {:>8}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}{}\n",
+            s.t[i],
+            r.counts[i],
+            s.re.gmean[i],
+            s.ee.gmean[i],
+            s.me.gmean[i],
+            s.me_scaled.gmean[i],
+            still_at(i)
         );
     }
     let a = &r.averages;
     out += &format!(
-        "{:>9}  {:>8}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}\n",
-        "mean", "", a.re, a.ee, a.me, a.me_scaled
+        "{:>9}  {:>8}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}{}\n",
+        "mean",
+        "",
+        a.re,
+        a.ee,
+        a.me,
+        a.me_scaled,
+        still.map_or(String::new(), |x| format!("  {:>8.3e}", x.re_mean))
     );
+    if let Some(x) = still {
+        out += &match x.warning(a.re) {
+            Some(w) => format!("{w}\n"),
+            None => format!(
+                "mean RE {:.1}x below standing still (`--model still`: {:.3e})\n",
+                x.times_better, x.re_mean
+            ),
+        };
+    }
     if r.diverged > 0 {
         out += &format!(
             "{} of {} rollouts failed before the horizon (counted with errors 1); first: {}\n",

@@ -834,3 +834,198 @@ fn errors_state_each_cause_once() {
     assert!(err.contains("/nonexistent/b.mcap"), "{err}");
     assert!(err.matches(cause).count() <= 1, "{err}");
 }
+
+/// `train`'s default recipe sizes batch, rate and widths by the data and
+/// records them; `--recipe paper` is the paper's settings exactly; every
+/// training reports how much of its targets it explains against predicting
+/// zero acceleration; `evaluate` and `replay` show the standing-still
+/// reference beside the model.
+#[test]
+fn train_recipes_explained_fraction_and_the_still_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (seed, traj, out) in [("1", "2", "train.mcap"), ("2", "2", "test.mcap")] {
+        ok(&mcgnode(
+            &[
+                "simulate",
+                "--system",
+                "peridynamic",
+                "--particles",
+                "27",
+                "--trajectories",
+                traj,
+                "--states",
+                "21",
+                "--seed",
+                seed,
+                "--out",
+                out,
+            ],
+            d,
+        ));
+    }
+    let train = |extra: &[&str], out: &str| {
+        let mut args = vec![
+            "train",
+            "--model",
+            "mcgnode",
+            "--data",
+            "train.mcap",
+            "--epochs",
+            "3",
+            "--out",
+            out,
+        ];
+        args.extend_from_slice(extra);
+        let o = mcgnode(&args, d);
+        ok(&o);
+        let m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join(out)).unwrap()).unwrap();
+        (m, String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    // 27 particles, 126 bonds: 252 directed edges, 16,000 / 252 = 63 states.
+    let (auto, log) = train(&[], "auto.json");
+    let t = &auto["training"];
+    assert_eq!(t["batch"], 63);
+    assert_eq!(t["lr"], 1e-2);
+    assert_eq!(t["lr_drops"], serde_json::json!([[2, 1e-3]]));
+    assert_eq!(
+        auto["hyper"]["block_hidden"],
+        serde_json::json!({"edge_em": [16, 16], "edge_out": [16, 16]})
+    );
+    assert!(
+        log.contains("recipe: batch 63 states (252 directed edges each)"),
+        "{log}"
+    );
+    let (val, trivial, explained) = (
+        t["validation_loss"].as_f64().unwrap(),
+        t["trivial_loss"].as_f64().unwrap(),
+        t["explained"].as_f64().unwrap(),
+    );
+    assert!(trivial > 0.0 && val > 0.0);
+    assert!((explained - (1.0 - val / trivial)).abs() <= 1e-15);
+    assert!(log.contains("explains"), "{log}");
+    // Three epochs learn little: the warning names what to try.
+    assert!(
+        explained < 0.99 && log.contains("--epochs"),
+        "{explained}: {log}"
+    );
+
+    // The recipe chooses exactly what its flags spell out: the same weights.
+    let (spelled, _) = train(
+        &[
+            "--batch",
+            "63",
+            "--lr",
+            "1e-2",
+            "--lr-drop",
+            "2:1e-3",
+            "--block-hidden",
+            "edge_em=16,16",
+            "--block-hidden",
+            "edge_out=16,16",
+        ],
+        "spelled.json",
+    );
+    assert_eq!(spelled["weights"], auto["weights"]);
+    assert_eq!(spelled["hyper"], auto["hyper"]);
+
+    let (paper, log) = train(&["--recipe", "paper"], "paper.json");
+    let t = &paper["training"];
+    assert_eq!(
+        (t["batch"].as_u64(), t["lr"].as_f64()),
+        (Some(100), Some(1e-3))
+    );
+    assert!(t.get("lr_drops").is_none(), "{t}");
+    assert!(paper["hyper"]["block_hidden"]
+        .as_object()
+        .is_none_or(serde_json::Map::is_empty));
+    assert!(!log.contains("recipe:"), "{log}");
+    // ... and is what the library's defaults (reproduce's, and `train`'s
+    // before the recipe) train: the same weights.
+    let lib = mcgnode::train::train_from_bags(
+        mcgnode::model::Variant::Mcgnode,
+        &[d.join("train.mcap")],
+        &mcgnode::train::ModelOptions::default(),
+        &mcgnode::train::TrainConfig {
+            epochs: 3,
+            ..Default::default()
+        },
+        |_| {},
+        |_| true,
+    )
+    .unwrap();
+    assert_eq!(serde_json::to_value(&lib.weights).unwrap(), paper["weights"]);
+    // Given options override the recipe.
+    let (given, _) = train(&["--batch", "7", "--lr", "3e-3"], "given.json");
+    assert_eq!(given["training"]["batch"], 7);
+    assert_eq!(given["training"]["lr"], 3e-3);
+    let drop = &given["training"]["lr_drops"][0];
+    assert_eq!(drop[0], 2);
+    assert!((drop[1].as_f64().unwrap() - 3e-4).abs() < 1e-18, "{drop}");
+
+    // The reference beside the model is `evaluate --model still` itself.
+    let still: serde_json::Value = serde_json::from_str(&ok(&mcgnode(
+        &[
+            "evaluate",
+            "--model",
+            "still",
+            "--bag",
+            "test.mcap",
+            "--json",
+        ],
+        d,
+    )))
+    .unwrap();
+    assert!(still["still"].is_null());
+    let e: serde_json::Value = serde_json::from_str(&ok(&mcgnode(
+        &[
+            "evaluate",
+            "--model",
+            "auto.json",
+            "--bag",
+            "test.mcap",
+            "--json",
+        ],
+        d,
+    )))
+    .unwrap();
+    let (ref_re, model_re) = (
+        e["still"]["re_mean"].as_f64().unwrap(),
+        e["averages"]["re"].as_f64().unwrap(),
+    );
+    assert_eq!(ref_re, still["averages"]["re"].as_f64().unwrap());
+    assert_eq!(e["still"]["re"], still["summary"]["re"]["gmean"]);
+    assert_eq!(e["still"]["worse"].as_bool().unwrap(), model_re > ref_re);
+    let table = ok(&mcgnode(
+        &["evaluate", "--model", "auto.json", "--bag", "test.mcap"],
+        d,
+    ));
+    assert!(table.contains("RE still"), "{table}");
+    assert!(
+        if model_re > ref_re {
+            table.contains("WARNING: the model is worse than predicting that nothing moves")
+        } else {
+            table.contains("below standing still")
+        },
+        "{table}"
+    );
+    let replay = ok(&mcgnode(
+        &[
+            "replay",
+            "--model",
+            "auto.json",
+            "--bag",
+            "test.mcap",
+            "--json",
+        ],
+        d,
+    ));
+    let r: serde_json::Value = serde_json::from_str(&replay).unwrap();
+    let still_replay: serde_json::Value = serde_json::from_str(&ok(&mcgnode(
+        &["replay", "--model", "still", "--bag", "test.mcap", "--json"],
+        d,
+    )))
+    .unwrap();
+    assert_eq!(r["still"]["re_mean"], still_replay["averages"]["re"]);
+}

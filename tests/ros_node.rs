@@ -112,6 +112,53 @@ fn node_serves_rclpy_clients() {
     );
 }
 
+/// States the served model cannot vouch for are never accepted silently:
+/// edges it was not trained on are rejected, inputs far outside its training
+/// scales are counted as out of range and warned about (refused once
+/// `out_of_range_refuse` is set), in NodeDiagnostics and on /rosout
+/// (tests/ros/range_drive.py).
+#[test]
+fn node_flags_states_outside_what_its_model_saw() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let model = dir.path().join("m.json");
+    let o = run_bounded(
+        Command::new(BIN)
+            .args([
+                "train", "--model", "mcgnode", "--epochs", "2", "--quiet", "--data",
+            ])
+            .arg(Path::new(ROOT).join("bags/spring5-sample.mcap"))
+            .arg("--out")
+            .arg(&model),
+        Duration::from_secs(60),
+        dir.path(),
+    );
+    assert!(o.status.success(), "training failed: {}", o.stderr);
+    let params = dir.path().join("params.yaml");
+    fs::write(
+        &params,
+        format!(
+            "mcgnode:\n  ros__parameters:\n    model: {:?}\n    horizon: 5\n    dt: 0.01\n    \
+             diagnostics_period: 0.2\n    warn_period: 0.5\n    markers: false\n",
+            model.display()
+        ),
+    )
+    .expect("writing params");
+    let script = &beside_node("timeout 60 python3 tests/ros/range_drive.py");
+    let log = dir.path().join("node.log");
+    let o = run_bounded(
+        in_netns(script, &params, &env_sh).env("LOG", &log),
+        Duration::from_secs(90),
+        dir.path(),
+    );
+    let (summary, node_log, report) = driver_outcome(&o, &log, "RANGE_SUMMARY ");
+    println!("rclpy range driver summary: {summary}");
+    assert_eq!(summary_number(&summary, "rejected"), 4, "{report}");
+    assert_eq!(summary_number(&summary, "out_of_range"), 2, "{report}");
+    assert!(node_log.contains("out-of-range input"), "{report}");
+    assert!(!node_log.contains("panicked"), "{report}");
+}
+
 #[test]
 fn node_exits_cleanly_on_sigterm() {
     let env_sh = ros_env();

@@ -799,3 +799,70 @@ fn zero_force_written_either_way_is_one_field() {
         .to_string();
     assert!(e.contains("system_config"), "{e}");
 }
+
+/// A 3D lattice from a simulator that is not ours (scripts/sim_lattice3d.py:
+/// numpy, its own lattice, stiffness, masses and step; written by rosbags's
+/// rosbag2 writer with no `mcgnode` metadata) reads as what its messages say,
+/// trains with the default recipe with no flag (closed system from the
+/// field entries, step from the stamps, edges recorded) and evaluates beside
+/// the standing-still reference, conserving momentum exactly.
+#[test]
+fn a_python_simulator_lattice_trains_and_evaluates_with_no_project_metadata() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (name, seed, traj) in [("lattice", "0", "3"), ("lattice-test", "9", "2")] {
+        let o = Command::new(venv_python())
+            .arg(Path::new(ROOT).join("scripts/sim_lattice3d.py"))
+            .arg(d.join(name))
+            .args([
+                "--side",
+                "2",
+                "--trajectories",
+                traj,
+                "--states",
+                "31",
+                "--seed",
+                seed,
+            ])
+            .output()
+            .expect("run sim_lattice3d.py");
+        assert!(
+            o.status.success(),
+            "sim_lattice3d.py failed: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    let bag = read(&d.join("lattice"));
+    assert!(bag.metadata.is_empty(), "{:?}", bag.metadata);
+    let tr = &bag.trajectories[0];
+    assert_eq!((tr.graph.n(), tr.graph.dim, tr.samples.len()), (8, 3, 31));
+    // 2x2x2: 12 axis bonds and 12 face diagonals, one stiffness.
+    assert_eq!(tr.graph.edges.len(), 24);
+    assert!(tr.graph.edges.iter().all(|e| e.stiffness == 2.0));
+    let o = mcgnode(
+        &[
+            "train", "--model", "mcgnode", "--data", "lattice", "--epochs", "3", "--out", "m.json",
+        ],
+        d,
+    );
+    ok(&o);
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(log.contains("closed system"), "{log}");
+    assert!(
+        log.contains("recipe: batch 100 states (48 directed edges each)"),
+        "{log}"
+    );
+    assert!(log.contains("explains"), "{log}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("m.json")).unwrap()).unwrap();
+    assert_eq!(m["trained_on"]["edge_params"].as_array().unwrap().len(), 2);
+    assert!(m["training"]["explained"].as_f64().is_some());
+    let e = evaluate_json(d, &["--model", "m.json", "--bag", "lattice-test"]);
+    assert_eq!(e["dt_source"], "the header stamps");
+    assert!(e["still"]["re_mean"].as_f64().unwrap() > 0.0);
+    assert!(e["summary"]["me_scaled"]["gmean"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|x| x.as_f64().unwrap() < 1e-12));
+}

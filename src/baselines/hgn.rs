@@ -10,6 +10,7 @@ use super::mechanics::hamilton;
 use super::net::BaselineNet;
 use crate::error::{bail, Result};
 use crate::model::batch::Batch;
+use crate::system::State;
 use candle_core::{Device, Tensor, Var};
 
 /// The learned Hamiltonian summed over the batch.
@@ -59,6 +60,27 @@ pub fn acceleration(net: &BaselineNet, b: &Batch) -> Result<Tensor> {
 /// the network are p = m∘v, as recorded by a Hamiltonian simulation.
 pub fn loss(net: &BaselineNet, b: &Batch, masses: &[f64]) -> Result<Tensor> {
     loss_with(derivatives, net, b, masses)
+}
+
+/// The loss of predicting q̇ = 0 and ṗ = 0 on the samples `idx`:
+/// ½ (mean v² + mean (m a)²), in [`loss`]'s units.
+pub fn trivial_loss(states: &[State], acc: &[Vec<f64>], masses: &[f64], idx: &[usize]) -> f64 {
+    let (mut v2, mut p2, mut count) = (0.0, 0.0, 0usize);
+    for &i in idx {
+        let d = acc[i].len() / masses.len().max(1);
+        v2 += states[i].v.iter().map(|x| x * x).sum::<f64>();
+        p2 += acc[i]
+            .iter()
+            .enumerate()
+            .map(|(k, a)| (masses[k / d.max(1)] * a).powi(2))
+            .sum::<f64>();
+        count += acc[i].len();
+    }
+    if count == 0 {
+        0.0
+    } else {
+        0.5 * (v2 + p2) / count as f64
+    }
 }
 
 /// [`loss`] through [`derivatives_generic`], for checking its gradients.

@@ -57,6 +57,7 @@ pub fn run(a: Args) -> Result<()> {
     // Refuse data the model was not trained for (dimension, edges, field).
     let trained = crate::models::trained_for(&a.model)?;
     check_fits(&trained, &bag, flag_field.as_ref())?;
+    super::field::warn_out_of_range(&trained, &bag, "test");
     let opts = EvalOptions {
         dt: a.dt,
         field: flag_field,

@@ -51,3 +51,21 @@ pub fn check_fits(trained: &TrainedFor, bag: &Bag, field: Option<&Field>) -> Res
     let data_field = bag_field(bag, field)?.map(|o| o.field);
     Ok(check_bag(trained, bag, data_field.as_ref())?)
 }
+
+/// Warns on stderr when states of `bag` (`what`: "test", "recorded") lie
+/// outside the model's training range ([`crate::compat::InputRange`]).
+pub fn warn_out_of_range(trained: &TrainedFor, bag: &Bag, what: &str) {
+    let Some(range) = &trained.range else {
+        return;
+    };
+    let limit = crate::compat::OUT_OF_RANGE_SIGMAS;
+    let (count, total, first) = crate::compat::count_out_of_range(range, bag, limit);
+    if count > 0 {
+        eprintln!(
+            "warning: {count} of {total} {what} states lie outside the model's training range \
+             (more than {limit} training scales): its predictions there are extrapolations; \
+             first: {}",
+            first.unwrap_or_default()
+        );
+    }
+}

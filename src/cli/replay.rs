@@ -66,6 +66,7 @@ pub fn run(a: Args) -> Result<()> {
     let field = a.field.field()?;
     if let Some(t) = model.trained_for() {
         check_fits(t, &bag, field.as_ref())?;
+        super::field::warn_out_of_range(t, &bag, "recorded");
     }
     let opts = ReplayOptions {
         dt: a.dt,

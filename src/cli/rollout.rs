@@ -81,6 +81,13 @@ pub fn run(a: Args) -> Result<()> {
         (g, s0, a.system.name().to_string(), Some(cfg), field, None)
     };
     trained.check(&graph, field.as_ref())?;
+    if let Some(o) = trained
+        .range
+        .as_ref()
+        .and_then(|r| r.check(&graph, &start, crate::compat::OUT_OF_RANGE_SIGMAS))
+    {
+        eprintln!("warning: the initial state is out of the model's training range: {o}; the rollout is an extrapolation");
+    }
     // Without a flag or a system_config, the step is the recorded interval and
     // every step is saved.
     let (dt, default_every) = match (a.dt, &cfg, stamp_dt) {

@@ -178,6 +178,64 @@ pub struct TrainingReport {
     /// seconds then count every session).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub resumed_at: Option<usize>,
+    /// The trivial predictor's validation loss, in the loss's units: zero
+    /// acceleration (for HGN zero q̇ and ṗ), i.e. the validation targets'
+    /// mean square. `None` in files written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trivial_loss: Option<f64>,
+    /// How much of the targets the model explains: 1 − validation_loss /
+    /// trivial_loss (1 is perfect, 0 no better than predicting nothing, < 0
+    /// worse). `None` in files written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub explained: Option<f64>,
+}
+
+/// Below this explained fraction `train` warns that the model learned little
+/// (measured: models under it rolled out no better than a few times standing
+/// still; see the README's "Defaults that learn").
+pub const EXPLAINED_WARN: f64 = 0.99;
+
+impl TrainingReport {
+    /// Records the trivial predictor's validation loss and the fraction
+    /// explained against it (left `None` when the targets are all zero).
+    pub fn with_trivial(mut self, trivial_loss: f64) -> Self {
+        self.trivial_loss = Some(trivial_loss);
+        self.explained = (trivial_loss > 0.0).then(|| 1.0 - self.validation_loss / trivial_loss);
+        self
+    }
+
+    /// One line: the fraction explained with both losses, or that it is unknown.
+    pub fn explained_line(&self) -> String {
+        match (self.explained, self.trivial_loss) {
+            (Some(f), Some(t)) => format!(
+                "explains {:.2} % of the validation targets' mean square (validation MSE \
+                 {:.3e} against {t:.3e} for predicting zero acceleration)",
+                100.0 * f,
+                self.validation_loss
+            ),
+            _ => "explained fraction unknown (file written before it was recorded, or all \
+                  targets zero)"
+                .to_string(),
+        }
+    }
+
+    /// A warning with what to try when the model explains less than
+    /// [`EXPLAINED_WARN`], else `None`.
+    pub fn explained_warning(&self) -> Option<String> {
+        let f = self.explained?;
+        (f < EXPLAINED_WARN).then(|| {
+            format!(
+                "warning: the model explains only {:.2} % of the targets (below {} %): its \
+                 rollouts may be no better than predicting that nothing moves. Try more \
+                 epochs (--epochs), the default recipe if another was used (--recipe \
+                 auto), wider edge MLPs (--block-hidden edge_em=32,32 --block-hidden \
+                 edge_out=32,32), or more trajectories; compare with `mcgnode evaluate \
+                 --model still`",
+                100.0 * f,
+                100.0 * EXPLAINED_WARN
+            )
+        })
+    }
 }
 
 /// A trained model on disk.

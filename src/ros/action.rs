@@ -56,6 +56,9 @@ pub struct TrainResult {
     pub train_loss: f64,
     /// Validation loss at the kept epoch.
     pub validation_loss: f64,
+    /// Fraction of the validation targets' mean square explained (NaN:
+    /// unknown).
+    pub explained: f64,
 }
 impl Message for TrainResult {}
 
@@ -95,6 +98,7 @@ impl From<TrainResponse> for TrainResult {
             model_path: r.model_path,
             train_loss: r.train_loss,
             validation_loss: r.validation_loss,
+            explained: r.explained,
         }
     }
 }
@@ -321,7 +325,9 @@ mod tests {
             model_path: "/x.json".into(),
             train_loss: 1.0,
             validation_loss: 2.0,
+            explained: 0.5,
         });
         assert!(res.success && res.model_path == "/x.json" && res.validation_loss == 2.0);
+        assert_eq!(res.explained, 0.5);
     }
 }

@@ -106,6 +106,9 @@ pub struct Stats {
     pub rejected: AtomicU64,
     /// Predictions published.
     pub predicted: AtomicU64,
+    /// States with an input outside the served model's training range
+    /// (predicted anyway unless `out_of_range_refuse`, then also rejected).
+    pub out_of_range: AtomicU64,
     /// States lost before the node took them: gaps in a publisher's sequence
     /// numbers (e.g. the input queue overflowed while the node was busy).
     pub dropped: AtomicU64,
@@ -198,13 +201,15 @@ pub enum Warning {
     Service,
     /// Recording failures.
     Record,
+    /// States outside the model's training range.
+    OutOfRange,
 }
 
 /// Counters, the log and rate-limited warnings.
 pub struct Diagnostics {
     /// The counters reported in `NodeDiagnostics`.
     pub stats: Stats,
-    limiters: [Mutex<RateLimiter>; 3],
+    limiters: [Mutex<RateLimiter>; 4],
     log: Logger,
     /// The warning period is a run-time parameter.
     params: LiveParams,
@@ -266,6 +271,7 @@ impl Diagnostics {
             received: self.stats.received.load(Ordering::Relaxed),
             rejected: self.stats.rejected.load(Ordering::Relaxed),
             predicted: self.stats.predicted.load(Ordering::Relaxed),
+            out_of_range: self.stats.out_of_range.load(Ordering::Relaxed),
             last_error: self
                 .stats
                 .last_error

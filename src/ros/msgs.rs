@@ -96,6 +96,8 @@ pub struct NodeDiagnostics {
     pub last_error: String,
     /// Description of the served model.
     pub model: String,
+    /// States with an input outside the model's training range.
+    pub out_of_range: u64,
 }
 
 /// `mcgnode_msgs/msg/LiveAccuracy`: running accuracy per lead time.
@@ -234,6 +236,9 @@ pub struct TrainResponse {
     pub train_loss: f64,
     /// Final validation loss.
     pub validation_loss: f64,
+    /// Fraction of the validation targets' mean square explained (NaN:
+    /// unknown).
+    pub explained: f64,
 }
 impl Message for TrainResponse {}
 

@@ -58,8 +58,22 @@ fn handle_state(
     // A state the model was not trained for (another dimension, edge kinds
     // or field) is refused with the reason, not predicted.
     if let Some(t) = model.trained_for() {
-        let (graph, _) = msg.to_parts()?;
+        let (graph, state) = msg.to_parts()?;
         t.check(&graph, msg.field()?.as_ref())?;
+        if let Some(o) = t
+            .range
+            .as_ref()
+            .and_then(|r| r.check(&graph, &state.state, params.out_of_range_sigmas))
+        {
+            h.diag.stats.out_of_range.fetch_add(1, Ordering::Relaxed);
+            if params.out_of_range_refuse {
+                return Err(predict::PredictError::OutOfRange(o));
+            }
+            h.diag.failed(
+                &format!("out-of-range input, predicted anyway: {o}"),
+                Warning::OutOfRange,
+            );
+        }
     }
     let p = predict::predict(
         model.as_ref(),
@@ -871,6 +885,7 @@ pub fn standard_diagnostics(
                 kv("received", d.received.to_string()),
                 kv("rejected", d.rejected.to_string()),
                 kv("predicted", d.predicted.to_string()),
+                kv("out_of_range", d.out_of_range.to_string()),
                 kv("dropped", dropped.to_string()),
                 kv("last_error", d.last_error.clone()),
                 kv("model", d.model.clone()),

@@ -227,6 +227,13 @@ pub struct NodeParams {
     pub markers_topic: String,
     /// Minimum seconds between two MarkerArrays (0: one per prediction).
     pub markers_period: f64,
+    /// An input more than this many training scales out (velocity, position
+    /// when the model reads it, edge vector, edge parameters) counts as
+    /// `out_of_range` (0: never checked).
+    pub out_of_range_sigmas: f64,
+    /// Refuse out-of-range states (counted as rejected too) instead of
+    /// predicting them with a warning.
+    pub out_of_range_refuse: bool,
     /// Start as an unconfigured managed node (predict only after configure
     /// and activate through the lifecycle services); read at start.
     pub lifecycle: bool,
@@ -266,6 +273,8 @@ impl Default for NodeParams {
             markers: true,
             markers_topic: "/mcgnode/markers".into(),
             markers_period: 0.1,
+            out_of_range_sigmas: crate::compat::OUT_OF_RANGE_SIGMAS,
+            out_of_range_refuse: false,
             lifecycle: false,
         }
     }
@@ -444,6 +453,19 @@ pub const SPECS: &[(&str, Kind, &str)] = &[
         "minimum seconds between two MarkerArrays (0 = one per prediction)",
     ),
     (
+        "out_of_range_sigmas",
+        Kind::Double(false),
+        "a state with an input (velocity, position, edge vector, edge parameter) more than \
+         this many training scales out counts as out_of_range in the diagnostics and is \
+         warned about (0 = never checked)",
+    ),
+    (
+        "out_of_range_refuse",
+        Kind::Bool,
+        "refuse out-of-range states (counted as rejected) instead of predicting them with a \
+         warning",
+    ),
+    (
         "lifecycle",
         Kind::Bool,
         "start as an unconfigured managed node: predict only after configure and activate \
@@ -472,6 +494,8 @@ pub const RUNTIME_SETTABLE: &[&str] = &[
     "accuracy_retrain_epochs",
     "markers",
     "markers_period",
+    "out_of_range_sigmas",
+    "out_of_range_refuse",
 ];
 
 /// Keys of the node's section that are accepted as node names.
@@ -577,6 +601,7 @@ impl NodeParams {
                 Scalar::Bool(b) if key == "accuracy_retrain" => self.accuracy_retrain = *b,
                 Scalar::Bool(b) if key == "markers" => self.markers = *b,
                 Scalar::Bool(b) if key == "lifecycle" => self.lifecycle = *b,
+                Scalar::Bool(b) if key == "out_of_range_refuse" => self.out_of_range_refuse = *b,
                 Scalar::Bool(b) => self.qos_reliable = *b,
                 _ => return Err(ill("true or false")),
             },
@@ -684,6 +709,7 @@ impl NodeParams {
             "accuracy_error_re" => self.accuracy_error_re = x,
             "accuracy_retrain_after" => self.accuracy_retrain_after = x,
             "markers_period" => self.markers_period = x,
+            "out_of_range_sigmas" => self.out_of_range_sigmas = x,
             _ => unreachable_key(key),
         }
     }
@@ -749,6 +775,8 @@ impl NodeParams {
             "markers" => self.markers.to_string(),
             "markers_topic" => self.markers_topic.clone(),
             "markers_period" => format!("{:?}", self.markers_period),
+            "out_of_range_sigmas" => format!("{:?}", self.out_of_range_sigmas),
+            "out_of_range_refuse" => self.out_of_range_refuse.to_string(),
             "lifecycle" => self.lifecycle.to_string(),
             _ => String::new(),
         }

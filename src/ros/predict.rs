@@ -33,6 +33,10 @@ pub enum PredictError {
     /// kinds or parameters, field).
     #[error(transparent)]
     NotTrainedFor(#[from] crate::compat::Mismatch),
+    /// An input outside the model's training range, refused because
+    /// `out_of_range_refuse` is set.
+    #[error("refused (out_of_range_refuse): {0}")]
+    OutOfRange(crate::compat::OutOfRange),
     /// The model cannot run this graph.
     #[error("unsupported system: {0}")]
     Unsupported(#[source] DynamicsError),

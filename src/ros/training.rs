@@ -38,7 +38,7 @@ use crate::data::msg::{Header, Time};
 use crate::dynamics::Dynamics;
 use crate::kernel::TrainedModel;
 use crate::model::{ModelFile, Variant};
-use crate::train::{train_from_bags, EpochReport, ModelOptions, TrainConfig};
+use crate::train::{train_from_bags, Auto, EpochReport, ModelOptions, Recipe, TrainConfig};
 
 use super::clock::Clock;
 use super::handles::{Diagnostics, ModelHandle, RecorderHandle};
@@ -430,17 +430,22 @@ pub fn run_training(
                 .join(", ")
         ),
     );
+    // The default recipe, as `mcgnode train` has it, with the epochs asked for.
     let cfg = TrainConfig {
         epochs: req.epochs as usize,
         seed: req.seed,
         init,
+        auto: Auto {
+            epochs: false,
+            ..Auto::ALL
+        },
         ..TrainConfig::default()
     };
     let every = (cfg.epochs / 10).max(1);
     let trained = train_from_bags(
         variant,
         &bags,
-        &ModelOptions::default(),
+        &auto_options(),
         &cfg,
         |m| log(LogLevel::Info, m),
         |r| {
@@ -469,6 +474,11 @@ pub fn run_training(
     let trained_at = Instant::now();
     let (train_loss, validation_loss) = (file.training.train_loss, file.training.validation_loss);
     let epochs_run = file.training.epochs_run;
+    let explained = file.training.explained.unwrap_or(f64::NAN);
+    let learned = file.training.explained_line();
+    if let Some(w) = file.training.explained_warning() {
+        log(LogLevel::Warn, &format!("{source}: {w}"));
+    }
     let (path, model) = match save_and_load(shared, file, variant) {
         Ok(x) => x,
         Err(e) => return fail(e.to_string()),
@@ -481,20 +491,21 @@ pub fn run_training(
         Some(path),
         &format!(
             "{source}: {variant} trained for {epochs_run} epochs in {took:.1} s \
-             (validation {validation_loss:.3e}); model {path_s}"
+             (validation {validation_loss:.3e}; {learned}); model {path_s}"
         ),
     );
     let save_and_swap = trained_at.elapsed().as_secs_f64() * 1e3;
     TrainResponse {
         success: true,
         message: format!(
-            "trained {variant} for {epochs_run} epochs in {took:.1} s; saved, loaded and \
-             swapped in {save_and_swap:.1} ms ({:.1} µs under the lock)",
+            "trained {variant} for {epochs_run} epochs in {took:.1} s; {learned}; saved, \
+             loaded and swapped in {save_and_swap:.1} ms ({:.1} µs under the lock)",
             locked.as_secs_f64() * 1e6
         ),
         model_path: path_s,
         train_loss,
         validation_loss,
+        explained,
     }
 }
 
@@ -610,20 +621,18 @@ fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, 
         });
     };
     let variant = init.hyper.variant;
+    let explained_old = init.training.explained;
     let cfg = TrainConfig {
         epochs: p.accuracy_retrain_epochs as usize,
         init: Some(Box::new(init)),
+        auto: Auto {
+            epochs: false,
+            ..Auto::ALL
+        },
         ..TrainConfig::default()
     };
-    let file = train_from_bags(
-        variant,
-        train,
-        &ModelOptions::default(),
-        &cfg,
-        |_| {},
-        |_| true,
-    )
-    .map_err(TrainingError::Train)?;
+    let file = train_from_bags(variant, train, &auto_options(), &cfg, |_| {}, |_| true)
+        .map_err(TrainingError::Train)?;
     let held = held_out.display().to_string();
     let score = |m: &dyn Dynamics| {
         crate::replay::replay_as_node(m, &held, p.dt, p.substeps, p.horizon)
@@ -636,19 +645,36 @@ fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, 
     let old = trainer.model.get();
     let candidate = TrainedModel::from_file(file.clone()).map_err(TrainingError::Load)?;
     let (re_old, re_new) = (score(old.as_ref())?, score(&candidate)?);
+    let explained_new = file.training.explained;
+    let percent =
+        |f: Option<f64>| f.map_or("unknown".to_string(), |f| format!("{:.2} %", 100.0 * f));
     let figures = format!(
         "held-out RE (mean over lead times, {held}) {re_new:.3e} for the retrained model \
-         against {re_old:.3e} for the served one; trained on {} bag(s) for {} epochs",
+         against {re_old:.3e} for the served one; explains {} of its validation targets \
+         against {} for the served one; trained on {} bag(s) for {} epochs",
+        percent(explained_new),
+        percent(explained_old),
         train.len(),
         file.training.epochs_run
     );
-    if re_new.is_finite() && re_new < re_old {
+    // A model that explains less of its targets than the served one did of
+    // its own is not swapped in, even when it happened to replay better.
+    let explains_less = matches!((explained_old, explained_new), (Some(o), Some(n)) if n < o);
+    if re_new.is_finite() && re_new < re_old && !explains_less {
         let (path, model) = save_and_load(trainer, file, variant)?;
         let reason = format!("{}: {figures}", "drift retraining");
         swap(trainer, model, Some(path.clone()), &reason);
         Ok(format!("swapped in {}: {figures}", path.display()))
     } else {
         Ok(format!("kept the served model: {figures}"))
+    }
+}
+
+/// The architecture options of `mcgnode train`'s default recipe.
+fn auto_options() -> ModelOptions {
+    ModelOptions {
+        recipe: Recipe::Auto,
+        ..ModelOptions::default()
     }
 }
 

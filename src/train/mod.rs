@@ -19,8 +19,10 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 pub mod checkpoint;
+pub mod recipe;
 pub use checkpoint::{Checkpoint, CheckpointError, Checkpointing};
 use checkpoint::{Progress, RngState, RunKey};
+pub use recipe::{Auto, Recipe};
 
 /// Training settings.
 #[derive(Clone, Debug)]
@@ -67,6 +69,9 @@ pub struct TrainConfig {
     /// Save the run's state as it goes, and resume from the file when it
     /// exists (see [`checkpoint`]).
     pub checkpoint: Option<Checkpointing>,
+    /// Settings the default recipe chooses from the data instead of taking
+    /// them from this config ([`recipe`]; none by default).
+    pub auto: Auto,
 }
 
 impl TrainConfig {
@@ -98,7 +103,51 @@ impl Default for TrainConfig {
             lr_drops: vec![],
             time_budget: None,
             checkpoint: None,
+            auto: Auto::default(),
         }
+    }
+}
+
+impl TrainConfig {
+    /// This config with the settings in [`TrainConfig::auto`] chosen by the
+    /// default recipe for `states` states of `graph` (before the split), and
+    /// a line saying what was chosen (`None` when nothing was).
+    pub fn resolved(&self, graph: &Graph, states: usize) -> (TrainConfig, Option<String>) {
+        let a = self.auto;
+        let mut c = self.clone();
+        c.auto = Auto::default();
+        if !a.any() {
+            return (c, None);
+        }
+        let warm = self.init.is_some();
+        if a.batch {
+            c.batch = recipe::batch_for(graph);
+        }
+        if a.lr {
+            c.lr = if warm { 1e-3 } else { 1e-2 };
+        }
+        if a.epochs {
+            let n_val = ((states as f64 * c.validation).round() as usize)
+                .clamp(1, states.saturating_sub(1).max(1));
+            c.epochs = recipe::epochs_for(states.saturating_sub(n_val), c.batch);
+        }
+        if a.lr_drops && !warm {
+            c.lr_drops = vec![((c.epochs * 2).div_ceil(3), c.lr / 10.0)];
+        }
+        let drops = c
+            .lr_drops
+            .iter()
+            .map(|(e, lr)| format!(", {lr:e} after epoch {e}"))
+            .collect::<String>();
+        let line = format!(
+            "recipe: batch {} states ({} directed edges each), {} epochs, lr {:e}{drops}{}",
+            c.batch,
+            recipe::directed_edges(graph),
+            c.epochs,
+            c.lr,
+            if warm { " (warm start)" } else { "" }
+        );
+        (c, Some(line))
     }
 }
 
@@ -568,6 +617,8 @@ pub fn fit(
         time_budget: cfg.time_budget,
         out_of_time: run.out_of_time,
         resumed_at,
+        trivial_loss: None,
+        explained: None,
     })
 }
 
@@ -596,6 +647,22 @@ fn resume(
     *adam = Adam::resume(lr, c.adam_step, c.adam_m, c.adam_v);
     theta.copy_from_slice(&c.theta);
     Ok(c.progress)
+}
+
+/// The trivial predictor's loss on the samples `idx`: the MSE of predicting
+/// zero acceleration, i.e. the targets' mean square (every entry weighs the
+/// same, as in the training loss).
+pub fn trivial_loss(acc: &[Vec<f64>], idx: &[usize]) -> f64 {
+    let (mut sum, mut count) = (0.0, 0usize);
+    for &i in idx {
+        sum += acc[i].iter().map(|a| a * a).sum::<f64>();
+        count += acc[i].len();
+    }
+    if count == 0 {
+        0.0
+    } else {
+        sum / count as f64
+    }
 }
 
 /// Mixed into [`TrainConfig::seed`] for the subsample's stream ("points"), so
@@ -696,9 +763,11 @@ pub fn train(
             &mut native
         }
     };
+    let trivial = trivial_loss(acc, &sp.validation);
     let report = fit(
         &mut theta, sp, cfg, &mut rng, objective, &mut adam, on_epoch,
-    )?;
+    )?
+    .with_trivial(trivial);
     net.store.load(&layout.weights(&theta))?;
     let (step, m, v) = adam.state();
     let optimizer = AdamState {
@@ -760,6 +829,10 @@ pub struct ModelOptions {
     pub block_hidden: std::collections::BTreeMap<String, Vec<usize>>,
     /// Edges read their rest length and stiffness.
     pub edge_physics: bool,
+    /// With [`Recipe::Auto`], the blocks that embed and decode edges get the
+    /// recipe's widths ([`recipe::edge_blocks`]) unless `block_hidden` names
+    /// them; [`Recipe::Paper`] (the default here) adds nothing.
+    pub recipe: Recipe,
 }
 
 impl Default for ModelOptions {
@@ -777,6 +850,7 @@ impl Default for ModelOptions {
             edge_input: None,
             block_hidden: Default::default(),
             edge_physics: false,
+            recipe: Recipe::Paper,
         }
     }
 }
@@ -799,6 +873,11 @@ impl ModelOptions {
         h.message = self.message.unwrap_or(h.message);
         h.edge_input = self.edge_input.unwrap_or(h.edge_input);
         h.block_hidden = self.block_hidden.clone();
+        if self.recipe == Recipe::Auto {
+            for (block, sizes) in recipe::edge_blocks(variant) {
+                h.block_hidden.entry(block.to_string()).or_insert(sizes);
+            }
+        }
         h.edge_physics = self.edge_physics;
         let known: Vec<String> = crate::model::Arch::new(&h)
             .mlps
@@ -955,6 +1034,11 @@ pub fn train_from_bags(
     apply_data_options(&mut data.dataset, cfg, &mut log)?;
     data.trained_on.states = data.dataset.len();
     let ds = &data.dataset;
+    let (cfg, chosen) = cfg.resolved(&ds.graph, ds.len());
+    let cfg = &cfg;
+    if let Some(line) = chosen {
+        log(&line);
+    }
     let types = opts.types.unwrap_or(
         ds.graph
             .types

@@ -180,6 +180,8 @@ class Driver:
         check(os.path.isfile(r.model_path), f"model_path {r.model_path!r} is not a file")
         check(math.isfinite(r.train_loss) and math.isfinite(r.validation_loss) and r.validation_loss > 0,
               f"losses {r.train_loss}, {r.validation_loss}")
+        check(math.isfinite(r.explained) and r.explained <= 1.0 and "explains" in r.message,
+              f"explained fraction {r.explained} / message {r.message!r}")
         got = [i for i in during if i in self.preds and self.preds[i][0] <= t0 + t_train]
         check(len(got) >= 3, f"only {len(got)} of {len(during)} states were answered during training")
         check("service" in refusals, "training ended before a second request could be sent; raise --epochs")
