@@ -83,6 +83,34 @@ impl BaselineHyper {
             rounds,
         }
     }
+
+    /// Scalar parameters of the network these settings define, counted as
+    /// [`BaselineNet::new`] declares them but without building it; `None` if
+    /// the count overflows. For refusing a file whose settings need more
+    /// parameters than it holds before allocating them (a corrupt width of
+    /// 10^15 would abort, 10^15 rounds would never end).
+    pub fn param_count(&self) -> Option<usize> {
+        let (d, t, h, l) = (self.dim, self.types, self.hidden, self.latent);
+        let energy = self.kind != Kind::Gns;
+        // An MLP inp → h → out, with biases.
+        let mlp = |inp: usize, out: usize| -> Option<usize> {
+            inp.checked_mul(h)?
+                .checked_add(h)?
+                .checked_add(h.checked_mul(out)?)?
+                .checked_add(out)
+        };
+        let node_in = t.checked_add(if energy { d } else { d.checked_mul(2)? })?;
+        let edge_in = d.checked_add(usize::from(!energy))?;
+        let round = mlp(l.checked_mul(3)?, l)?.checked_add(mlp(l.checked_mul(2)?, l)?)?;
+        let mut n = mlp(node_in, l)?
+            .checked_add(mlp(edge_in, l)?)?
+            .checked_add(round.checked_mul(self.rounds)?)?
+            .checked_add(mlp(l, if energy { 1 } else { d })?)?;
+        if energy {
+            n = n.checked_add(mlp(l, 1)?)?.checked_add(t)?;
+        }
+        Some(n)
+    }
 }
 
 /// A baseline's parameters and networks.

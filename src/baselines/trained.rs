@@ -4,7 +4,7 @@
 use super::file::BaselineFile;
 use super::net::BaselineNet;
 use crate::dynamics::{Dynamics, DynamicsError, Forces};
-use crate::error::Result;
+use crate::error::{bail, Result};
 use crate::model::arch::ArchError;
 use crate::model::batch::Batch;
 use crate::model::plan::GraphPlan;
@@ -30,6 +30,16 @@ impl TrainedBaseline {
 
     /// Builds the network of an in-memory file.
     pub fn from_file(file: BaselineFile) -> Result<Self> {
+        // Settings read from a file are checked against the weights it holds
+        // before the network they define is allocated.
+        let stored: usize = file.weights.values().map(|a| a.data.len()).sum();
+        match file.hyper.param_count() {
+            Some(n) if n <= stored => {}
+            n => bail!(
+                "the baseline's hyperparameters define {} parameters, more than the {stored} its file holds",
+                n.map_or_else(|| "over 2^64".to_string(), |n| n.to_string())
+            ),
+        }
         let net = BaselineNet::new(file.hyper.clone(), &mut ChaCha8Rng::seed_from_u64(0))?;
         net.store.load(&file.weights)?;
         Ok(Self { file, net })
@@ -131,5 +141,88 @@ impl Dynamics for TrainedBaseline {
             total,
             edges: vec![],
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::TrainedBaseline;
+    use crate::baselines::{BaselineFile, BaselineHyper, BaselineNet, Kind};
+    use crate::model::Variant;
+    use crate::physics::{SystemConfig, SystemKind};
+    use rand::SeedableRng;
+
+    fn net(hyper: BaselineHyper) -> BaselineNet {
+        BaselineNet::new(hyper, &mut rand_chacha::ChaCha8Rng::seed_from_u64(4)).expect("net")
+    }
+
+    /// The count that guards loading is the count the network declares.
+    #[test]
+    fn param_count_is_the_networks() {
+        for kind in Kind::ALL {
+            for (dim, types, hidden, latent, rounds) in
+                [(2, 1, 16, 8, 1), (3, 2, 5, 3, 0), (2, 3, 4, 6, 3)]
+            {
+                let h = BaselineHyper {
+                    kind,
+                    dim,
+                    types,
+                    hidden,
+                    latent,
+                    rounds,
+                };
+                assert_eq!(h.param_count(), Some(net(h.clone()).store.count()), "{h:?}");
+            }
+        }
+    }
+
+    /// tests/fuzz_readers.rs met a GNS file with a setting of
+    /// 18446744073709551615 that never finished loading. Before the count
+    /// was checked, each of these panicked on a capacity overflow, took
+    /// seconds (a latent of 10^6) or never ended (10^15 rounds); now each is
+    /// an error before anything is allocated.
+    #[test]
+    fn corrupt_sizes_are_errors_not_aborts() {
+        let g = SystemConfig::new(SystemKind::Spring, 3).graph();
+        let (_, template) = crate::testing::random_model(Variant::Gnode, &g, 3).expect("model");
+        type Edit = fn(&mut BaselineHyper);
+        let cases: [(Kind, Edit, &str); 4] = [
+            (
+                Kind::Gns,
+                |h| h.hidden = usize::MAX,
+                "over 2^64 parameters, more than the 4722",
+            ),
+            (
+                Kind::Gns,
+                |h| h.latent = 1_000_000,
+                "278000274 parameters, more than the 4722",
+            ),
+            (
+                Kind::Gns,
+                |h| h.rounds = 1_000_000_000_000_000,
+                "parameters, more than the 4722",
+            ),
+            (
+                Kind::Lgn,
+                |h| h.types = usize::MAX,
+                "over 2^64 parameters, more than the 1651",
+            ),
+        ];
+        for (kind, edit, want) in cases {
+            let n = net(BaselineHyper::new(kind, 2, 1));
+            let mut file = BaselineFile {
+                format: crate::baselines::file::FORMAT.into(),
+                crate_version: env!("CARGO_PKG_VERSION").into(),
+                hyper: n.hyper.clone(),
+                trained_on: None,
+                training: template.file.training.clone(),
+                weights: n.store.weights().expect("weights"),
+            };
+            edit(&mut file.hyper);
+            let e = TrainedBaseline::from_file(file)
+                .expect_err(want)
+                .to_string();
+            assert!(e.contains(want), "{kind}: {e:?} does not say {want:?}");
+        }
     }
 }

@@ -71,9 +71,64 @@ pub struct Workspace {
     pub projector: Option<Projector>,
 }
 
+/// Checks, before anything is allocated for them, that a file's
+/// hyperparameters can describe the weights stored with them: no more layers
+/// than (weight, bias) pairs, no more parameters than the file holds, scales
+/// that can be used. A corrupt width or count (10^15) would
+/// otherwise abort on allocation or build for ever, and a short `q_mean`
+/// would index out of bounds in every forward pass.
+fn check_sizes(hyper: &Hyper, w: &Weights) -> Result<()> {
+    if hyper.dim != 2 && hyper.dim != 3 {
+        bail!("model dimension must be 2 or 3, got {}", hyper.dim);
+    }
+    let Some(arch) = Arch::within(hyper, w.len() / 2) else {
+        bail!(
+            "the model's hyperparameters define more layers than its {} weight arrays can hold",
+            w.len()
+        );
+    };
+    // With no width 0, every size is at least one parameter of some layer,
+    // so the count below bounds them all (and the buffers sized by them).
+    if let Some((block, _)) = arch.mlps.iter().find(|(_, s)| s.contains(&0)) {
+        bail!("the model's hyperparameters give block {block} a layer of width 0");
+    }
+    let stored: usize = w.values().map(|a| a.data.len()).sum();
+    match arch.param_count() {
+        Some(n) if n <= stored => {}
+        n => bail!(
+            "the model's hyperparameters define {} parameters, more than the {stored} its file holds",
+            n.map_or_else(|| "over 2^64".to_string(), |n| n.to_string())
+        ),
+    }
+    if let Some(nm) = &hyper.norm {
+        if nm.q_mean.len() != hyper.dim {
+            bail!(
+                "the model's norm.q_mean has {} entries for dimension {}",
+                nm.q_mean.len(),
+                hyper.dim
+            );
+        }
+        let scales = [
+            ("q_scale", nm.q_scale),
+            ("v_scale", nm.v_scale),
+            ("w_scale", nm.w_scale),
+            ("out_scale", nm.out_scale),
+            ("k_scale", nm.k_scale),
+        ];
+        if let Some((name, x)) = scales.iter().find(|(_, x)| !(x.is_finite() && *x > 0.0)) {
+            bail!("the model's norm.{name} = {x} is not a finite number > 0");
+        }
+        if nm.q_mean.iter().any(|x| !x.is_finite()) {
+            bail!("the model's norm.q_mean is not finite");
+        }
+    }
+    Ok(())
+}
+
 impl Kernel {
     /// Builds the kernel from a model's hyperparameters and weights.
     pub fn new(hyper: &Hyper, w: &Weights) -> Result<Self> {
+        check_sizes(hyper, w)?;
         // Names, shapes and finiteness are checked against the architecture that
         // `hyper` defines, so the loops below can trust every size.
         let reference = crate::model::Net::new(
@@ -149,7 +204,13 @@ impl Kernel {
     pub fn workspace(&self, graph: &Graph) -> Result<Workspace, ArchError> {
         self.supports(graph)?;
         let plan = GraphPlan::new(graph);
-        let (n, d, em, t) = (plan.n, plan.dim, self.hyper.embed, self.hyper.types);
+        let (n, d, t) = (plan.n, plan.dim, self.arch.types);
+        // NODE has no embeddings (and its file's `embed` sizes no weight).
+        let em = if self.node_mlp.is_some() {
+            0
+        } else {
+            self.arch.embed
+        };
         let ne = plan.recv.len();
         let mlps = [
             &self.node_mlp,
@@ -230,7 +291,7 @@ impl Kernel {
     /// Accelerations at (q, v), written to `acc` (`n·d`). Forces (and pairwise
     /// forces for MCGNODE) are left in `ws.force` / `ws.edge_force`.
     pub fn acceleration(&self, ws: &mut Workspace, q: &[f64], v: &[f64], acc: &mut [f64]) {
-        let (n, d, em, t) = (ws.plan.n, ws.plan.dim, self.hyper.embed, self.hyper.types);
+        let (n, d, em, t) = (ws.plan.n, ws.plan.dim, self.arch.embed, self.arch.types);
         let bias = self.hyper.variant.biases();
         if let Some(m) = &self.node_mlp {
             let nd = n * d;
@@ -427,6 +488,144 @@ impl Kernel {
                 }
                 acc[p * d + c] = mi * f;
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::TrainedModel;
+    use crate::dynamics::Dynamics;
+    use crate::model::{ModelFile, Norm, Variant};
+    use crate::physics::{SystemConfig, SystemKind};
+
+    /// Builds a kernel from a random model's file after `edit`, as loading
+    /// an edited file does; on success runs one acceleration on the
+    /// 3-spring ring the model was made for.
+    fn load_edited(
+        variant: Variant,
+        edit: impl FnOnce(&mut ModelFile),
+    ) -> Result<Vec<f64>, String> {
+        let c = SystemConfig::new(SystemKind::Spring, 3);
+        let g = c.graph();
+        let s = c.start_for(&g, 1, 0);
+        let (_, m) = crate::testing::random_model(variant, &g, 3).expect("model");
+        let mut file = m.file;
+        edit(&mut file);
+        let m = TrainedModel::from_file(file).map_err(|e| e.to_string())?;
+        let mut out = vec![0.0; g.ndof()];
+        m.acceleration(&g, &s, &mut out)
+            .map_err(|e| e.to_string())?;
+        Ok(out)
+    }
+
+    /// Settings a corrupt model file can hold (tests/fuzz_readers.rs edits
+    /// them; each was checked to fail this way before `check_sizes`): they
+    /// allocated terabytes (an abort), panicked on a capacity overflow or an
+    /// index out of bounds, or never finished loading.
+    #[test]
+    fn corrupt_sizes_are_errors_not_aborts() {
+        type Edit = fn(&mut ModelFile);
+        let cases: [(Variant, Edit, &str); 12] = [
+            (
+                Variant::Mcgnode,
+                |f| f.hyper.hidden = 1_000_000,
+                "5000055000023 parameters, more than the 423",
+            ),
+            (
+                Variant::Mcgnode,
+                |f| f.hyper.hidden = usize::MAX,
+                "over 2^64 parameters",
+            ),
+            (
+                Variant::Mcgnode,
+                |f| f.hyper.embed = 1 << 32,
+                "parameters, more than the 423",
+            ),
+            (
+                Variant::Mcgnode,
+                |f| f.hyper.types = usize::MAX,
+                "over 2^64 parameters",
+            ),
+            (
+                Variant::Mcgnode,
+                |f| f.hyper.rounds = 1_000_000_000_000_000,
+                "more layers than its 31 weight arrays",
+            ),
+            (
+                Variant::Mcgnode,
+                |f| f.hyper.hidden_layers = 1_000_000_000_000_000,
+                "more layers than its 31",
+            ),
+            (
+                Variant::Mcgnode,
+                |f| f.hyper.hidden = 0,
+                "block node_em a layer of width 0",
+            ),
+            (
+                Variant::Mcgnode,
+                |f| f.hyper.dim = 1_000_000_000_000_000,
+                "dimension must be 2 or 3",
+            ),
+            (
+                Variant::Node,
+                |f| f.hyper.node_hidden = 1_000_000,
+                "parameters, more than the 582",
+            ),
+            (
+                Variant::Node,
+                |f| f.hyper.node_layers = 1_000_000_000_000_000,
+                "more layers than its 6",
+            ),
+            (
+                Variant::Node,
+                |f| f.hyper.particles = usize::MAX,
+                "over 2^64 parameters",
+            ),
+            (
+                Variant::Gnode,
+                |f| {
+                    let mut n = Norm::identity(2);
+                    n.q_mean = vec![0.0];
+                    f.hyper.norm = Some(n);
+                },
+                "norm.q_mean has 1 entries for dimension 2",
+            ),
+        ];
+        for (variant, edit, want) in cases {
+            let e = load_edited(variant, edit).expect_err(want);
+            assert!(e.contains(want), "{variant}: {e:?} does not say {want:?}");
+        }
+        let e = load_edited(Variant::Gnode, |f| {
+            let mut n = Norm::identity(2);
+            n.q_scale = 0.0;
+            f.hyper.norm = Some(n);
+        })
+        .expect_err("a zero scale makes every output NaN");
+        assert!(
+            e.contains("norm.q_scale = 0 is not a finite number > 0"),
+            "{e}"
+        );
+    }
+
+    /// Settings that size no weight do not size buffers either: NODE's
+    /// `embed` and `types` (tests/fuzz_readers.rs met a NODE file whose
+    /// `embed` of 2^32 made the workspace ask for 100 GB, an abort), and a
+    /// `types` of 0, which the architecture reads as 1 (the kernel indexed
+    /// out of bounds).
+    #[test]
+    fn settings_that_size_no_weight_are_harmless() {
+        let plain = load_edited(Variant::Node, |_| {}).expect("node");
+        let odd = load_edited(Variant::Node, |f| {
+            f.hyper.embed = 1 << 32;
+            f.hyper.types = 1 << 40;
+        })
+        .expect("NODE ignores embed and types");
+        assert_eq!(plain, odd);
+        for v in [Variant::Gnode, Variant::Mcgnode] {
+            let one = load_edited(v, |_| {}).expect("model");
+            let zero = load_edited(v, |f| f.hyper.types = 0).expect("types 0 reads as 1");
+            assert_eq!(one, zero, "{v}");
         }
     }
 }

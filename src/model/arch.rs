@@ -126,6 +126,23 @@ pub struct Arch {
 impl Arch {
     /// The architecture a set of hyperparameters defines.
     pub fn new(h: &Hyper) -> Self {
+        Self::build(h, usize::MAX).expect("any architecture has fewer than usize::MAX layers")
+    }
+
+    /// [`Arch::new`] for hyperparameters read from a file: `None` for a
+    /// dimension other than 2 or 3, and as soon as the architecture has more
+    /// than `max_layers` linear layers, so that a corrupt count (10^15 rounds
+    /// or hidden layers) is refused instead of described layer by layer.
+    /// Sizes saturate rather than wrap, so a corrupt width shows as a
+    /// [`Arch::param_count`] no file holds.
+    pub fn within(h: &Hyper, max_layers: usize) -> Option<Self> {
+        if !matches!(h.dim, 2 | 3) {
+            return None;
+        }
+        Self::build(h, max_layers)
+    }
+
+    fn build(h: &Hyper, max_layers: usize) -> Option<Self> {
         let (d, t, hid, em) = (h.dim, h.types.max(1), h.hidden, h.embed);
         let b = h.variant.biases();
         let mut mlps = vec![];
@@ -141,57 +158,80 @@ impl Arch {
             Decoder::Node { global: body }
         };
         let rounds = if b.graph { h.rounds } else { 0 };
+        let mut layers = 0usize;
+        let mut count = |n: usize| -> Option<()> {
+            layers = layers.checked_add(n)?;
+            (layers <= max_layers).then_some(())
+        };
         // Layer sizes of a block: its override, or `hidden` × `hidden_layers`.
-        let mlp = |block: Block, inp: usize, out: usize, hidden: bool| {
+        let mut mlp = |block: Block, inp: usize, out: usize, hidden: bool| {
+            let over = h.block_hidden.get(&block.prefix());
+            count(match over {
+                Some(hs) => hs.len().checked_add(1)?,
+                None if hidden => h.hidden_layers.checked_add(1)?,
+                None => 1,
+            })?;
             let mut sizes = vec![inp];
-            match h.block_hidden.get(&block.prefix()) {
+            match over {
                 Some(hs) => sizes.extend(hs),
                 None if hidden => sizes.extend(std::iter::repeat_n(hid, h.hidden_layers)),
                 None => {}
             }
             sizes.push(out);
-            (block, sizes)
+            Some((block, sizes))
         };
+        let d2 = d.saturating_mul(2);
         let msg_hidden = h.message == MessageFn::Mlp;
         let edge_extra = if h.edge_physics { EDGE_PHYSICS } else { 0 };
         let edge_in = match h.edge_input {
-            EdgeInput::Concat => 2 * em,
+            EdgeInput::Concat => em.saturating_mul(2),
             EdgeInput::Product => em,
         };
         if b.graph {
             let node_in = match node_input {
                 NodeInput::TypeOnly => t,
-                NodeInput::Full => t + 2 * d,
+                NodeInput::Full => t.saturating_add(d2),
             };
-            mlps.push(mlp(Block::NodeEmbed, node_in, em, true));
-            mlps.push(mlp(Block::EdgeEmbed, d + edge_extra, em, true));
+            mlps.push(mlp(Block::NodeEmbed, node_in, em, true)?);
+            mlps.push(mlp(
+                Block::EdgeEmbed,
+                d.saturating_add(edge_extra),
+                em,
+                true,
+            )?);
             for l in 0..rounds {
-                mlps.push(mlp(Block::Message(l), 2 * em, em, msg_hidden));
-                mlps.push(mlp(Block::EdgeUpdate(l), edge_in, em, msg_hidden));
+                mlps.push(mlp(
+                    Block::Message(l),
+                    em.saturating_mul(2),
+                    em,
+                    msg_hidden,
+                )?);
+                mlps.push(mlp(Block::EdgeUpdate(l), edge_in, em, msg_hidden)?);
             }
             if body {
-                mlps.push(mlp(Block::GlobalEmbed, t + 2 * d, em, true));
+                mlps.push(mlp(Block::GlobalEmbed, t.saturating_add(d2), em, true)?);
             }
             match decoder {
                 Decoder::Pairwise { body } => {
-                    mlps.push(mlp(Block::EdgeDecoder, em, d, true));
+                    mlps.push(mlp(Block::EdgeDecoder, em, d, true)?);
                     if body {
-                        mlps.push(mlp(Block::BodyDecoder, em, d, true));
+                        mlps.push(mlp(Block::BodyDecoder, em, d, true)?);
                     }
                 }
                 Decoder::Node { global } => {
-                    let inp = if global { 2 * em } else { em };
-                    mlps.push(mlp(Block::NodeDecoder, inp, d, true));
+                    let inp = if global { em.saturating_mul(2) } else { em };
+                    mlps.push(mlp(Block::NodeDecoder, inp, d, true)?);
                 }
             }
         } else {
-            let io = h.particles * d;
-            let mut sizes = vec![2 * io];
+            count(h.node_layers.checked_add(1)?)?;
+            let io = h.particles.saturating_mul(d);
+            let mut sizes = vec![io.saturating_mul(2)];
             sizes.extend(std::iter::repeat_n(h.node_hidden, h.node_layers));
             sizes.push(io);
             mlps.push((Block::Flat, sizes));
         }
-        Self {
+        Some(Self {
             dim: d,
             types: t,
             embed: em,
@@ -205,7 +245,15 @@ impl Arch {
             norm: h.norm.clone().unwrap_or_else(|| Norm::identity(d)),
             edge_physics: h.edge_physics,
             biases: b,
-        }
+        })
+    }
+
+    /// Scalar parameters in all ([`Arch::params`]); `None` if the count
+    /// overflows.
+    pub fn param_count(&self) -> Option<usize> {
+        self.params().iter().try_fold(0usize, |n, (_, shape)| {
+            n.checked_add(shape.iter().try_fold(1usize, |p, &x| p.checked_mul(x))?)
+        })
     }
 
     /// Layer sizes of a block, if the architecture has it.
