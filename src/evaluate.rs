@@ -236,12 +236,7 @@ pub fn table(e: &Evaluation, rows: usize) -> String {
         "ME scaled",
         if still.is_some() { "  RE still" } else { "" }
     );
-    let still_at = |i: usize| {
-        still.map_or(String::new(), |r| {
-            r.re.get(i)
-                .map_or(String::new(), |x| format!("  {x:>8.3e}"))
-        })
-    };
+    let still_at = |i: usize| still.map_or(String::new(), |r| r.cell(i));
     let n = s.t.len();
     let picks: Vec<usize> = if n <= rows {
         (0..n).collect()
@@ -276,13 +271,7 @@ pub fn table(e: &Evaluation, rows: usize) -> String {
         still.map_or(String::new(), |r| format!("  {:>8.3e}", r.re_mean))
     );
     if let Some(r) = still {
-        out += &match r.warning(a.re) {
-            Some(w) => format!("{w}\n"),
-            None => format!(
-                "mean RE {:.1}x below standing still (`--model still`: {:.3e})\n",
-                r.times_better, r.re_mean
-            ),
-        };
+        out += &r.verdict(a.re);
     }
     out += &format!(
         "(dt from {}; field for EE from {})\n",

@@ -461,6 +461,26 @@ impl StillReference {
         }
     }
 
+    /// The table cell of the reference's RE at time index `i` (empty past
+    /// its times), for a column beside the model's.
+    pub fn cell(&self, i: usize) -> String {
+        self.re
+            .get(i)
+            .map_or(String::new(), |x| format!("  {x:>8.3e}"))
+    }
+
+    /// The line under a table: the warning for a model worse than standing
+    /// still, else how many times below it the model's mean RE is.
+    pub fn verdict(&self, model_re: f64) -> String {
+        match self.warning(model_re) {
+            Some(w) => format!("{w}\n"),
+            None => format!(
+                "mean RE {:.1}x below standing still (`--model still`: {:.3e})\n",
+                self.times_better, self.re_mean
+            ),
+        }
+    }
+
     /// The warning a model worse than standing still gets, else `None`.
     pub fn warning(&self, model_re: f64) -> Option<String> {
         self.worse.then(|| {

@@ -564,12 +564,7 @@ pub fn table(r: &ReplayReport, rows: usize) -> String {
         "ME scaled",
         if still.is_some() { "  RE still" } else { "" }
     );
-    let still_at = |i: usize| {
-        still.map_or(String::new(), |x| {
-            x.re.get(i)
-                .map_or(String::new(), |v| format!("  {v:>8.3e}"))
-        })
-    };
+    let still_at = |i: usize| still.map_or(String::new(), |x| x.cell(i));
     let n = s.t.len();
     let rows = rows.max(2);
     let picks: Vec<usize> = if n <= rows {
@@ -601,13 +596,7 @@ pub fn table(r: &ReplayReport, rows: usize) -> String {
         still.map_or(String::new(), |x| format!("  {:>8.3e}", x.re_mean))
     );
     if let Some(x) = still {
-        out += &match x.warning(a.re) {
-            Some(w) => format!("{w}\n"),
-            None => format!(
-                "mean RE {:.1}x below standing still (`--model still`: {:.3e})\n",
-                x.times_better, x.re_mean
-            ),
-        };
+        out += &x.verdict(a.re);
     }
     if r.diverged > 0 {
         out += &format!(

@@ -955,7 +955,10 @@ fn train_recipes_explained_fraction_and_the_still_reference() {
         |_| true,
     )
     .unwrap();
-    assert_eq!(serde_json::to_value(&lib.weights).unwrap(), paper["weights"]);
+    assert_eq!(
+        serde_json::to_value(&lib.weights).unwrap(),
+        paper["weights"]
+    );
     // Given options override the recipe.
     let (given, _) = train(&["--batch", "7", "--lr", "3e-3"], "given.json");
     assert_eq!(given["training"]["batch"], 7);

@@ -248,7 +248,14 @@ fn shipped_models_carry_their_training_metadata() {
         assert_eq!(m.file.hyper.variant.name(), "mcgnode");
         assert_eq!(m.file.trained_on.system, system);
         assert_eq!(m.file.trained_on.particles, 5);
-        assert!(m.file.training.epochs_run >= 1000, "{:?}", m.file.training);
+        // Trained to the point of explaining its targets (what the default
+        // recipe's 300 epochs reach; the paper's settings took 1,000–2,000
+        // epochs to fall short of it), in the current file format: training
+        // edges and input scales recorded.
+        let explained = m.file.training.explained.unwrap_or(f64::NAN);
+        assert!(explained > 0.9999, "{:?}", m.file.training);
+        assert!(!m.file.trained_on.edge_params.is_empty());
+        assert!(m.file.hyper.norm.is_some());
         // The sample bag is not training data.
         let sample = read_trajectories(root(&format!("bags/{bag}-sample.mcap")))
             .expect("the sample bag reads");
