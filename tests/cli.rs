@@ -1013,6 +1013,32 @@ fn train_recipes_explained_fraction_and_the_still_reference() {
         },
         "{table}"
     );
+    // States far outside the training scales are evaluated with a warning
+    // that counts them and names the first.
+    let mut bag = mcgnode::data::read_trajectories(d.join("test.mcap")).unwrap();
+    bag.trajectories[0].samples[3]
+        .state
+        .v
+        .iter_mut()
+        .for_each(|v| *v = 1e3);
+    mcgnode::data::write_trajectories_with_field(
+        d.join("wild.mcap"),
+        &bag.trajectories,
+        &bag.metadata,
+        bag.field.as_ref(),
+    )
+    .unwrap();
+    let o = mcgnode(
+        &["evaluate", "--model", "auto.json", "--bag", "wild.mcap"],
+        d,
+    );
+    ok(&o);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("1 of 42 test states lie outside the model's training range")
+            && err.contains("trajectory 0, state 3: velocity"),
+        "{err}"
+    );
     let replay = ok(&mcgnode(
         &[
             "replay",

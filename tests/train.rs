@@ -353,7 +353,10 @@ fn training_on_a_subset_reports_it() {
 fn old_model_files_load_without_noise_and_points() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     // The models shipped before the default recipe, kept as they were written.
-    for name in ["legacy-spring5-mcgnode.json", "legacy-pendulum5-mcgnode.json"] {
+    for name in [
+        "legacy-spring5-mcgnode.json",
+        "legacy-pendulum5-mcgnode.json",
+    ] {
         let path = root.join("tests/fixtures").join(name);
         let text = std::fs::read_to_string(&path).unwrap();
         assert!(!text.contains("\"points\""), "{name} is not an old file");
