@@ -435,10 +435,7 @@ pub fn run_training(
         epochs: req.epochs as usize,
         seed: req.seed,
         init,
-        auto: Auto {
-            epochs: false,
-            ..Auto::ALL
-        },
+        auto: Auto::GIVEN_EPOCHS,
         ..TrainConfig::default()
     };
     let every = (cfg.epochs / 10).max(1);
@@ -477,7 +474,7 @@ pub fn run_training(
     let explained = file.training.explained.unwrap_or(f64::NAN);
     let learned = file.training.explained_line();
     if let Some(w) = file.training.explained_warning() {
-        log(LogLevel::Warn, &format!("{source}: {w}"));
+        log(LogLevel::Warn, &w);
     }
     let (path, model) = match save_and_load(shared, file, variant) {
         Ok(x) => x,
@@ -625,10 +622,7 @@ fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, 
     let cfg = TrainConfig {
         epochs: p.accuracy_retrain_epochs as usize,
         init: Some(Box::new(init)),
-        auto: Auto {
-            epochs: false,
-            ..Auto::ALL
-        },
+        auto: Auto::GIVEN_EPOCHS,
         ..TrainConfig::default()
     };
     let file = train_from_bags(variant, train, &auto_options(), &cfg, |_| {}, |_| true)

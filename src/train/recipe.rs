@@ -83,6 +83,13 @@ impl Auto {
         lr_drops: true,
     };
 
+    /// The default recipe for all but the epochs, which the caller gives
+    /// (the node's Train requests and drift retraining).
+    pub const GIVEN_EPOCHS: Auto = Auto {
+        epochs: false,
+        ..Auto::ALL
+    };
+
     /// Whether it chooses anything.
     pub fn any(self) -> bool {
         self.epochs || self.batch || self.lr || self.lr_drops

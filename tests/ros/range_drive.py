@@ -24,7 +24,7 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-import drive  # noqa: E402  (its state builders; importing runs nothing)
+import drive  # noqa: E402  (its state builders and checks; importing it loads rclpy, runs nothing)
 
 from builtin_interfaces.msg import Time  # noqa: E402
 from mcgnode_msgs.msg import NodeDiagnostics, PredictedTrajectory, ParticleState  # noqa: E402
