@@ -26,6 +26,7 @@ use serde::Serialize;
 
 use crate::data::bag::Bag;
 use crate::data::field::bag_system;
+use crate::data::stream::{Estimate, History, Smoother, StreamOptions};
 use crate::dynamics::{Dynamics, DynamicsError};
 use crate::metrics::{error_curves, floored_ln, log_band, Averages, Band, StillReference, Summary};
 use crate::physics::Field;
@@ -59,6 +60,17 @@ pub struct ReplayOptions {
     pub max_trajectories: Option<usize>,
     /// Use every `stride`-th recorded state as a start (0 and 1: all).
     pub stride: usize,
+    /// Start from positions only, with velocities estimated causally from
+    /// the states before (the node's rule for position-only streams,
+    /// [`crate::data::stream`]), even where the bag records velocities.
+    /// Position-only trajectories are always started this way.
+    pub positions_only: bool,
+    /// How those velocities are estimated.
+    pub stream: StreamOptions,
+    /// Score against this bag's states (same trajectory ids and stamps, e.g.
+    /// the noise-free recording of a noisy one) instead of the replayed
+    /// bag's own.
+    pub reference: Option<Bag>,
 }
 
 /// Result of a replay.
@@ -114,6 +126,12 @@ pub struct ReplayReport {
     /// The "nothing moves" reference replayed on the same starts and leads
     /// (`None` when the model is that reference).
     pub still: Option<StillReference>,
+    /// Where the start states' velocities came from: "recorded", or the
+    /// causal estimate (as the node makes it for position-only states).
+    pub start_velocities: String,
+    /// What the predictions were scored against: "the replayed bag" or the
+    /// reference bag's files.
+    pub scored_against: String,
 }
 
 /// The largest value of each metric per grid point.
@@ -294,10 +312,61 @@ fn advance(
         .ok_or_else(|| DynamicsError::Model("the model returned no states".into()))
 }
 
+/// The state each recorded state starts a prediction from: the recorded one,
+/// or with `causal` its positions with velocities estimated from it and the
+/// states before ([`History`], as the node does; `None` while warming up).
+fn start_states(tr: &Trajectory, causal: bool, stream: &StreamOptions) -> Vec<Option<State>> {
+    if !causal {
+        return tr.samples.iter().map(|s| Some(s.state.clone())).collect();
+    }
+    let mut h = History::default();
+    tr.samples
+        .iter()
+        .map(|s| {
+            let t = (s.t * 1e9).round() as crate::data::stream::Nanos;
+            match h.push(stream, &tr.graph, t, &s.state.q).1 {
+                Estimate::Ready(state) => Some(state),
+                Estimate::WarmingUp { .. } => None,
+            }
+        })
+        .collect()
+}
+
+/// The reference trajectory for `tr`: same id, graph, and stamps (to 1 µs).
+fn reference_for<'a>(reference: &'a Bag, tr: &Trajectory) -> Result<&'a Trajectory> {
+    let r = reference
+        .trajectories
+        .iter()
+        .find(|r| r.id == tr.id)
+        .ok_or_else(|| crate::error::err!("the reference bag has no trajectory {}", tr.id))?;
+    if r.graph != tr.graph || r.samples.len() != tr.samples.len() {
+        bail!(
+            "reference trajectory {} does not match the replayed one ({} states against {}, \
+             or another graph): pass the recording the replayed bag was made from",
+            tr.id,
+            r.samples.len(),
+            tr.samples.len()
+        );
+    }
+    if let Some(k) = (0..r.samples.len()).find(|&k| (r.samples[k].t - tr.samples[k].t).abs() > 1e-6)
+    {
+        bail!(
+            "reference trajectory {}: state {k} is at {} s, the replayed one at {} s",
+            tr.id,
+            r.samples[k].t,
+            tr.samples[k].t
+        );
+    }
+    Ok(r)
+}
+
 /// Replays every start state of one trajectory into the bins.
+#[allow(clippy::too_many_arguments)]
 fn replay_trajectory(
     model: &dyn Dynamics,
     tr: &Trajectory,
+    truth: Option<&Trajectory>,
+    (causal, stream): (bool, &StreamOptions),
     p: &Plan,
     stride: usize,
     bins: &mut [Bin],
@@ -309,7 +378,13 @@ fn replay_trajectory(
     // Leads a little past the horizon (stamp round-off) still count.
     let limit = p.horizon + 1e-6 * p.bin_width;
     let s = &tr.samples;
+    let starts = start_states(tr, causal, stream);
+    let truth_of = |j: usize| truth.map_or(&s[j].state, |r| &r.samples[j].state);
     for k in (0..s.len()).step_by(stride) {
+        let Some(start) = &starts[k] else {
+            // Still warming up, as the node would be: not a start.
+            continue;
+        };
         let t0 = s[k].t;
         let targets: Vec<usize> = (k + 1..s.len())
             .take_while(|&j| s[j].t - t0 <= limit)
@@ -320,9 +395,9 @@ fn replay_trajectory(
         report.starts += 1;
         // Lead 0: the start itself, errors exactly 0.
         bins[0].push(0.0, [0.0; 4]);
-        let mut cur = s[k].state.clone();
+        let mut cur = start.clone();
         let mut t_cur = t0;
-        let mut truth = Vec::with_capacity(targets.len());
+        let mut truths = Vec::with_capacity(targets.len());
         let mut pred = Vec::with_capacity(targets.len());
         let mut leads = Vec::with_capacity(targets.len());
         let mut failed = false;
@@ -331,7 +406,7 @@ fn replay_trajectory(
                 Ok(next) => {
                     cur = next;
                     t_cur = s[j].t;
-                    truth.push(s[j].state.clone());
+                    truths.push(truth_of(j).clone());
                     pred.push(cur.clone());
                     leads.push(s[j].t - t0);
                 }
@@ -347,7 +422,7 @@ fn replay_trajectory(
         }
         let bin_of = |lead: f64| ((lead / p.bin_width).round() as usize).clamp(1, p.bins);
         if !pred.is_empty() {
-            let c = error_curves(&tr.graph, &p.field, &truth, &pred, &leads)
+            let c = error_curves(&tr.graph, &p.field, &truths, &pred, &leads)
                 .map_err(|e| crate::error::err!("trajectory {}, start {k}: {e}", tr.id))?;
             for i in 0..leads.len() {
                 bins[bin_of(leads[i])].push(leads[i], [c.re[i], c.ee[i], c.me[i], c.me_scaled[i]]);
@@ -433,9 +508,33 @@ fn replay_model(model: &dyn Dynamics, bag: &Bag, opts: &ReplayOptions) -> Result
         },
         seconds: 0.0,
         still: None,
+        start_velocities: start_velocities(bag, &trajs, opts),
+        scored_against: opts.reference.as_ref().map_or_else(
+            || "the replayed bag".to_string(),
+            |r| {
+                let files: Vec<String> =
+                    r.sources.iter().map(|p| p.display().to_string()).collect();
+                format!("reference {}", files.join(", "))
+            },
+        ),
     };
     for tr in &trajs {
-        replay_trajectory(model, tr, &p, opts.stride.max(1), &mut bins, &mut report)?;
+        let truth = opts
+            .reference
+            .as_ref()
+            .map(|r| reference_for(r, tr))
+            .transpose()?;
+        let causal = opts.positions_only || bag.derived_velocities.contains(&tr.id);
+        replay_trajectory(
+            model,
+            tr,
+            truth,
+            (causal, &opts.stream),
+            &p,
+            opts.stride.max(1),
+            &mut bins,
+            &mut report,
+        )?;
     }
     if report.starts == 0 {
         bail!(
@@ -477,6 +576,29 @@ fn replay_model(model: &dyn Dynamics, bag: &Bag, opts: &ReplayOptions) -> Result
     Ok(report)
 }
 
+/// Says where the start states' velocities come from.
+fn start_velocities(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> String {
+    let derived = trajs
+        .iter()
+        .filter(|t| opts.positions_only || bag.derived_velocities.contains(&t.id))
+        .count();
+    if derived == 0 {
+        return "recorded".into();
+    }
+    let rule = match opts.stream.smoother {
+        Smoother::None => "three-point difference at the newest state".to_string(),
+        Smoother::Poly { window, order } => {
+            format!("degree-{order} fit over the last {window} states")
+        }
+    };
+    let which = if derived == trajs.len() {
+        "every trajectory".to_string()
+    } else {
+        format!("{derived} of {} trajectories", trajs.len())
+    };
+    format!("estimated causally from the positions ({rule}), {which}")
+}
+
 /// Reads the bag at `path` and replays it (what the node's Replay service
 /// does with its current model); the error names the file.
 pub fn replay_bag(
@@ -500,12 +622,29 @@ pub fn replay_as_node(
     substeps: u32,
     horizon_steps: u32,
 ) -> Result<(ReplayReport, String)> {
+    replay_as_node_with(
+        model,
+        path,
+        (dt, substeps, horizon_steps),
+        StreamOptions::default(),
+    )
+}
+
+/// [`replay_as_node`] with the node's stream settings (how it estimates
+/// the velocities of position-only states): `(dt, substeps, horizon_steps)`.
+pub fn replay_as_node_with(
+    model: &dyn Dynamics,
+    path: &str,
+    (dt, substeps, horizon_steps): (f64, u32, u32),
+    stream: StreamOptions,
+) -> Result<(ReplayReport, String)> {
     if path.trim().is_empty() {
         bail!("no bag given: set `bag` to the path of an MCAP file");
     }
     let opts = ReplayOptions {
         dt: Some(dt / f64::from(substeps.max(1))),
         horizon: Some(f64::from(horizon_steps) * dt),
+        stream,
         ..ReplayOptions::default()
     };
     let report = replay_bag(model, std::path::Path::new(path), &opts)?;
@@ -553,6 +692,12 @@ pub fn table(r: &ReplayReport, rows: usize) -> String {
         secs(r.horizon),
         secs(r.bin_width)
     );
+    if r.start_velocities != "recorded" {
+        out += &format!("start velocities: {}\n", r.start_velocities);
+    }
+    if r.scored_against != "the replayed bag" {
+        out += &format!("scored against: {}\n", r.scored_against);
+    }
     let still = r.still.as_ref();
     out += &format!(
         "{:>9}  {:>8}  {:>10}  {:>10}  {:>10}  {:>10}{}\n",

@@ -28,6 +28,42 @@ enum BagCommand {
     /// Draw one visualization_msgs/MarkerArray of a recording (what RViz and
     /// Foxglove show: particles, edges, predicted paths, force arrows) as a PNG.
     Draw(DrawArgs),
+    /// Write a bag as a tracker would report it: positions only (velocities
+    /// and accelerations left empty), with Gaussian position noise, an uneven
+    /// rate and dropped states as asked. The system description (metadata,
+    /// field) is kept, so `replay` and the node read it as before.
+    Observe(ObserveArgs),
+}
+
+/// Options of `bag observe`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ObserveArgs {
+    /// The bag to observe (MCAP, rosbag2 directory or .db3).
+    pub input: PathBuf,
+    /// The MCAP file to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Position noise (standard deviation) as a fraction of the particle
+    /// spacing (the median edge length in the first state; the median
+    /// nearest-neighbour distance without edges): 0.001 is 0.1 %.
+    #[arg(long, default_value_t = 0.0)]
+    pub noise: f64,
+    /// Keep about every N-th state.
+    #[arg(long, default_value_t = 1)]
+    pub thin: usize,
+    /// Spread of the kept states' spacing: each next one N·(1 ± u) states on,
+    /// u uniform in [0, UNEVEN].
+    #[arg(long, default_value_t = 0.0)]
+    pub uneven: f64,
+    /// Probability of dropping a kept state.
+    #[arg(long, default_value_t = 0.0)]
+    pub drop: f64,
+    /// Seed of the noise and the choices.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// The ParticleState topic to read, when the bag holds several.
+    #[arg(long)]
+    pub topic: Option<String>,
 }
 
 /// Options of `bag draw`.
@@ -69,7 +105,46 @@ pub fn run(a: Args) -> Result<()> {
         BagCommand::Info(a) => info(a),
         BagCommand::Repair(a) => repair(a),
         BagCommand::Draw(a) => draw(&a),
+        BagCommand::Observe(a) => observe(&a),
     }
+}
+
+/// Writes `a.input` as a tracker would report it to `a.out`.
+fn observe(a: &ObserveArgs) -> Result<()> {
+    use crate::data::observe::{observe, Observation};
+    let bag = read_bags(
+        std::slice::from_ref(&a.input),
+        &ReadOptions {
+            topic: a.topic.clone(),
+        },
+    )
+    .context("reading the bag")?;
+    let o = Observation {
+        noise: a.noise,
+        thin: a.thin,
+        uneven: a.uneven,
+        drop: a.drop,
+        seed: a.seed,
+    };
+    let (seen, sigma) = observe(&bag.trajectories, &o)?;
+    let mut meta = bag.metadata.clone();
+    meta.insert(
+        "observed".into(),
+        format!(
+            "positions only; noise {} of the spacing (sigma {sigma:.3e}); thin {}, uneven {}, \
+             drop {}, seed {}",
+            a.noise, a.thin, a.uneven, a.drop, a.seed
+        ),
+    );
+    crate::data::write_positions_only(&a.out, &seen, &meta, bag.field.as_ref())
+        .with_context(|| format!("writing {}", a.out.display()))?;
+    let states: usize = seen.iter().map(|t| t.samples.len()).sum();
+    println!(
+        "wrote {}: {} trajectories, {states} position-only states, noise sigma {sigma:.3e}",
+        a.out.display(),
+        seen.len()
+    );
+    Ok(())
 }
 
 /// Per system name: trajectories, particle counts, dimensions, states,

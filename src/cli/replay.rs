@@ -6,6 +6,7 @@ use anyhow::{Context, Result};
 
 use super::field::{check_fits, FieldArgs};
 use crate::data::bag::{read_bags, ReadOptions};
+use crate::data::stream::{Smoother, StreamOptions, SMOOTHERS};
 use crate::replay::{replay, table, ReplayOptions};
 
 /// Options of `replay`.
@@ -51,6 +52,26 @@ pub struct Args {
     /// Rows of the printed table.
     #[arg(long, default_value_t = 11)]
     pub rows: usize,
+    /// Start from positions only, velocities estimated from the states
+    /// before as the node estimates them for a position-only stream (the
+    /// bag's velocities ignored); position-only bags are always replayed so.
+    #[arg(long)]
+    pub positions_only: bool,
+    /// Velocity estimate for those starts, as the node's velocity_smoother:
+    /// none (three-point difference at the newest state) or poly (fit over
+    /// the last --smoother-window states).
+    #[arg(long, default_value = "none", value_parser = clap::builder::PossibleValuesParser::new(SMOOTHERS))]
+    pub smoother: String,
+    /// States in a poly smoother's fit.
+    #[arg(long, default_value_t = 15)]
+    pub smoother_window: usize,
+    /// Degree of a poly smoother's polynomial.
+    #[arg(long, default_value_t = 2)]
+    pub smoother_order: usize,
+    /// Score against this bag's states instead (same trajectories and
+    /// stamps): e.g. the noise-free recording a noisy bag was made from.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
 }
 
 /// Runs `replay`.
@@ -75,6 +96,18 @@ pub fn run(a: Args) -> Result<()> {
         field,
         max_trajectories: a.trajectories,
         stride: a.stride,
+        positions_only: a.positions_only,
+        stream: StreamOptions {
+            smoother: Smoother::new(&a.smoother, a.smoother_window, a.smoother_order)?,
+            max_gap: 0.0,
+        },
+        reference: match &a.reference {
+            Some(p) => Some(
+                crate::data::read_trajectories(p)
+                    .with_context(|| format!("reading the reference bag {}", p.display()))?,
+            ),
+            None => None,
+        },
     };
     let r = replay(model.as_ref(), &bag, &opts)?;
     if let Some(p) = &a.plot {

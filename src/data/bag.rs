@@ -258,7 +258,28 @@ pub fn write_trajectories_with_field(
     metadata: &BTreeMap<String, String>,
     field: Option<&Field>,
 ) -> Result<(), DataError> {
-    let path = path.as_ref();
+    write_bag(path.as_ref(), trajectories, metadata, field, false)
+}
+
+/// [`write_trajectories_with_field`] as a tracker reports the states:
+/// positions only (`velocities` and `accelerations` left empty), which the
+/// reader and the node then estimate.
+pub fn write_positions_only(
+    path: impl AsRef<Path>,
+    trajectories: &[Trajectory],
+    metadata: &BTreeMap<String, String>,
+    field: Option<&Field>,
+) -> Result<(), DataError> {
+    write_bag(path.as_ref(), trajectories, metadata, field, true)
+}
+
+fn write_bag(
+    path: &Path,
+    trajectories: &[Trajectory],
+    metadata: &BTreeMap<String, String>,
+    field: Option<&Field>,
+    positions_only: bool,
+) -> Result<(), DataError> {
     if let (Some(f), Some(tr)) = (field, trajectories.first()) {
         f.validate(tr.graph.dim)
             .map_err(|e| DataError::Trajectory(format!("field: {e}")))?;
@@ -293,8 +314,12 @@ pub fn write_trajectories_with_field(
     let ch = w.add_particle_state_channel(PARTICLE_STATE_TOPIC)?;
     for tr in trajectories {
         for (k, s) in tr.samples.iter().enumerate() {
-            let msg = ParticleState::from_sample(tr.id, k as u32, &tr.system, &tr.graph, s)
+            let mut msg = ParticleState::from_sample(tr.id, k as u32, &tr.system, &tr.graph, s)
                 .with_field(field);
+            if positions_only {
+                msg.velocities.clear();
+                msg.accelerations.clear();
+            }
             w.write_particle_state(ch, &msg)?;
         }
     }

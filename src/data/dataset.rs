@@ -231,43 +231,44 @@ pub fn finite_difference_velocities(tr: &Trajectory) -> Result<Vec<Vec<f64>>, Da
         let v: Vec<f64> = (0..n).map(|i| (q(1)[i] - q(0)[i]) / h).collect();
         return Ok(vec![v.clone(), v]);
     }
-    // Weights (a, b, c) of q at the three points for the derivative at one of them.
-    let combine = |k0: usize, w: (f64, f64, f64)| -> Vec<f64> {
+    // Weights of q at three consecutive points for the derivative at one of them.
+    let combine = |k0: usize, w: [f64; 3]| -> Vec<f64> {
         (0..n)
-            .map(|i| w.0 * q(k0)[i] + w.1 * q(k0 + 1)[i] + w.2 * q(k0 + 2)[i])
+            .map(|i| w[0] * q(k0)[i] + w[1] * q(k0 + 1)[i] + w[2] * q(k0 + 2)[i])
             .collect()
     };
+    let h = |k: usize| s[k].t - s[k - 1].t;
     let mut out = Vec::with_capacity(m);
-    let (h1, h2) = (s[1].t - s[0].t, s[2].t - s[1].t);
-    out.push(combine(
-        0,
-        (
-            -(2.0 * h1 + h2) / (h1 * (h1 + h2)),
-            (h1 + h2) / (h1 * h2),
-            -h1 / (h2 * (h1 + h2)),
-        ),
-    ));
+    out.push(combine(0, three_point(h(1), h(2), At::First)));
     for k in 1..m - 1 {
-        let (h1, h2) = (s[k].t - s[k - 1].t, s[k + 1].t - s[k].t);
-        out.push(combine(
-            k - 1,
-            (
-                -h2 / (h1 * (h1 + h2)),
-                (h2 - h1) / (h1 * h2),
-                h1 / (h2 * (h1 + h2)),
-            ),
-        ));
+        out.push(combine(k - 1, three_point(h(k), h(k + 1), At::Middle)));
     }
-    let (h1, h2) = (s[m - 2].t - s[m - 3].t, s[m - 1].t - s[m - 2].t);
-    out.push(combine(
-        m - 3,
-        (
-            h2 / (h1 * (h1 + h2)),
-            -(h1 + h2) / (h1 * h2),
-            (2.0 * h2 + h1) / (h2 * (h1 + h2)),
-        ),
-    ));
+    out.push(combine(m - 3, three_point(h(m - 2), h(m - 1), At::Last)));
     Ok(out)
+}
+
+/// Which of three consecutive points a derivative is taken at.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum At {
+    /// The first (one-sided, forward).
+    First,
+    /// The middle (central).
+    Middle,
+    /// The last (one-sided, backward): what a live stream has for its newest state.
+    Last,
+}
+
+/// Weights of the positions at three points with steps `h1`, `h2` between
+/// them for the first derivative at one of them: the derivative of the
+/// quadratic through the three points, so exact for quadratics (error O(h²)).
+/// The bag reader and the node's live streams both use it.
+pub fn three_point(h1: f64, h2: f64, at: At) -> [f64; 3] {
+    let h = h1 + h2;
+    match at {
+        At::First => [-(2.0 * h1 + h2) / (h1 * h), h / (h1 * h2), -h1 / (h2 * h)],
+        At::Middle => [-h2 / (h1 * h), (h2 - h1) / (h1 * h2), h1 / (h2 * h)],
+        At::Last => [h2 / (h1 * h), -h / (h1 * h2), (2.0 * h2 + h1) / (h2 * h)],
+    }
 }
 
 /// The Verlet difference with the mean step, after checking the steps are

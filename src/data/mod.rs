@@ -8,6 +8,8 @@
 //! - [`field`]: what a bag says about its system (configuration, field).
 //! - [`repair`]: rewriting an MCAP file cut short as a complete one.
 //! - [`dataset`]: states and target accelerations for training; bag digests.
+//! - [`observe`]: trajectories as a tracker sees them (noise, uneven rate, gaps).
+//! - [`stream`]: velocities of live position-only streams, causally (node, replay).
 
 pub mod bag;
 pub mod dataset;
@@ -15,11 +17,13 @@ mod error;
 pub mod field;
 pub mod meta;
 pub mod msg;
+pub mod observe;
 pub mod repair;
 pub mod source;
+pub mod stream;
 
 pub use bag::{
-    read_bags, read_trajectories, scan_bag, scan_input, write_trajectories,
+    read_bags, read_trajectories, scan_bag, scan_input, write_positions_only, write_trajectories,
     write_trajectories_with_field, Bag, BagWriter, ChannelId, MetadataRecords, RawMessage,
     ReadOptions, METADATA_NAME, PARTICLE_STATE_TOPIC,
 };

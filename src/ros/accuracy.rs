@@ -12,8 +12,11 @@
 //!   predictions for earlier times, which can no longer match.
 //! - Memory is bounded: at most `capacity` predictions are kept, the oldest
 //!   dropped first (counted in [`Tracker::overflowed`]).
-//! - A state of another trajectory, or one earlier than the last, starts over
-//!   (a new run or a replayed bag): predictions of the old run are dropped.
+//! - A state of another trajectory, or one not after the last, starts over
+//!   (a new run or a replayed bag): predictions, figures and the alarm level
+//!   of the old run are dropped, so a lead reports only once the new run has
+//!   reached it. The node keeps one tracker per stream (trajectory id,
+//!   [`Live`]), so interleaved streams never mix.
 //!
 //! A lead time is compared only when incoming stamps fall on it: with states
 //! every 0.1 s, a lead of 0.15 s never matches. The running value is the mean
@@ -23,16 +26,17 @@
 use std::collections::VecDeque;
 use std::sync::{Mutex, PoisonError};
 
-use crate::data::msg::ParticleState;
+use crate::data::stream::Streams;
 use crate::metrics::error_curves;
 use crate::physics::Field;
 use crate::system::{Graph, State};
 
-use super::msgs::{LiveAccuracy, PredictedTrajectory};
+use super::input::Input;
+use super::msgs::LiveAccuracy;
 use super::params::NodeParams;
+use super::predict::Prediction;
 
-/// Time in nanoseconds (a ROS stamp).
-pub type Nanos = i64;
+pub use crate::data::stream::Nanos;
 
 /// One prediction waiting for the state it is about.
 #[derive(Clone, Debug)]
@@ -168,8 +172,8 @@ impl Tracker {
         state: &State,
     ) -> Vec<Comparison> {
         if let Some((id, last)) = self.last {
-            if id != trajectory || t < last {
-                self.pending.clear();
+            if id != trajectory || t <= last {
+                self.restart();
             }
         }
         self.last = Some((trajectory, t));
@@ -203,6 +207,15 @@ impl Tracker {
             });
         }
         out
+    }
+
+    /// Forgets the run: predictions and figures (settings and the overflow
+    /// count stay).
+    pub fn restart(&mut self) {
+        self.pending.clear();
+        self.recent.iter_mut().for_each(VecDeque::clear);
+        self.compared.iter_mut().for_each(|c| *c = 0);
+        self.last = None;
     }
 
     /// Keeps the states predicted from the state of `trajectory` at time `t`:
@@ -332,31 +345,46 @@ pub struct Update {
     pub alarm_changed: Option<(Level, String)>,
 }
 
-/// The node's live accuracy: a [`Tracker`] behind a lock, rebuilt when its
-/// parameters change at run time, and the alarm level last reported.
+/// One stream's tracker and the alarm level it last reported.
+type StreamTracker = (Tracker, Level);
+
+/// The trackers of the node's streams and what they were built for.
+#[derive(Debug)]
+struct LiveState {
+    /// Lead times, window, capacity, streams.
+    settings: (Vec<f64>, usize, usize, usize),
+    streams: Streams<StreamTracker>,
+    /// The stream scored last (what the diagnostics report).
+    latest: Option<u32>,
+}
+
+/// The node's live accuracy: one [`Tracker`] per stream (trajectory id, at
+/// most `input_max_streams`) behind a lock, rebuilt when its parameters
+/// change at run time, each with the alarm level it last reported.
 #[derive(Debug)]
 pub struct Live {
-    state: Mutex<(Tracker, Level)>,
+    state: Mutex<LiveState>,
 }
 
 impl Default for Live {
     fn default() -> Self {
         Live {
-            state: Mutex::new((Tracker::new(&[], 1, 1), Level::Ok)),
+            state: Mutex::new(LiveState {
+                settings: (Vec::new(), 1, 1, 1),
+                streams: Streams::new(1),
+                latest: None,
+            }),
         }
     }
 }
 
 impl Live {
-    /// Scores `input` against the predictions made for its moment, then keeps
-    /// the states of `predicted` (its own prediction) at the lead times.
-    /// Nothing happens when `accuracy_lead_times` is empty.
-    pub fn update(
-        &self,
-        p: &NodeParams,
-        input: &ParticleState,
-        predicted: &PredictedTrajectory,
-    ) -> Update {
+    /// Scores `input` against the predictions made for its moment in its
+    /// stream, then keeps the states of `predicted` (its own prediction) at
+    /// the lead times. A stream that started over ([`Input::reset`]) starts
+    /// its figures and alarm over too. Nothing happens when
+    /// `accuracy_lead_times` is empty.
+    pub fn update(&self, p: &NodeParams, input: &Input, predicted: &Prediction) -> Update {
         let mut none = Update {
             message: None,
             alarm_changed: None,
@@ -364,28 +392,45 @@ impl Live {
         if p.accuracy_lead_times.is_empty() {
             return none;
         }
-        let Ok((graph, sample)) = input.to_parts() else {
-            return none;
-        };
-        // An unknown field leaves the energy uncomputable: RE only.
-        let field = input.field().ok().flatten();
-        let t = input.header.stamp.as_nanos();
+        let t = input.stamp;
         let tolerance = (p.dt * 0.5e9).round() as Nanos;
         let id = input.trajectory_id;
         let mut guard = self.state.lock().unwrap_or_else(PoisonError::into_inner);
-        let (tracker, level) = &mut *guard;
+        let live = &mut *guard;
         let (window, capacity) = (p.accuracy_window as usize, p.accuracy_max_pending as usize);
-        if !tracker.is_for(&p.accuracy_lead_times, window, capacity) {
-            *tracker = Tracker::new(&p.accuracy_lead_times, window, capacity);
+        let settings = (
+            p.accuracy_lead_times.clone(),
+            window,
+            capacity,
+            p.input_max_streams as usize,
+        );
+        if live.settings != settings {
+            live.streams = Streams::new(settings.3);
+            live.settings = settings;
         }
-        let compared = tracker.observe(id, t, tolerance, &graph, field.as_ref(), &sample.state);
+        live.latest = Some(id);
+        let (tracker, level) = live.streams.get_or_insert_with(id, || {
+            (
+                Tracker::new(&p.accuracy_lead_times, window, capacity),
+                Level::Ok,
+            )
+        });
+        if input.reset.is_some() {
+            tracker.restart();
+            *level = Level::Ok;
+        }
+        let compared = tracker.observe(
+            id,
+            t,
+            tolerance,
+            &input.graph,
+            input.field.as_ref(),
+            &input.state,
+        );
         let ahead: Vec<(usize, State)> = tracker
-            .steps(predicted.dt, predicted.steps)
+            .steps(predicted.trajectory.dt, predicted.trajectory.steps)
             .into_iter()
-            .filter_map(|(lead, k)| {
-                let (_, s) = predicted.state(k - 1)?.to_parts().ok()?;
-                Some((lead, s.state))
-            })
+            .filter_map(|(lead, k)| Some((lead, predicted.states.get(k - 1)?.clone())))
             .collect();
         tracker.expect(id, t, ahead);
         if compared.is_empty() {
@@ -398,7 +443,7 @@ impl Live {
             none.alarm_changed = Some((now, why.clone()));
         }
         none.message = Some(LiveAccuracy {
-            header: input.header.clone(),
+            header: input.message.header.clone(),
             trajectory_id: id,
             lead_times: figures.iter().map(|f| f.lead).collect(),
             compared: figures.iter().map(|f| f.compared).collect(),
@@ -412,16 +457,30 @@ impl Live {
         none
     }
 
-    /// The running figures and the alarm now (`None` when live accuracy is
-    /// off).
+    /// The running figures and the alarm now of the stream scored last, and
+    /// the predictions dropped for capacity over all streams (`None` when
+    /// live accuracy is off).
     pub fn figures(&self, p: &NodeParams) -> Option<(Vec<LeadAccuracy>, Level, String, u64)> {
         if p.accuracy_lead_times.is_empty() {
             return None;
         }
         let guard = self.state.lock().unwrap_or_else(PoisonError::into_inner);
-        let figures = guard.0.summary();
+        let overflowed = guard.streams.values().map(|(t, _)| t.overflowed()).sum();
+        let latest = guard
+            .latest
+            .and_then(|id| Some((id, guard.streams.get(id)?)));
+        let Some((id, (tracker, _))) = latest else {
+            let fresh = Tracker::new(&p.accuracy_lead_times, 1, 1).summary();
+            return Some((fresh, Level::Ok, "no comparisons yet".into(), overflowed));
+        };
+        let figures = tracker.summary();
         let (level, why) = alarm(&figures, p.accuracy_warn_re, p.accuracy_error_re);
-        Some((figures, level, why, guard.0.overflowed()))
+        Some((
+            figures,
+            level,
+            format!("trajectory {id}: {why}"),
+            overflowed,
+        ))
     }
 }
 
@@ -544,5 +603,79 @@ mod tests {
         assert_eq!(alarm(&figures, 0.01, 0.015).0, Level::Error);
         assert_eq!(alarm(&figures, 0.0, 0.0).0, Level::Ok, "0 disables");
         assert_eq!(alarm(&[], 0.01, 0.02).0, Level::Ok);
+    }
+
+    /// The measured failure: a new trajectory must not report the previous
+    /// one's comparisons or inherit its alarm.
+    #[test]
+    fn a_new_trajectory_starts_its_figures_and_alarm_from_nothing() {
+        use crate::data::msg::{ParticleState, Time};
+        use crate::ros::input::{Accepted, Inputs};
+        let mut cfg = SystemConfig::new(SystemKind::Spring, 5);
+        cfg.states = 21;
+        let g = cfg.graph();
+        let model = crate::models::truth::load_truth("truth:spring").unwrap();
+        let p = NodeParams {
+            dt: 0.1,
+            substeps: 100,
+            horizon: 10,
+            accuracy_lead_times: vec![0.5, 1.0],
+            accuracy_window: 3,
+            accuracy_warn_re: 1e-3,
+            accuracy_error_re: 5e-3,
+            ..NodeParams::default()
+        };
+        let (inputs, live) = (Inputs::default(), Live::default());
+        let run = |id: u32, sec: i32, drift: f64| {
+            let tr = cfg.simulate_one(&g, cfg.start_for(&g, 3 + u64::from(id), 0), 0);
+            let mut out = Vec::new();
+            for (k, s) in tr.samples.iter().enumerate() {
+                let mut s = s.clone();
+                s.state.q.iter_mut().for_each(|x| *x += drift * k as f64);
+                let mut m = ParticleState::from_sample(id, k as u32, "spring", &g, &s);
+                m.header.stamp = Time {
+                    sec: sec + (k / 10) as i32,
+                    nanosec: (k % 10) as u32 * 100_000_000,
+                };
+                let Accepted::Ready(input) = inputs.accept(&p, &m).unwrap() else {
+                    panic!("full states are ready");
+                };
+                let pred = crate::ros::predict::predict_parts(
+                    model.as_ref(),
+                    &input.message,
+                    &input.graph,
+                    &input.state,
+                    p.dt,
+                    p.horizon,
+                    p.substeps,
+                )
+                .unwrap();
+                out.push((k, live.update(&p, &input, &pred)));
+            }
+            out
+        };
+        // Run 1 drifts away from what the model predicts: an ERROR alarm.
+        let first = run(1, 100, 0.01);
+        let last = first.last().unwrap().1.message.clone().unwrap();
+        assert_eq!(last.level, Level::Error as u8, "{last:?}");
+        assert!(last.compared.iter().all(|&c| c > 0));
+        // Run 2 follows the model: every figure is its own, from nothing.
+        let second = run(2, 300, 0.0);
+        for (k, u) in &second {
+            let Some(m) = &u.message else {
+                // Nothing to compare before lead 0.5 s.
+                assert!(*k < 5, "state {k} of run 2 compared nothing");
+                continue;
+            };
+            assert_eq!(m.trajectory_id, 2);
+            assert!(*k >= 5, "state {k} compared with run 1: {m:?}");
+            assert_eq!(m.compared[0], *k as u64 - 4, "state {k}: {m:?}");
+            let reached_1s = *k >= 10;
+            assert_eq!(m.compared[1] > 0, reached_1s, "state {k}: {m:?}");
+            assert!(m.re[1].is_nan() != reached_1s, "state {k}: {m:?}");
+            assert_eq!(m.level, Level::Ok as u8, "state {k}: {m:?}");
+        }
+        // Run 2 never raised or cleared an alarm it did not cause.
+        assert!(second.iter().all(|(_, u)| u.alarm_changed.is_none()));
     }
 }

@@ -109,6 +109,15 @@ pub struct Stats {
     /// States with an input outside the served model's training range
     /// (predicted anyway unless `out_of_range_refuse`, then also rejected).
     pub out_of_range: AtomicU64,
+    /// Position-only states whose velocities were estimated from their
+    /// stream's history, then predicted from.
+    pub derived: AtomicU64,
+    /// Position-only states held as history only: their stream had too few
+    /// states yet for a velocity estimate (not rejected).
+    pub warming_up: AtomicU64,
+    /// Times a stream's history started over (graph change, stamp not after
+    /// the previous one, a gap longer than `input_max_gap`).
+    pub history_resets: AtomicU64,
     /// States lost before the node took them: gaps in a publisher's sequence
     /// numbers (e.g. the input queue overflowed while the node was busy).
     pub dropped: AtomicU64,
@@ -272,6 +281,9 @@ impl Diagnostics {
             rejected: self.stats.rejected.load(Ordering::Relaxed),
             predicted: self.stats.predicted.load(Ordering::Relaxed),
             out_of_range: self.stats.out_of_range.load(Ordering::Relaxed),
+            derived: self.stats.derived.load(Ordering::Relaxed),
+            warming_up: self.stats.warming_up.load(Ordering::Relaxed),
+            history_resets: self.stats.history_resets.load(Ordering::Relaxed),
             last_error: self
                 .stats
                 .last_error
@@ -343,6 +355,8 @@ pub struct Handles {
     pub clock: Arc<Clock>,
     /// Live accuracy of the predictions.
     pub accuracy: Arc<Live>,
+    /// The input streams (velocities of position-only states).
+    pub inputs: Arc<super::input::Inputs>,
     /// The managed-node state: only an active node predicts.
     pub lifecycle: Arc<super::lifecycle::Lifecycle>,
 }

@@ -5,6 +5,8 @@
 //!
 //! - [`params`] (+ [`yaml`]): the ROS 2 parameter file and `--set` overrides;
 //! - [`msgs`]: wire structs of our interfaces;
+//! - [`input`]: an incoming state parsed once, with the velocities of
+//!   position-only streams estimated from their history (no DDS);
 //! - [`predict`]: input checks and building the outputs (no ROS);
 //! - [`accuracy`]: live accuracy, comparing incoming states with what was
 //!   predicted for them, and the drift alarm (no DDS);
@@ -25,6 +27,7 @@ pub mod accuracy;
 pub mod action;
 pub mod clock;
 pub mod handles;
+pub mod input;
 pub mod lifecycle;
 pub mod markers;
 pub mod msgs;

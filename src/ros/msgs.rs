@@ -98,6 +98,12 @@ pub struct NodeDiagnostics {
     pub model: String,
     /// States with an input outside the model's training range.
     pub out_of_range: u64,
+    /// Position-only states predicted from estimated velocities.
+    pub derived: u64,
+    /// Position-only states held as history while their stream warms up.
+    pub warming_up: u64,
+    /// Times a stream's history started over.
+    pub history_resets: u64,
 }
 
 /// `mcgnode_msgs/msg/LiveAccuracy`: running accuracy per lead time.

@@ -25,6 +25,7 @@ use super::action::{self, TrainActionServer};
 use super::handles::{
     Diagnostics, Handles, LiveParams, Logger, ModelHandle, RecorderHandle, Warning,
 };
+use super::input::Accepted;
 use super::markers::{prediction_markers, MarkerArray};
 use super::msgs::{
     DiagnosticArray, DiagnosticStatus, KeyValue, LiveAccuracy, NodeDiagnostics, ParticleForces,
@@ -38,14 +39,16 @@ use super::record::Recorder;
 use super::service::{self, OnFailure::Warn};
 use super::training::{self, Trainer, TrainerHandles, TrainingServers};
 use super::yaml::Scalar;
+use crate::data::stream::Reset;
 
 /// Checks, records and predicts one incoming state, and scores it against
-/// what was predicted for its moment (blocking work).
+/// what was predicted for its moment (blocking work). `None`: a
+/// position-only state kept as its stream's history while it warms up.
 fn handle_state(
     h: &Handles,
     msg: ParticleState,
     received_ns: u64,
-) -> Result<(Prediction, accuracy::Update), predict::PredictError> {
+) -> Result<Option<(Prediction, accuracy::Update)>, predict::PredictError> {
     // Refused before anything is recorded or predicted: an oversized state
     // would hold memory and its prediction could not be delivered promptly.
     if let Some(why) = h.lifecycle.refusal() {
@@ -54,16 +57,29 @@ fn handle_state(
     let params = h.params.get();
     predict::check_size(&msg, params.max_particles)?;
     h.recorder.record(|r| r.state(received_ns, &msg));
+    let input = match h.inputs.accept(&params, &msg)? {
+        Accepted::Ready(input) => {
+            note_reset(h, msg.trajectory_id, input.reset.as_ref());
+            if input.derived {
+                h.diag.stats.derived.fetch_add(1, Ordering::Relaxed);
+            }
+            input
+        }
+        Accepted::WarmingUp { reset, .. } => {
+            note_reset(h, msg.trajectory_id, reset.as_ref());
+            h.diag.stats.warming_up.fetch_add(1, Ordering::Relaxed);
+            return Ok(None);
+        }
+    };
     let model = h.model.get();
     // A state the model was not trained for (another dimension, edge kinds
     // or field) is refused with the reason, not predicted.
     if let Some(t) = model.trained_for() {
-        let (graph, state) = msg.to_parts()?;
-        t.check(&graph, msg.field()?.as_ref())?;
+        t.check(&input.graph, input.field.as_ref())?;
         if let Some(o) = t
             .range
             .as_ref()
-            .and_then(|r| r.check(&graph, &state.state, params.out_of_range_sigmas))
+            .and_then(|r| r.check(&input.graph, &input.state, params.out_of_range_sigmas))
         {
             h.diag.stats.out_of_range.fetch_add(1, Ordering::Relaxed);
             if params.out_of_range_refuse {
@@ -75,17 +91,31 @@ fn handle_state(
             );
         }
     }
-    let p = predict::predict(
+    let p = predict::predict_parts(
         model.as_ref(),
-        &msg,
+        &input.message,
+        &input.graph,
+        &input.state,
         params.dt,
         params.horizon,
         params.substeps,
     )?;
     h.recorder
         .record(|r| r.prediction(h.clock.now_log_ns(), &p.trajectory, &p.forces));
-    let scored = h.accuracy.update(&params, &msg, &p.trajectory);
-    Ok((p, scored))
+    let scored = h.accuracy.update(&params, &input, &p);
+    Ok(Some((p, scored)))
+}
+
+/// Counts and logs a stream starting over (not rate-limited: it happens once
+/// per run, and says why predictions pause for a warm-up).
+fn note_reset(h: &Handles, trajectory: u32, reset: Option<&Reset>) {
+    if let Some(why) = reset {
+        h.diag.stats.history_resets.fetch_add(1, Ordering::Relaxed);
+        h.diag.log(
+            LogLevel::Info,
+            &format!("input stream {trajectory} starts over: {why}"),
+        );
+    }
 }
 
 /// The counters now, stamped with the node's clock.
@@ -139,6 +169,7 @@ pub fn check_runtime_change(
     }
     let mut p = current.clone();
     p.set(name, &scalar(value), false)?;
+    p.check_together()?;
     Ok(p)
 }
 
@@ -165,6 +196,7 @@ fn descriptor(key: &str, kind: super::params::Kind, doc: &str) -> ParameterDescr
         Kind::Double(true) => "finite and > 0".to_string(),
         Kind::Double(false) => "finite and >= 0".to_string(),
         Kind::Doubles(max) => format!("at most {max} finite numbers > 0"),
+        Kind::Choice(words) => format!("one of {}", words.join(", ")),
         _ => String::new(),
     };
     ParameterDescriptor {
@@ -188,7 +220,7 @@ fn declare_parameters(p: &NodeParams, live: LiveParams) -> NodeOptions {
         .map(|(key, kind, _)| {
             let text = p.raw_value(key);
             let v = match kind {
-                Kind::Str | Kind::Topic => ParameterValue::String(text),
+                Kind::Str | Kind::Topic | Kind::Choice(_) => ParameterValue::String(text),
                 Kind::Bool => ParameterValue::Boolean(text == "true"),
                 Kind::Int(..) => ParameterValue::Integer(text.parse().unwrap_or_default()),
                 Kind::Double(_) => ParameterValue::Double(text.parse().unwrap_or_default()),
@@ -413,6 +445,7 @@ fn handles(
         diag,
         clock: Arc::new(super::clock::Clock::new(params.use_sim_time)),
         accuracy: Arc::new(accuracy::Live::default()),
+        inputs: Arc::new(super::input::Inputs::default()),
         lifecycle: Arc::new(super::lifecycle::Lifecycle::new(if params.lifecycle {
             super::lifecycle::Primary::Unconfigured
         } else {
@@ -659,7 +692,8 @@ async fn input_loop(
         let worker = h.clone();
         let job = tokio::task::spawn_blocking(move || handle_state(&worker, msg, received_ns));
         let (prediction, scored) = match job.await {
-            Ok(Ok(p)) => p,
+            Ok(Ok(Some(p))) => p,
+            Ok(Ok(None)) => continue,
             Ok(Err(why)) => {
                 h.diag.reject(&format!("rejected input: {why}"));
                 continue;
@@ -821,12 +855,20 @@ pub const REPLAY_SERVICE: &str = "/mcgnode/replay";
 /// node's dt and horizon (see [`crate::replay::replay_as_node`]).
 fn replay_call(h: &Handles, req: ReplayRequest) -> ReplayResponse {
     let p = h.params.get();
-    match crate::replay::replay_as_node(
+    let stream = match super::input::stream_options(&p) {
+        Ok(s) => s,
+        Err(e) => {
+            return ReplayResponse {
+                message: e.to_string(),
+                ..ReplayResponse::default()
+            }
+        }
+    };
+    match crate::replay::replay_as_node_with(
         h.model.get().as_ref(),
         &req.bag,
-        p.dt,
-        p.substeps,
-        p.horizon,
+        (p.dt, p.substeps, p.horizon),
+        stream,
     ) {
         Ok((r, json)) => ReplayResponse {
             success: true,
@@ -886,6 +928,9 @@ pub fn standard_diagnostics(
                 kv("rejected", d.rejected.to_string()),
                 kv("predicted", d.predicted.to_string()),
                 kv("out_of_range", d.out_of_range.to_string()),
+                kv("derived", d.derived.to_string()),
+                kv("warming_up", d.warming_up.to_string()),
+                kv("history_resets", d.history_resets.to_string()),
                 kv("dropped", dropped.to_string()),
                 kv("last_error", d.last_error.clone()),
                 kv("model", d.model.clone()),

@@ -133,6 +133,9 @@ pub enum ParamError {
         settable = RUNTIME_SETTABLE.join(", ")
     )]
     NotRuntime(String),
+    /// Parameters that are valid alone but not together.
+    #[error("parameters {0}")]
+    Together(String),
     /// No model to serve.
     #[error("no model: set the `model` parameter or pass --model")]
     NoModel,
@@ -237,6 +240,19 @@ pub struct NodeParams {
     /// Start as an unconfigured managed node (predict only after configure
     /// and activate through the lifecycle services); read at start.
     pub lifecycle: bool,
+    /// Velocity estimate of position-only streams: "none" (three-point
+    /// difference at the newest state) or "poly" (local polynomial fit).
+    pub velocity_smoother: String,
+    /// States in a poly smoother's fit (also its warm-up).
+    pub smoother_window: u32,
+    /// Degree of a poly smoother's polynomial.
+    pub smoother_order: u32,
+    /// A gap longer than this (seconds) between two states of a stream
+    /// starts its history over (0: never).
+    pub input_max_gap: f64,
+    /// Input streams (trajectory ids) followed at once; the least recently
+    /// seen is dropped first.
+    pub input_max_streams: u32,
 }
 
 impl Default for NodeParams {
@@ -276,6 +292,11 @@ impl Default for NodeParams {
             out_of_range_sigmas: crate::compat::OUT_OF_RANGE_SIGMAS,
             out_of_range_refuse: false,
             lifecycle: false,
+            velocity_smoother: "none".into(),
+            smoother_window: 15,
+            smoother_order: 2,
+            input_max_gap: 0.5,
+            input_max_streams: 64,
         }
     }
 }
@@ -295,6 +316,8 @@ pub enum Kind {
     Double(bool),
     /// A list of at most this many finite doubles > 0.
     Doubles(usize),
+    /// One of these words.
+    Choice(&'static [&'static str]),
 }
 
 /// Name, kind and documentation of every parameter, in file order: the one
@@ -471,6 +494,36 @@ pub const SPECS: &[(&str, Kind, &str)] = &[
         "start as an unconfigured managed node: predict only after configure and activate \
          (lifecycle_msgs services /mcgnode/change_state ...); false: start active. Read at start",
     ),
+    (
+        "velocity_smoother",
+        Kind::Choice(crate::data::stream::SMOOTHERS),
+        "velocities of position-only states (empty velocities): none = three-point difference \
+         at the newest state (3 states of warm-up); poly = least-squares polynomial over the \
+         last smoother_window states, evaluated at the newest stamp (no lag; averages tracker \
+         noise)",
+    ),
+    (
+        "smoother_window",
+        Kind::Int(3, 1000),
+        "poly smoother: states in the fit, also its warm-up (at least smoother_order + 2)",
+    ),
+    (
+        "smoother_order",
+        Kind::Int(1, 4),
+        "poly smoother: degree of the polynomial",
+    ),
+    (
+        "input_max_gap",
+        Kind::Double(false),
+        "seconds between two states of a stream beyond which its history starts over (0 = \
+         never)",
+    ),
+    (
+        "input_max_streams",
+        Kind::Int(1, 100_000),
+        "input streams (trajectory ids) followed at once for velocities and live accuracy; \
+         the least recently seen is dropped",
+    ),
 ];
 
 /// Parameters that can be changed while the node runs (through the ROS
@@ -496,6 +549,11 @@ pub const RUNTIME_SETTABLE: &[&str] = &[
     "markers_period",
     "out_of_range_sigmas",
     "out_of_range_refuse",
+    "velocity_smoother",
+    "smoother_window",
+    "smoother_order",
+    "input_max_gap",
+    "input_max_streams",
 ];
 
 /// Keys of the node's section that are accepted as node names.
@@ -520,7 +578,20 @@ impl NodeParams {
         for o in overrides {
             p.apply_override(o)?;
         }
+        p.check_together()?;
         Ok(p)
+    }
+
+    /// Checks what single parameters cannot: a poly smoother's window holds
+    /// at least `smoother_order + 2` states.
+    pub fn check_together(&self) -> Result<(), ParamError> {
+        crate::data::stream::Smoother::new(
+            &self.velocity_smoother,
+            self.smoother_window as usize,
+            self.smoother_order as usize,
+        )
+        .map(|_| ())
+        .map_err(|e| ParamError::Together(format!("smoother_window, smoother_order: {e}")))
     }
 
     /// Applies the contents of a ROS 2 parameter file.
@@ -595,6 +666,15 @@ impl NodeParams {
                     });
                 }
                 self.set_str(key, s);
+            }
+            Kind::Choice(words) => {
+                let Scalar::Str(w) = value else {
+                    return Err(ill(&format!("one of {}", words.join(", "))));
+                };
+                if !words.contains(&w.as_str()) {
+                    return Err(ill(&format!("one of {}", words.join(", "))));
+                }
+                self.set_str(key, w.clone());
             }
             Kind::Bool => match value {
                 Scalar::Bool(b) if key == "use_sim_time" => self.use_sim_time = *b,
@@ -680,6 +760,7 @@ impl NodeParams {
             "record_dir" => self.record_dir = s,
             "model_dir" => self.model_dir = s,
             "markers_topic" => self.markers_topic = s,
+            "velocity_smoother" => self.velocity_smoother = s,
             _ => unreachable_key(key),
         }
     }
@@ -695,6 +776,9 @@ impl NodeParams {
             "accuracy_window" => self.accuracy_window = v,
             "accuracy_max_pending" => self.accuracy_max_pending = v,
             "accuracy_retrain_epochs" => self.accuracy_retrain_epochs = v,
+            "smoother_window" => self.smoother_window = v,
+            "smoother_order" => self.smoother_order = v,
+            "input_max_streams" => self.input_max_streams = v,
             _ => unreachable_key(key),
         }
     }
@@ -710,6 +794,7 @@ impl NodeParams {
             "accuracy_retrain_after" => self.accuracy_retrain_after = x,
             "markers_period" => self.markers_period = x,
             "out_of_range_sigmas" => self.out_of_range_sigmas = x,
+            "input_max_gap" => self.input_max_gap = x,
             _ => unreachable_key(key),
         }
     }
@@ -729,7 +814,9 @@ impl NodeParams {
     /// The value of `key` as parameter-file text (strings quoted).
     pub fn value_text(&self, key: &str) -> String {
         match SPECS.iter().find(|(k, _, _)| *k == key) {
-            Some((_, Kind::Str | Kind::Topic, _)) => format!("{:?}", self.raw_value(key)),
+            Some((_, Kind::Str | Kind::Topic | Kind::Choice(_), _)) => {
+                format!("{:?}", self.raw_value(key))
+            }
             _ => self.raw_value(key),
         }
     }
@@ -778,6 +865,11 @@ impl NodeParams {
             "out_of_range_sigmas" => format!("{:?}", self.out_of_range_sigmas),
             "out_of_range_refuse" => self.out_of_range_refuse.to_string(),
             "lifecycle" => self.lifecycle.to_string(),
+            "velocity_smoother" => self.velocity_smoother.clone(),
+            "smoother_window" => self.smoother_window.to_string(),
+            "smoother_order" => self.smoother_order.to_string(),
+            "input_max_gap" => format!("{:?}", self.input_max_gap),
+            "input_max_streams" => self.input_max_streams.to_string(),
             _ => String::new(),
         }
     }

@@ -63,6 +63,9 @@ pub struct Prediction {
     pub trajectory: PredictedTrajectory,
     /// Forces at the input state.
     pub forces: ParticleForces,
+    /// The trajectory's states as the model gave them (state `k` is
+    /// `(k + 1)·dt` after the input), for live accuracy.
+    pub states: Vec<State>,
 }
 
 /// Refuses a state with more than `max_particles` particles (counted as the
@@ -108,6 +111,20 @@ pub fn trajectory(
     steps: u32,
     substeps: u32,
 ) -> Result<PredictedTrajectory, PredictError> {
+    let states = rollout(model, graph, start, dt, steps, substeps)?;
+    Ok(trajectory_msg(input, graph, dt, &states[1..]))
+}
+
+/// The model's states every `dt` for `steps` steps from `start` (the first
+/// is `start` itself), integrated with `dt / substeps`.
+fn rollout(
+    model: &dyn Dynamics,
+    graph: &Graph,
+    start: &State,
+    dt: f64,
+    steps: u32,
+    substeps: u32,
+) -> Result<Vec<State>, PredictError> {
     if !(dt.is_finite() && dt > 0.0) {
         return Err(PredictError::BadStep(dt));
     }
@@ -115,23 +132,38 @@ pub fn trajectory(
     let states = model
         .rollout_every(graph, start, dt / sub as f64, steps as usize * sub, sub)
         .map_err(PredictError::Rollout)?;
+    if states.is_empty() {
+        return Err(PredictError::Rollout(DynamicsError::Model(
+            "the model returned no states".into(),
+        )));
+    }
+    Ok(states)
+}
+
+/// The wire message of the predicted `states` after `input`, `dt` apart.
+fn trajectory_msg(
+    input: &ParticleState,
+    graph: &Graph,
+    dt: f64,
+    states: &[State],
+) -> PredictedTrajectory {
     let n = graph.n();
     let (mut positions, mut velocities) = (
-        Vec::with_capacity(n * steps as usize),
-        Vec::with_capacity(n * steps as usize),
+        Vec::with_capacity(n * states.len()),
+        Vec::with_capacity(n * states.len()),
     );
-    for state in states.iter().skip(1) {
+    for state in states {
         positions.extend(to_vec3(&state.q, graph.dim));
         velocities.extend(to_vec3(&state.v, graph.dim));
     }
-    Ok(PredictedTrajectory {
+    PredictedTrajectory {
         header: input.header.clone(),
         initial: input.clone(),
         dt,
-        steps: u32::try_from(states.len().saturating_sub(1)).unwrap_or(u32::MAX),
+        steps: u32::try_from(states.len()).unwrap_or(u32::MAX),
         positions,
         velocities,
-    })
+    }
 }
 
 /// Forces at the input state, as a message stamped with the input's header.
@@ -191,9 +223,31 @@ pub fn predict(
     substeps: u32,
 ) -> Result<Prediction, PredictError> {
     let (graph, start) = accept(model, input)?;
-    let trajectory = trajectory(model, input, &graph, &start, dt, horizon, substeps)?;
-    let forces = forces(model, &input.header, &graph, &start)?;
-    Ok(Prediction { trajectory, forces })
+    predict_parts(model, input, &graph, &start, dt, horizon, substeps)
+}
+
+/// [`predict`] for an input already parsed into `graph` and `start` (what
+/// the node has: [`super::input::Input`]); the model is asked whether it
+/// supports the graph.
+pub fn predict_parts(
+    model: &dyn Dynamics,
+    input: &ParticleState,
+    graph: &Graph,
+    start: &State,
+    dt: f64,
+    horizon: u32,
+    substeps: u32,
+) -> Result<Prediction, PredictError> {
+    model.supports(graph).map_err(PredictError::Unsupported)?;
+    let mut states = rollout(model, graph, start, dt, horizon, substeps)?;
+    states.remove(0);
+    let trajectory = trajectory_msg(input, graph, dt, &states);
+    let forces = forces(model, &input.header, graph, start)?;
+    Ok(Prediction {
+        trajectory,
+        forces,
+        states,
+    })
 }
 
 #[cfg(test)]

@@ -1,0 +1,225 @@
+//! An incoming `ParticleState`, parsed once into what the model, the checks
+//! and live accuracy need ([`Input`]), with the velocities of position-only
+//! messages estimated from the stream's history ([`crate::data::stream`]):
+//! one history per trajectory id, at most `input_max_streams` of them.
+
+use std::sync::{Mutex, PoisonError};
+
+use crate::data::msg::{to_vec3, ParticleState};
+use crate::data::stream::{Estimate, History, Nanos, Reset, Smoother, StreamOptions, Streams};
+use crate::data::DataError;
+use crate::physics::Field;
+use crate::system::{Graph, State};
+
+use super::params::NodeParams;
+
+/// One incoming state, checked and typed.
+#[derive(Clone, Debug)]
+pub struct Input {
+    /// The message as predicted from: a position-only message gets the
+    /// estimated velocities (and, with a poly smoother, the fitted positions).
+    pub message: ParticleState,
+    /// Its graph.
+    pub graph: Graph,
+    /// Its state.
+    pub state: State,
+    /// Its field (`None`: unknown).
+    pub field: Option<Field>,
+    /// Its stamp.
+    pub stamp: Nanos,
+    /// Its trajectory id (the stream).
+    pub trajectory_id: u32,
+    /// Whether its velocities were estimated from the history.
+    pub derived: bool,
+    /// Why the stream started over at this state, if it did.
+    pub reset: Option<Reset>,
+}
+
+/// What became of an incoming state.
+#[derive(Clone, Debug)]
+pub enum Accepted {
+    /// Ready to predict from.
+    Ready(Box<Input>),
+    /// Position-only, and its stream has too little history yet.
+    WarmingUp {
+        /// States held.
+        have: usize,
+        /// States needed.
+        needs: usize,
+        /// Why the stream started over at this state, if it did.
+        reset: Option<Reset>,
+    },
+}
+
+/// The stream settings the parameters give; the error names the parameters.
+pub fn stream_options(p: &NodeParams) -> Result<StreamOptions, DataError> {
+    let smoother = Smoother::new(
+        &p.velocity_smoother,
+        p.smoother_window as usize,
+        p.smoother_order as usize,
+    )
+    .map_err(|e| {
+        DataError::Invalid(format!(
+            "velocity_smoother, smoother_window, smoother_order: {e}"
+        ))
+    })?;
+    Ok(StreamOptions {
+        smoother,
+        max_gap: p.input_max_gap,
+    })
+}
+
+/// The node's input streams.
+#[derive(Debug)]
+pub struct Inputs {
+    state: Mutex<(StreamOptions, Streams<History>)>,
+}
+
+impl Default for Inputs {
+    fn default() -> Self {
+        Inputs {
+            state: Mutex::new((StreamOptions::default(), Streams::new(1))),
+        }
+    }
+}
+
+impl Inputs {
+    /// Parses `msg` once and, for a position-only one, estimates its
+    /// velocities from its stream's history. Streams start over when the
+    /// stream settings change.
+    pub fn accept(&self, p: &NodeParams, msg: &ParticleState) -> Result<Accepted, DataError> {
+        let (graph, sample, no_v) = msg.to_parts_positions_only()?;
+        let field = msg.field()?;
+        let opts = stream_options(p)?;
+        let stamp = msg.header.stamp.as_nanos();
+        let id = msg.trajectory_id;
+        let estimate = {
+            let mut guard = self.state.lock().unwrap_or_else(PoisonError::into_inner);
+            let (current, streams) = &mut *guard;
+            if *current != opts || streams.capacity() != p.input_max_streams as usize {
+                *guard = (opts, Streams::new(p.input_max_streams as usize));
+            }
+            guard.1.get_or_insert_with(id, History::default).push(
+                &opts,
+                &graph,
+                stamp,
+                &sample.state.q,
+            )
+        };
+        let (reset, estimate) = estimate;
+        let (state, message) = if no_v {
+            match estimate {
+                Estimate::WarmingUp { have, needs } => {
+                    return Ok(Accepted::WarmingUp { have, needs, reset })
+                }
+                Estimate::Ready(s) => {
+                    let mut m = msg.clone();
+                    m.positions = to_vec3(&s.q, graph.dim);
+                    m.velocities = to_vec3(&s.v, graph.dim);
+                    (s, m)
+                }
+            }
+        } else {
+            (sample.state, msg.clone())
+        };
+        Ok(Accepted::Ready(Box::new(Input {
+            message,
+            graph,
+            state,
+            field,
+            stamp,
+            trajectory_id: id,
+            derived: no_v,
+            reset,
+        })))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::{SystemConfig, SystemKind};
+    use crate::system::Sample;
+
+    fn message(k: u32, t: f64, cfg: &SystemConfig) -> ParticleState {
+        let graph = cfg.graph();
+        let mut state = cfg.start_for(&graph, 3, 0);
+        state.q.iter_mut().for_each(|x| *x += 0.1 * t);
+        let mut m = ParticleState::from_sample(
+            7,
+            k,
+            "spring",
+            &graph,
+            &Sample {
+                t,
+                state,
+                acc: None,
+            },
+        );
+        m.header.stamp = crate::data::msg::Time {
+            sec: 100,
+            nanosec: (t * 1e9) as u32,
+        };
+        m.velocities.clear();
+        m
+    }
+
+    #[test]
+    fn position_only_messages_warm_up_then_get_velocities() {
+        let cfg = SystemConfig::new(SystemKind::Spring, 5);
+        let inputs = Inputs::default();
+        let p = NodeParams::default();
+        for k in 0..2 {
+            let a = inputs
+                .accept(&p, &message(k, 0.01 * f64::from(k), &cfg))
+                .unwrap();
+            assert!(matches!(a, Accepted::WarmingUp { needs: 3, .. }), "{a:?}");
+        }
+        let Accepted::Ready(i) = inputs.accept(&p, &message(2, 0.02, &cfg)).unwrap() else {
+            panic!("not ready after 3 states");
+        };
+        assert!(i.derived);
+        // Every position moves at 0.1 per second.
+        assert!(
+            i.state.v.iter().all(|v| (v - 0.1).abs() < 1e-6),
+            "{:?}",
+            i.state.v
+        );
+        assert_eq!(i.message.velocities.len(), 5);
+        assert!((i.message.velocities[0].x - 0.1).abs() < 1e-6);
+        // A stamp going back starts over.
+        let a = inputs.accept(&p, &message(3, 0.0, &cfg)).unwrap();
+        assert!(
+            matches!(
+                a,
+                Accepted::WarmingUp {
+                    reset: Some(Reset::NotAfter { .. }),
+                    ..
+                }
+            ),
+            "{a:?}"
+        );
+        // Full states pass through.
+        let mut full = message(4, 0.05, &cfg);
+        full.velocities = full.positions.clone();
+        let Accepted::Ready(i) = inputs.accept(&p, &full).unwrap() else {
+            panic!("a full state is ready at once");
+        };
+        assert!(!i.derived);
+        assert_eq!(i.message, full);
+    }
+
+    #[test]
+    fn bad_smoother_settings_name_the_parameters() {
+        let p = NodeParams {
+            velocity_smoother: "poly".into(),
+            smoother_window: 3,
+            ..NodeParams::default()
+        };
+        let e = stream_options(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("smoother_window") && e.contains("window 3"),
+            "{e}"
+        );
+    }
+}
