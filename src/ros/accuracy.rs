@@ -637,7 +637,7 @@ mod tests {
                     sec: sec + (k / 10) as i32,
                     nanosec: (k % 10) as u32 * 100_000_000,
                 };
-                let Accepted::Ready(input) = inputs.accept(&p, &m).unwrap() else {
+                let Accepted::Ready(input) = inputs.accept(&p, m).unwrap() else {
                     panic!("full states are ready");
                 };
                 let pred = crate::ros::predict::predict_parts(

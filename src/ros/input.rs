@@ -87,7 +87,7 @@ impl Inputs {
     /// Parses `msg` once and, for a position-only one, estimates its
     /// velocities from its stream's history. Streams start over when the
     /// stream settings change.
-    pub fn accept(&self, p: &NodeParams, msg: &ParticleState) -> Result<Accepted, DataError> {
+    pub fn accept(&self, p: &NodeParams, mut msg: ParticleState) -> Result<Accepted, DataError> {
         let (graph, sample, no_v) = msg.to_parts_positions_only()?;
         let field = msg.field()?;
         let opts = stream_options(p)?;
@@ -107,23 +107,22 @@ impl Inputs {
             )
         };
         let (reset, estimate) = estimate;
-        let (state, message) = if no_v {
+        let state = if no_v {
             match estimate {
                 Estimate::WarmingUp { have, needs } => {
                     return Ok(Accepted::WarmingUp { have, needs, reset })
                 }
                 Estimate::Ready(s) => {
-                    let mut m = msg.clone();
-                    m.positions = to_vec3(&s.q, graph.dim);
-                    m.velocities = to_vec3(&s.v, graph.dim);
-                    (s, m)
+                    msg.positions = to_vec3(&s.q, graph.dim);
+                    msg.velocities = to_vec3(&s.v, graph.dim);
+                    s
                 }
             }
         } else {
-            (sample.state, msg.clone())
+            sample.state
         };
         Ok(Accepted::Ready(Box::new(Input {
-            message,
+            message: msg,
             graph,
             state,
             field,
@@ -171,11 +170,11 @@ mod tests {
         let p = NodeParams::default();
         for k in 0..2 {
             let a = inputs
-                .accept(&p, &message(k, 0.01 * f64::from(k), &cfg))
+                .accept(&p, message(k, 0.01 * f64::from(k), &cfg))
                 .unwrap();
             assert!(matches!(a, Accepted::WarmingUp { needs: 3, .. }), "{a:?}");
         }
-        let Accepted::Ready(i) = inputs.accept(&p, &message(2, 0.02, &cfg)).unwrap() else {
+        let Accepted::Ready(i) = inputs.accept(&p, message(2, 0.02, &cfg)).unwrap() else {
             panic!("not ready after 3 states");
         };
         assert!(i.derived);
@@ -188,7 +187,7 @@ mod tests {
         assert_eq!(i.message.velocities.len(), 5);
         assert!((i.message.velocities[0].x - 0.1).abs() < 1e-6);
         // A stamp going back starts over.
-        let a = inputs.accept(&p, &message(3, 0.0, &cfg)).unwrap();
+        let a = inputs.accept(&p, message(3, 0.0, &cfg)).unwrap();
         assert!(
             matches!(
                 a,
@@ -202,7 +201,7 @@ mod tests {
         // Full states pass through.
         let mut full = message(4, 0.05, &cfg);
         full.velocities = full.positions.clone();
-        let Accepted::Ready(i) = inputs.accept(&p, &full).unwrap() else {
+        let Accepted::Ready(i) = inputs.accept(&p, full.clone()).unwrap() else {
             panic!("a full state is ready at once");
         };
         assert!(!i.derived);

@@ -57,16 +57,17 @@ fn handle_state(
     let params = h.params.get();
     predict::check_size(&msg, params.max_particles)?;
     h.recorder.record(|r| r.state(received_ns, &msg));
-    let input = match h.inputs.accept(&params, &msg)? {
+    let id = msg.trajectory_id;
+    let input = match h.inputs.accept(&params, msg)? {
         Accepted::Ready(input) => {
-            note_reset(h, msg.trajectory_id, input.reset.as_ref());
+            note_reset(h, id, input.reset.as_ref());
             if input.derived {
                 h.diag.stats.derived.fetch_add(1, Ordering::Relaxed);
             }
             input
         }
         Accepted::WarmingUp { reset, .. } => {
-            note_reset(h, msg.trajectory_id, reset.as_ref());
+            note_reset(h, id, reset.as_ref());
             h.diag.stats.warming_up.fetch_add(1, Ordering::Relaxed);
             return Ok(None);
         }
