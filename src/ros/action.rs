@@ -15,7 +15,9 @@ use ros2_client::action::{
 use ros2_client::action_msgs::GoalId;
 use ros2_client::log::LogLevel;
 use ros2_client::qos::{Durability, History};
-use ros2_client::{ActionTypeName, Message, Name, Node, QosProfile, ServiceMapping};
+use ros2_client::{ActionTypeName, Message, Node, QosProfile, ServiceMapping};
+
+use super::names::Names;
 use serde::{Deserialize, Serialize};
 
 use crate::train::EpochReport;
@@ -25,7 +27,7 @@ use super::qos::reliable_qos;
 use super::training::{claim, run_training, Claim, Trainer, BUSY};
 
 /// Name of the Train action.
-pub const TRAIN_ACTION: &str = "/mcgnode/train_action";
+pub const TRAIN_ACTION: &str = "~/train_action";
 
 /// Goal of `mcgnode_msgs/action/Train` (the Train service's request).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -106,14 +108,14 @@ impl From<TrainResponse> for TrainResult {
 type ActionServer = AsyncActionServer<TrainGoal, TrainResult, TrainFeedback>;
 
 /// The Train action server, handed to [`spawn`].
-pub struct TrainActionServer(ActionServer);
+pub struct TrainActionServer(ActionServer, String);
 
 /// The goal being executed and its cancel flag.
 type Running = Arc<Mutex<Option<(GoalId, Arc<AtomicBool>)>>>;
 
 /// Creates the action server (QoS as rclpy's action defaults: reliable,
 /// volatile services and feedback; transient-local status).
-pub fn create(node: &mut Node) -> crate::error::Result<TrainActionServer> {
+pub fn create(node: &mut Node, names: &Names) -> crate::error::Result<TrainActionServer> {
     let status = QosProfile::publisher_default()
         .durability(Durability::TransientLocal)
         .history(History::KeepLast { depth: 1 });
@@ -124,7 +126,7 @@ pub fn create(node: &mut Node) -> crate::error::Result<TrainActionServer> {
         feedback_publisher: reliable_qos(),
         status_publisher: status,
     };
-    let name = Name::parse(TRAIN_ACTION).map_err(|e| err!("action name: {e:?}"))?;
+    let name = super::qos::ros_name(names, TRAIN_ACTION)?;
     let server = node
         .create_action_server(
             ServiceMapping::Enhanced,
@@ -133,12 +135,15 @@ pub fn create(node: &mut Node) -> crate::error::Result<TrainActionServer> {
             qos,
         )
         .map_err(|e| err!("creating the Train action: {e:?}"))?;
-    Ok(TrainActionServer(AsyncActionServer::new(server)))
+    Ok(TrainActionServer(
+        AsyncActionServer::new(server),
+        names.resolve(TRAIN_ACTION)?,
+    ))
 }
 
 /// Starts the goal and cancel tasks (inside the runtime).
 pub fn spawn(shared: Arc<Trainer>, server: TrainActionServer) {
-    shared.log(LogLevel::Info, &format!("action {TRAIN_ACTION}"));
+    shared.log(LogLevel::Info, &format!("action {}", server.1));
     let server = Arc::new(server.0);
     let running: Running = Arc::new(Mutex::new(None));
     tokio::spawn(goal_loop(shared.clone(), server.clone(), running.clone()));

@@ -21,7 +21,8 @@ use crate::dynamics::Dynamics;
 use super::accuracy::Live;
 use super::clock::Clock;
 use super::msgs::NodeDiagnostics;
-use super::params::{NodeParams, NODE_NAME};
+use super::names::severity;
+use super::params::NodeParams;
 use super::record::{RecordError, Recorder};
 
 /// The parameters now: those in
@@ -162,16 +163,28 @@ impl RateLimiter {
 /// Logs to stderr and to /rosout.
 pub struct Logger {
     rosout: NodeLoggingHandle,
+    /// The node's name, as the log lines say it.
+    name: String,
+    /// Below this severity nothing is logged (`--log-level`; default info).
+    min: u8,
 }
 
 impl Logger {
-    /// Logs through the node's /rosout handle.
-    pub fn new(rosout: NodeLoggingHandle) -> Self {
-        Logger { rosout }
+    /// Logs through the node's /rosout handle as `name`, at `level` and
+    /// above (`None`: info).
+    pub fn new(rosout: NodeLoggingHandle, name: &str, level: Option<LogLevel>) -> Self {
+        Logger {
+            rosout,
+            name: name.to_string(),
+            min: severity(level.unwrap_or(LogLevel::Info)),
+        }
     }
 
     /// Logs `msg` at `level`.
     pub fn log(&self, level: LogLevel, msg: &str) {
+        if severity(level) < self.min {
+            return;
+        }
         let tag = match level {
             LogLevel::Fatal => "FATAL",
             LogLevel::Error => "ERROR",
@@ -179,11 +192,11 @@ impl Logger {
             LogLevel::Info => "INFO",
             LogLevel::Debug => "DEBUG",
         };
-        eprintln!("[{tag}] [{:.6}] [{NODE_NAME}]: {msg}", wall_secs());
+        eprintln!("[{tag}] [{:.6}] [{}]: {msg}", wall_secs(), self.name);
         self.rosout.rosout_raw(
             ros2_client::builtin_interfaces::Time::now(),
             level,
-            NODE_NAME,
+            &self.name,
             msg,
             file!(),
             "",

@@ -334,10 +334,11 @@ pub struct LifecycleServers {
     events: ros2_client::Publisher<TransitionEvent>,
 }
 
-/// Creates the lifecycle services under `/<node>/`, as rclcpp names them.
+/// Creates the lifecycle services under the node (`~/change_state`, ...), as
+/// rclcpp names them.
 pub fn create(
     node: &mut ros2_client::Node,
-    node_name: &str,
+    names: &super::names::Names,
 ) -> crate::error::Result<LifecycleServers> {
     use super::qos::{reliable_qos, ros_name};
     use crate::error::err;
@@ -346,7 +347,7 @@ pub fn create(
         ($srv:literal, $ty:literal) => {
             node.create_server(
                 ServiceMapping::Enhanced,
-                &ros_name(&format!("/{node_name}/{}", $srv))?,
+                &ros_name(names, &format!("~/{}", $srv))?,
                 &ServiceTypeName::new(LIFECYCLE_PACKAGE, $ty),
                 reliable_qos(),
                 reliable_qos(),
@@ -356,7 +357,7 @@ pub fn create(
     }
     let topic = node
         .create_topic(
-            &ros_name(&format!("/{node_name}/transition_event"))?,
+            &ros_name(names, "~/transition_event")?,
             MessageTypeName::new(LIFECYCLE_PACKAGE, "TransitionEvent"),
             &reliable_qos(),
         )

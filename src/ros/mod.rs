@@ -5,6 +5,8 @@
 //!
 //! - [`params`] (+ [`yaml`]): the ROS 2 parameter file and `--set` overrides;
 //! - [`msgs`]: wire structs of our interfaces;
+//! - [`names`]: ROS 2 names and `--ros-args` as rcl reads them (namespace,
+//!   node name, remaps);
 //! - [`input`]: an incoming state parsed once, with the velocities of
 //!   position-only streams estimated from their history (no DDS);
 //! - [`predict`]: input checks and building the outputs (no ROS);
@@ -31,6 +33,7 @@ pub mod input;
 pub mod lifecycle;
 pub mod markers;
 pub mod msgs;
+pub mod names;
 pub mod node;
 pub mod params;
 pub mod predict;
@@ -63,6 +66,12 @@ pub struct ServeArgs {
     /// Print the effective parameters as a parameter file and exit.
     #[arg(long)]
     pub print_params: bool,
+    /// ROS 2 arguments, as rcl takes them, to the end of the command line:
+    /// `-r __ns:=/robot1`, `-r __node:=NAME`, `-r FROM:=TO`, `-p NAME:=VALUE`,
+    /// `--params-file FILE` (repeatable), `--log-level LEVEL`. Applied after
+    /// --params and --set; others are refused with the reason.
+    #[arg(long = "ros-args", num_args = 0.., allow_hyphen_values = true, value_name = "ARG")]
+    pub ros_args: Option<Vec<String>>,
 }
 
 /// Runs the node until SIGINT/SIGTERM.
@@ -72,14 +81,22 @@ pub fn run_serve(args: ServeArgs) -> crate::error::Result<()> {
         print!("{}", params.to_yaml());
         return Ok(());
     }
+    let ros = ros_args(&args)?;
     let model = crate::models::load_model(&params.model)?;
     let domain_id = domain_id_from_env()?;
-    node::serve(params, model, domain_id)
+    node::serve(params, &ros, model, domain_id)
 }
 
-/// Parameters from the file, `--set` overrides and `--model`, in that order.
+/// What follows `--ros-args`.
+pub fn ros_args(args: &ServeArgs) -> Result<names::RosArgs, names::NameError> {
+    names::RosArgs::parse(args.ros_args.as_deref().unwrap_or_default())
+}
+
+/// Parameters from the file, `--set` overrides, `--ros-args` (parameter
+/// files, `-p`) and `--model`, in that order.
 pub fn effective_params(args: &ServeArgs) -> Result<NodeParams, ParamError> {
-    let mut p = NodeParams::load(args.params.as_deref(), &args.set)?;
+    let ros = ros_args(args)?;
+    let mut p = NodeParams::load_with(args.params.as_deref(), &args.set, &ros)?;
     if let Some(m) = &args.model {
         p.model.clone_from(m);
     }

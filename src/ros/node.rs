@@ -32,6 +32,7 @@ use super::msgs::{
     PredictedTrajectory, ReplayRequest, ReplayResponse, RolloutRequest, RolloutResponse,
     DIAGNOSTIC_OK, DIAGNOSTIC_WARN, PACKAGE,
 };
+use super::names::{Names, RosArgs};
 use super::params::{NodeParams, ParamError, NODE_NAME, RUNTIME_SETTABLE};
 use super::predict::{self, Prediction};
 use super::qos::{clock_qos, reliable_qos, ros_name, topic_qos};
@@ -193,7 +194,9 @@ fn descriptor(key: &str, kind: super::params::Kind, doc: &str) -> ParameterDescr
         _ => NumericRange::NotSpecified,
     };
     let constraints = match kind {
-        Kind::Topic => "an absolute ROS 2 name".to_string(),
+        Kind::Topic => "a ROS 2 name: absolute (/a), relative to the namespace (a) or to the \
+                        node (~/a)"
+            .to_string(),
         Kind::Double(true) => "finite and > 0".to_string(),
         Kind::Double(false) => "finite and >= 0".to_string(),
         Kind::Doubles(max) => format!("at most {max} finite numbers > 0"),
@@ -281,10 +284,14 @@ struct Endpoints {
 
 impl Endpoints {
     /// Topics, publishers, subscriptions and servers as the parameters say.
-    fn create(node: &mut Node, params: &NodeParams) -> crate::error::Result<Endpoints> {
+    fn create(
+        node: &mut Node,
+        params: &NodeParams,
+        names: &Names,
+    ) -> crate::error::Result<Endpoints> {
         let e = |what: &'static str| move |err| err!("creating {what}: {err:?}");
         let topic = |name: &str, pkg: &str, ty: &str, qos: &QosProfile| {
-            node.create_topic(&ros_name(name)?, MessageTypeName::new(pkg, ty), qos)
+            node.create_topic(&ros_name(names, name)?, MessageTypeName::new(pkg, ty), qos)
                 .map_err(|e| err!("creating topic {name}: {e:?}"))
         };
         let qos = topic_qos(params);
@@ -325,8 +332,8 @@ impl Endpoints {
         } else {
             None
         };
-        let rollout = create_server(node, &params.rollout_service, "Rollout")?;
-        let replay = create_server(node, REPLAY_SERVICE, "Replay")?;
+        let rollout = create_server(node, names, &params.rollout_service, "Rollout")?;
+        let replay = create_server(node, names, REPLAY_SERVICE, "Replay")?;
         Ok(Endpoints {
             input: node
                 .create_subscription(&input_topic, Some(qos.clone()))
@@ -405,12 +412,13 @@ impl Endpoints {
 /// A server of our service type `ty` named `name`, with rclpy's QoS.
 fn create_server<Req: Message + Clone + 'static, Resp: Message + Clone + 'static>(
     node: &mut Node,
+    names: &Names,
     name: &str,
     ty: &str,
 ) -> crate::error::Result<Server<Req, Resp>> {
     node.create_server(
         ServiceMapping::Enhanced,
-        &ros_name(name)?,
+        &ros_name(names, name)?,
         &ServiceTypeName::new(PACKAGE, ty),
         reliable_qos(),
         reliable_qos(),
@@ -423,10 +431,11 @@ fn model_file(model: &str) -> Option<std::path::PathBuf> {
     (!crate::models::truth::is_truth(model)).then(|| model.into())
 }
 
-/// The handles of a node serving `model`, logging through `node`.
+/// The handles of a node serving `model`, logging through `node` at
+/// `log_level` and above.
 fn handles(
     node: &Node,
-    params: &NodeParams,
+    (params, names, log_level): (&NodeParams, &Names, Option<LogLevel>),
     live: LiveParams,
     model: Arc<dyn Dynamics>,
 ) -> crate::error::Result<Handles> {
@@ -436,7 +445,7 @@ fn handles(
         Some(Recorder::new(params, &model.describe())?)
     };
     let diag = Arc::new(Diagnostics::new(
-        Logger::new(node.logging_handle()),
+        Logger::new(node.logging_handle(), names.node(), log_level),
         live.clone(),
     ));
     Ok(Handles {
@@ -455,12 +464,18 @@ fn handles(
     })
 }
 
-/// Runs the node in `domain_id` until SIGINT or SIGTERM.
+/// Runs the node in `domain_id` until SIGINT or SIGTERM, named and
+/// remapped as `ros` (`--ros-args`) says.
 pub fn serve(
     params: NodeParams,
+    ros: &RosArgs,
     model: Arc<dyn Dynamics>,
     domain_id: u16,
 ) -> crate::error::Result<()> {
+    let names = ros.names()?;
+    // Every topic and service parameter as the absolute name it resolves to,
+    // for the endpoints, the recordings and the log alike.
+    let params = params.resolved(&names)?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -469,19 +484,20 @@ pub fn serve(
     let live = LiveParams::new(params.clone());
     let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
         .map_err(|e| err!("creating the DDS participant in domain {domain_id}: {e:?}"))?;
-    let name = NodeName::new("/", NODE_NAME).map_err(|e| err!("node name: {e:?}"))?;
+    let name =
+        NodeName::new(names.namespace(), names.node()).map_err(|e| err!("node name: {e:?}"))?;
     let mut node = context
         .new_node(name, declare_parameters(&params, live.clone()))
         .map_err(|e| err!("creating the node: {e:?}"))?;
-    let endpoints = Endpoints::create(&mut node, &params)?;
-    let h = handles(&node, &params, live, model)?;
-    let (trainer, servers) = training::create(&mut node, &params, trainer_handles(&h))?;
-    let action_server = action::create(&mut node)?;
-    let lifecycle = super::lifecycle::create(&mut node, NODE_NAME)?;
+    let endpoints = Endpoints::create(&mut node, &params, &names)?;
+    let h = handles(&node, (&params, &names, ros.log_level), live, model)?;
+    let (trainer, servers) = training::create(&mut node, &params, &names, trainer_handles(&h))?;
+    let action_server = action::create(&mut node, &names)?;
+    let lifecycle = super::lifecycle::create(&mut node, &names)?;
     let spinner = node
         .spinner()
         .map_err(|e| err!("the node spinner: {e:?}"))?;
-    log_start(&h, domain_id);
+    log_start(&h, &names, domain_id);
     let result = runtime.block_on(async {
         tokio::spawn(async move {
             if let Err(e) = spinner.spin().await {
@@ -548,7 +564,7 @@ fn spawn_training(
 }
 
 /// Says what the node serves, where.
-fn log_start(h: &Handles, domain_id: u16) {
+fn log_start(h: &Handles, names: &Names, domain_id: u16) {
     let p = h.params.get();
     h.diag.log(
         LogLevel::Info,
@@ -566,8 +582,11 @@ fn log_start(h: &Handles, domain_id: u16) {
     if p.lifecycle {
         h.diag.log(
             LogLevel::Info,
-            "managed lifecycle: unconfigured, predicting nothing until configure and activate \
-             (/mcgnode/change_state)",
+            &format!(
+                "managed lifecycle: unconfigured, predicting nothing until configure and \
+                 activate ({}/change_state)",
+                names.fqn()
+            ),
         );
     }
     if !p.accuracy_lead_times.is_empty() {
@@ -620,7 +639,7 @@ async fn wait_for_shutdown() -> crate::error::Result<()> {
 }
 
 /// Topic of live accuracy (`mcgnode_msgs/msg/LiveAccuracy`).
-pub const LIVE_ACCURACY_TOPIC: &str = "/mcgnode/live_accuracy";
+pub const LIVE_ACCURACY_TOPIC: &str = "~/live_accuracy";
 
 /// What the input loop publishes.
 struct Outputs {
@@ -850,7 +869,7 @@ pub fn rollout_response(
 }
 
 /// Name of the Replay service (`mcgnode_msgs/srv/Replay`).
-pub const REPLAY_SERVICE: &str = "/mcgnode/replay";
+pub const REPLAY_SERVICE: &str = "~/replay";
 
 /// The Replay service's work: the bag through the model served now, with the
 /// node's dt and horizon (see [`crate::replay::replay_as_node`]).

@@ -33,6 +33,9 @@ pub enum ParamError {
     /// The file's top level is not a mapping.
     #[error("expected a mapping at the top level")]
     NotAMapping,
+    /// A `--params-file` without a section for this node.
+    #[error("no section for this node ({0}); use `/**:`, its name or its fully qualified name")]
+    NoSectionFor(String),
     /// No section at all.
     #[error("no `{NODE_NAME}: ros__parameters:` section")]
     NoSection,
@@ -76,9 +79,10 @@ pub enum ParamError {
         /// The value's YAML type and text.
         got: String,
     },
-    /// A topic or service name that is not an absolute ROS 2 name.
+    /// A topic or service name that is not a ROS 2 name.
     #[error(
-        "parameter {key:?}: {name:?} is not an absolute ROS 2 name like /particle_state (letters, digits, _)"
+        "parameter {key:?}: {name:?} is not a ROS 2 name like /particle_state, particle_state \
+         or ~/rollout (letters, digits, _)"
     )]
     BadName {
         /// The parameter.
@@ -133,6 +137,9 @@ pub enum ParamError {
         settable = RUNTIME_SETTABLE.join(", ")
     )]
     NotRuntime(String),
+    /// A name that does not resolve.
+    #[error(transparent)]
+    Name(#[from] NameError),
     /// Parameters that are valid alone but not together.
     #[error("parameters {0}")]
     Together(String),
@@ -154,8 +161,8 @@ fn known_parameters() -> String {
         .join(", ")
 }
 
-/// The node's name, which is also the key of its section in parameter files.
-pub const NODE_NAME: &str = "mcgnode";
+pub use super::names::NODE_NAME;
+use super::names::{is_ros_name, NameError, Names};
 
 /// Everything the node can be configured with.
 #[derive(Clone, Debug, PartialEq)]
@@ -259,11 +266,11 @@ impl Default for NodeParams {
     fn default() -> Self {
         NodeParams {
             model: "truth:spring".into(),
-            input_topic: "/particle_state".into(),
-            trajectory_topic: "/mcgnode/predicted_trajectory".into(),
-            forces_topic: "/mcgnode/predicted_forces".into(),
-            diagnostics_topic: "/mcgnode/diagnostics".into(),
-            rollout_service: "/mcgnode/rollout".into(),
+            input_topic: "particle_state".into(),
+            trajectory_topic: "~/predicted_trajectory".into(),
+            forces_topic: "~/predicted_forces".into(),
+            diagnostics_topic: "~/diagnostics".into(),
+            rollout_service: "~/rollout".into(),
             horizon: 100,
             dt: 0.001,
             substeps: 1,
@@ -287,7 +294,7 @@ impl Default for NodeParams {
             accuracy_retrain_after: 5.0,
             accuracy_retrain_epochs: 3000,
             markers: true,
-            markers_topic: "/mcgnode/markers".into(),
+            markers_topic: "~/markers".into(),
             markers_period: 0.1,
             out_of_range_sigmas: crate::compat::OUT_OF_RANGE_SIGMAS,
             out_of_range_refuse: false,
@@ -306,7 +313,7 @@ impl Default for NodeParams {
 pub enum Kind {
     /// Any text.
     Str,
-    /// An absolute ROS 2 name.
+    /// A ROS 2 name: absolute, relative to the namespace, or private (`~/`).
     Topic,
     /// `true` or `false`.
     Bool,
@@ -556,29 +563,96 @@ pub const RUNTIME_SETTABLE: &[&str] = &[
     "input_max_streams",
 ];
 
-/// Keys of the node's section that are accepted as node names.
-fn is_our_section(key: &str) -> bool {
-    matches!(key, "/**" | "**") || key.trim_start_matches('/') == NODE_NAME
+/// Keys of a parameter file section that are this node's, as rcl matches
+/// them: `/**`, `**`, `/**/NAME`, the node's name, and its fully qualified
+/// name with or without the leading slash; the default name too (the shipped
+/// files use `mcgnode:`).
+fn is_our_section(key: &str, names: &Names) -> bool {
+    let fqn = names.fqn();
+    matches!(key, "/**" | "**")
+        || key.trim_start_matches('/') == NODE_NAME
+        || key.trim_start_matches('/') == names.node()
+        || key.strip_prefix("/**/") == Some(names.node())
+        || key == fqn
+        || Some(key) == fqn.strip_prefix('/')
+}
+
+/// What a parameter file section for another node means.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Others {
+    /// An error (`--params`: the file is this node's).
+    Refuse,
+    /// Skipped (`--params-file`: one file may configure many nodes).
+    Skip,
+}
+
+fn read_file(path: &Path) -> Result<String, ParamError> {
+    std::fs::read_to_string(path).map_err(|source| ParamError::Read {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 impl NodeParams {
     /// Defaults, then the file (if any), then each `key=value` override in order.
     pub fn load(file: Option<&Path>, overrides: &[String]) -> Result<NodeParams, ParamError> {
+        Self::load_with(file, overrides, &super::names::RosArgs::default())
+    }
+
+    /// [`NodeParams::load`], then what `--ros-args` says: each
+    /// `--params-file` in order (sections for other nodes skipped, as rcl
+    /// does; a file with none for this node is an error), then each `-p`.
+    pub fn load_with(
+        file: Option<&Path>,
+        overrides: &[String],
+        ros: &super::names::RosArgs,
+    ) -> Result<NodeParams, ParamError> {
+        let names = ros.names()?;
         let mut p = NodeParams::default();
+        let in_file = |path: &Path, e: ParamError| ParamError::File {
+            path: path.to_path_buf(),
+            source: Box::new(e),
+        };
         if let Some(path) = file {
-            let text = std::fs::read_to_string(path).map_err(|source| ParamError::Read {
-                path: path.to_path_buf(),
-                source,
-            })?;
-            p.apply_file_text(&text).map_err(|e| ParamError::File {
-                path: path.to_path_buf(),
-                source: Box::new(e),
-            })?;
+            p.apply_sections(&read_file(path)?, &names, Others::Refuse)
+                .map_err(|e| in_file(path, e))?;
         }
         for o in overrides {
             p.apply_override(o)?;
         }
+        for path in &ros.params_files {
+            let matched = p
+                .apply_sections(&read_file(path)?, &names, Others::Skip)
+                .map_err(|e| in_file(path, e))?;
+            if matched == 0 {
+                return Err(in_file(path, ParamError::NoSectionFor(names.fqn())));
+            }
+        }
+        for (key, value) in &ros.params {
+            p.set(key, &Scalar::parse_plain(value), true)
+                .map_err(|e| ParamError::Override {
+                    given: format!("-p {key}:={value}"),
+                    source: Box::new(e),
+                })?;
+        }
         p.check_together()?;
+        Ok(p)
+    }
+
+    /// The topic and service parameters as absolute names, resolved for
+    /// `names` (namespace, node name, remaps) as rcl resolves them.
+    pub fn resolved(&self, names: &Names) -> Result<NodeParams, ParamError> {
+        let mut p = self.clone();
+        for name in [
+            &mut p.input_topic,
+            &mut p.trajectory_topic,
+            &mut p.forces_topic,
+            &mut p.diagnostics_topic,
+            &mut p.rollout_service,
+            &mut p.markers_topic,
+        ] {
+            *name = names.resolve(name)?;
+        }
         Ok(p)
     }
 
@@ -596,16 +670,33 @@ impl NodeParams {
 
     /// Applies the contents of a ROS 2 parameter file.
     pub fn apply_file_text(&mut self, text: &str) -> Result<(), ParamError> {
+        self.apply_sections(text, &Names::default(), Others::Refuse)
+            .map(|_| ())
+    }
+
+    /// Applies the sections of a parameter file that are this node's;
+    /// returns how many there were.
+    fn apply_sections(
+        &mut self,
+        text: &str,
+        names: &Names,
+        others: Others,
+    ) -> Result<usize, ParamError> {
         let Value::Map(top) = yaml::parse(text)? else {
             return Err(ParamError::NotAMapping);
         };
         if top.is_empty() {
             return Err(ParamError::NoSection);
         }
+        let mut matched = 0;
         for (node, section) in &top {
-            if !is_our_section(node) {
+            if !is_our_section(node, names) {
+                if others == Others::Skip {
+                    continue;
+                }
                 return Err(ParamError::OtherNode(node.clone()));
             }
+            matched += 1;
             let Value::Map(entries) = section else {
                 return Err(ParamError::NoRosParameters(node.clone()));
             };
@@ -623,7 +714,7 @@ impl NodeParams {
                 }
             }
         }
-        Ok(())
+        Ok(matched)
     }
 
     /// Applies one `key=value` command-line override.
@@ -659,7 +750,7 @@ impl NodeParams {
                     }
                     _ => return Err(ill("a string")),
                 };
-                if kind == Kind::Topic && !is_absolute_name(&s) {
+                if kind == Kind::Topic && !is_ros_name(&s) {
                     return Err(ParamError::BadName {
                         key: key.to_string(),
                         name: s,
@@ -898,20 +989,6 @@ fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Scalar)>) {
     }
 }
 
-/// An absolute ROS 2 name: `/` then tokens of `[A-Za-z0-9_]` not starting
-/// with a digit, separated by single slashes.
-fn is_absolute_name(s: &str) -> bool {
-    s.strip_prefix('/').is_some_and(|rest| {
-        !rest.is_empty()
-            && rest.split('/').all(|t| {
-                !t.is_empty()
-                    && !t.starts_with(|c: char| c.is_ascii_digit())
-                    && !t.contains("__")
-                    && t.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
-            })
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -986,7 +1063,7 @@ mod tests {
             ),
             (
                 "mcgnode:\n  ros__parameters:\n    input_topic: x y\n",
-                "absolute ROS 2 name",
+                "is not a ROS 2 name",
             ),
             ("other:\n  ros__parameters:\n    dt: 1.0\n", "another node"),
             ("mcgnode:\n  params:\n    dt: 1.0\n", "only ros__parameters"),
@@ -1038,5 +1115,72 @@ mod tests {
                 .unwrap();
             assert_eq!(p.horizon, 9, "{head}");
         }
+    }
+
+    #[test]
+    fn ros_args_params_files_and_p_apply_in_order() {
+        use super::super::names::RosArgs;
+        let dir = tempfile::tempdir().unwrap();
+        let fleet = dir.path().join("fleet.yaml");
+        std::fs::write(
+            &fleet,
+            "/robot1/mcgnode:\n  ros__parameters:\n    horizon: 7\n\
+             /robot2/mcgnode:\n  ros__parameters:\n    horizon: 9\n\
+             /**:\n  ros__parameters:\n    dt: 0.5\n",
+        )
+        .unwrap();
+        let only1 = dir.path().join("only1.yaml");
+        std::fs::write(
+            &only1,
+            "/robot1/mcgnode:\n  ros__parameters:\n    horizon: 7\n",
+        )
+        .unwrap();
+        let load = |args: &[&str]| {
+            let args: Vec<String> = args.iter().map(|a| (*a).to_string()).collect();
+            NodeParams::load_with(None, &["horizon=3".into()], &RosArgs::parse(&args).unwrap())
+        };
+        let f = fleet.to_str().unwrap();
+        let p = load(&["-r", "__ns:=/robot2", "--params-file", f, "-p", "dt:=0.25"]).unwrap();
+        assert_eq!(
+            (p.horizon, p.dt),
+            (9, 0.25),
+            "file over --set, -p over the file"
+        );
+        let p = load(&["-r", "__ns:=/robot3", "--params-file", f]).unwrap();
+        assert_eq!(
+            (p.horizon, p.dt),
+            (3, 0.5),
+            "only /** is for /robot3/mcgnode"
+        );
+        let e = load(&[
+            "-r",
+            "__ns:=/robot3",
+            "--params-file",
+            only1.to_str().unwrap(),
+        ])
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("no section for this node (/robot3/mcgnode)"),
+            "{e}"
+        );
+        let e = load(&["-p", "nope:=1"]).unwrap_err().to_string();
+        assert!(
+            e.contains("-p nope:=1") && e.contains("unknown parameter"),
+            "{e}"
+        );
+        // Names resolve for the node's namespace.
+        let names = RosArgs::parse(&["-r".into(), "__ns:=/robot2".into()])
+            .unwrap()
+            .names()
+            .unwrap();
+        let r = NodeParams::default().resolved(&names).unwrap();
+        assert_eq!(r.input_topic, "/robot2/particle_state");
+        assert_eq!(r.rollout_service, "/robot2/mcgnode/rollout");
+        let d = NodeParams::default().resolved(&Names::default()).unwrap();
+        assert_eq!(
+            d.trajectory_topic, "/mcgnode/predicted_trajectory",
+            "unchanged by default"
+        );
     }
 }

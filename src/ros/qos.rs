@@ -5,6 +5,7 @@ use crate::error::err;
 use ros2_client::qos::{Durability, History, WhenFull};
 use ros2_client::{Name, QosProfile};
 
+use super::names::Names;
 use super::params::NodeParams;
 
 /// Topic QoS from the parameters: volatile, keep-last `qos_depth`.
@@ -39,7 +40,9 @@ pub fn reliable_qos() -> QosProfile {
         .history(History::KeepLast { depth: 10 })
 }
 
-/// A ROS name, or an error naming it.
-pub fn ros_name(s: &str) -> crate::error::Result<Name> {
-    Name::parse(s).map_err(|e| err!("invalid ROS name {s:?}: {e:?}"))
+/// The ROS name `s` resolved for the node's `names` (namespace, node name,
+/// remaps), or an error naming it.
+pub fn ros_name(names: &Names, s: &str) -> crate::error::Result<Name> {
+    let full = names.resolve(s)?;
+    Name::parse(&full).map_err(|e| err!("invalid ROS name {full:?}: {e:?}"))
 }

@@ -104,7 +104,8 @@ crate::error::typed_errors!(RecordError);
 
 impl Recorder {
     /// A recorder for `params.record_dir` (created if missing); no file is
-    /// opened until the first message.
+    /// opened until the first message. The topic names are taken as given:
+    /// the node passes them resolved ([`NodeParams::resolved`]).
     pub fn new(params: &NodeParams, model: &str) -> Result<Recorder, RecordError> {
         let dir = PathBuf::from(&params.record_dir);
         if let Err(source) = std::fs::create_dir_all(&dir) {
@@ -322,6 +323,10 @@ mod tests {
             record_split_seconds: 0.05,
             ..NodeParams::default()
         };
+        // As the node hands them over: names resolved (here with no --ros-args).
+        let params = params
+            .resolved(&crate::ros::names::Names::default())
+            .unwrap();
         let mut r = Recorder::new(&params, "truth:spring").unwrap();
         let state = ParticleState {
             dimension: 2,

@@ -45,15 +45,16 @@ use super::handles::{Diagnostics, ModelHandle, RecorderHandle};
 use super::msgs::{
     LoadModelRequest, LoadModelResponse, ModelSwap, TrainRequest, TrainResponse, PACKAGE,
 };
+use super::names::Names;
 use super::params::NodeParams;
 use super::qos::{reliable_qos, ros_name as name};
 
 /// Name of the Train service.
-pub const TRAIN_SERVICE: &str = "/mcgnode/train";
+pub const TRAIN_SERVICE: &str = "~/train";
 /// Name of the LoadModel service.
-pub const LOAD_MODEL_SERVICE: &str = "/mcgnode/load_model";
+pub const LOAD_MODEL_SERVICE: &str = "~/load_model";
 /// Topic announcing every model swap (`mcgnode_msgs/msg/ModelSwap`).
-pub const MODEL_SWAP_TOPIC: &str = "/mcgnode/model_swap";
+pub const MODEL_SWAP_TOPIC: &str = "~/model_swap";
 /// Variant trained when a request leaves it empty.
 pub const DEFAULT_VARIANT: Variant = Variant::Mcgnode;
 
@@ -115,12 +116,13 @@ pub struct TrainerHandles {
 pub fn create(
     node: &mut Node,
     params: &NodeParams,
+    names: &Names,
     handles: TrainerHandles,
 ) -> crate::error::Result<(Arc<Trainer>, TrainingServers)> {
     let qos = reliable_qos();
     let topic = node
         .create_topic(
-            &name(MODEL_SWAP_TOPIC)?,
+            &name(names, MODEL_SWAP_TOPIC)?,
             MessageTypeName::new(PACKAGE, "ModelSwap"),
             &qos,
         )
@@ -131,7 +133,7 @@ pub fn create(
     let train = node
         .create_server(
             ServiceMapping::Enhanced,
-            &name(TRAIN_SERVICE)?,
+            &name(names, TRAIN_SERVICE)?,
             &ServiceTypeName::new(PACKAGE, "Train"),
             qos.clone(),
             qos.clone(),
@@ -140,7 +142,7 @@ pub fn create(
     let load = node
         .create_server(
             ServiceMapping::Enhanced,
-            &name(LOAD_MODEL_SERVICE)?,
+            &name(names, LOAD_MODEL_SERVICE)?,
             &ServiceTypeName::new(PACKAGE, "LoadModel"),
             qos.clone(),
             qos,
@@ -165,8 +167,10 @@ pub fn create(
     trainer.log(
         LogLevel::Info,
         &format!(
-            "services {TRAIN_SERVICE}, {LOAD_MODEL_SERVICE}; swaps announced on \
-             {MODEL_SWAP_TOPIC}; trained models go to {}",
+            "services {}, {}; swaps announced on {}; trained models go to {}",
+            names.resolve(TRAIN_SERVICE)?,
+            names.resolve(LOAD_MODEL_SERVICE)?,
+            names.resolve(MODEL_SWAP_TOPIC)?,
             trainer.model_dir.display()
         ),
     );

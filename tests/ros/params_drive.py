@@ -71,7 +71,7 @@ def main():
         fail(f"horizon described as {h}")
     if [(r.from_value, r.to_value, r.step) for r in h.integer_range] != [(1, 100000, 1)]:
         fail(f"horizon range {h.integer_range}")
-    if not t.read_only or t.additional_constraints != "an absolute ROS 2 name":
+    if not t.read_only or not t.additional_constraints.startswith("a ROS 2 name: absolute (/a), relative"):
         fail(f"input_topic described as {t}")
     if d.additional_constraints != "finite and > 0" or d.floating_point_range[0].from_value != 0.0:
         fail(f"dt described as {d}")
