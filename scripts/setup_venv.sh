@@ -67,6 +67,12 @@ ensure_packages \
     ros-kilted-rosidl-default-generators==1.7.1 ros-kilted-rosidl-core-generators==0.3.1 \
     cmake==4.4.4 ninja==1.13.2 catkin-pkg==1.1.1
 
+# colcon, to build this repository as a ROS 2 workspace (ros/: mcgnode_msgs
+# and the mcgnode node package; tests/colcon.rs).
+ensure_packages colcon-core==0.21.3 colcon-cmake==0.2.30 colcon-ros==0.5.0 \
+    colcon-library-path==0.2.1 colcon-bash==0.5.0 colcon-package-information==0.4.1 \
+    colcon-output==0.2.15
+
 # The wheels' exported CMake files carry the build machine's Python paths:
 # point them at this venv's (once; later runs find nothing to rewrite).
 stale=$(grep -rl /opt/python/cp311-cp311 "$VENV"/share/*/cmake 2>/dev/null || true)

@@ -214,7 +214,7 @@ fn observed_bags_replay_as_the_node_predicts_them() {
     assert!(!e.status.success() && err.contains("window 3"), "{err}");
 }
 
-/// scripts/noise.sh (smaller: 2 trajectories) prints the README's table; what
+/// scripts/noise.sh (smaller: 1 trajectory) prints the README's table; what
 /// the README says of it holds.
 #[test]
 fn noise_script_makes_the_readme_table() {
@@ -224,7 +224,7 @@ fn noise_script_makes_the_readme_table() {
         .arg(root.join("scripts/noise.sh"))
         .arg(dir.path())
         .env("MCGNODE", BIN)
-        .env("TRAJECTORIES", "2")
+        .env("TRAJECTORIES", "1")
         .output()
         .expect("running scripts/noise.sh");
     let table = ok(&o);
