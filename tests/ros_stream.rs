@@ -143,7 +143,7 @@ fn position_only_uneven_and_gapped_streams_are_predicted() {
         count("received") - count("warming_up"),
         "{report}"
     );
-    // Runs 2 and 3 each start over (a stamp not after the previous one).
+    // Runs 2 and 3 each start over (a stamp before the previous one).
     assert_eq!(count("history_resets"), 2, "{report}");
     assert!(node_log.contains("input stream 0 starts over"), "{report}");
 

@@ -16,8 +16,9 @@
 //!   span (keep the span well under a period of the fastest motion).
 //!
 //! A stream starts over (the history is emptied, [`Reset`] says why) when its
-//! graph changes, a stamp is not after the previous one, or the gap since the
-//! previous state exceeds `max_gap`.
+//! graph changes, a stamp is before the previous one, or the gap since the
+//! previous state exceeds `max_gap`. A state stamped like the previous one
+//! replaces it (a repeat or a correction of the same instant).
 
 use std::collections::{HashMap, VecDeque};
 
@@ -107,8 +108,8 @@ impl Default for StreamOptions {
 pub enum Reset {
     /// The graph (types, masses, edges, anchors) changed.
     Graph,
-    /// A stamp not after the previous one (a new run, a replayed bag).
-    NotAfter {
+    /// A stamp before the previous one (a new run, a replayed bag).
+    Earlier {
         /// The previous stamp.
         last: Nanos,
         /// This one.
@@ -127,9 +128,9 @@ impl std::fmt::Display for Reset {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Reset::Graph => write!(f, "the graph changed"),
-            Reset::NotAfter { last, now } => write!(
+            Reset::Earlier { last, now } => write!(
                 f,
-                "stamp {:.6} s is not after the previous {:.6} s (a new run?)",
+                "stamp {:.6} s is before the previous {:.6} s (a new run?)",
                 *now as f64 * 1e-9,
                 *last as f64 * 1e-9
             ),
@@ -189,6 +190,14 @@ impl History {
             self.positions.clear();
             self.graph = Some(graph.clone());
         }
+        if reset.is_none() && self.stamps.back() == Some(&t) {
+            // The same instant again: its positions replace the last ones.
+            if let Some(last) = self.positions.back_mut() {
+                last.clear();
+                last.extend_from_slice(q);
+            }
+            return (None, self.estimate(opts));
+        }
         let keep = opts.smoother.needs().max(3);
         let mut spare = None;
         while self.stamps.len() >= keep {
@@ -209,8 +218,8 @@ impl History {
         if self.graph.as_ref() != Some(graph) {
             return Some(Reset::Graph);
         }
-        if t <= last {
-            return Some(Reset::NotAfter { last, now: t });
+        if t < last {
+            return Some(Reset::Earlier { last, now: t });
         }
         let gap = (t - last) as f64 * 1e-9;
         (opts.max_gap > 0.0 && gap > opts.max_gap).then_some(Reset::Gap {
@@ -487,9 +496,15 @@ mod tests {
             Estimate::Ready(_)
         ));
         let (r, e) = h.push(&opts, &g, 20 * MS, &q);
-        assert!(matches!(r, Some(Reset::NotAfter { .. })), "{r:?}");
-        assert!(r.unwrap().to_string().contains("not after"));
+        assert!(matches!(r, Some(Reset::Earlier { .. })), "{r:?}");
+        assert!(r.unwrap().to_string().contains("before the previous"));
         assert_eq!(e, Estimate::WarmingUp { have: 1, needs: 3 });
+        // The same instant again replaces the last state: no reset.
+        let moved = vec![0.5; g.ndof()];
+        let (r, e) = h.push(&opts, &g, 20 * MS, &moved);
+        assert_eq!(r, None);
+        assert_eq!((h.len(), e), (1, Estimate::WarmingUp { have: 1, needs: 3 }));
+        assert_eq!(h.positions[0], moved);
         let (r, _) = h.push(&opts, &g, 900 * MS, &q);
         assert!(matches!(r, Some(Reset::Gap { .. })), "{r:?}");
         let other = SystemConfig::new(SystemKind::Spring, 3).graph();

@@ -12,7 +12,7 @@
 //!   predictions for earlier times, which can no longer match.
 //! - Memory is bounded: at most `capacity` predictions are kept, the oldest
 //!   dropped first (counted in [`Tracker::overflowed`]).
-//! - A state of another trajectory, or one not after the last, starts over
+//! - A state of another trajectory, or one before the last, starts over
 //!   (a new run or a replayed bag): predictions, figures and the alarm level
 //!   of the old run are dropped, so a lead reports only once the new run has
 //!   reached it. The node keeps one tracker per stream (trajectory id,
@@ -172,7 +172,7 @@ impl Tracker {
         state: &State,
     ) -> Vec<Comparison> {
         if let Some((id, last)) = self.last {
-            if id != trajectory || t <= last {
+            if id != trajectory || t < last {
                 self.restart();
             }
         }

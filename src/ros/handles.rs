@@ -116,7 +116,7 @@ pub struct Stats {
     /// Position-only states held as history only: their stream had too few
     /// states yet for a velocity estimate (not rejected).
     pub warming_up: AtomicU64,
-    /// Times a stream's history started over (graph change, stamp not after
+    /// Times a stream's history started over (graph change, stamp before
     /// the previous one, a gap longer than `input_max_gap`).
     pub history_resets: AtomicU64,
     /// States lost before the node took them: gaps in a publisher's sequence

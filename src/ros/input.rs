@@ -192,7 +192,7 @@ mod tests {
             matches!(
                 a,
                 Accepted::WarmingUp {
-                    reset: Some(Reset::NotAfter { .. }),
+                    reset: Some(Reset::Earlier { .. }),
                     ..
                 }
             ),
