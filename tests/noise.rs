@@ -119,9 +119,8 @@ fn observed_bags_replay_as_the_node_predicts_them() {
     let own = replay(&["--smoother", "poly", "--smoother-window", "25"]);
     assert!(re_at(&own, 0.1) > s, "noisy truth should score worse");
     // A full bag replayed from positions only: noise-free, close to full.
-    let full = ok(&mcgnode(
-        d,
-        &[
+    let replay_truth = |extra: &[&str]| {
+        let mut args = vec![
             "replay",
             "--bag",
             "truth.mcap",
@@ -130,22 +129,12 @@ fn observed_bags_replay_as_the_node_predicts_them() {
             "--horizon",
             "0.5",
             "--json",
-        ],
-    ));
-    let pos = ok(&mcgnode(
-        d,
-        &[
-            "replay",
-            "--bag",
-            "truth.mcap",
-            "--model",
-            model,
-            "--horizon",
-            "0.5",
-            "--json",
-            "--positions-only",
-        ],
-    ));
+        ];
+        args.extend_from_slice(extra);
+        ok(&mcgnode(d, &args))
+    };
+    let full = replay_truth(&[]);
+    let pos = replay_truth(&["--positions-only"]);
     let (f, q) = (re_at(&full, 0.5), re_at(&pos, 0.5));
     assert!(q < 2.0 * f && q > 0.5 * f, "{q} vs {f}");
     // Bad settings and a reference that does not match say what to do.
