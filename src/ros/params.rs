@@ -768,12 +768,7 @@ impl NodeParams {
                 self.set_str(key, w.clone());
             }
             Kind::Bool => match value {
-                Scalar::Bool(b) if key == "use_sim_time" => self.use_sim_time = *b,
-                Scalar::Bool(b) if key == "accuracy_retrain" => self.accuracy_retrain = *b,
-                Scalar::Bool(b) if key == "markers" => self.markers = *b,
-                Scalar::Bool(b) if key == "lifecycle" => self.lifecycle = *b,
-                Scalar::Bool(b) if key == "out_of_range_refuse" => self.out_of_range_refuse = *b,
-                Scalar::Bool(b) => self.qos_reliable = *b,
+                Scalar::Bool(b) => self.set_bool(key, *b),
                 _ => return Err(ill("true or false")),
             },
             Kind::Int(lo, hi) => {
@@ -852,6 +847,20 @@ impl NodeParams {
             "model_dir" => self.model_dir = s,
             "markers_topic" => self.markers_topic = s,
             "velocity_smoother" => self.velocity_smoother = s,
+            _ => unreachable_key(key),
+        }
+    }
+
+    // Each bool by name: a new one without an arm is caught by the tests
+    // instead of silently setting another.
+    fn set_bool(&mut self, key: &str, b: bool) {
+        match key {
+            "qos_reliable" => self.qos_reliable = b,
+            "use_sim_time" => self.use_sim_time = b,
+            "accuracy_retrain" => self.accuracy_retrain = b,
+            "markers" => self.markers = b,
+            "lifecycle" => self.lifecycle = b,
+            "out_of_range_refuse" => self.out_of_range_refuse = b,
             _ => unreachable_key(key),
         }
     }
@@ -1028,6 +1037,28 @@ mod tests {
         let mut q = NodeParams::default();
         q.apply_file_text(&p.to_yaml()).unwrap();
         assert_eq!(p, q);
+    }
+
+    /// Setting one bool changes that parameter and no other.
+    #[test]
+    fn each_bool_sets_only_itself() {
+        let d = NodeParams::default();
+        for (key, kind, _) in SPECS {
+            if *kind != Kind::Bool {
+                continue;
+            }
+            let flipped = d.raw_value(key) != "true";
+            let mut p = d.clone();
+            p.set(key, &Scalar::Bool(flipped), false).unwrap();
+            assert_eq!(p.raw_value(key), flipped.to_string(), "{key}");
+            for (other, _, _) in SPECS.iter().filter(|(k, _, _)| k != key) {
+                assert_eq!(
+                    p.raw_value(other),
+                    d.raw_value(other),
+                    "{key} changed {other}"
+                );
+            }
+        }
     }
 
     #[test]
