@@ -23,7 +23,11 @@
 //! - [`action`]: the Train action (per-epoch feedback, cancel), on top of
 //!   [`training`];
 //! - [`clock`]: system or simulated (`/clock`) time;
-//! - [`service`]: the one loop serving every service.
+//! - [`service`]: the one loop serving every service;
+//! - [`lifecycle`]: the managed-node states and transitions (no DDS), and
+//!   [`lifecycle_services`]: the `lifecycle_msgs` services over them.
+//!
+//! No circle of imports joins these files (tests/structure.rs).
 
 pub mod accuracy;
 pub mod action;
@@ -31,6 +35,7 @@ pub mod clock;
 pub mod handles;
 pub mod input;
 pub mod lifecycle;
+pub mod lifecycle_services;
 pub mod markers;
 pub mod msgs;
 pub mod names;

@@ -493,7 +493,7 @@ pub fn serve(
     let h = handles(&node, (&params, &names, ros.log_level), live, model)?;
     let (trainer, servers) = training::create(&mut node, &params, &names, trainer_handles(&h))?;
     let action_server = action::create(&mut node, &names)?;
-    let lifecycle = super::lifecycle::create(&mut node, &names)?;
+    let lifecycle = super::lifecycle_services::create(&mut node, &names)?;
     let spinner = node
         .spinner()
         .map_err(|e| err!("the node spinner: {e:?}"))?;
@@ -506,7 +506,7 @@ pub fn serve(
         });
         endpoints.spawn(&h, &trainer);
         spawn_training(trainer, servers, action_server);
-        super::lifecycle::spawn(
+        super::lifecycle_services::spawn(
             h.lifecycle.clone(),
             h.diag.clone(),
             h.clock.clone(),
