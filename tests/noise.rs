@@ -76,11 +76,11 @@ fn observed_bags_replay_as_the_node_predicts_them() {
     // bag info reads it, and says the velocities are derived.
     let info = ok(&mcgnode(d, &["bag", "info", "noisy.mcap"]));
     assert!(info.contains("spring"), "{info}");
-    let replay = |extra: &[&str]| {
+    let replay_bag = |bag: &str, extra: &[&str]| {
         let mut args = vec![
             "replay",
             "--bag",
-            "noisy.mcap",
+            bag,
             "--model",
             model,
             "--horizon",
@@ -90,6 +90,7 @@ fn observed_bags_replay_as_the_node_predicts_them() {
         args.extend_from_slice(extra);
         ok(&mcgnode(d, &args))
     };
+    let replay = |extra: &[&str]| replay_bag("noisy.mcap", extra);
     let plain = replay(&["--reference", "truth.mcap"]);
     let smooth = replay(&[
         "--reference",
@@ -119,20 +120,7 @@ fn observed_bags_replay_as_the_node_predicts_them() {
     let own = replay(&["--smoother", "poly", "--smoother-window", "25"]);
     assert!(re_at(&own, 0.1) > s, "noisy truth should score worse");
     // A full bag replayed from positions only: noise-free, close to full.
-    let replay_truth = |extra: &[&str]| {
-        let mut args = vec![
-            "replay",
-            "--bag",
-            "truth.mcap",
-            "--model",
-            model,
-            "--horizon",
-            "0.5",
-            "--json",
-        ];
-        args.extend_from_slice(extra);
-        ok(&mcgnode(d, &args))
-    };
+    let replay_truth = |extra: &[&str]| replay_bag("truth.mcap", extra);
     let full = replay_truth(&[]);
     let pos = replay_truth(&["--positions-only"]);
     let (f, q) = (re_at(&full, 0.5), re_at(&pos, 0.5));

@@ -140,35 +140,10 @@ fn imports() -> BTreeMap<String, BTreeSet<String>> {
     let mut g: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
     for (path, code) in sources() {
         let me = top(&path);
-        let mut add = |m: &str| {
-            if m != me && !m.is_empty() {
-                g.entry(me.clone()).or_default().insert(m.to_string());
-            }
-        };
-        for part in code.split("crate::").skip(1) {
-            if let Some(rest) = part.strip_prefix('{') {
-                // `use crate::{a::x, b, c::{y, z}}`: the first name of each item.
-                let mut depth = 0;
-                let mut item = String::new();
-                for c in rest.chars() {
-                    match c {
-                        '{' => depth += 1,
-                        '}' if depth == 0 => break,
-                        '}' => depth -= 1,
-                        ',' if depth == 0 => {
-                            add(first_name(&item));
-                            item.clear();
-                            continue;
-                        }
-                        _ => {}
-                    }
-                    item.push(c);
-                }
-                add(first_name(&item));
-            } else {
-                add(first_name(part));
-            }
-        }
+        let uses = names_after(&code, "crate::");
+        g.entry(me.clone())
+            .or_default()
+            .extend(uses.into_iter().filter(|m| *m != me));
     }
     g
 }

@@ -398,15 +398,12 @@ impl Live {
         let mut guard = self.state.lock().unwrap_or_else(PoisonError::into_inner);
         let live = &mut *guard;
         let (window, capacity) = (p.accuracy_window as usize, p.accuracy_max_pending as usize);
-        let settings = (
-            p.accuracy_lead_times.clone(),
-            window,
-            capacity,
-            p.input_max_streams as usize,
-        );
-        if live.settings != settings {
-            live.streams = Streams::new(settings.3);
-            live.settings = settings;
+        let streams = p.input_max_streams as usize;
+        // Compared in place: no copy of the lead times per message.
+        let (leads, w, c, n) = &live.settings;
+        if *leads != p.accuracy_lead_times || (*w, *c, *n) != (window, capacity, streams) {
+            live.streams = Streams::new(streams);
+            live.settings = (p.accuracy_lead_times.clone(), window, capacity, streams);
         }
         live.latest = Some(id);
         let (tracker, level) = live.streams.get_or_insert_with(id, || {
