@@ -5,7 +5,8 @@
 # positions only with Gaussian noise of 0, 0.1 % and 1 % of the particle
 # spacing, replayed the way the node predicts from such a stream (velocities
 # estimated causally, without and with the poly smoother) and scored against
-# the noise-free truth (`replay --reference`). RE at lead 0.1 s and 1 s.
+# the noise-free truth (`replay --reference`). RE at lead 0.1 s and 1 s,
+# beside standing still's (predicting that nothing moves) on the same starts.
 #
 #   scripts/noise.sh [OUT_DIR]      # bags in OUT_DIR (default: a temporary folder)
 #
@@ -22,18 +23,21 @@ mkdir -p "$OUT"
 TRAJ=${TRAJECTORIES:-4}
 WINDOWS=${WINDOWS:-9 25}
 
-# Mean RE at leads 0.1 s and 1 s of one replay (JSON on stdin).
+# Mean RE at leads 0.1 s and 1 s of one replay (JSON on stdin), then the
+# standing-still reference's on the same starts.
 at_leads() {
     python3 -c '
 import json, sys
 r = json.load(sys.stdin)
 t, g = r["summary"]["t"], r["summary"]["re"]["gmean"]
 at = lambda x: g[min(range(len(t)), key=lambda i: abs(t[i] - x))]
-print("%.2e | %.2e" % (at(0.1), at(1.0)))'
+still = r["still"]["re"]
+st = lambda x: still[min(range(len(t)), key=lambda i: abs(t[i] - x))]
+print("%.2e | %.2e | %.2e | %.2e" % (at(0.1), at(1.0), st(0.1), st(1.0)))'
 }
 
-echo "| system | input | smoother | RE at 0.1 s | RE at 1 s |"
-echo "| --- | --- | --- | --- | --- |"
+echo "| system | input | smoother | RE at 0.1 s | RE at 1 s | still at 0.1 s | still at 1 s |"
+echo "| --- | --- | --- | --- | --- | --- | --- |"
 for system in spring pendulum; do
     model=bags/models/${system}5-mcgnode.json
     # 100 Hz: the pendulum's simulator saves every 1000 of its 1e-5 s steps.

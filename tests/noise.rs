@@ -220,6 +220,33 @@ fn noise_script_makes_the_readme_table() {
     for r in &rows {
         assert!(r.3 > 0.0 && r.3 < 1.0 && r.4 > 0.0 && r.4 < 1.0, "{r:?}");
     }
+    // Standing still beside each row: the noise-free model beats it.
+    let still: Vec<f64> = table
+        .lines()
+        .skip(2)
+        .map(|l| {
+            l.trim_matches('|')
+                .split('|')
+                .nth(6)
+                .unwrap_or("")
+                .trim()
+                .parse()
+                .unwrap_or(f64::NAN)
+        })
+        .collect();
+    assert!(
+        still.iter().all(|s| *s > 0.0 && *s < 1.0),
+        "{still:?}\n{table}"
+    );
+    for (r, s) in rows.iter().zip(&still) {
+        if r.1 == "full states" {
+            assert!(
+                r.4 < *s / 10.0,
+                "{} is not 10x better than still: {r:?}",
+                r.0
+            );
+        }
+    }
     let get = |system: &str, input: &str, smoother: &str| {
         rows.iter()
             .find(|r| r.0 == system && r.1 == input && r.2 == smoother)
