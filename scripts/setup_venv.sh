@@ -46,6 +46,10 @@ fi
 # Independent MCAP/ROS 2 bag decoders (tests/bag_python.rs, scripts/decode_bag.py).
 ensure_packages mcap==1.6.0 mcap-ros2-support==0.6.0 rosbags==0.11.9 numpy==2.4.6
 
+# The Python package python/ (PyO3): maturin builds its wheel, pytest runs
+# python/tests/ (tests/python.rs).
+ensure_packages maturin==1.16.0 pytest==9.2.0
+
 # ROS 2 Kilted from PyPI: rclpy with std/geometry/std_srvs messages, and what
 # scripts/build_msgs.sh needs to build our interface package (see
 # shared/ros-notes.md). Build-time packages are not pulled in by the others.

@@ -9,7 +9,9 @@ mod replay;
 mod reproduce;
 mod rollout;
 mod simulate;
-mod train;
+// Public for the Python package's `mcgnode.train` (python/), which parses its
+// options with these Args and trains through `train::train`.
+pub mod train;
 
 use clap::{Parser, Subcommand};
 

@@ -1,5 +1,6 @@
 //! `mcgnode train`.
 
+use crate::model::file::TrainingReport;
 use crate::model::{ArchPreset, EdgeInput, MessageFn};
 use crate::models::{train_any_from_bags, ModelKind};
 use crate::train::{
@@ -8,7 +9,7 @@ use crate::train::{
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Options of `train`.
 #[derive(clap::Args, Debug, Clone)]
@@ -225,8 +226,14 @@ pub fn progress(quiet: bool) -> impl FnMut(&EpochReport) -> bool {
     }
 }
 
-/// Runs `train`.
-pub fn run(a: Args) -> Result<()> {
+/// Trains as `a` says and writes the model file `a.out`: what `run` does,
+/// without its printing. `log` gets training's messages and `on_epoch` each
+/// epoch's figures (returning false cancels). The Python package's `train`.
+pub fn train(
+    a: &Args,
+    log: impl FnMut(&str),
+    on_epoch: impl FnMut(&EpochReport) -> bool,
+) -> Result<TrainingReport> {
     let recipe = Recipe::from(a.recipe);
     let paper = TrainConfig::default();
     let auto = recipe == Recipe::Auto;
@@ -276,32 +283,43 @@ pub fn run(a: Args) -> Result<()> {
         edge_physics: a.edge_physics,
         recipe,
     };
+    Ok(train_any_from_bags(
+        a.model, &a.data, &opts, &cfg, log, on_epoch, &a.out,
+    )?)
+}
+
+/// The line `run` prints when training has written `out`.
+pub fn summary(out: &Path, t: &TrainingReport) -> String {
+    format!(
+        "wrote {}: {} epochs{}{} in {:.1} s, best epoch {}, train MSE {:.3e}, validation MSE {:.3e}",
+        out.display(),
+        t.epochs_run,
+        t.resumed_at
+            .map(|e| format!(" (resumed from the checkpoint of epoch {e})"))
+            .unwrap_or_default(),
+        match (t.stopped_early, t.out_of_time) {
+            (true, _) => " (early stop)",
+            (_, true) => " (time budget reached)",
+            _ => "",
+        },
+        t.seconds,
+        t.best_epoch,
+        t.train_loss,
+        t.validation_loss
+    )
+}
+
+/// Runs `train`.
+pub fn run(a: Args) -> Result<()> {
     let quiet = a.quiet;
     let log = |m: &str| {
         if !quiet {
             eprintln!("{m}")
         }
     };
-    let progress = progress(a.quiet);
-    let t = &train_any_from_bags(a.model, &a.data, &opts, &cfg, log, progress, &a.out)?;
+    let t = &train(&a, log, progress(a.quiet))?;
     if !a.quiet {
-        eprintln!(
-            "wrote {}: {} epochs{}{} in {:.1} s, best epoch {}, train MSE {:.3e}, validation MSE {:.3e}",
-            a.out.display(),
-            t.epochs_run,
-            t.resumed_at
-                .map(|e| format!(" (resumed from the checkpoint of epoch {e})"))
-                .unwrap_or_default(),
-            match (t.stopped_early, t.out_of_time) {
-                (true, _) => " (early stop)",
-                (_, true) => " (time budget reached)",
-                _ => "",
-            },
-            t.seconds,
-            t.best_epoch,
-            t.train_loss,
-            t.validation_loss
-        );
+        eprintln!("{}", summary(&a.out, t));
         eprintln!("{}", t.explained_line());
     }
     // Even --quiet says when a model learned little: a plausible wrong

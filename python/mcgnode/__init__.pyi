@@ -1,0 +1,137 @@
+"""Type hints of the mcgnode package (the native module mcgnode._mcgnode)."""
+
+import os
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+__all__ = ["Error", "Model", "__version__", "load_model", "read_bag", "train"]
+
+PathLike = Union[str, "os.PathLike[str]"]
+ArrayLike = npt.ArrayLike
+F64 = npt.NDArray[np.float64]
+
+class Error(Exception):
+    """A failure of the mcgnode library: a bag it cannot read, a model file
+    that does not load, data a model was not trained for, a rollout that
+    diverged. The message is the one the ``mcgnode`` command line prints after
+    ``error: ``."""
+
+# One trajectory as read_bag returns it. Keys:
+#   id: int, system: str, dim: int,
+#   positions, velocities: (states, particles, dim) float64,
+#   accelerations: (states, particles, dim) float64 or None,
+#   stamps: (states,) float64 seconds from the first stamp,
+#   masses: (particles,) float64, types: (particles,) uint32,
+#   edges: (edges, 5) float64 rows (a, b, kind, rest_length, stiffness),
+#          b >= particles meaning anchor b - particles, kind 0 spring / 1 bar,
+#   anchors: (anchors, dim) float64,
+#   field: {"gravity": float, "drag": float, "force": list[float]} or None,
+#   dt: float or None, save_every: int (mcgnode rollout --initial's defaults),
+#   velocities_derived: bool.
+Trajectory = Dict[str, Any]
+
+# A rollout: positions and velocities (steps // every + 1, particles, dim)
+# float64, stamps (steps // every + 1,) seconds.
+RolloutResult = Dict[str, F64]
+
+def read_bag(
+    path: Union[PathLike, Sequence[PathLike]], topic: Optional[str] = None
+) -> List[Trajectory]:
+    """The ParticleState trajectories of a bag (an MCAP file, a rosbag2
+    directory with MCAP or sqlite3 storage, a .db3 file, or a list of them),
+    read as ``mcgnode`` reads them. ``topic`` chooses among several
+    ParticleState topics. Raises Error when the bag cannot be read."""
+
+def load_model(ref: PathLike) -> Model:
+    """Loads a model as ``mcgnode rollout --model REF`` does: a model file
+    (GNODE family or a baseline), ``"still"`` or ``"truth:<system>"``.
+    Raises Error with the library's message."""
+
+def train(
+    bags: Union[PathLike, Sequence[PathLike]],
+    out: PathLike,
+    *,
+    variant: str,
+    **options: Any,
+) -> Dict[str, Any]:
+    """``mcgnode train --data BAGS --out OUT --model VARIANT [options]``,
+    options as keywords with underscores (``epochs=300``, ``seed=1``,
+    ``recipe="paper"``, ``edge_physics=True``, ``lr_drop=[(300, 1e-3)]``,
+    ``block_hidden={"edge_out": [16, 16]}``, ``quiet=True``, ...), with the
+    CLI's defaults and checks. Writes the model file and returns its training
+    report as a dict, with "out", "summary" and "explained_line". Raises Error
+    with the CLI's message; an unknown option raises TypeError, a bad value
+    ValueError."""
+
+class Model:
+    """A loaded model (see load_model)."""
+
+    @property
+    def reference(self) -> str:
+        """The reference it was loaded from."""
+    @property
+    def name(self) -> str:
+        """Its kind: "mcgnode", "gnode", ..., "lgn", "still", "truth:spring", ..."""
+    @property
+    def predicts_forces(self) -> bool:
+        """Whether forces() answers (CGNODE, CDGNODE, MCGNODE, truth, still)."""
+    def describe(self) -> str:
+        """A one-line description of the model."""
+    def rollout(
+        self,
+        trajectory: Mapping[str, Any],
+        steps: int,
+        dt: Optional[float] = None,
+        every: int = 1,
+    ) -> RolloutResult:
+        """Rolls out from the first state of ``trajectory`` (a read_bag dict)
+        for ``steps`` steps of ``dt`` (default: the trajectory's ``dt``),
+        keeping every ``every``-th state: ``mcgnode rollout --initial``, bit
+        for bit. Checks the graph and field against what the model was
+        trained on; a start out of its training range warns (RuntimeWarning)."""
+    def rollout_arrays(
+        self,
+        positions: ArrayLike,
+        velocities: ArrayLike,
+        masses: ArrayLike,
+        edges: ArrayLike,
+        anchors: Optional[ArrayLike] = None,
+        *,
+        steps: int,
+        dt: float,
+        types: Optional[ArrayLike] = None,
+        every: int = 1,
+    ) -> RolloutResult:
+        """rollout from arrays: positions, velocities (particles, dim), masses
+        (particles,), edges (edges, 5), anchors (anchors, dim), types
+        (particles,; default 0)."""
+    def accelerations(
+        self,
+        positions: ArrayLike,
+        velocities: ArrayLike,
+        masses: ArrayLike,
+        edges: ArrayLike,
+        anchors: Optional[ArrayLike] = None,
+        *,
+        types: Optional[ArrayLike] = None,
+    ) -> F64:
+        """The model's accelerations at one state (particles, dim) or a stack
+        of states (k, particles, dim); the result has their shape."""
+    def forces(
+        self,
+        positions: ArrayLike,
+        velocities: ArrayLike,
+        masses: ArrayLike,
+        edges: ArrayLike,
+        anchors: Optional[ArrayLike] = None,
+        *,
+        types: Optional[ArrayLike] = None,
+    ) -> Dict[str, npt.NDArray[Any]]:
+        """The forces the model predicts at one state: "total" (particles,
+        dim), "pairs" (pairs, 2) int64 rows (a, b) and "pair_forces" (pairs,
+        dim), the force on a due to b, b feeling its opposite (MCGNODE and
+        truth; none for CGNODE and CDGNODE). Models that predict accelerations (NODE, GNODE, baselines)
+        raise Error."""

@@ -1,0 +1,388 @@
+"""The mcgnode Python package against the `mcgnode` command line.
+
+Every check compares with what the CLI does on the same input: bags written
+by `mcgnode simulate` (and rewritten as rosbag2 directories by rosbags), read
+by `read_bag` and by `mcgnode bag info` / an independent decoder; rollouts by
+`Model.rollout` and `mcgnode rollout`, equal bit for bit; error messages equal
+to the CLI's; a model trained through `mcgnode.train` and through `mcgnode
+train` with the same options, equal but for the wall time.
+
+Run by tests/python.rs (`cargo test --release --test python`), which builds
+and installs the wheel and sets MCGNODE_BIN; standalone: build and install
+the wheel, then `MCGNODE_BIN=target/release/mcgnode .venv/bin/python3 -m
+pytest python/tests`.
+"""
+
+import inspect
+import json
+import os
+import re
+import shlex
+import struct
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mcgnode
+
+ROOT = Path(__file__).resolve().parents[2]
+SPRING_MODEL = ROOT / "bags/models/spring5-mcgnode.json"
+PENDULUM_MODEL = ROOT / "bags/models/pendulum5-mcgnode.json"
+
+
+def mcgnode_bin() -> str:
+    b = os.environ.get("MCGNODE_BIN")
+    if not b:
+        target = Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
+        b = str(target / "release/mcgnode")
+    assert Path(b).exists(), (
+        f"the mcgnode binary {b} is missing: build it (cargo build --release) "
+        "or set MCGNODE_BIN"
+    )
+    return b
+
+
+def cli(*args, ok=True):
+    """Runs `mcgnode ARGS` and returns the finished process."""
+    p = subprocess.run(
+        [mcgnode_bin(), *map(str, args)], capture_output=True, text=True, cwd=ROOT
+    )
+    if ok:
+        assert p.returncode == 0, f"mcgnode {args} failed:\n{p.stderr}"
+    else:
+        assert p.returncode != 0, f"mcgnode {args} succeeded:\n{p.stdout}"
+    return p
+
+
+def cli_error(*args) -> str:
+    """The message `mcgnode ARGS` fails with (after `error: `)."""
+    lines = [l for l in cli(*args, ok=False).stderr.splitlines() if l.startswith("error: ")]
+    assert lines, f"mcgnode {args} printed no error line"
+    return lines[-1][len("error: "):]
+
+
+def same_bits(a, b) -> bool:
+    """Equal shapes and float64 bit patterns (so -0.0 differs from 0.0)."""
+    a, b = np.ascontiguousarray(a), np.ascontiguousarray(b)
+    return (
+        a.shape == b.shape
+        and a.dtype == b.dtype == np.float64
+        and np.array_equal(a.view(np.uint64), b.view(np.uint64))
+    )
+
+
+@pytest.fixture(scope="session")
+def bags(tmp_path_factory):
+    d = tmp_path_factory.mktemp("bags")
+    spring, pendulum = d / "spring.mcap", d / "pendulum.mcap"
+    cli("simulate", "--trajectories", 3, "--states", 20, "--seed", 3, "--out", spring)
+    cli("simulate", "--system", "pendulum", "--trajectories", 2, "--states", 10,
+        "--seed", 4, "--out", pendulum)
+    return {"dir": d, "spring": spring, "pendulum": pendulum}
+
+
+@pytest.fixture(scope="session")
+def gnode(bags):
+    """A tiny GNODE trained through Python (it learns little, and says so)."""
+    out = bags["dir"] / "gnode.json"
+    with pytest.warns(UserWarning, match="explains only"):
+        mcgnode.train(bags["spring"], out, variant="gnode", epochs=2, quiet=True)
+    return out
+
+
+# -- read_bag -----------------------------------------------------------------
+
+
+def test_read_bag_matches_bag_info_and_an_independent_decoder(bags):
+    trs = mcgnode.read_bag(bags["spring"])
+    info = cli("bag", "info", bags["spring"]).stdout
+    m = re.search(r"spring: (\d+) trajectories, (\d+) particles, (\d)D, (\d+) states, "
+                  r"longest ([0-9.]+) s", info)
+    assert m, info
+    assert len(trs) == int(m[1]) == 3
+    assert all(t["positions"].shape[1] == int(m[2]) and t["dim"] == int(m[3]) for t in trs)
+    assert sum(len(t["stamps"]) for t in trs) == int(m[4])
+    assert max(t["stamps"][-1] for t in trs) == pytest.approx(float(m[5]), abs=1e-3)
+    assert "field: none" in info
+    for t in trs:
+        assert t["field"] == {"gravity": 0.0, "drag": 0.0, "force": []}
+        assert (t["dt"], t["save_every"]) == (1e-3, 100)
+        assert t["velocities_derived"] is False
+    # Every message, decoded by the Python mcap readers, bit for bit.
+    out = subprocess.run(
+        [sys.executable, ROOT / "scripts/decode_bag.py", bags["spring"], "--bits"],
+        capture_output=True, text=True, check=True,
+    )
+    msgs = json.loads(out.stdout)["messages"]
+    f = lambda bits: struct.unpack("<d", struct.pack("<Q", bits))[0]
+    by_id = {t["id"]: t for t in trs}
+    for msg in msgs:
+        t, k = by_id[msg["trajectory_id"]], msg["step"]
+        q = np.array([[f(p[0]), f(p[1])] for p in msg["positions"]])
+        v = np.array([[f(p[0]), f(p[1])] for p in msg["velocities"]])
+        assert same_bits(t["positions"][k], q) and same_bits(t["velocities"][k], v)
+        assert same_bits(t["masses"], np.array([f(x) for x in msg["masses"]]))
+        edges = np.array([[a, b, kind, f(r), f(s)] for a, b, kind, r, s in zip(
+            msg["edge_a"], msg["edge_b"], msg["edge_kind"], msg["edge_rest_length"],
+            msg["edge_stiffness"])], dtype=np.float64)
+        assert same_bits(t["edges"], edges)
+    assert len(msgs) == sum(len(t["stamps"]) for t in trs)
+
+
+def test_read_bag_reads_rosbag2_directories_and_several_paths(bags):
+    ref = mcgnode.read_bag(bags["spring"])
+    for storage in ["sqlite3", "mcap"]:
+        out = bags["dir"] / f"rosbag2_{storage}"
+        subprocess.run(
+            [sys.executable, ROOT / "scripts/write_rosbag2.py", bags["spring"], out,
+             "--storage", storage, "--compression", "message"],
+            check=True, capture_output=True,
+        )
+        got = mcgnode.read_bag(out)
+        assert len(got) == len(ref)
+        for a, b in zip(got, ref):
+            for k in ["positions", "velocities", "stamps", "masses", "edges", "anchors"]:
+                assert same_bits(a[k], b[k]), (storage, k)
+        # The .db3 file alone, too.
+        if storage == "sqlite3":
+            (db3,) = out.glob("*.db3")
+            assert len(mcgnode.read_bag(db3)) == len(ref)
+    # Several paths: their trajectories in order (as `train --data A B`).
+    both = mcgnode.read_bag([bags["spring"], bags["dir"] / "rosbag2_sqlite3"])
+    assert [t["id"] for t in both] == [0, 1, 2, 0, 1, 2]
+    assert same_bits(both[4]["positions"], ref[1]["positions"])
+
+
+def test_read_bag_gives_the_pendulum_graph_with_anchors(bags):
+    t = mcgnode.read_bag(bags["pendulum"])[0]
+    n = t["positions"].shape[1]
+    assert t["anchors"].shape == (1, 2)
+    assert t["field"]["gravity"] == 10.0
+    # Bars (kind 1); the first hangs from anchor 0, written b = n + 0.
+    assert set(t["edges"][:, 2]) == {1.0}
+    assert n in set(t["edges"][:, 1].astype(int))
+    assert t["accelerations"].shape == t["positions"].shape
+
+
+# -- rollouts against `mcgnode rollout` --------------------------------------
+
+
+def cli_rollout(model, bag, trajectory, steps, dt, every, tmp):
+    out = tmp / f"cli_rollout_{abs(hash((str(model), str(bag), trajectory, steps, dt, every)))}.mcap"
+    cli("rollout", "--model", model, "--initial", bag, "--trajectory", trajectory,
+        "--duration", repr(steps * dt), "--dt", repr(dt), "--save-every", every, "--out", out)
+    (t,) = mcgnode.read_bag(out)
+    return t
+
+
+@pytest.mark.parametrize("model, bag, steps, dt, every", [
+    (SPRING_MODEL, "spring", 300, 1e-3, 1),
+    (SPRING_MODEL, "spring", 700, 1e-3, 7),
+    ("truth:spring", "spring", 300, 1e-3, 1),
+    ("still", "spring", 50, 1e-3, 1),
+    (PENDULUM_MODEL, "pendulum", 400, 1e-5, 1),
+    ("truth:pendulum", "pendulum", 400, 1e-5, 1),
+])
+def test_rollout_equals_the_cli_bit_for_bit(bags, tmp_path, model, bag, steps, dt, every):
+    tr = mcgnode.read_bag(bags[bag])[1]
+    got = mcgnode.load_model(model).rollout(tr, steps, dt, every=every)
+    want = cli_rollout(model, bags[bag], tr["id"], steps, dt, every, tmp_path)
+    assert got["positions"].shape == (steps // every + 1, *tr["positions"].shape[1:])
+    assert same_bits(got["positions"], want["positions"])
+    assert same_bits(got["velocities"], want["velocities"])
+    assert np.allclose(got["stamps"], want["stamps"], rtol=0, atol=1e-9)
+
+
+def test_a_trained_gnode_rolls_out_as_the_cli_and_its_accelerations_are_the_cli_s(
+        bags, gnode, tmp_path):
+    tr = mcgnode.read_bag(bags["spring"])[2]
+    m = mcgnode.load_model(gnode)
+    got = m.rollout(tr, 200, 1e-3)
+    want = cli_rollout(gnode, bags["spring"], tr["id"], 200, 1e-3, 1, tmp_path)
+    assert same_bits(got["positions"], want["positions"])
+    assert same_bits(got["velocities"], want["velocities"])
+    # The CLI records the model's acceleration at every state it writes.
+    acc = m.accelerations(want["positions"], want["velocities"], tr["masses"], tr["edges"])
+    assert same_bits(acc, want["accelerations"])
+    one = m.accelerations(want["positions"][5], want["velocities"][5], tr["masses"], tr["edges"])
+    assert same_bits(one, want["accelerations"][5])
+
+
+def test_rollout_defaults_to_the_bag_step_and_arrays_give_the_same(bags):
+    tr = mcgnode.read_bag(bags["pendulum"])[0]
+    m = mcgnode.load_model(PENDULUM_MODEL)
+    by_dict = m.rollout(tr, 300)  # dt: the bag's system_config, 1e-5
+    by_arrays = m.rollout_arrays(
+        tr["positions"][0], tr["velocities"][0], tr["masses"], tr["edges"], tr["anchors"],
+        steps=300, dt=1e-5, types=tr["types"])
+    assert same_bits(by_dict["positions"], by_arrays["positions"])
+    assert same_bits(by_dict["velocities"], by_arrays["velocities"])
+    assert by_dict["stamps"][-1] == pytest.approx(300 * 1e-5)
+
+
+def test_the_truth_rollout_reproduces_the_simulated_bag(bags):
+    tr = mcgnode.read_bag(bags["spring"])[0]
+    every = tr["save_every"]
+    out = mcgnode.load_model("truth:spring").rollout(tr, (len(tr["stamps"]) - 1) * every,
+                                                    every=every)
+    assert same_bits(out["positions"], tr["positions"])
+
+
+# -- forces -----------------------------------------------------------------
+
+
+def test_forces_of_mcgnode_and_truth_and_refused_for_gnode(bags, gnode):
+    tr = mcgnode.read_bag(bags["spring"])[0]
+    args = (tr["positions"][3], tr["velocities"][3], tr["masses"], tr["edges"])
+    f = mcgnode.load_model(SPRING_MODEL).forces(*args)
+    n = tr["positions"].shape[1]
+    assert f["total"].shape == (n, 2) and f["pair_forces"].shape[1] == 2
+    assert f["pairs"].shape == (f["pair_forces"].shape[0], 2) and f["pairs"].dtype == np.int64
+
+    def summed(f):
+        """Each pair's force on a, and its opposite on b, summed per particle."""
+        s = np.zeros((n, 2))
+        np.add.at(s, f["pairs"][:, 0], f["pair_forces"])
+        np.add.at(s, f["pairs"][:, 1], -f["pair_forces"])
+        return s
+
+    # MCGNODE's totals are its pairwise forces summed (closed system: no body force).
+    assert np.allclose(summed(f), f["total"], rtol=1e-12, atol=1e-12)
+    truth = mcgnode.load_model("truth:spring")
+    ft = truth.forces(*args)
+    assert np.allclose(ft["total"], truth.accelerations(*args) * tr["masses"][:, None],
+                       rtol=1e-12, atol=1e-12)
+    assert ft["pairs"].shape == (len(tr["edges"]), 2)
+    assert np.allclose(summed(ft), ft["total"], rtol=1e-12, atol=1e-12)
+    still = mcgnode.load_model("still").forces(*args)
+    assert not still["total"].any() and still["pairs"].shape == (0, 2)
+    g = mcgnode.load_model(gnode)
+    assert not g.predicts_forces
+    with pytest.raises(mcgnode.Error, match="predicts accelerations, not forces"):
+        g.forces(*args)
+
+
+# -- errors: the CLI's messages ---------------------------------------------
+
+
+def test_errors_carry_the_cli_messages(bags, tmp_path):
+    out = tmp_path / "o.mcap"
+    for ref in ["missing-model.json", "truth:rope"]:
+        with pytest.raises(mcgnode.Error) as e:
+            mcgnode.load_model(ref)
+        assert str(e.value) == cli_error("rollout", "--model", ref, "--out", out)
+    not_a_bag = ROOT / "README.md"
+    with pytest.raises(mcgnode.Error) as e:
+        mcgnode.read_bag(not_a_bag)
+    assert str(e.value) == cli_error("train", "--model", "mcgnode", "--data", not_a_bag,
+                                     "--out", tmp_path / "m.json")
+    assert cli_error("rollout", "--model", "still", "--initial", not_a_bag,
+                     "--out", out) == f"reading --initial: {e.value}"
+    # A spring model refuses a pendulum's bars and anchors, in the CLI's words.
+    tr = mcgnode.read_bag(bags["pendulum"])[0]
+    with pytest.raises(mcgnode.Error) as e:
+        mcgnode.load_model(SPRING_MODEL).rollout(tr, 10)
+    assert str(e.value) == cli_error("rollout", "--model", SPRING_MODEL, "--initial",
+                                     bags["pendulum"], "--out", out)
+    # A bad training option: clap's message for it.
+    with pytest.raises(ValueError) as e:
+        mcgnode.train(bags["spring"], tmp_path / "m.json", variant="rope")
+    assert str(e.value) == cli_error("train", "--model", "rope", "--data", bags["spring"],
+                                     "--out", tmp_path / "m.json")
+    with pytest.raises(TypeError, match="unexpected keyword argument 'epoch'"):
+        mcgnode.train(bags["spring"], tmp_path / "m.json", variant="gnode", epoch=3)
+    with pytest.raises(ValueError, match="positions must have shape"):
+        mcgnode.load_model("still").rollout_arrays(np.zeros(3), np.zeros(3), [1.0], [],
+                                                   steps=1, dt=0.1)
+
+
+def test_a_start_out_of_range_warns_as_the_cli(bags):
+    tr = mcgnode.read_bag(bags["spring"])[0]
+    fast = dict(tr, velocities=tr["velocities"] * 1e6)
+    with pytest.warns(RuntimeWarning, match="out of the model's training range"):
+        out = mcgnode.load_model(SPRING_MODEL).rollout(fast, 0)
+    assert out["positions"].shape == (1, 5, 2)
+
+
+# -- training against `mcgnode train` ----------------------------------------
+
+
+def test_train_equals_the_cli_with_the_same_options(bags, tmp_path):
+    py_out, cli_out = tmp_path / "py.json", tmp_path / "cli.json"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # a tiny model learns little
+        report = mcgnode.train(
+            bags["spring"], py_out, variant="mcgnode", epochs=4, seed=5,
+            lr_drop=[(2, 1e-3)], block_hidden={"edge_out": [4, 4]}, edge_physics=True,
+            quiet=True,
+        )
+    cli("train", "--model", "mcgnode", "--data", bags["spring"], "--out", cli_out,
+        "--epochs", 4, "--seed", 5, "--lr-drop", "2:1e-3", "--block-hidden", "edge_out=4,4",
+        "--edge-physics", "--quiet")
+    a, b = json.loads(py_out.read_text()), json.loads(cli_out.read_text())
+    for f in (a, b):
+        f["training"].pop("seconds")
+    assert a == b
+    got = {k: v for k, v in report.items() if k not in ("seconds", "out", "summary",
+                                                       "explained_line")}
+    assert got == a["training"]
+    assert report["epochs_run"] == 4 and report["lr_drops"] == [[2, 1e-3]]
+    assert report["out"] == str(py_out)
+    assert report["summary"].startswith(f"wrote {py_out}: 4 epochs")
+
+
+# -- the README's example and the type stubs --------------------------------
+
+
+def test_the_readme_example_runs_as_the_readme_shows():
+    readme = (ROOT / "README.md").read_text()
+    (line,) = [l.strip() for l in readme.splitlines()
+               if "python/examples/compare.py" in l and l.strip().startswith(".venv/")]
+    script = (ROOT / "python/examples/compare.py").read_text()
+    assert len(script.splitlines()) <= 10
+    assert script in readme, "the README shows python/examples/compare.py as it is"
+    words = shlex.split(line)
+    p = subprocess.run(words, capture_output=True, text=True,
+                       cwd=ROOT, check=True)
+    mse = dict(l.rsplit(": position MSE ", 1) for l in p.stdout.splitlines())
+    mse = {k: float(v) for k, v in mse.items()}
+    assert list(mse) == words[3:], p.stdout
+    assert mse["truth:spring"] == 0.0
+    assert mse["bags/models/spring5-mcgnode.json"] < mse["still"] / 100
+
+
+def stub_params(sig: str):
+    """The parameter names of a stub's signature text (commas inside [] kept)."""
+    names, depth, cur = [], 0, ""
+    for c in sig + ",":
+        depth += c in "[(" and 1 or 0
+        depth -= c in "])" and 1 or 0
+        if c == "," and depth == 0:
+            name = cur.split(":")[0].split("=")[0].strip().lstrip("*")
+            if name:
+                names.append(name)
+            cur = ""
+        else:
+            cur += c
+    return names
+
+
+def test_the_stubs_name_what_the_module_has():
+    stub = (Path(mcgnode.__file__).parent / "__init__.pyi").read_text()
+    assert (Path(mcgnode.__file__).parent / "py.typed").exists()
+    for name in mcgnode.__all__:
+        assert hasattr(mcgnode, name)
+        assert re.search(rf"^(def|class) {name}\b|^{name}:", stub, re.M), name
+    for fn in [mcgnode.read_bag, mcgnode.load_model, mcgnode.train]:
+        params = list(inspect.signature(fn).parameters)
+        m = re.search(rf"^def {fn.__name__}\((.*?)\) ->", stub, re.M | re.S)
+        assert stub_params(m[1]) == params, fn.__name__
+    for meth in ["rollout", "rollout_arrays", "accelerations", "forces"]:
+        params = list(inspect.signature(getattr(mcgnode.Model, meth)).parameters)
+        m = re.search(rf"    def {meth}\((.*?)\) ->", stub, re.S)
+        assert stub_params(m[1]) == params, meth
+    assert mcgnode.read_bag.__doc__ and mcgnode.Model.rollout.__doc__
