@@ -141,7 +141,14 @@ impl Chunk {
             return;
         }
         let a = &m.arch;
-        let (n, d, em) = (m.plan.n, m.plan.dim, a.embed);
+        // NODE's `embed` and `types` size no weight: they must size no
+        // buffer either (a corrupt file's 2^32 would be an abort).
+        let (em, types) = if a.biases.graph {
+            (a.embed, a.types)
+        } else {
+            (0, 0)
+        };
+        let (n, d) = (m.plan.n, m.plan.dim);
         let nodes = bs * n;
         let edges = bs * m.plan.recv.len();
         let rmax = nodes.max(edges).max(bs).max(1);
@@ -203,7 +210,7 @@ impl Chunk {
             gglob: z(em * nodes),
             gf_edge: z(d * edges),
             gminv: z(nodes),
-            inv_m: z(a.types),
+            inv_m: z(types),
             s1: z(width * rmax),
             s2: z(width * rmax),
             grad: z(m.layout.len()),
@@ -314,15 +321,22 @@ impl Chunk {
         let bs = idx.len();
         let nd = m.plan.n * m.plan.dim;
         for (s, &k) in idx.iter().enumerate() {
-            let st = &states[k];
-            let nm = &m.arch.norm;
-            for f in 0..nd {
-                self.x[f * bs + s] = (st.q[f] - nm.q_mean[f % m.plan.dim]) / nm.q_scale;
-                self.x[(nd + f) * bs + s] = st.v[f] / nm.v_scale;
-                if let Some(t) = targets.get(k) {
-                    self.tgt[f * bs + s] = t[f];
+            self.put_flat_state(m, s, bs, &states[k].q, &states[k].v);
+            if let Some(t) = targets.get(k) {
+                for (f, x) in t[..nd].iter().enumerate() {
+                    self.tgt[f * bs + s] = *x;
                 }
             }
+        }
+    }
+
+    /// NODE's scaled (q, q̇) of state `s` of `bs`.
+    fn put_flat_state(&mut self, m: &Model, s: usize, bs: usize, q: &[f64], v: &[f64]) {
+        let nd = m.plan.n * m.plan.dim;
+        let nm = &m.arch.norm;
+        for f in 0..nd {
+            self.x[f * bs + s] = (q[f] - nm.q_mean[f % m.plan.dim]) / nm.q_scale;
+            self.x[(nd + f) * bs + s] = v[f] / nm.v_scale;
         }
     }
 
@@ -367,29 +381,77 @@ impl Chunk {
         targets: &[Vec<f64>],
         idx: &[usize],
     ) {
-        let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
+        let (n, d) = (m.plan.n, m.plan.dim);
         let nodes = idx.len() * n;
-        let nm = &m.arch.norm;
-        self.x[..t * nodes].fill(0.0);
-        self.xn[..t * nodes].fill(0.0);
+        self.clear_one_hot(m, nodes);
         for (s, &k) in idx.iter().enumerate() {
-            let st = &states[k];
-            for (i, &ty) in m.plan.types.iter().enumerate() {
-                let row = s * n + i;
-                self.x[ty * nodes + row] = 1.0;
-                self.xn[ty * nodes + row] = 1.0;
-                for c in 0..d {
-                    let (qv, vv) = (st.q[i * d + c], st.v[i * d + c]);
-                    self.x[(t + c) * nodes + row] = qv;
-                    self.x[(t + d + c) * nodes + row] = vv;
-                    self.xn[(t + c) * nodes + row] = (qv - nm.q_mean[c]) / nm.q_scale;
-                    self.xn[(t + d + c) * nodes + row] = vv / nm.v_scale;
-                    if let Some(a) = targets.get(k) {
-                        self.tgt[c * nodes + row] = a[i * d + c];
+            self.put_graph_state(m, s, nodes, &states[k].q, &states[k].v);
+            if let Some(a) = targets.get(k) {
+                for i in 0..n {
+                    for c in 0..d {
+                        self.tgt[c * nodes + s * n + i] = a[i * d + c];
                     }
                 }
             }
         }
+    }
+
+    fn clear_one_hot(&mut self, m: &Model, nodes: usize) {
+        let t = m.arch.types;
+        self.x[..t * nodes].fill(0.0);
+        self.xn[..t * nodes].fill(0.0);
+    }
+
+    /// Node inputs of state `s` (one-hot, q, q̇ raw in `x`, scaled in `xn`)
+    /// from node-major `q`, `v`; the one-hot rows must have been cleared.
+    fn put_graph_state(&mut self, m: &Model, s: usize, nodes: usize, q: &[f64], v: &[f64]) {
+        let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
+        let nm = &m.arch.norm;
+        for (i, &ty) in m.plan.types.iter().enumerate() {
+            let row = s * n + i;
+            self.x[ty * nodes + row] = 1.0;
+            self.xn[ty * nodes + row] = 1.0;
+            for c in 0..d {
+                let (qv, vv) = (q[i * d + c], v[i * d + c]);
+                self.x[(t + c) * nodes + row] = qv;
+                self.x[(t + d + c) * nodes + row] = vv;
+                self.xn[(t + c) * nodes + row] = (qv - nm.q_mean[c]) / nm.q_scale;
+                self.xn[(t + d + c) * nodes + row] = vv / nm.v_scale;
+            }
+        }
+    }
+
+    /// Sizes the buffers for one state (inference).
+    pub(crate) fn reserve_one(&mut self, m: &Model) {
+        self.reserve(m, 1);
+        self.lay_out(m, 1);
+    }
+
+    /// Forward pass of one state given as node-major slices, for inference:
+    /// no targets, no loss, no reverse pass. Read the results with
+    /// [`Chunk::acceleration`], [`Chunk::decoded`] and [`Chunk::edge_outputs`].
+    pub(crate) fn forward_one(&mut self, m: &Model, th: &[f64], q: &[f64], v: &[f64]) {
+        self.reserve_one(m);
+        if m.arch.biases.graph {
+            self.clear_one_hot(m, m.plan.n);
+            self.put_graph_state(m, 0, m.plan.n, q, v);
+            self.forward_graph(m, th);
+        } else {
+            self.put_flat_state(m, 0, 1, q, v);
+            self.forward_flat(m, th, 1);
+        }
+    }
+
+    /// The decoder's output of the last run (forces of constrained models,
+    /// accelerations of the others; scaled), feature-major `d × rows`.
+    pub(crate) fn decoded(&self) -> &[f64] {
+        &self.out
+    }
+
+    /// The edge decoder's raw output of the last run (pairwise models),
+    /// feature-major `d × edges`, before antisymmetrising and scaling.
+    pub(crate) fn edge_outputs(&self) -> &[f64] {
+        &self.f_edge
     }
 
     fn forward_graph(&mut self, m: &Model, th: &[f64]) {

@@ -12,8 +12,10 @@
 
 mod chunk;
 mod dense;
+mod infer;
 mod layout;
 
+pub use infer::Forward;
 pub use layout::{Layout, LayoutError};
 
 use crate::model::arch::Arch;

@@ -1,21 +1,19 @@
-//! The hand-written, forward-only inference kernel: the same equations as
-//! [`crate::model::net`], on plain slices (feature-major, see [`dense`]), with
-//! every buffer allocated once per graph in a [`Workspace`]. Rollouts and the ROS node run on this; candle is
-//! only for training. Tested against candle's forward to 1e-12.
+//! Inference: a trained model's weights on the engine's forward pass
+//! ([`crate::engine::Forward`], the same equations training differentiates,
+//! feature-major), with every buffer allocated once per graph in a
+//! [`Workspace`]. Rollouts and the ROS node run on this; candle is the
+//! reference it is tested against (to 1e-12).
 
-mod dense;
 pub mod trained;
 
-use crate::error::{bail, Context, Result};
-use crate::model::arch::{Arch, ArchError, Block, LOG_MASS};
-use crate::model::mlp::squareplus_f64;
+use crate::engine::{Forward, Layout};
+use crate::error::{bail, Result};
+use crate::model::arch::{Arch, ArchError, LOG_MASS};
 use crate::model::params::Weights;
-use crate::model::plan::{BarEnd, GraphPlan};
-use crate::model::solve::lu_solve_in_place;
-use crate::model::variant::{EdgeInput, Hyper};
+use crate::model::plan::GraphPlan;
+use crate::model::variant::Hyper;
 use crate::physics::Projector;
 use crate::system::Graph;
-use dense::Mlp as KMlp;
 use rand::SeedableRng;
 pub use trained::TrainedModel;
 
@@ -23,52 +21,32 @@ pub use trained::TrainedModel;
 #[derive(Clone, Debug)]
 pub struct Kernel {
     hyper: Hyper,
-    node_mlp: Option<KMlp>,
-    node_em: Option<KMlp>,
-    edge_em: Option<KMlp>,
-    rounds: Vec<(KMlp, KMlp)>,
-    node_out: Option<KMlp>,
-    glob_em: Option<KMlp>,
-    edge_out: Option<KMlp>,
-    body_out: Option<KMlp>,
-    inv_mass: Option<Vec<f64>>,
     arch: Arch,
+    /// Every parameter, flat, at the engine's offsets.
+    theta: Vec<f64>,
+    inv_mass: Option<Vec<f64>>,
     project_bars: bool,
 }
 
 /// Buffers for one graph; reused across steps so that the loop allocates nothing.
-/// Activations are feature-major: `buf[feature · rows + row]`.
 #[derive(Clone, Debug)]
 pub struct Workspace {
-    /// The graph as the kernel sees it.
-    pub plan: GraphPlan,
-    /// Node inputs (one-hot type, q, q̇), or NODE's flat (q, q̇).
-    x: Vec<f64>,
-    h: Vec<f64>,
-    agg: Vec<f64>,
-    glob: Vec<f64>,
-    w_in: Vec<f64>,
-    he: Vec<f64>,
-    he_new: Vec<f64>,
-    hs: Vec<f64>,
-    hr: Vec<f64>,
-    msg: Vec<f64>,
-    f_edge: Vec<f64>,
-    f_node: Vec<f64>,
-    t1: Vec<f64>,
-    t2: Vec<f64>,
-    /// Forces of the last evaluation, `n·d` (force-predicting variants).
+    forward: Forward,
+    /// Forces of the last evaluation, `n·d` (constrained variants).
     pub force: Vec<f64>,
     /// Antisymmetric pairwise forces of the last evaluation, `E·d`, on
-    /// `plan.recv[e]` due to `plan.send[e]` (MCGNODE).
+    /// `plan().recv[e]` due to `plan().send[e]` (MCGNODE).
     pub edge_force: Vec<f64>,
-    incid: Vec<Vec<(usize, f64)>>,
-    dq: Vec<f64>,
-    kmat: Vec<f64>,
-    lambda: Vec<f64>,
     /// SHAKE/RATTLE onto the bars with the learned masses, for rollouts of
     /// constrained models on graphs with bars (see [`Kernel::set_project_bars`]).
     pub projector: Option<Projector>,
+}
+
+impl Workspace {
+    /// The graph as the kernel sees it.
+    pub fn plan(&self) -> &GraphPlan {
+        self.forward.plan()
+    }
 }
 
 /// Checks, before anything is allocated for them, that a file's
@@ -137,43 +115,20 @@ impl Kernel {
         )?;
         reference.store.load(w)?;
         let arch = Arch::new(hyper);
-        let ld = |b: Block| KMlp::load(w, &b.prefix());
-        let mut rounds = vec![];
-        for l in 0..arch.rounds {
-            let v = ld(Block::Message(l))?.with_context(|| format!("missing round {l}"))?;
-            let e = ld(Block::EdgeUpdate(l))?.with_context(|| format!("missing round {l}"))?;
-            rounds.push((v, e));
-        }
+        let theta = Layout::new(&arch).flatten(w)?;
         let inv_mass = w
             .get(LOG_MASS)
             .map(|a| a.data.iter().map(|x| (-x).exp()).collect());
-        let k = Self {
-            hyper: hyper.clone(),
-            node_mlp: ld(Block::Flat)?,
-            node_em: ld(Block::NodeEmbed)?,
-            edge_em: ld(Block::EdgeEmbed)?,
-            rounds,
-            node_out: ld(Block::NodeDecoder)?,
-            glob_em: ld(Block::GlobalEmbed)?,
-            edge_out: ld(Block::EdgeDecoder)?,
-            body_out: ld(Block::BodyDecoder)?,
-            inv_mass,
-            arch,
-            project_bars: true,
-        };
-        let b = hyper.variant.biases();
-        let ok = if b.graph {
-            k.node_em.is_some()
-                && k.edge_em.is_some()
-                && (k.node_out.is_some() || k.edge_out.is_some())
-                && (k.inv_mass.is_some() == b.constrained)
-        } else {
-            k.node_mlp.is_some()
-        };
-        if !ok {
+        if inv_mass.is_some() != hyper.variant.biases().constrained {
             bail!("weights do not match a {} model", hyper.variant);
         }
-        Ok(k)
+        Ok(Self {
+            hyper: hyper.clone(),
+            arch,
+            theta,
+            inv_mass,
+            project_bars: true,
+        })
     }
 
     /// Whether rollouts project positions and velocities back onto the bars
@@ -204,58 +159,9 @@ impl Kernel {
     pub fn workspace(&self, graph: &Graph) -> Result<Workspace, ArchError> {
         self.supports(graph)?;
         let plan = GraphPlan::new(graph);
-        let (n, d, t) = (plan.n, plan.dim, self.arch.types);
-        // NODE has no embeddings (and its file's `embed` sizes no weight).
-        let em = if self.node_mlp.is_some() {
-            0
-        } else {
-            self.arch.embed
-        };
-        let ne = plan.recv.len();
-        let mlps = [
-            &self.node_mlp,
-            &self.node_em,
-            &self.edge_em,
-            &self.node_out,
-            &self.glob_em,
-            &self.edge_out,
-            &self.body_out,
-        ];
-        let mut width = mlps
-            .iter()
-            .filter_map(|m| m.as_ref())
-            .map(dense::Mlp::width)
-            .max()
-            .unwrap_or(1);
-        for (a, b) in &self.rounds {
-            width = width.max(a.width()).max(b.width());
-        }
-        let rows = n.max(ne).max(1);
-        let x_len = if self.node_mlp.is_some() {
-            2 * n * d
-        } else {
-            (t + 2 * d) * n
-        };
-        let mut incid = vec![vec![]; n];
-        for (r, bar) in plan.bars.iter().enumerate() {
-            incid[bar.a].push((r, 1.0));
-            if let BarEnd::Particle(b) = bar.b {
-                incid[b].push((r, -1.0));
-            }
-        }
-        let k = plan.bars.len();
-        // Edge inputs: q_i − q_j (filled each step), then constant edge physics.
-        let arch = &self.arch;
-        let mut w_in_init = vec![0.0; arch.edge_features() * ne];
-        if arch.edge_physics {
-            for e in 0..ne {
-                for (f, x) in arch.edge_physics_of(&plan, e).iter().enumerate() {
-                    w_in_init[(d + f) * ne + e] = *x;
-                }
-            }
-        }
+        let (nd, ne, bars) = (plan.n * plan.dim, plan.n_edges(), plan.bars.len());
         let projector = match self.learned_masses() {
-            Some(m) if self.project_bars && k > 0 => {
+            Some(m) if self.project_bars && bars > 0 => {
                 let mut g = graph.clone();
                 g.masses = g.types.iter().map(|&t| m[t as usize]).collect();
                 Some(Projector::new(&g))
@@ -263,231 +169,23 @@ impl Kernel {
             _ => None,
         };
         Ok(Workspace {
-            x: vec![0.0; x_len],
-            h: vec![0.0; em * n],
-            agg: vec![0.0; em * n],
-            glob: vec![0.0; em * n],
-            w_in: w_in_init,
-            he: vec![0.0; em * ne],
-            he_new: vec![0.0; em * ne],
-            hs: vec![0.0; em * ne],
-            hr: vec![0.0; em * ne],
-            msg: vec![0.0; em * ne],
-            f_edge: vec![0.0; d * ne],
-            f_node: vec![0.0; d * n],
-            t1: vec![0.0; width * rows],
-            t2: vec![0.0; width * rows],
-            force: vec![0.0; n * d],
-            edge_force: vec![0.0; ne / 2 * d],
-            incid,
-            dq: vec![0.0; k * d],
-            kmat: vec![0.0; k * k],
-            lambda: vec![0.0; k],
+            force: vec![0.0; nd],
+            edge_force: vec![0.0; ne * plan.dim],
+            forward: Forward::new(self.arch.clone(), plan),
             projector,
-            plan,
         })
     }
 
     /// Accelerations at (q, v), written to `acc` (`n·d`). Forces (and pairwise
     /// forces for MCGNODE) are left in `ws.force` / `ws.edge_force`.
     pub fn acceleration(&self, ws: &mut Workspace, q: &[f64], v: &[f64], acc: &mut [f64]) {
-        let (n, d, em, t) = (ws.plan.n, ws.plan.dim, self.arch.embed, self.arch.types);
-        let bias = self.hyper.variant.biases();
-        if let Some(m) = &self.node_mlp {
-            let nd = n * d;
-            let nm = &self.arch.norm;
-            for i in 0..nd {
-                ws.x[i] = (q[i] - nm.q_mean[i % d]) / nm.q_scale;
-                ws.x[nd + i] = v[i] / nm.v_scale;
-            }
-            m.forward(&ws.x[..2 * nd], &[], 1, acc, &mut ws.t1, &mut ws.t2);
-            acc.iter_mut().for_each(|a| *a *= nm.out_scale);
-            return;
+        ws.forward.run(&self.theta, q, v, acc);
+        let b = self.hyper.variant.biases();
+        if b.constrained {
+            ws.forward.forces(&mut ws.force);
         }
-        let ne = ws.plan.recv.len();
-        let sqp = |x: &mut [f64]| x.iter_mut().for_each(|v| *v = squareplus_f64(*v));
-        // Node inputs (one-hot, q, q̇), feature-major.
-        ws.x[..t * n].fill(0.0);
-        for (i, &ty) in ws.plan.types.iter().enumerate() {
-            ws.x[ty * n + i] = 1.0;
-            for c in 0..d {
-                ws.x[(t + c) * n + i] =
-                    (q[i * d + c] - self.arch.norm.q_mean[c]) / self.arch.norm.q_scale;
-                ws.x[(t + d + c) * n + i] = v[i * d + c] / self.arch.norm.v_scale;
-            }
-        }
-        // Node embeddings: of the type alone when decoupled.
-        let node_in = if bias.decoupled {
-            t * n
-        } else {
-            (t + 2 * d) * n
-        };
-        let node_em = self.node_em.as_ref().expect("checked in new");
-        node_em.forward(&ws.x[..node_in], &[], n, &mut ws.h, &mut ws.t1, &mut ws.t2);
-        sqp(&mut ws.h);
-        // Edge embeddings of w_ij = q_i − q_j.
-        for (e, (&r, &s)) in ws.plan.recv.iter().zip(&ws.plan.send).enumerate() {
-            for c in 0..d {
-                ws.w_in[c * ne + e] = (q[r * d + c] - q[s * d + c]) / self.arch.norm.w_scale;
-            }
-        }
-        let edge_em = self.edge_em.as_ref().expect("checked in new");
-        edge_em.forward(&ws.w_in, &[], ne, &mut ws.he, &mut ws.t1, &mut ws.t2);
-        sqp(&mut ws.he);
-        // Message passing. In the last round, skip what no decoder reads: node
-        // updates when forces come from edges, edge updates when they come from nodes.
-        let rounds = self.rounds.len();
-        for (l, (wv, we)) in self.rounds.iter().enumerate() {
-            let last = l + 1 == rounds;
-            let nodes_needed = !(last && bias.pairwise);
-            let edges_needed = !last || bias.pairwise;
-            for k in 0..em {
-                let (hk, base) = (&ws.h[k * n..(k + 1) * n], k * ne);
-                for (e, (&r, &s)) in ws.plan.recv.iter().zip(&ws.plan.send).enumerate() {
-                    ws.hs[base + e] = hk[s];
-                    ws.hr[base + e] = hk[r];
-                }
-            }
-            if nodes_needed {
-                // h_i ← sqp(h_i + Σ_j W_V (h_j ‖ h_ij)).
-                wv.forward(&ws.hs, &ws.he, ne, &mut ws.msg, &mut ws.t1, &mut ws.t2);
-                ws.agg.fill(0.0);
-                for k in 0..em {
-                    let m = &ws.msg[k * ne..(k + 1) * ne];
-                    let a = &mut ws.agg[k * n..(k + 1) * n];
-                    for (&r, mv) in ws.plan.recv.iter().zip(m) {
-                        a[r] += mv;
-                    }
-                }
-                for (h, a) in ws.h.iter_mut().zip(&ws.agg) {
-                    *h = squareplus_f64(*h + a);
-                }
-            }
-            if edges_needed {
-                // h_ij ← sqp(h_ij + W_E (h_i ‖ h_j)), from the node states before this round.
-                match self.arch.edge_input {
-                    EdgeInput::Concat => {
-                        we.forward(&ws.hr, &ws.hs, ne, &mut ws.he_new, &mut ws.t1, &mut ws.t2)
-                    }
-                    EdgeInput::Product => {
-                        // h_i ⊙ h_j into `msg`, free at this point of the round.
-                        for ((p, r), s) in ws.msg.iter_mut().zip(&ws.hr).zip(&ws.hs) {
-                            *p = r * s;
-                        }
-                        we.forward(&ws.msg, &[], ne, &mut ws.he_new, &mut ws.t1, &mut ws.t2)
-                    }
-                }
-                for (x, old) in ws.he_new.iter_mut().zip(&ws.he) {
-                    *x = squareplus_f64(*x + old);
-                }
-                std::mem::swap(&mut ws.he, &mut ws.he_new);
-            }
-        }
-        // Global (body) embedding of (one-hot, q, q̇).
-        if let Some(g) = &self.glob_em {
-            g.forward(&ws.x, &[], n, &mut ws.glob, &mut ws.t1, &mut ws.t2);
-            sqp(&mut ws.glob);
-        }
-        // Decoders, into node-major forces (or accelerations for GNODE).
-        let out: &mut [f64] = if bias.constrained {
-            &mut ws.force
-        } else {
-            &mut acc[..]
-        };
-        if let Some(eo) = &self.edge_out {
-            // Newton's third law: F_ab = (f_ab − f_ba)/2 on a, −F_ab on b.
-            out.fill(0.0);
-            eo.forward(&ws.he, &[], ne, &mut ws.f_edge, &mut ws.t1, &mut ws.t2);
-            let half = ne / 2;
-            for e in 0..half {
-                let (a, b) = (ws.plan.recv[e], ws.plan.send[e]);
-                for c in 0..d {
-                    let f = (ws.f_edge[c * ne + e] - ws.f_edge[c * ne + e + half])
-                        * (0.5 * self.arch.norm.out_scale);
-                    ws.edge_force[e * d + c] = f;
-                    out[a * d + c] += f;
-                    out[b * d + c] -= f;
-                }
-            }
-            if let Some(bo) = &self.body_out {
-                bo.forward(&ws.glob, &[], n, &mut ws.f_node, &mut ws.t1, &mut ws.t2);
-                for i in 0..n {
-                    for c in 0..d {
-                        out[i * d + c] += ws.f_node[c * n + i] * self.arch.norm.out_scale;
-                    }
-                }
-            }
-        } else if let Some(no) = &self.node_out {
-            let g: &[f64] = if self.glob_em.is_some() {
-                &ws.glob
-            } else {
-                &[]
-            };
-            no.forward(&ws.h, g, n, &mut ws.f_node, &mut ws.t1, &mut ws.t2);
-            for i in 0..n {
-                for c in 0..d {
-                    out[i * d + c] = ws.f_node[c * n + i] * self.arch.norm.out_scale;
-                }
-            }
-        }
-        if bias.constrained {
-            self.constrained_acc(ws, q, v, acc);
-        }
-    }
-
-    /// q̈ = M⁻¹(N − Aᵀλ) with λ = (A M⁻¹ Aᵀ)⁻¹(A M⁻¹ N + Ȧq̇), on the sparse bar
-    /// incidence: K_rs gathers only bars that share a particle.
-    fn constrained_acc(&self, ws: &mut Workspace, q: &[f64], v: &[f64], acc: &mut [f64]) {
-        let (n, d) = (ws.plan.n, ws.plan.dim);
-        let inv_m = self
-            .inv_mass
-            .as_ref()
-            .expect("constrained model has masses");
-        let k = ws.plan.bars.len();
-        let mut ok = true;
-        if k > 0 {
-            for (r, bar) in ws.plan.bars.iter().enumerate() {
-                let mut s = 0.0;
-                let mut rhs = 0.0;
-                for c in 0..d {
-                    let (dq, dv) = bar.delta(q, v, d, c);
-                    ws.dq[r * d + c] = dq;
-                    s += dv * dv;
-                    rhs += dq * inv_m[ws.plan.types[bar.a]] * ws.force[bar.a * d + c];
-                    if let BarEnd::Particle(b) = bar.b {
-                        rhs -= dq * inv_m[ws.plan.types[b]] * ws.force[b * d + c];
-                    }
-                }
-                ws.lambda[r] = rhs + s;
-            }
-            ws.kmat.iter_mut().for_each(|x| *x = 0.0);
-            for p in 0..n {
-                let mi = inv_m[ws.plan.types[p]];
-                for &(r, sr) in &ws.incid[p] {
-                    for &(s, ss) in &ws.incid[p] {
-                        let mut dot = 0.0;
-                        for c in 0..d {
-                            dot += ws.dq[r * d + c] * ws.dq[s * d + c];
-                        }
-                        ws.kmat[r * k + s] += mi * sr * ss * dot;
-                    }
-                }
-            }
-            ok = lu_solve_in_place(&mut ws.kmat, &mut ws.lambda, k, 1).is_ok();
-        }
-        for p in 0..n {
-            let mi = inv_m[ws.plan.types[p]];
-            for c in 0..d {
-                let mut f = ws.force[p * d + c];
-                if ok {
-                    for &(r, sr) in &ws.incid[p] {
-                        f -= sr * ws.dq[r * d + c] * ws.lambda[r];
-                    }
-                } else {
-                    f = f64::NAN;
-                }
-                acc[p * d + c] = mi * f;
-            }
+        if b.pairwise {
+            ws.forward.edge_forces(&mut ws.edge_force);
         }
     }
 }

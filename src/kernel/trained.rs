@@ -152,10 +152,10 @@ impl Dynamics for TrainedModel {
         };
         let d = graph.dim;
         let edges = if b.pairwise {
-            (0..ws.plan.n_edges())
+            (0..ws.plan().n_edges())
                 .map(|e| EdgeForce {
-                    a: ws.plan.recv[e],
-                    b: ws.plan.send[e],
+                    a: ws.plan().recv[e],
+                    b: ws.plan().send[e],
                     force: ws.edge_force[e * d..(e + 1) * d].to_vec(),
                 })
                 .collect()

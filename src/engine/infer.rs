@@ -1,0 +1,69 @@
+//! Inference on the engine: the training engine's forward pass over one
+//! state (no gradient record beyond the activations the forward keeps, every
+//! buffer allocated once per graph), with its results read off node-major.
+//! This is what rollouts, the node and the bench run, so the GNODE family's
+//! equations exist once outside candle.
+
+use super::chunk::{Chunk, Model};
+use crate::model::arch::{Arch, Decoder};
+use crate::model::plan::GraphPlan;
+
+/// One graph's forward pass and its buffers.
+#[derive(Clone, Debug)]
+pub struct Forward {
+    model: Model,
+    chunk: Chunk,
+}
+
+impl Forward {
+    /// Buffers for `plan` under `arch` (whose support of the graph the caller
+    /// has checked).
+    pub fn new(arch: Arch, plan: GraphPlan) -> Self {
+        let model = Model::new(arch, plan);
+        let mut chunk = Chunk::default();
+        // Sizes every buffer now, so that the first step allocates nothing.
+        chunk.reserve_one(&model);
+        Self { model, chunk }
+    }
+
+    /// The graph as the engine sees it.
+    pub fn plan(&self) -> &GraphPlan {
+        &self.model.plan
+    }
+
+    /// Accelerations at (q, v) under the parameters `theta`, node-major into `acc`.
+    pub fn run(&mut self, theta: &[f64], q: &[f64], v: &[f64], acc: &mut [f64]) {
+        self.chunk.forward_one(&self.model, theta, q, v);
+        self.chunk.acceleration(self.model.shape(), 1, 0, acc);
+    }
+
+    /// The decoded forces of the last [`Forward::run`] (constrained models:
+    /// the N of q̈ = M⁻¹(N − Aᵀλ)), node-major into `out` (`n·d`).
+    pub fn forces(&self, out: &mut [f64]) {
+        let (n, d) = (self.model.plan.n, self.model.plan.dim);
+        let f = self.chunk.decoded();
+        for i in 0..n {
+            for c in 0..d {
+                out[i * d + c] = f[c * n + i];
+            }
+        }
+    }
+
+    /// Pairwise forces of the last [`Forward::run`] (pairwise decoders; else
+    /// nothing is written): `out[e·d + c]` on `plan.recv[e]` due to
+    /// `plan.send[e]`, for each undirected edge `e`. These are the terms the
+    /// decoder sums into [`Forward::forces`].
+    pub fn edge_forces(&self, out: &mut [f64]) {
+        if !matches!(self.model.arch.decoder, Decoder::Pairwise { .. }) {
+            return;
+        }
+        let (d, ne) = (self.model.plan.dim, self.model.plan.recv.len());
+        let (half, k) = (ne / 2, self.model.arch.norm.out_scale);
+        let fe = self.chunk.edge_outputs();
+        for e in 0..half {
+            for c in 0..d {
+                out[e * d + c] = (fe[c * ne + e] - fe[c * ne + e + half]) * 0.5 * k;
+            }
+        }
+    }
+}
