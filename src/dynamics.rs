@@ -4,7 +4,7 @@
 
 use crate::compat::Mismatch;
 use crate::model::arch::ArchError;
-use crate::physics::PhysicsError;
+use crate::physics::{verlet, PhysicsError};
 use crate::system::{Graph, State, SystemError};
 
 /// Forces a model attributes to a state.
@@ -77,18 +77,13 @@ pub fn verlet_lockstep(
             break;
         }
         for (s, a) in cur.iter_mut().zip(&acc) {
-            for ((q, v), a) in s.q.iter_mut().zip(s.v.iter_mut()).zip(a) {
-                *q += *v * dt + 0.5 * a * dt * dt;
-                *v += 0.5 * a * dt;
-            }
+            verlet::drift(&mut s.q, &mut s.v, a, dt);
         }
         accel(&cur, &mut acc)?;
         let mut k = 0;
         while k < cur.len() {
             let s = &mut cur[k];
-            for (v, a) in s.v.iter_mut().zip(&acc[k]) {
-                *v += 0.5 * a * dt;
-            }
+            verlet::kick(&mut s.v, &acc[k], dt);
             if s.q.iter().chain(&s.v).any(|x| !x.is_finite()) {
                 out[active[k]].diverged_at = Some(step);
                 cur.remove(k);
@@ -186,14 +181,9 @@ pub trait Dynamics: Send + Sync {
         self.acceleration(graph, &s, &mut a)?;
         out.push(s.clone());
         for step in 1..=steps {
-            for ((q, v), a) in s.q.iter_mut().zip(s.v.iter_mut()).zip(&a) {
-                *q += *v * dt + 0.5 * a * dt * dt;
-                *v += 0.5 * a * dt;
-            }
+            verlet::drift(&mut s.q, &mut s.v, &a, dt);
             self.acceleration(graph, &s, &mut a)?;
-            for (v, a) in s.v.iter_mut().zip(&a) {
-                *v += 0.5 * a * dt;
-            }
+            verlet::kick(&mut s.v, &a, dt);
             if s.q.iter().chain(&s.v).any(|x| !x.is_finite()) {
                 return Err(DynamicsError::Diverged(step));
             }

@@ -943,8 +943,8 @@ fn train_recipes_explained_fraction_and_the_still_reference() {
     assert!(!log.contains("recipe:"), "{log}");
     // ... and is what the library's defaults (reproduce's, and `train`'s
     // before the recipe) train: the same weights.
-    let lib = mcgnode::train::train_from_bags(
-        mcgnode::model::Variant::Mcgnode,
+    let lib = mcgnode::models::train_from_bags(
+        mcgnode::models::ModelKind::Family(mcgnode::model::Variant::Mcgnode),
         &[d.join("train.mcap")],
         &mcgnode::train::ModelOptions::default(),
         &mcgnode::train::TrainConfig {
@@ -954,7 +954,9 @@ fn train_recipes_explained_fraction_and_the_still_reference() {
         |_| {},
         |_| true,
     )
-    .unwrap();
+    .unwrap()
+    .into_family()
+    .expect("a GNODE-family file");
     assert_eq!(
         serde_json::to_value(&lib.weights).unwrap(),
         paper["weights"]

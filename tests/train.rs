@@ -308,15 +308,17 @@ fn training_on_a_subset_reports_it() {
         ..TrainConfig::default()
     };
     let mut lines = vec![];
-    let file = mcgnode::train::train_from_bags(
-        Variant::Gnode,
+    let file = mcgnode::models::train_from_bags(
+        mcgnode::models::ModelKind::Family(Variant::Gnode),
         &[bag],
         &mcgnode::train::ModelOptions::default(),
         &cfg,
         |m| lines.push(m.to_string()),
         |_| true,
     )
-    .unwrap();
+    .unwrap()
+    .into_family()
+    .expect("a GNODE-family file");
     assert_eq!(file.training.points, Some(200));
     assert_eq!(file.training.noise, 5.0);
     assert_eq!(file.trained_on.states, 200);
@@ -333,8 +335,8 @@ fn training_on_a_subset_reports_it() {
         points: Some(401),
         ..cfg
     };
-    let err = mcgnode::train::train_from_bags(
-        Variant::Gnode,
+    let err = mcgnode::models::train_from_bags(
+        mcgnode::models::ModelKind::Family(Variant::Gnode),
         &[dir.path().join("train.mcap")],
         &mcgnode::train::ModelOptions::default(),
         &too_many,

@@ -37,5 +37,6 @@ pub mod train;
 pub mod trained;
 
 pub use file::BaselineFile;
-pub use train::{train_baseline, train_baseline_from_bags};
+pub use train::train_baseline;
+pub(crate) use train::train_baseline_from_bags;
 pub use trained::TrainedBaseline;

@@ -72,7 +72,7 @@ pub fn train_baseline(
 /// Trains a baseline from trajectory bags (on ParticleState topic `topic`
 /// when they hold several), as [`crate::train::train_from_bags`] does for the
 /// GNODE family (same data, split and loop); returns the file.
-pub fn train_baseline_from_bags(
+pub(crate) fn train_baseline_from_bags(
     kind: super::net::Kind,
     bags: &[std::path::PathBuf],
     topic: Option<&str>,

@@ -4,7 +4,9 @@ use super::{Kernel, Workspace};
 use crate::dynamics::{Dynamics, DynamicsError, EdgeForce, Forces, Rollout};
 use crate::error::Result;
 use crate::model::file::ModelFile;
+use crate::physics::verlet;
 use crate::system::{Graph, State};
+use std::convert::Infallible;
 use std::path::Path;
 
 /// A trained model ready for rollouts and serving.
@@ -65,26 +67,14 @@ impl TrainedModel {
         visit(0, &q, &v);
         let every = every.max(1);
         for step in 1..=steps {
-            if let Some(p) = ws.projector.as_mut() {
-                p.begin(&q);
-            }
-            for i in 0..d {
-                q[i] += v[i] * dt + 0.5 * a[i] * dt * dt;
-                v[i] += 0.5 * a[i] * dt;
-            }
-            if let Some(p) = ws.projector.as_mut() {
-                p.shake(&mut q, &mut v, dt);
-            }
-            self.kernel.acceleration(ws, &q, &v, &mut a);
-            let mut finite = true;
-            for i in 0..d {
-                v[i] += 0.5 * a[i] * dt;
-                finite &= q[i].is_finite() && v[i].is_finite();
-            }
-            if let Some(p) = ws.projector.as_mut() {
-                p.rattle(&q, &mut v);
-            }
-            if !finite {
+            // The projector and the forward pass borrow the workspace apart.
+            let mut projector = ws.projector.take();
+            let Ok(()) = verlet::step(&mut q, &mut v, &mut a, dt, projector.as_mut(), |q, v, a| {
+                self.kernel.acceleration(ws, q, v, a);
+                Ok::<(), Infallible>(())
+            });
+            ws.projector = projector;
+            if q.iter().chain(&v).any(|x| !x.is_finite()) {
                 return Some(step);
             }
             if step % every == 0 {

@@ -15,5 +15,5 @@ pub mod truth;
 pub use checked::{trained_for, Checked};
 pub use kind::ModelKind;
 pub use load::{load_any_model, load_model, LoadedModel};
-pub use train::train_any_from_bags;
+pub use train::{train_any_from_bags, train_from_bags, TrainedFile};
 pub use truth::Truth;

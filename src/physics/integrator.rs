@@ -11,6 +11,7 @@
 
 use super::forces::applied_forces;
 use super::projection::Projector;
+use super::verlet;
 use super::Field;
 use super::PhysicsError;
 use crate::system::{Graph, State};
@@ -64,37 +65,26 @@ impl Integrator {
 
     /// acc = M⁻¹ F(q, v) for the current state.
     fn update_acc(&mut self) {
-        let d = self.graph.dim;
-        applied_forces(
-            &self.graph,
-            &self.field,
-            &self.state.q,
-            &self.state.v,
-            &mut self.acc,
-        );
-        for (i, m) in self.graph.masses.iter().enumerate() {
-            for c in 0..d {
-                self.acc[i * d + c] /= m;
-            }
-        }
+        let s = &self.state;
+        true_acceleration(&self.graph, &self.field, &s.q, &s.v, &mut self.acc);
     }
 
     /// One step of length dt.
     pub fn step(&mut self) {
-        let dt = self.dt;
-        self.projector.begin(&self.state.q);
+        let (graph, field) = (&self.graph, &self.field);
         let s = &mut self.state;
-        for i in 0..s.q.len() {
-            s.q[i] += s.v[i] * dt + 0.5 * self.acc[i] * dt * dt;
-            s.v[i] += 0.5 * self.acc[i] * dt;
-        }
-        self.projector.shake(&mut s.q, &mut s.v, dt);
-        self.update_acc();
-        let s = &mut self.state;
-        for i in 0..s.v.len() {
-            s.v[i] += 0.5 * self.acc[i] * dt;
-        }
-        self.projector.rattle(&s.q, &mut s.v);
+        let accel = |q: &[f64], v: &[f64], acc: &mut [f64]| {
+            true_acceleration(graph, field, q, v, acc);
+            Ok::<(), std::convert::Infallible>(())
+        };
+        let Ok(()) = verlet::step(
+            &mut s.q,
+            &mut s.v,
+            &mut self.acc,
+            self.dt,
+            Some(&mut self.projector),
+            accel,
+        );
         self.steps += 1;
     }
 
@@ -145,5 +135,17 @@ impl Integrator {
     /// not be solved (degenerate bars). 0 for a healthy run.
     pub fn shake_failures(&self) -> u64 {
         self.projector.failures()
+    }
+}
+
+/// acc = M⁻¹ F(q, v): the applied forces over the masses (bars are the
+/// projector's job).
+fn true_acceleration(graph: &Graph, field: &Field, q: &[f64], v: &[f64], acc: &mut [f64]) {
+    let d = graph.dim;
+    applied_forces(graph, field, q, v, acc);
+    for (i, m) in graph.masses.iter().enumerate() {
+        for c in 0..d {
+            acc[i * d + c] /= m;
+        }
     }
 }

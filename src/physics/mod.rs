@@ -3,7 +3,8 @@
 //!
 //! * [`forces`]: applied forces and the Hamiltonian;
 //! * [`constraints`]: bars, the exact constrained acceleration, residuals;
-//! * [`integrator`]: velocity Verlet + SHAKE/RATTLE;
+//! * [`verlet`]: the velocity-Verlet step (drift, kick), written once;
+//! * [`integrator`]: velocity Verlet + SHAKE/RATTLE on the true forces;
 //! * [`config`]: the paper's spring, pendulum and peridynamic-solid systems,
 //!   initial states, trajectory generation;
 //! * [`rk4`]: RK4 on (q, p), the paper's HGN training data.
@@ -19,6 +20,7 @@ pub mod integrator;
 mod linalg;
 pub mod projection;
 pub mod rk4;
+pub mod verlet;
 
 use serde::{Deserialize, Serialize};
 

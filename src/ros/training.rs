@@ -38,7 +38,8 @@ use crate::data::msg::{Header, Time};
 use crate::dynamics::Dynamics;
 use crate::kernel::TrainedModel;
 use crate::model::{ModelFile, Variant};
-use crate::train::{train_from_bags, Auto, EpochReport, ModelOptions, Recipe, TrainConfig};
+use crate::models::{train_from_bags, ModelKind};
+use crate::train::{Auto, EpochReport, ModelOptions, Recipe, TrainConfig};
 
 use super::clock::Clock;
 use super::handles::{Diagnostics, ModelHandle, RecorderHandle};
@@ -444,7 +445,7 @@ pub fn run_training(
     };
     let every = (cfg.epochs / 10).max(1);
     let trained = train_from_bags(
-        variant,
+        ModelKind::Family(variant),
         &bags,
         &auto_options(),
         &cfg,
@@ -463,8 +464,9 @@ pub fn run_training(
             !cancel.load(Ordering::Acquire)
         },
     );
-    let file = match trained {
-        Ok(f) => f,
+    let file = match trained.map(crate::models::TrainedFile::into_family) {
+        Ok(Some(f)) => f,
+        Ok(None) => return fail(format!("{variant} did not train a GNODE-family file")),
         Err(e) => return fail(TrainingError::Train(e).to_string()),
     };
     // A cancel after the last epoch still wins: nothing is swapped.
@@ -629,8 +631,21 @@ fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, 
         auto: Auto::GIVEN_EPOCHS,
         ..TrainConfig::default()
     };
-    let file = train_from_bags(variant, train, &auto_options(), &cfg, |_| {}, |_| true)
-        .map_err(TrainingError::Train)?;
+    let file = train_from_bags(
+        ModelKind::Family(variant),
+        train,
+        &auto_options(),
+        &cfg,
+        |_| {},
+        |_| true,
+    )
+    .map_err(TrainingError::Train)?
+    .into_family()
+    .ok_or_else(|| {
+        TrainingError::Train(crate::error::Error::msg(format!(
+            "{variant} did not train a GNODE-family file"
+        )))
+    })?;
     let held = held_out.display().to_string();
     let score = |m: &dyn Dynamics| {
         crate::replay::replay_as_node(m, &held, p.dt, p.substeps, p.horizon)

@@ -1021,7 +1021,7 @@ fn bag_digest(p: &std::path::Path) -> Result<String> {
 }
 
 /// Trains a model from trajectory bags and returns the model file (not yet saved).
-pub fn train_from_bags(
+pub(crate) fn train_from_bags(
     variant: crate::model::Variant,
     bags: &[std::path::PathBuf],
     opts: &ModelOptions,
