@@ -1,7 +1,7 @@
-//! The training engine of the GNODE family: the forward pass on the
-//! kernel's feature-major layout with hand-written reverse-mode gradients
-//! (squared error on accelerations → every weight and log-mass), over all
-//! cores.
+//! The one f64 executor of the GNODE family: the forward pass on the
+//! feature-major layout, for inference ([`Forward`], one state, no loss) and
+//! for training, with hand-written reverse-mode gradients (squared error on
+//! accelerations → every weight and log-mass) over all cores.
 //!
 //! A batch is cut into chunks by a rule that depends only on the batch size
 //! and the graph, never on the thread count; each chunk's gradient is

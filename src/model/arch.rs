@@ -1,15 +1,15 @@
 //! The one typed description of a model's architecture: which blocks (MLPs)
 //! exist, their layer sizes and weight names, how node inputs are built and
-//! how forces are decoded. The candle model ([`super::net`]), the inference
-//! kernel ([`crate::kernel`]) and the training engine ([`crate::engine`]) all
-//! read it, so adding a bias means changing this description and one stage in
-//! each executor, and no weight name is spelled twice.
+//! how forces are decoded. The candle model ([`super::net`], the reference)
+//! and the engine ([`crate::engine`], the one f64 executor: training, and
+//! inference through [`crate::kernel`]) both read it, so adding a bias means
+//! changing this description and one stage in each, and no weight name is
+//! spelled twice.
 
 use super::variant::{Biases, EdgeInput, Hyper, MessageFn, Norm};
 use std::fmt;
 
-/// Edge-physics input features: rest length and stiffness.
-pub const EDGE_PHYSICS: usize = 2;
+pub use super::plan::EDGE_PHYSICS;
 
 /// The parameter holding learnable log-masses, one per particle type.
 pub const LOG_MASS: &str = "log_mass";
@@ -297,10 +297,14 @@ impl Arch {
     /// The scaled edge-physics features (rest length, stiffness) of directed
     /// edge `e` of a plan.
     pub fn edge_physics_of(&self, plan: &super::plan::GraphPlan, e: usize) -> [f64; EDGE_PHYSICS] {
-        [
-            plan.rest[e] / self.norm.w_scale,
-            plan.stiffness[e] / self.norm.k_scale,
-        ]
+        let (raw, scale) = (plan.edge_physics(e), self.edge_physics_scale());
+        std::array::from_fn(|f| raw[f] / scale[f])
+    }
+
+    /// What each edge-physics input is divided by: the rest length is a
+    /// length like w_ij, the stiffness has its own scale.
+    pub fn edge_physics_scale(&self) -> [f64; EDGE_PHYSICS] {
+        [self.norm.w_scale, self.norm.k_scale]
     }
 
     /// Whether the global (body) embedding exists.

@@ -1,6 +1,6 @@
 //! A batch of states of one graph, as candle tensors.
 
-use super::plan::GraphPlan;
+use super::plan::{GraphPlan, EDGE_PHYSICS};
 use crate::error::{bail, Result};
 use crate::system::State;
 use candle_core::{Device, Tensor};
@@ -77,7 +77,7 @@ impl Batch {
                 for k in half * e..(half + 1) * e {
                     recv.push((s * n + plan.recv[k]) as u32);
                     send.push((s * n + plan.send[k]) as u32);
-                    params.extend([plan.rest[k], plan.stiffness[k]]);
+                    params.extend(plan.edge_physics(k));
                 }
             }
         }
@@ -135,7 +135,7 @@ impl Batch {
             recv: Tensor::from_vec(recv, n_directed, dev)?,
             send: Tensor::from_vec(send, n_directed, dev)?,
             n_directed,
-            edge_params: Tensor::from_vec(params, (n_directed, 2), dev)?,
+            edge_params: Tensor::from_vec(params, (n_directed, EDGE_PHYSICS), dev)?,
             constraint,
             target,
         })

@@ -16,7 +16,7 @@ pub fn squareplus_grad(x: &Tensor) -> candle_core::Result<Tensor> {
     ((x / (x.sqr()? + 4.0)?.sqrt()?)? + 1.0)? * 0.5
 }
 
-/// Scalar squareplus, for the kernel.
+/// Scalar squareplus, for the engine.
 #[inline]
 pub fn squareplus_f64(x: f64) -> f64 {
     0.5 * (x + (x * x + 4.0).sqrt())

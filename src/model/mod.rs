@@ -1,6 +1,7 @@
-//! Learned dynamics: the GNODE family and NODE in candle (training), and the
-//! model file that hands trained weights to the inference kernel (where
-//! [`crate::kernel::TrainedModel`] runs them).
+//! Learned dynamics: the GNODE family and NODE described once ([`arch`]), in
+//! candle (the reference the engine is tested against), and the model file
+//! that hands trained weights to inference (where
+//! [`crate::kernel::TrainedModel`] runs them on the engine).
 
 pub mod arch;
 pub mod batch;

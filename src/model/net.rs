@@ -1,6 +1,6 @@
 //! The candle model: the paper's equations, one bias per piece.
 
-use super::arch::{Arch, Block, Decoder, NodeInput, LOG_MASS};
+use super::arch::{Arch, Block, Decoder, NodeInput, EDGE_PHYSICS, LOG_MASS};
 use super::batch::Batch;
 use super::mlp::{squareplus, Mlp};
 use super::params::ParamStore;
@@ -120,8 +120,8 @@ impl Net {
         let mut he = if b.n_directed > 0 {
             let mut w = ((gather(&b.q, &b.recv)? - gather(&b.q, &b.send)?)? / arch.norm.w_scale)?;
             if arch.edge_physics {
-                let (n, k) = (arch.norm.w_scale, arch.norm.k_scale);
-                let scale = Tensor::from_slice(&[1.0 / n, 1.0 / k], (1, 2), &Device::Cpu)?;
+                let scale = arch.edge_physics_scale().map(|s| 1.0 / s);
+                let scale = Tensor::from_slice(&scale, (1, EDGE_PHYSICS), &Device::Cpu)?;
                 w = Tensor::cat(&[&w, &b.edge_params.broadcast_mul(&scale)?], 1)?;
             }
             Some(squareplus(&p.need(Block::EdgeEmbed)?.forward(s, &w)?)?)

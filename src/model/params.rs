@@ -1,5 +1,5 @@
-//! Named, seeded parameters shared by the candle model (training) and the
-//! hand-written kernel (inference).
+//! Named, seeded parameters shared by the candle model (the reference) and
+//! the engine (training and inference).
 
 use crate::error::{bail, Context, Result};
 use candle_core::{Device, Tensor, Var};
@@ -17,7 +17,7 @@ pub struct Array {
     pub data: Vec<f64>,
 }
 
-/// Plain parameter values by name: what a model file stores and the kernel reads.
+/// Plain parameter values by name: what a model file stores and the engine reads.
 pub type Weights = BTreeMap<String, Array>;
 
 /// Trainable candle variables by name, in a fixed order.

@@ -1,8 +1,11 @@
 //! A graph prepared for learned models: directed message-passing edges and the
-//! rigid-bar constraint rows A(q), Ȧq̇. Shared by the candle model and the kernel
+//! rigid-bar constraint rows A(q), Ȧq̇. Shared by the candle model and the engine
 //! so both read the graph the same way.
 
 use crate::system::{EdgeKind, Endpoint, Graph};
+
+/// Edge-physics input features per edge: rest length and stiffness.
+pub const EDGE_PHYSICS: usize = 2;
 
 /// One rigid bar: particle `a` to particle `b`, or to a fixed point.
 #[derive(Clone, Debug, PartialEq)]
@@ -95,6 +98,13 @@ impl GraphPlan {
             rest,
             stiffness,
         }
+    }
+
+    /// The physical inputs of directed edge `e` before scaling: rest length
+    /// and stiffness. The one definition of the edge-physics features; their
+    /// scales are the architecture's `edge_physics_scale`.
+    pub fn edge_physics(&self, e: usize) -> [f64; EDGE_PHYSICS] {
+        [self.rest[e], self.stiffness[e]]
     }
 
     /// Number of undirected particle edges E.
