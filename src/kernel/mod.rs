@@ -176,10 +176,16 @@ impl Kernel {
         })
     }
 
-    /// Accelerations at (q, v), written to `acc` (`n·d`). Forces (and pairwise
-    /// forces for MCGNODE) are left in `ws.force` / `ws.edge_force`.
+    /// Accelerations at (q, v), written to `acc` (`n·d`); see
+    /// [`Kernel::read_forces`] for the forces of the same evaluation.
     pub fn acceleration(&self, ws: &mut Workspace, q: &[f64], v: &[f64], acc: &mut [f64]) {
         ws.forward.run(&self.theta, q, v, acc);
+    }
+
+    /// The forces of the last [`Kernel::acceleration`] into `ws.force`
+    /// (constrained variants) and `ws.edge_force` (pairwise ones), read off
+    /// that evaluation (rollouts do not pay for them).
+    pub fn read_forces(&self, ws: &mut Workspace) {
         let b = self.hyper.variant.biases();
         if b.constrained {
             ws.forward.forces(&mut ws.force);

@@ -130,6 +130,7 @@ impl Dynamics for TrainedModel {
         let mut acc = vec![0.0; graph.ndof()];
         self.kernel
             .acceleration(&mut ws, &state.q, &state.v, &mut acc);
+        self.kernel.read_forces(&mut ws);
         let b = self.file.hyper.variant.biases();
         let total = if b.constrained {
             ws.force.clone()
