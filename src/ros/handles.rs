@@ -25,8 +25,8 @@ use super::names::severity;
 use super::params::NodeParams;
 use super::record::{RecordError, Recorder};
 
-/// The parameters now: those in
-/// [`RUNTIME_SETTABLE`](super::params::RUNTIME_SETTABLE) change at run time.
+/// The parameters now: those settable at run time
+/// ([`super::params::Spec::runtime`]) change while the node runs.
 #[derive(Clone, Debug)]
 pub struct LiveParams(Arc<RwLock<NodeParams>>);
 

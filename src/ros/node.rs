@@ -33,7 +33,7 @@ use super::msgs::{
     DIAGNOSTIC_OK, DIAGNOSTIC_WARN, PACKAGE,
 };
 use super::names::{Names, RosArgs};
-use super::params::{NodeParams, ParamError, NODE_NAME, RUNTIME_SETTABLE};
+use super::params::{runtime_settable, NodeParams, ParamError, ParamValue, Spec, NODE_NAME, SPECS};
 use super::predict::{self, Prediction};
 use super::qos::{clock_qos, reliable_qos, ros_name, topic_qos};
 use super::record::Recorder;
@@ -159,14 +159,14 @@ fn scalar(value: &ParameterValue) -> Scalar {
 }
 
 /// Checks a run-time change of parameter `name` against `current`: only
-/// [`RUNTIME_SETTABLE`] parameters, with the same type and range checks as at
+/// parameters settable at run time ([`Spec::runtime`]), with the same type and range checks as at
 /// start. The refusal says why and what to do instead.
 pub fn check_runtime_change(
     current: &NodeParams,
     name: &str,
     value: &ParameterValue,
 ) -> Result<NodeParams, ParamError> {
-    if !RUNTIME_SETTABLE.contains(&name) {
+    if !runtime_settable(name) {
         return Err(ParamError::NotRuntime(name.to_string()));
     }
     let mut p = current.clone();
@@ -178,7 +178,14 @@ pub fn check_runtime_change(
 /// What `describe_parameters` (`ros2 param describe`) answers for a
 /// parameter of the one table: its documentation, whether it can change at
 /// run time, and its range.
-fn descriptor(key: &str, kind: super::params::Kind, doc: &str) -> ParameterDescriptor {
+fn descriptor(
+    &Spec {
+        name,
+        kind,
+        doc,
+        runtime,
+    }: &Spec,
+) -> ParameterDescriptor {
     use super::params::Kind;
     let range = match kind {
         Kind::Int(lo, hi) => NumericRange::IntegerRange {
@@ -204,42 +211,40 @@ fn descriptor(key: &str, kind: super::params::Kind, doc: &str) -> ParameterDescr
         _ => String::new(),
     };
     ParameterDescriptor {
-        name: key.to_string(),
+        name: name.to_string(),
         param_type: ParameterType::NotSet,
         description: doc.to_string(),
         additional_constraints: constraints,
-        read_only: !RUNTIME_SETTABLE.contains(&key),
+        read_only: !runtime,
         dynamic_typing: false,
         range,
     }
 }
 
-/// Every parameter of [`SPECS`](super::params::SPECS) as a ROS parameter, so
-/// rclpy can list and get them all; those in [`RUNTIME_SETTABLE`] can be set
+/// Every parameter of [`SPECS`] as a ROS parameter, so rclpy can list and
+/// get them all; those settable at run time ([`Spec::runtime`]) can be set
 /// (validated, then applied to `live`), the others refuse with the reason.
 fn declare_parameters(p: &NodeParams, live: LiveParams) -> NodeOptions {
-    use super::params::{Kind, SPECS};
     let values: Vec<(&'static str, ParameterValue)> = SPECS
         .iter()
-        .map(|(key, kind, _)| {
-            let text = p.raw_value(key);
-            let v = match kind {
-                Kind::Str | Kind::Topic | Kind::Choice(_) => ParameterValue::String(text),
-                Kind::Bool => ParameterValue::Boolean(text == "true"),
-                Kind::Int(..) => ParameterValue::Integer(text.parse().unwrap_or_default()),
-                Kind::Double(_) => ParameterValue::Double(text.parse().unwrap_or_default()),
-                // The only list parameter.
-                Kind::Doubles(_) => ParameterValue::DoubleArray(p.accuracy_lead_times.clone()),
+        .filter_map(|s| {
+            let v = match p.value(s.name)? {
+                ParamValue::Str(x) => ParameterValue::String(x.to_string()),
+                ParamValue::Bool(x) => ParameterValue::Boolean(x),
+                ParamValue::Int(x) => ParameterValue::Integer(i64::from(x)),
+                ParamValue::Double(x) => ParameterValue::Double(x),
+                ParamValue::Doubles(xs) => ParameterValue::DoubleArray(xs.to_vec()),
             };
-            (*key, v)
+            Some((s.name, v))
         })
         .collect();
     let initial = values.clone();
     let (check, apply) = (live.clone(), live);
-    let described = SPECS.iter().fold(
-        NodeOptions::new().enable_rosout(true),
-        |o, (k, kind, doc)| o.describe_parameter(descriptor(k, *kind, doc)),
-    );
+    let described = SPECS
+        .iter()
+        .fold(NodeOptions::new().enable_rosout(true), |o, s| {
+            o.describe_parameter(descriptor(s))
+        });
     values
         .into_iter()
         .fold(described, |o, (k, v)| o.declare_parameter(k, v))
@@ -257,7 +262,7 @@ fn declare_parameters(p: &NodeParams, live: LiveParams) -> NodeOptions {
         // Other parameters (read-only ones, ros2-client's use_sim_time) need
         // nothing here: the validator refuses changes to the read-only ones.
         .parameter_set_action(Box::new(move |name, value| {
-            if !RUNTIME_SETTABLE.contains(&name) {
+            if !runtime_settable(name) {
                 return Ok(());
             }
             apply

@@ -134,7 +134,7 @@ pub enum ParamError {
     #[error(
         "parameter {0} cannot change at run time (it shapes topics, services, QoS, files or the \
          model); restart the node with --set {0}=...; settable now: {settable}",
-        settable = RUNTIME_SETTABLE.join(", ")
+        settable = runtime_settable_names().join(", ")
     )]
     NotRuntime(String),
     /// A name that does not resolve.
@@ -154,158 +154,290 @@ pub enum ParamError {
 crate::error::typed_errors!(ParamError);
 
 fn known_parameters() -> String {
-    SPECS
-        .iter()
-        .map(|(k, _, _)| *k)
-        .collect::<Vec<_>>()
-        .join(", ")
+    SPECS.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
 }
 
 pub use super::names::NODE_NAME;
 use super::names::{is_ros_name, NameError, Names};
 
-/// Everything the node can be configured with.
-#[derive(Clone, Debug, PartialEq)]
-pub struct NodeParams {
+/// One parameter in the table: its name, kind, description, and whether it
+/// can change while the node runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Spec {
+    /// The parameter's name (its field's).
+    pub name: &'static str,
+    /// What it holds.
+    pub kind: Kind,
+    /// One line for parameter files, `--print-params` and `describe_parameters`.
+    pub doc: &'static str,
+    /// Settable at run time (through the ROS parameter services, e.g.
+    /// rclpy's `set_parameters`), taking effect from the next incoming state
+    /// or call. The others shape DDS endpoints, files or the loaded model and
+    /// need a restart.
+    pub runtime: bool,
+}
+
+/// A parameter's value, typed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ParamValue<'a> {
+    /// Text (strings, names, choices).
+    Str(&'a str),
+    /// A flag.
+    Bool(bool),
+    /// An integer.
+    Int(u32),
+    /// A double.
+    Double(f64),
+    /// A list of doubles.
+    Doubles(&'a [f64]),
+}
+
+/// Where a parameter's value lives, typed (for the setter).
+enum Slot<'a> {
+    Str(&'a mut String),
+    Bool(&'a mut bool),
+    Int(&'a mut u32),
+    Double(&'a mut f64),
+    Doubles(&'a mut Vec<f64>),
+}
+
+macro_rules! slot_and_value {
+    ($($t:ty => $v:ident),*) => {$(
+        impl<'a> From<&'a mut $t> for Slot<'a> {
+            fn from(x: &'a mut $t) -> Self {
+                Slot::$v(x)
+            }
+        }
+    )*};
+}
+slot_and_value!(String => Str, bool => Bool, u32 => Int, f64 => Double, Vec<f64> => Doubles);
+
+impl<'a> From<&'a String> for ParamValue<'a> {
+    fn from(x: &'a String) -> Self {
+        ParamValue::Str(x)
+    }
+}
+impl From<&bool> for ParamValue<'_> {
+    fn from(x: &bool) -> Self {
+        ParamValue::Bool(*x)
+    }
+}
+impl From<&u32> for ParamValue<'_> {
+    fn from(x: &u32) -> Self {
+        ParamValue::Int(*x)
+    }
+}
+impl From<&f64> for ParamValue<'_> {
+    fn from(x: &f64) -> Self {
+        ParamValue::Double(*x)
+    }
+}
+impl<'a> From<&'a Vec<f64>> for ParamValue<'a> {
+    fn from(x: &'a Vec<f64>) -> Self {
+        ParamValue::Doubles(x)
+    }
+}
+
+/// Declares every parameter once: its field (with its documentation, type
+/// and default) and its [`Spec`]; the struct, its `Default`, [`SPECS`] and
+/// the typed accessors by name are generated from it, so no parameter's name
+/// is written twice.
+macro_rules! node_params {
+    ($(
+        $(#[$meta:meta])*
+        $name:ident: $ty:ty = $default:expr, $kind:expr, $when:ident, $doc:literal;
+    )*) => {
+        /// Everything the node can be configured with.
+        #[derive(Clone, Debug, PartialEq)]
+        pub struct NodeParams {
+            $($(#[$meta])* pub $name: $ty,)*
+        }
+
+        impl Default for NodeParams {
+            fn default() -> Self {
+                NodeParams {
+                    $($name: $default,)*
+                }
+            }
+        }
+
+        /// Every parameter, in file order: the one table the parameter file,
+        /// `--set`, `--print-params` and the node's declared ROS parameters
+        /// (with descriptions, ranges and read-only flags) all come from.
+        pub const SPECS: &[Spec] = &[$(Spec {
+            name: stringify!($name),
+            kind: $kind,
+            doc: $doc,
+            runtime: node_params!(@when $when),
+        },)*];
+
+        impl NodeParams {
+            /// The value of parameter `key`, typed (`None`: no such parameter).
+            pub fn value(&self, key: &str) -> Option<ParamValue<'_>> {
+                match key {
+                    $(stringify!($name) => Some(ParamValue::from(&self.$name)),)*
+                    _ => None,
+                }
+            }
+
+            fn slot(&mut self, key: &str) -> Option<Slot<'_>> {
+                match key {
+                    $(stringify!($name) => Some(Slot::from(&mut self.$name)),)*
+                    _ => None,
+                }
+            }
+        }
+    };
+    (@when runtime) => { true };
+    (@when restart) => { false };
+}
+
+node_params! {
     /// Model to serve: `truth:spring`, `truth:pendulum`, or a trained model file.
-    pub model: String,
+    model: String = "truth:spring".into(), Kind::Str, restart,
+        "model to serve: truth:spring, truth:pendulum or a model file";
     /// Topic the node reads `ParticleState` from.
-    pub input_topic: String,
+    input_topic: String = "particle_state".into(), Kind::Topic, restart,
+        "topic of incoming ParticleState messages";
     /// Topic of the predicted trajectories.
-    pub trajectory_topic: String,
+    trajectory_topic: String = "~/predicted_trajectory".into(), Kind::Topic, restart,
+        "topic of PredictedTrajectory messages";
     /// Topic of the predicted forces.
-    pub forces_topic: String,
+    forces_topic: String = "~/predicted_forces".into(), Kind::Topic, restart,
+        "topic of ParticleForces messages";
     /// Topic of the periodic `NodeDiagnostics`.
-    pub diagnostics_topic: String,
+    diagnostics_topic: String = "~/diagnostics".into(), Kind::Topic, restart,
+        "topic of NodeDiagnostics messages";
     /// Name of the Rollout service.
-    pub rollout_service: String,
+    rollout_service: String = "~/rollout".into(), Kind::Topic, restart,
+        "name of the Rollout service";
     /// Steps predicted for each incoming state.
-    pub horizon: u32,
+    horizon: u32 = 100, Kind::Int(1, 100_000), runtime,
+        "steps predicted per incoming state";
     /// Time step of predictions, seconds.
-    pub dt: f64,
+    dt: f64 = 0.001, Kind::Double(true), runtime,
+        "time step of predictions, seconds";
     /// Integration steps per prediction step: the model is integrated with
     /// `dt / substeps` (e.g. the training data's simulator step) and every
     /// `substeps`-th state is published.
-    pub substeps: u32,
-    /// Reliable (true) or best-effort (false) QoS on the topics.
-    pub qos_reliable: bool,
-    /// Stamp diagnostics, swaps and recordings with `/clock` (bag playback)
-    /// instead of the system clock; read at start.
-    pub use_sim_time: bool,
-    /// Keep-last history depth of the topics.
-    pub qos_depth: u32,
-    /// Seconds between diagnostics messages.
-    pub diagnostics_period: f64,
-    /// Minimum seconds between two warnings about malformed input.
-    pub warn_period: f64,
-    /// Largest `steps` the Rollout service accepts.
-    pub max_rollout_steps: u32,
-    /// Largest state (particles) the node accepts on its input topic and in
-    /// Rollout calls; larger ones are rejected with the reason.
-    pub max_particles: u32,
-    /// Folder to record MCAP bags into; empty disables recording.
-    pub record_dir: String,
-    /// Start a new bag after this many megabytes (0 = no size limit).
-    pub record_split_mb: u32,
-    /// Start a new bag after this many seconds (0 = no duration limit).
-    pub record_split_seconds: f64,
+    substeps: u32 = 1, Kind::Int(1, 1_000_000), runtime,
+        "integration steps per prediction step (the model is integrated with dt / substeps)";
     /// Folder for models trained by the node; empty: `<record_dir>/models`,
     /// or a temporary folder when not recording.
-    pub model_dir: String,
+    model_dir: String = String::new(), Kind::Str, restart,
+        "folder for models trained by the node (empty: <record_dir>/models, or a temporary folder)";
+    /// Reliable (true) or best-effort (false) QoS on the topics.
+    qos_reliable: bool = true, Kind::Bool, restart,
+        "reliable (true) or best-effort (false) topics";
+    /// Keep-last history depth of the topics.
+    qos_depth: u32 = 10, Kind::Int(1, 10_000), restart,
+        "keep-last history depth";
+    /// Stamp diagnostics, swaps and recordings with `/clock` (bag playback)
+    /// instead of the system clock; read at start.
+    use_sim_time: bool = false, Kind::Bool, restart,
+        "stamp diagnostics, swaps and recordings with /clock (bag playback); read at start";
+    /// Seconds between diagnostics messages.
+    diagnostics_period: f64 = 1.0, Kind::Double(true), restart,
+        "seconds between diagnostics messages";
+    /// Minimum seconds between two warnings about malformed input.
+    warn_period: f64 = 5.0, Kind::Double(false), runtime,
+        "seconds between malformed-input warnings";
+    /// Largest `steps` the Rollout service accepts.
+    max_rollout_steps: u32 = 10_000, Kind::Int(1, 1_000_000), runtime,
+        "largest steps of a Rollout call";
+    /// Largest state (particles) the node accepts on its input topic and in
+    /// Rollout calls; larger ones are rejected with the reason.
+    max_particles: u32 = 10_000, Kind::Int(1, 10_000_000), runtime,
+        "largest state accepted (particles); larger states are rejected with the reason";
+    /// Folder to record MCAP bags into; empty disables recording.
+    record_dir: String = String::new(), Kind::Str, restart,
+        "folder for MCAP recordings; empty = no recording";
+    /// Start a new bag after this many megabytes (0 = no size limit).
+    record_split_mb: u32 = 0, Kind::Int(0, 1_000_000), restart,
+        "split bags after this many MB (0 = never)";
+    /// Start a new bag after this many seconds (0 = no duration limit).
+    record_split_seconds: f64 = 0.0, Kind::Double(false), restart,
+        "split bags after this many seconds (0 = never)";
     /// Lead times (seconds) at which live accuracy compares incoming states
     /// with what was predicted for them; empty disables live accuracy.
-    pub accuracy_lead_times: Vec<f64>,
+    accuracy_lead_times: Vec<f64> = Vec::new(), Kind::Doubles(16), runtime,
+        "live accuracy: lead times (s) at which incoming states are compared with their \
+         predictions, each within horizon * dt; [] = off";
     /// Comparisons averaged into the running RE and EE per lead time.
-    pub accuracy_window: u32,
+    accuracy_window: u32 = 10, Kind::Int(1, 100_000), runtime,
+        "live accuracy: comparisons averaged into the running RE and EE";
     /// Predictions kept waiting for their moment (bounds memory).
-    pub accuracy_max_pending: u32,
+    accuracy_max_pending: u32 = 10_000, Kind::Int(1, 10_000_000), runtime,
+        "live accuracy: predictions kept waiting for their moment (bounds memory)";
     /// Drift alarm: WARN when a running RE exceeds this (0 = never).
-    pub accuracy_warn_re: f64,
+    accuracy_warn_re: f64 = 0.01, Kind::Double(false), runtime,
+        "drift alarm: WARN when a running RE exceeds this (0 = never)";
     /// Drift alarm: ERROR when a running RE exceeds this (0 = never).
-    pub accuracy_error_re: f64,
+    accuracy_error_re: f64 = 0.05, Kind::Double(false), runtime,
+        "drift alarm: ERROR when a running RE exceeds this (0 = never)";
     /// Retrain when the drift alarm is raised: warm-start the served model on
     /// what is recorded after the alarm, swapped in only if it beats the old
     /// one on the most recent (held-out) recording.
-    pub accuracy_retrain: bool,
+    accuracy_retrain: bool = false, Kind::Bool, runtime,
+        "on a drift alarm, warm-start the served model on what is recorded next (needs \
+         record_dir); swapped in only if it beats the old model on held-out recent data";
     /// Seconds recorded after the alarm before retraining.
-    pub accuracy_retrain_after: f64,
+    accuracy_retrain_after: f64 = 5.0, Kind::Double(true), runtime,
+        "seconds recorded after a drift alarm before retraining (bags split by \
+         record_split_seconds; the last is held out)";
     /// Epochs of a retraining.
-    pub accuracy_retrain_epochs: u32,
+    accuracy_retrain_epochs: u32 = 3000, Kind::Int(1, 1_000_000), runtime,
+        "epochs of a retraining after a drift alarm";
     /// Publish (and record) a MarkerArray of predictions for RViz/Foxglove.
-    pub markers: bool,
+    markers: bool = true, Kind::Bool, runtime,
+        "publish and record a visualization_msgs/MarkerArray of predictions (particles, \
+         edges, predicted paths, forces) for RViz and Foxglove";
     /// Topic of the MarkerArray.
-    pub markers_topic: String,
+    markers_topic: String = "~/markers".into(), Kind::Topic, restart,
+        "topic of the MarkerArray";
     /// Minimum seconds between two MarkerArrays (0: one per prediction).
-    pub markers_period: f64,
+    markers_period: f64 = 0.1, Kind::Double(false), runtime,
+        "minimum seconds between two MarkerArrays (0 = one per prediction)";
     /// An input more than this many training scales out (velocity, position
     /// when the model reads it, edge vector, edge parameters) counts as
     /// `out_of_range` (0: never checked).
-    pub out_of_range_sigmas: f64,
+    out_of_range_sigmas: f64 = crate::compat::OUT_OF_RANGE_SIGMAS, Kind::Double(false), runtime,
+        "a state with an input (velocity, position, edge vector, edge parameter) more than \
+         this many training scales out counts as out_of_range in the diagnostics and is \
+         warned about (0 = never checked)";
     /// Refuse out-of-range states (counted as rejected too) instead of
     /// predicting them with a warning.
-    pub out_of_range_refuse: bool,
+    out_of_range_refuse: bool = false, Kind::Bool, runtime,
+        "refuse out-of-range states (counted as rejected) instead of predicting them with a \
+         warning";
     /// Start as an unconfigured managed node (predict only after configure
     /// and activate through the lifecycle services); read at start.
-    pub lifecycle: bool,
+    lifecycle: bool = false, Kind::Bool, restart,
+        "start as an unconfigured managed node: predict only after configure and activate \
+         (lifecycle_msgs services /mcgnode/change_state ...); false: start active. Read at start";
     /// Velocity estimate of position-only streams: "none" (three-point
     /// difference at the newest state) or "poly" (local polynomial fit).
-    pub velocity_smoother: String,
+    velocity_smoother: String = "none".into(), Kind::Choice(crate::data::stream::SMOOTHERS), runtime,
+        "velocities of position-only states (empty velocities): none = three-point difference \
+         at the newest state (3 states of warm-up); poly = least-squares polynomial over the \
+         last smoother_window states, evaluated at the newest stamp (no lag; averages tracker \
+         noise)";
     /// States in a poly smoother's fit (also its warm-up).
-    pub smoother_window: u32,
+    smoother_window: u32 = 15, Kind::Int(3, 1000), runtime,
+        "poly smoother: states in the fit, also its warm-up (at least smoother_order + 2)";
     /// Degree of a poly smoother's polynomial.
-    pub smoother_order: u32,
+    smoother_order: u32 = 2, Kind::Int(1, 4), runtime,
+        "poly smoother: degree of the polynomial";
     /// A gap longer than this (seconds) between two states of a stream
     /// starts its history over (0: never).
-    pub input_max_gap: f64,
+    input_max_gap: f64 = 0.5, Kind::Double(false), runtime,
+        "seconds between two states of a stream beyond which its history starts over (0 = \
+         never)";
     /// Input streams (trajectory ids) followed at once; the least recently
     /// seen is dropped first.
-    pub input_max_streams: u32,
-}
-
-impl Default for NodeParams {
-    fn default() -> Self {
-        NodeParams {
-            model: "truth:spring".into(),
-            input_topic: "particle_state".into(),
-            trajectory_topic: "~/predicted_trajectory".into(),
-            forces_topic: "~/predicted_forces".into(),
-            diagnostics_topic: "~/diagnostics".into(),
-            rollout_service: "~/rollout".into(),
-            horizon: 100,
-            dt: 0.001,
-            substeps: 1,
-            qos_reliable: true,
-            use_sim_time: false,
-            qos_depth: 10,
-            diagnostics_period: 1.0,
-            warn_period: 5.0,
-            max_rollout_steps: 10_000,
-            max_particles: 10_000,
-            record_dir: String::new(),
-            record_split_mb: 0,
-            record_split_seconds: 0.0,
-            model_dir: String::new(),
-            accuracy_lead_times: Vec::new(),
-            accuracy_window: 10,
-            accuracy_max_pending: 10_000,
-            accuracy_warn_re: 0.01,
-            accuracy_error_re: 0.05,
-            accuracy_retrain: false,
-            accuracy_retrain_after: 5.0,
-            accuracy_retrain_epochs: 3000,
-            markers: true,
-            markers_topic: "~/markers".into(),
-            markers_period: 0.1,
-            out_of_range_sigmas: crate::compat::OUT_OF_RANGE_SIGMAS,
-            out_of_range_refuse: false,
-            lifecycle: false,
-            velocity_smoother: "none".into(),
-            smoother_window: 15,
-            smoother_order: 2,
-            input_max_gap: 0.5,
-            input_max_streams: 64,
-        }
-    }
+    input_max_streams: u32 = 64, Kind::Int(1, 100_000), runtime,
+        "input streams (trajectory ids) followed at once for velocities and live accuracy; \
+         the least recently seen is dropped";
 }
 
 /// What a parameter holds, for type checking and messages.
@@ -326,242 +458,6 @@ pub enum Kind {
     /// One of these words.
     Choice(&'static [&'static str]),
 }
-
-/// Name, kind and documentation of every parameter, in file order: the one
-/// table the parameter file, `--set`, `--print-params` and the node's declared
-/// ROS parameters (with descriptions and ranges) all come from.
-pub const SPECS: &[(&str, Kind, &str)] = &[
-    (
-        "model",
-        Kind::Str,
-        "model to serve: truth:spring, truth:pendulum or a model file",
-    ),
-    (
-        "input_topic",
-        Kind::Topic,
-        "topic of incoming ParticleState messages",
-    ),
-    (
-        "trajectory_topic",
-        Kind::Topic,
-        "topic of PredictedTrajectory messages",
-    ),
-    (
-        "forces_topic",
-        Kind::Topic,
-        "topic of ParticleForces messages",
-    ),
-    (
-        "diagnostics_topic",
-        Kind::Topic,
-        "topic of NodeDiagnostics messages",
-    ),
-    (
-        "rollout_service",
-        Kind::Topic,
-        "name of the Rollout service",
-    ),
-    (
-        "horizon",
-        Kind::Int(1, 100_000),
-        "steps predicted per incoming state",
-    ),
-    (
-        "dt",
-        Kind::Double(true),
-        "time step of predictions, seconds",
-    ),
-    (
-        "substeps",
-        Kind::Int(1, 1_000_000),
-        "integration steps per prediction step (the model is integrated with dt / substeps)",
-    ),
-    (
-        "model_dir",
-        Kind::Str,
-        "folder for models trained by the node (empty: <record_dir>/models, or a temporary folder)",
-    ),
-    (
-        "qos_reliable",
-        Kind::Bool,
-        "reliable (true) or best-effort (false) topics",
-    ),
-    ("qos_depth", Kind::Int(1, 10_000), "keep-last history depth"),
-    (
-        "use_sim_time",
-        Kind::Bool,
-        "stamp diagnostics, swaps and recordings with /clock (bag playback); read at start",
-    ),
-    (
-        "diagnostics_period",
-        Kind::Double(true),
-        "seconds between diagnostics messages",
-    ),
-    (
-        "warn_period",
-        Kind::Double(false),
-        "seconds between malformed-input warnings",
-    ),
-    (
-        "max_rollout_steps",
-        Kind::Int(1, 1_000_000),
-        "largest steps of a Rollout call",
-    ),
-    (
-        "max_particles",
-        Kind::Int(1, 10_000_000),
-        "largest state accepted (particles); larger states are rejected with the reason",
-    ),
-    (
-        "record_dir",
-        Kind::Str,
-        "folder for MCAP recordings; empty = no recording",
-    ),
-    (
-        "record_split_mb",
-        Kind::Int(0, 1_000_000),
-        "split bags after this many MB (0 = never)",
-    ),
-    (
-        "record_split_seconds",
-        Kind::Double(false),
-        "split bags after this many seconds (0 = never)",
-    ),
-    (
-        "accuracy_lead_times",
-        Kind::Doubles(16),
-        "live accuracy: lead times (s) at which incoming states are compared with their \
-         predictions, each within horizon * dt; [] = off",
-    ),
-    (
-        "accuracy_window",
-        Kind::Int(1, 100_000),
-        "live accuracy: comparisons averaged into the running RE and EE",
-    ),
-    (
-        "accuracy_max_pending",
-        Kind::Int(1, 10_000_000),
-        "live accuracy: predictions kept waiting for their moment (bounds memory)",
-    ),
-    (
-        "accuracy_warn_re",
-        Kind::Double(false),
-        "drift alarm: WARN when a running RE exceeds this (0 = never)",
-    ),
-    (
-        "accuracy_error_re",
-        Kind::Double(false),
-        "drift alarm: ERROR when a running RE exceeds this (0 = never)",
-    ),
-    (
-        "accuracy_retrain",
-        Kind::Bool,
-        "on a drift alarm, warm-start the served model on what is recorded next (needs \
-         record_dir); swapped in only if it beats the old model on held-out recent data",
-    ),
-    (
-        "accuracy_retrain_after",
-        Kind::Double(true),
-        "seconds recorded after a drift alarm before retraining (bags split by \
-         record_split_seconds; the last is held out)",
-    ),
-    (
-        "accuracy_retrain_epochs",
-        Kind::Int(1, 1_000_000),
-        "epochs of a retraining after a drift alarm",
-    ),
-    (
-        "markers",
-        Kind::Bool,
-        "publish and record a visualization_msgs/MarkerArray of predictions (particles, \
-         edges, predicted paths, forces) for RViz and Foxglove",
-    ),
-    ("markers_topic", Kind::Topic, "topic of the MarkerArray"),
-    (
-        "markers_period",
-        Kind::Double(false),
-        "minimum seconds between two MarkerArrays (0 = one per prediction)",
-    ),
-    (
-        "out_of_range_sigmas",
-        Kind::Double(false),
-        "a state with an input (velocity, position, edge vector, edge parameter) more than \
-         this many training scales out counts as out_of_range in the diagnostics and is \
-         warned about (0 = never checked)",
-    ),
-    (
-        "out_of_range_refuse",
-        Kind::Bool,
-        "refuse out-of-range states (counted as rejected) instead of predicting them with a \
-         warning",
-    ),
-    (
-        "lifecycle",
-        Kind::Bool,
-        "start as an unconfigured managed node: predict only after configure and activate \
-         (lifecycle_msgs services /mcgnode/change_state ...); false: start active. Read at start",
-    ),
-    (
-        "velocity_smoother",
-        Kind::Choice(crate::data::stream::SMOOTHERS),
-        "velocities of position-only states (empty velocities): none = three-point difference \
-         at the newest state (3 states of warm-up); poly = least-squares polynomial over the \
-         last smoother_window states, evaluated at the newest stamp (no lag; averages tracker \
-         noise)",
-    ),
-    (
-        "smoother_window",
-        Kind::Int(3, 1000),
-        "poly smoother: states in the fit, also its warm-up (at least smoother_order + 2)",
-    ),
-    (
-        "smoother_order",
-        Kind::Int(1, 4),
-        "poly smoother: degree of the polynomial",
-    ),
-    (
-        "input_max_gap",
-        Kind::Double(false),
-        "seconds between two states of a stream beyond which its history starts over (0 = \
-         never)",
-    ),
-    (
-        "input_max_streams",
-        Kind::Int(1, 100_000),
-        "input streams (trajectory ids) followed at once for velocities and live accuracy; \
-         the least recently seen is dropped",
-    ),
-];
-
-/// Parameters that can be changed while the node runs (through the ROS
-/// parameter services, e.g. rclpy's `set_parameters`): they take effect from
-/// the next incoming state or call. The others shape DDS endpoints, files or
-/// the loaded model and need a restart.
-pub const RUNTIME_SETTABLE: &[&str] = &[
-    "horizon",
-    "dt",
-    "substeps",
-    "warn_period",
-    "max_rollout_steps",
-    "max_particles",
-    "accuracy_lead_times",
-    "accuracy_window",
-    "accuracy_max_pending",
-    "accuracy_warn_re",
-    "accuracy_error_re",
-    "accuracy_retrain",
-    "accuracy_retrain_after",
-    "accuracy_retrain_epochs",
-    "markers",
-    "markers_period",
-    "out_of_range_sigmas",
-    "out_of_range_refuse",
-    "velocity_smoother",
-    "smoother_window",
-    "smoother_order",
-    "input_max_gap",
-    "input_max_streams",
-];
 
 /// Keys of a parameter file section that are this node's, as rcl matches
 /// them: `/**`, `**`, `/**/NAME`, the node's name, and its fully qualified
@@ -732,7 +628,7 @@ impl NodeParams {
     /// Sets one parameter, checking its name, type and range. Command-line
     /// values for string parameters are taken as text whatever they look like.
     pub fn set(&mut self, key: &str, value: &Scalar, from_cli: bool) -> Result<(), ParamError> {
-        let Some(&(_, kind, _)) = SPECS.iter().find(|(k, _, _)| *k == key) else {
+        let Some(kind) = spec(key).map(|s| s.kind) else {
             return Err(ParamError::Unknown(key.to_string()));
         };
         let ill = |want: &str| ParamError::IllTyped {
@@ -756,7 +652,7 @@ impl NodeParams {
                         name: s,
                     });
                 }
-                self.set_str(key, s);
+                self.put(key, Put::Str(s));
             }
             Kind::Choice(words) => {
                 let Scalar::Str(w) = value else {
@@ -765,10 +661,10 @@ impl NodeParams {
                 if !words.contains(&w.as_str()) {
                     return Err(ill(&format!("one of {}", words.join(", "))));
                 }
-                self.set_str(key, w.clone());
+                self.put(key, Put::Str(w.clone()));
             }
             Kind::Bool => match value {
-                Scalar::Bool(b) => self.set_bool(key, *b),
+                Scalar::Bool(b) => self.put(key, Put::Bool(*b)),
                 _ => return Err(ill("true or false")),
             },
             Kind::Int(lo, hi) => {
@@ -784,7 +680,7 @@ impl NodeParams {
                         lo,
                         hi,
                     })?;
-                self.set_int(key, v);
+                self.put(key, Put::Int(v));
             }
             Kind::Double(positive) => {
                 let x = match value {
@@ -801,7 +697,7 @@ impl NodeParams {
                         want,
                     });
                 }
-                self.set_double(key, x);
+                self.put(key, Put::Double(x));
             }
             Kind::Doubles(max) => {
                 let Scalar::List(items) = value else {
@@ -829,72 +725,21 @@ impl NodeParams {
                     }
                     xs.push(x);
                 }
-                self.accuracy_lead_times = xs;
+                self.put(key, Put::Doubles(xs));
             }
         }
         Ok(())
     }
 
-    fn set_str(&mut self, key: &str, s: String) {
-        match key {
-            "model" => self.model = s,
-            "input_topic" => self.input_topic = s,
-            "trajectory_topic" => self.trajectory_topic = s,
-            "forces_topic" => self.forces_topic = s,
-            "diagnostics_topic" => self.diagnostics_topic = s,
-            "rollout_service" => self.rollout_service = s,
-            "record_dir" => self.record_dir = s,
-            "model_dir" => self.model_dir = s,
-            "markers_topic" => self.markers_topic = s,
-            "velocity_smoother" => self.velocity_smoother = s,
-            _ => unreachable_key(key),
-        }
-    }
-
-    // Each bool by name: a new one without an arm is caught by the tests
-    // instead of silently setting another.
-    fn set_bool(&mut self, key: &str, b: bool) {
-        match key {
-            "qos_reliable" => self.qos_reliable = b,
-            "use_sim_time" => self.use_sim_time = b,
-            "accuracy_retrain" => self.accuracy_retrain = b,
-            "markers" => self.markers = b,
-            "lifecycle" => self.lifecycle = b,
-            "out_of_range_refuse" => self.out_of_range_refuse = b,
-            _ => unreachable_key(key),
-        }
-    }
-
-    fn set_int(&mut self, key: &str, v: u32) {
-        match key {
-            "horizon" => self.horizon = v,
-            "substeps" => self.substeps = v,
-            "qos_depth" => self.qos_depth = v,
-            "max_rollout_steps" => self.max_rollout_steps = v,
-            "max_particles" => self.max_particles = v,
-            "record_split_mb" => self.record_split_mb = v,
-            "accuracy_window" => self.accuracy_window = v,
-            "accuracy_max_pending" => self.accuracy_max_pending = v,
-            "accuracy_retrain_epochs" => self.accuracy_retrain_epochs = v,
-            "smoother_window" => self.smoother_window = v,
-            "smoother_order" => self.smoother_order = v,
-            "input_max_streams" => self.input_max_streams = v,
-            _ => unreachable_key(key),
-        }
-    }
-
-    fn set_double(&mut self, key: &str, x: f64) {
-        match key {
-            "dt" => self.dt = x,
-            "diagnostics_period" => self.diagnostics_period = x,
-            "warn_period" => self.warn_period = x,
-            "record_split_seconds" => self.record_split_seconds = x,
-            "accuracy_warn_re" => self.accuracy_warn_re = x,
-            "accuracy_error_re" => self.accuracy_error_re = x,
-            "accuracy_retrain_after" => self.accuracy_retrain_after = x,
-            "markers_period" => self.markers_period = x,
-            "out_of_range_sigmas" => self.out_of_range_sigmas = x,
-            "input_max_gap" => self.input_max_gap = x,
+    /// Stores a checked value through its typed slot; the kind in [`SPECS`]
+    /// and the field's type agree (tested over the whole table).
+    fn put(&mut self, key: &str, value: Put) {
+        match (self.slot(key), value) {
+            (Some(Slot::Str(x)), Put::Str(v)) => *x = v,
+            (Some(Slot::Bool(x)), Put::Bool(v)) => *x = v,
+            (Some(Slot::Int(x)), Put::Int(v)) => *x = v,
+            (Some(Slot::Double(x)), Put::Double(v)) => *x = v,
+            (Some(Slot::Doubles(x)), Put::Doubles(v)) => *x = v,
             _ => unreachable_key(key),
         }
     }
@@ -902,10 +747,10 @@ impl NodeParams {
     /// The parameters as a ROS 2 parameter file (what `serve --print-params` prints).
     pub fn to_yaml(&self) -> String {
         let mut s = format!("{NODE_NAME}:\n  ros__parameters:\n");
-        for (key, _, doc) in SPECS {
+        for Spec { name, doc, .. } in SPECS {
             s.push_str(&format!(
-                "    # {doc}\n    {key}: {}\n",
-                self.value_text(key)
+                "    # {doc}\n    {name}: {}\n",
+                self.value_text(name)
             ));
         }
         s
@@ -913,8 +758,8 @@ impl NodeParams {
 
     /// The value of `key` as parameter-file text (strings quoted).
     pub fn value_text(&self, key: &str) -> String {
-        match SPECS.iter().find(|(k, _, _)| *k == key) {
-            Some((_, Kind::Str | Kind::Topic | Kind::Choice(_), _)) => {
+        match spec(key).map(|s| s.kind) {
+            Some(Kind::Str | Kind::Topic | Kind::Choice(_)) => {
                 format!("{:?}", self.raw_value(key))
             }
             _ => self.raw_value(key),
@@ -923,62 +768,48 @@ impl NodeParams {
 
     /// The value of `key` as text, strings unquoted ("" for an unknown key).
     pub fn raw_value(&self, key: &str) -> String {
-        match key {
-            "model" => self.model.clone(),
-            "input_topic" => self.input_topic.clone(),
-            "trajectory_topic" => self.trajectory_topic.clone(),
-            "forces_topic" => self.forces_topic.clone(),
-            "diagnostics_topic" => self.diagnostics_topic.clone(),
-            "rollout_service" => self.rollout_service.clone(),
-            "record_dir" => self.record_dir.clone(),
-            "model_dir" => self.model_dir.clone(),
-            "substeps" => self.substeps.to_string(),
-            "horizon" => self.horizon.to_string(),
-            "qos_depth" => self.qos_depth.to_string(),
-            "max_rollout_steps" => self.max_rollout_steps.to_string(),
-            "max_particles" => self.max_particles.to_string(),
-            "record_split_mb" => self.record_split_mb.to_string(),
-            "qos_reliable" => self.qos_reliable.to_string(),
-            "use_sim_time" => self.use_sim_time.to_string(),
-            "dt" => format!("{:?}", self.dt),
-            "diagnostics_period" => format!("{:?}", self.diagnostics_period),
-            "warn_period" => format!("{:?}", self.warn_period),
-            "record_split_seconds" => format!("{:?}", self.record_split_seconds),
-            "accuracy_lead_times" => {
-                let xs: Vec<String> = self
-                    .accuracy_lead_times
-                    .iter()
-                    .map(|x| format!("{x:?}"))
-                    .collect();
+        match self.value(key) {
+            Some(ParamValue::Str(x)) => x.to_string(),
+            Some(ParamValue::Bool(x)) => x.to_string(),
+            Some(ParamValue::Int(x)) => x.to_string(),
+            Some(ParamValue::Double(x)) => format!("{x:?}"),
+            Some(ParamValue::Doubles(xs)) => {
+                let xs: Vec<String> = xs.iter().map(|x| format!("{x:?}")).collect();
                 format!("[{}]", xs.join(", "))
             }
-            "accuracy_window" => self.accuracy_window.to_string(),
-            "accuracy_max_pending" => self.accuracy_max_pending.to_string(),
-            "accuracy_warn_re" => format!("{:?}", self.accuracy_warn_re),
-            "accuracy_error_re" => format!("{:?}", self.accuracy_error_re),
-            "accuracy_retrain" => self.accuracy_retrain.to_string(),
-            "accuracy_retrain_after" => format!("{:?}", self.accuracy_retrain_after),
-            "accuracy_retrain_epochs" => self.accuracy_retrain_epochs.to_string(),
-            "markers" => self.markers.to_string(),
-            "markers_topic" => self.markers_topic.clone(),
-            "markers_period" => format!("{:?}", self.markers_period),
-            "out_of_range_sigmas" => format!("{:?}", self.out_of_range_sigmas),
-            "out_of_range_refuse" => self.out_of_range_refuse.to_string(),
-            "lifecycle" => self.lifecycle.to_string(),
-            "velocity_smoother" => self.velocity_smoother.clone(),
-            "smoother_window" => self.smoother_window.to_string(),
-            "smoother_order" => self.smoother_order.to_string(),
-            "input_max_gap" => format!("{:?}", self.input_max_gap),
-            "input_max_streams" => self.input_max_streams.to_string(),
-            _ => String::new(),
+            None => String::new(),
         }
     }
 }
 
-/// The SPECS table and the setters list the same keys; a mismatch is a bug
-/// caught by the tests, and must not panic a running node.
+/// A checked value on its way into its field.
+enum Put {
+    Str(String),
+    Bool(bool),
+    Int(u32),
+    Double(f64),
+    Doubles(Vec<f64>),
+}
+
+/// The table's entry for `key`.
+pub fn spec(key: &str) -> Option<&'static Spec> {
+    SPECS.iter().find(|s| s.name == key)
+}
+
+/// Whether parameter `key` can change while the node runs ([`Spec::runtime`]).
+pub fn runtime_settable(key: &str) -> bool {
+    spec(key).is_some_and(|s| s.runtime)
+}
+
+/// The names of the parameters settable at run time, in table order.
+pub fn runtime_settable_names() -> Vec<&'static str> {
+    SPECS.iter().filter(|s| s.runtime).map(|s| s.name).collect()
+}
+
+/// A kind in SPECS that does not fit its field's type is a bug caught by the
+/// tests, and must not panic a running node.
 fn unreachable_key(key: &str) {
-    debug_assert!(false, "parameter {key} is in SPECS but has no setter");
+    debug_assert!(false, "parameter {key}: its kind does not fit its field");
 }
 
 /// Nested mappings under `ros__parameters` become dotted names, as in ROS 2.
@@ -1039,11 +870,37 @@ mod tests {
         assert_eq!(p, q);
     }
 
+    /// Each kind in the table fits its field's type, so `set` stores every
+    /// checked value (a mismatch would be dropped by `put`).
+    #[test]
+    fn every_kind_fits_its_field() {
+        let p = NodeParams::default();
+        for Spec { name, kind, .. } in SPECS {
+            let fits = matches!(
+                (kind, p.value(name)),
+                (
+                    Kind::Str | Kind::Topic | Kind::Choice(_),
+                    Some(ParamValue::Str(_))
+                ) | (Kind::Bool, Some(ParamValue::Bool(_)))
+                    | (Kind::Int(..), Some(ParamValue::Int(_)))
+                    | (Kind::Double(_), Some(ParamValue::Double(_)))
+                    | (Kind::Doubles(_), Some(ParamValue::Doubles(_)))
+            );
+            assert!(fits, "{name}: {kind:?} does not fit {:?}", p.value(name));
+        }
+        assert!(p.value("horizn").is_none());
+        let names: std::collections::BTreeSet<_> = SPECS.iter().map(|s| s.name).collect();
+        assert_eq!(names.len(), SPECS.len(), "a name twice in the table");
+    }
+
     /// Setting one bool changes that parameter and no other.
     #[test]
     fn each_bool_sets_only_itself() {
         let d = NodeParams::default();
-        for (key, kind, _) in SPECS {
+        for Spec {
+            name: key, kind, ..
+        } in SPECS
+        {
             if *kind != Kind::Bool {
                 continue;
             }
@@ -1051,7 +908,7 @@ mod tests {
             let mut p = d.clone();
             p.set(key, &Scalar::Bool(flipped), false).unwrap();
             assert_eq!(p.raw_value(key), flipped.to_string(), "{key}");
-            for (other, _, _) in SPECS.iter().filter(|(k, _, _)| k != key) {
+            for other in SPECS.iter().map(|s| s.name).filter(|k| k != key) {
                 assert_eq!(
                     p.raw_value(other),
                     d.raw_value(other),
