@@ -158,6 +158,21 @@ pub trait Dynamics: Send + Sync {
     /// Forces at a state.
     fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, DynamicsError>;
 
+    /// [`Dynamics::rollout_every`] and the [`Dynamics::forces`] at `start`,
+    /// what the node publishes for each state. Models with a forward pass
+    /// take the forces from the rollout's first evaluation.
+    fn rollout_with_forces(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<(Vec<State>, Forces), DynamicsError> {
+        let states = self.rollout_every(graph, start, dt, steps, every)?;
+        Ok((states, self.forces(graph, start)?))
+    }
+
     /// Velocity-Verlet rollout of `steps` steps of `dt`, keeping `start` and
     /// every `every`-th state (so a coarse output can come from a fine
     /// integration step).

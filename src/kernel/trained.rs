@@ -8,6 +8,7 @@ use crate::physics::verlet;
 use crate::system::{Graph, State};
 use std::convert::Infallible;
 use std::path::Path;
+use std::sync::Mutex;
 
 /// A trained model ready for rollouts and serving.
 #[derive(Clone, Debug)]
@@ -16,6 +17,38 @@ pub struct TrainedModel {
     pub file: ModelFile,
     /// The forward kernel built from its weights.
     pub kernel: Kernel,
+    /// The last graph's workspace, for the next call on the same graph (the
+    /// node predicts state after state of one system).
+    cache: Cache,
+}
+
+/// A graph and its workspace, kept between calls: a call on the same graph
+/// takes it (no allocation), another graph builds its own; calls at the same
+/// time each get one.
+#[derive(Debug, Default)]
+struct Cache(Mutex<Option<(Graph, Workspace)>>);
+
+impl Clone for Cache {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl Cache {
+    /// The workspace for `graph`: the kept one if it was made for it.
+    fn take(&self, kernel: &Kernel, graph: &Graph) -> Result<(Graph, Workspace), DynamicsError> {
+        let kept = self.0.lock().ok().and_then(|mut c| c.take());
+        match kept {
+            Some((g, ws)) if g == *graph => Ok((g, ws)),
+            _ => Ok((graph.clone(), kernel.workspace(graph)?)),
+        }
+    }
+
+    fn put(&self, kept: (Graph, Workspace)) {
+        if let Ok(mut c) = self.0.lock() {
+            *c = Some(kept);
+        }
+    }
 }
 
 impl TrainedModel {
@@ -27,7 +60,11 @@ impl TrainedModel {
     /// Builds the kernel of an in-memory model file.
     pub fn from_file(file: ModelFile) -> Result<Self> {
         let kernel = Kernel::new(&file.hyper, &file.weights)?;
-        Ok(Self { file, kernel })
+        Ok(Self {
+            file,
+            kernel,
+            cache: Cache::default(),
+        })
     }
 
     /// Velocity-Verlet rollout on the kernel (with SHAKE/RATTLE onto the bars,
@@ -42,14 +79,16 @@ impl TrainedModel {
         every: usize,
         visit: impl FnMut(usize, &[f64], &[f64]),
     ) -> Result<(), DynamicsError> {
-        match self.verlet(ws, start, dt, steps, every, visit) {
+        match self.verlet(ws, start, dt, steps, every, |_, _| {}, visit) {
             None => Ok(()),
             Some(step) => Err(DynamicsError::Diverged(step)),
         }
     }
 
-    /// The loop of [`TrainedModel::rollout_with`]; returns the step at which
-    /// the state became non-finite, if it did.
+    /// The loop of [`TrainedModel::rollout_with`]; `first(ws, q̈)` sees the
+    /// workspace after the evaluation at the start (its forces). Returns the
+    /// step at which the state became non-finite, if it did.
+    #[allow(clippy::too_many_arguments)]
     fn verlet(
         &self,
         ws: &mut Workspace,
@@ -57,6 +96,7 @@ impl TrainedModel {
         dt: f64,
         steps: usize,
         every: usize,
+        first: impl FnOnce(&mut Workspace, &[f64]),
         mut visit: impl FnMut(usize, &[f64], &[f64]),
     ) -> Option<usize> {
         let d = start.q.len();
@@ -64,6 +104,7 @@ impl TrainedModel {
         let mut v = start.v.clone();
         let mut a = vec![0.0; d];
         self.kernel.acceleration(ws, &q, &v, &mut a);
+        first(ws, &a);
         visit(0, &q, &v);
         let every = every.max(1);
         for step in 1..=steps {
@@ -82,6 +123,72 @@ impl TrainedModel {
             }
         }
         None
+    }
+}
+
+impl TrainedModel {
+    /// Forces of the workspace's last evaluation, whose accelerations are `acc`.
+    fn forces_of(&self, ws: &mut Workspace, graph: &Graph, acc: &[f64]) -> Forces {
+        self.kernel.read_forces(ws);
+        let b = self.file.hyper.variant.biases();
+        let total = if b.constrained {
+            ws.force.clone()
+        } else {
+            // Acceleration-predicting models: force = m q̈ with the true masses.
+            acc.iter()
+                .enumerate()
+                .map(|(i, a)| a * graph.masses[i / graph.dim])
+                .collect()
+        };
+        let (d, plan) = (graph.dim, ws.plan());
+        let edges = if b.pairwise {
+            (0..plan.n_edges())
+                .map(|e| EdgeForce {
+                    a: plan.recv[e],
+                    b: plan.send[e],
+                    force: ws.edge_force[e * d..(e + 1) * d].to_vec(),
+                })
+                .collect()
+        } else {
+            vec![]
+        };
+        Forces { total, edges }
+    }
+
+    /// A rollout on the kept workspace, with the forces of its first
+    /// evaluation when `forces` is set.
+    fn rollout_and_forces(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+        forces: bool,
+    ) -> Result<(Vec<State>, Option<Forces>), DynamicsError> {
+        start.validate(graph)?;
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(DynamicsError::TimeStep(dt));
+        }
+        let mut kept = self.cache.take(&self.kernel, graph)?;
+        let mut out = Vec::with_capacity(steps / every.max(1) + 1);
+        let mut f = None;
+        let first = |ws: &mut Workspace, acc: &[f64]| {
+            if forces {
+                f = Some(self.forces_of(ws, graph, acc));
+            }
+        };
+        let diverged = self.verlet(&mut kept.1, start, dt, steps, every, first, |_, q, v| {
+            out.push(State {
+                q: q.to_vec(),
+                v: v.to_vec(),
+            })
+        });
+        self.cache.put(kept);
+        match diverged {
+            None => Ok((out, f)),
+            Some(step) => Err(DynamicsError::Diverged(step)),
+        }
     }
 }
 
@@ -112,7 +219,6 @@ impl Dynamics for TrainedModel {
         state: &State,
         out: &mut [f64],
     ) -> Result<(), DynamicsError> {
-        let mut ws = self.kernel.workspace(graph)?;
         state.validate(graph)?;
         if out.len() != graph.ndof() {
             return Err(DynamicsError::OutputSize {
@@ -120,40 +226,22 @@ impl Dynamics for TrainedModel {
                 need: graph.ndof(),
             });
         }
-        self.kernel.acceleration(&mut ws, &state.q, &state.v, out);
+        let mut kept = self.cache.take(&self.kernel, graph)?;
+        self.kernel
+            .acceleration(&mut kept.1, &state.q, &state.v, out);
+        self.cache.put(kept);
         Ok(())
     }
 
     fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, DynamicsError> {
-        let mut ws = self.kernel.workspace(graph)?;
         state.validate(graph)?;
+        let mut kept = self.cache.take(&self.kernel, graph)?;
         let mut acc = vec![0.0; graph.ndof()];
         self.kernel
-            .acceleration(&mut ws, &state.q, &state.v, &mut acc);
-        self.kernel.read_forces(&mut ws);
-        let b = self.file.hyper.variant.biases();
-        let total = if b.constrained {
-            ws.force.clone()
-        } else {
-            // Acceleration-predicting models: force = m q̈ with the true masses.
-            acc.iter()
-                .enumerate()
-                .map(|(i, a)| a * graph.masses[i / graph.dim])
-                .collect()
-        };
-        let d = graph.dim;
-        let edges = if b.pairwise {
-            (0..ws.plan().n_edges())
-                .map(|e| EdgeForce {
-                    a: ws.plan().recv[e],
-                    b: ws.plan().send[e],
-                    force: ws.edge_force[e * d..(e + 1) * d].to_vec(),
-                })
-                .collect()
-        } else {
-            vec![]
-        };
-        Ok(Forces { total, edges })
+            .acceleration(&mut kept.1, &state.q, &state.v, &mut acc);
+        let f = self.forces_of(&mut kept.1, graph, &acc);
+        self.cache.put(kept);
+        Ok(f)
     }
 
     fn rollout_every(
@@ -164,19 +252,23 @@ impl Dynamics for TrainedModel {
         steps: usize,
         every: usize,
     ) -> Result<Vec<State>, DynamicsError> {
-        let mut ws = self.kernel.workspace(graph)?;
-        start.validate(graph)?;
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(DynamicsError::TimeStep(dt));
-        }
-        let mut out = Vec::with_capacity(steps / every.max(1) + 1);
-        self.rollout_with(&mut ws, start, dt, steps, every, |_, q, v| {
-            out.push(State {
-                q: q.to_vec(),
-                v: v.to_vec(),
-            })
-        })?;
-        Ok(out)
+        Ok(self
+            .rollout_and_forces(graph, start, dt, steps, every, false)?
+            .0)
+    }
+
+    /// The forces come from the rollout's first evaluation, in the same
+    /// workspace: one forward pass fewer per prediction.
+    fn rollout_with_forces(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<(Vec<State>, Forces), DynamicsError> {
+        let (states, forces) = self.rollout_and_forces(graph, start, dt, steps, every, true)?;
+        Ok((states, forces.unwrap_or_default()))
     }
 
     /// One kernel rollout per start (no batching needed: the kernel has no
@@ -206,12 +298,14 @@ impl Dynamics for TrainedModel {
                 .iter()
                 .map(|start| {
                     let mut states = Vec::with_capacity(steps / every.max(1) + 1);
-                    let diverged_at = self.verlet(&mut ws, start, dt, steps, every, |_, q, v| {
+                    let visit = |_: usize, q: &[f64], v: &[f64]| {
                         states.push(State {
                             q: q.to_vec(),
                             v: v.to_vec(),
                         })
-                    });
+                    };
+                    let diverged_at =
+                        self.verlet(&mut ws, start, dt, steps, every, |_, _| {}, visit);
                     Rollout {
                         states,
                         diverged_at,

@@ -75,6 +75,19 @@ impl Dynamics for Checked {
         self.inner.forces(graph, state)
     }
 
+    fn rollout_with_forces(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+    ) -> Result<(Vec<State>, Forces), DynamicsError> {
+        self.trained.check(graph, None)?;
+        self.inner
+            .rollout_with_forces(graph, start, dt, steps, every)
+    }
+
     fn rollout_every(
         &self,
         graph: &Graph,

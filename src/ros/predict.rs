@@ -115,6 +115,31 @@ pub fn trajectory(
     Ok(trajectory_msg(input, graph, dt, &states[1..]))
 }
 
+/// [`rollout`] and the forces at `start`, from one call (one evaluation of
+/// the start for models with a forward pass).
+fn rollout_and_forces(
+    model: &dyn Dynamics,
+    graph: &Graph,
+    start: &State,
+    dt: f64,
+    steps: u32,
+    substeps: u32,
+) -> Result<(Vec<State>, Forces), PredictError> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(PredictError::BadStep(dt));
+    }
+    let sub = substeps.max(1) as usize;
+    let (states, forces) = model
+        .rollout_with_forces(graph, start, dt / sub as f64, steps as usize * sub, sub)
+        .map_err(PredictError::Rollout)?;
+    if states.is_empty() {
+        return Err(PredictError::Rollout(DynamicsError::Model(
+            "the model returned no states".into(),
+        )));
+    }
+    Ok((states, forces))
+}
+
 /// The model's states every `dt` for `steps` steps from `start` (the first
 /// is `start` itself), integrated with `dt / substeps`.
 fn rollout(
@@ -239,10 +264,10 @@ pub fn predict_parts(
     substeps: u32,
 ) -> Result<Prediction, PredictError> {
     model.supports(graph).map_err(PredictError::Unsupported)?;
-    let mut states = rollout(model, graph, start, dt, horizon, substeps)?;
+    let (mut states, f) = rollout_and_forces(model, graph, start, dt, horizon, substeps)?;
     states.remove(0);
     let trajectory = trajectory_msg(input, graph, dt, &states);
-    let forces = forces(model, &input.header, graph, start)?;
+    let forces = forces_msg(&input.header, graph.dim, &f)?;
     Ok(Prediction {
         trajectory,
         forces,
