@@ -125,19 +125,9 @@ fn rollout_and_forces(
     steps: u32,
     substeps: u32,
 ) -> Result<(Vec<State>, Forces), PredictError> {
-    if !(dt.is_finite() && dt > 0.0) {
-        return Err(PredictError::BadStep(dt));
-    }
-    let sub = substeps.max(1) as usize;
-    let (states, forces) = model
-        .rollout_with_forces(graph, start, dt / sub as f64, steps as usize * sub, sub)
-        .map_err(PredictError::Rollout)?;
-    if states.is_empty() {
-        return Err(PredictError::Rollout(DynamicsError::Model(
-            "the model returned no states".into(),
-        )));
-    }
-    Ok((states, forces))
+    integrate(dt, steps, substeps, |h, n, every| {
+        model.rollout_with_forces(graph, start, h, n, every)
+    })
 }
 
 /// The model's states every `dt` for `steps` steps from `start` (the first
@@ -150,19 +140,32 @@ fn rollout(
     steps: u32,
     substeps: u32,
 ) -> Result<Vec<State>, PredictError> {
+    let (states, ()) = integrate(dt, steps, substeps, |h, n, every| {
+        Ok((model.rollout_every(graph, start, h, n, every)?, ()))
+    })?;
+    Ok(states)
+}
+
+/// Runs `roll(dt / substeps, steps · substeps, substeps)` after checking
+/// `dt`, refusing an empty answer.
+fn integrate<T>(
+    dt: f64,
+    steps: u32,
+    substeps: u32,
+    roll: impl FnOnce(f64, usize, usize) -> Result<(Vec<State>, T), DynamicsError>,
+) -> Result<(Vec<State>, T), PredictError> {
     if !(dt.is_finite() && dt > 0.0) {
         return Err(PredictError::BadStep(dt));
     }
     let sub = substeps.max(1) as usize;
-    let states = model
-        .rollout_every(graph, start, dt / sub as f64, steps as usize * sub, sub)
-        .map_err(PredictError::Rollout)?;
+    let (states, extra) =
+        roll(dt / sub as f64, steps as usize * sub, sub).map_err(PredictError::Rollout)?;
     if states.is_empty() {
         return Err(PredictError::Rollout(DynamicsError::Model(
             "the model returned no states".into(),
         )));
     }
-    Ok(states)
+    Ok((states, extra))
 }
 
 /// The wire message of the predicted `states` after `input`, `dt` apart.
