@@ -28,26 +28,24 @@ use super::record::{RecordError, Recorder};
 /// The parameters now: those settable at run time
 /// ([`super::params::Spec::runtime`]) change while the node runs.
 #[derive(Clone, Debug)]
-pub struct LiveParams(Arc<RwLock<NodeParams>>);
+pub struct LiveParams(Arc<RwLock<Arc<NodeParams>>>);
 
 impl LiveParams {
     /// Starts from `params`.
     pub fn new(params: NodeParams) -> Self {
-        LiveParams(Arc::new(RwLock::new(params)))
+        LiveParams(Arc::new(RwLock::new(Arc::new(params))))
     }
 
-    /// A copy of the parameters now.
-    pub fn get(&self) -> NodeParams {
-        self.0
-            .read()
-            .unwrap_or_else(PoisonError::into_inner)
-            .clone()
+    /// The parameters now: a shared snapshot (a change replaces it, so a
+    /// reader's copy never changes under it), not a copy of the set.
+    pub fn get(&self) -> Arc<NodeParams> {
+        Arc::clone(&self.0.read().unwrap_or_else(PoisonError::into_inner))
     }
 
     /// Replaces the parameters with `f(current)`, unless `f` refuses.
     pub fn update<E>(&self, f: impl FnOnce(&NodeParams) -> Result<NodeParams, E>) -> Result<(), E> {
         let mut p = self.0.write().unwrap_or_else(PoisonError::into_inner);
-        *p = f(&p)?;
+        *p = Arc::new(f(&p)?);
         Ok(())
     }
 }
