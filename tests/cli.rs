@@ -1060,3 +1060,31 @@ fn train_recipes_explained_fraction_and_the_still_reference() {
     .unwrap();
     assert_eq!(r["still"]["re_mean"], still_replay["averages"]["re"]);
 }
+
+/// `scripts/bench_vs_reference.sh` (the side-by-side harness against the
+/// authors' JAX code) refuses a missing or wrong REF_DIR with a clear message
+/// and exit code 2, before it makes a venv or times anything.
+#[test]
+fn bench_vs_reference_refuses_a_missing_ref_dir() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let script = root.join("scripts/bench_vs_reference.sh");
+    let dir = tempfile::tempdir().unwrap();
+    for (args, want) in [
+        (vec![], "no REF_DIR given"),
+        (
+            vec![dir.path().join("nowhere").display().to_string()],
+            "is not a checkout of M3RG-IITD/graph_neural_ODE",
+        ),
+        (vec!["--bogus".to_string()], "unknown option --bogus"),
+    ] {
+        let o = Command::new("bash")
+            .arg(&script)
+            .args(&args)
+            .output()
+            .expect("run bash");
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(want), "{args:?}: stderr should say {want:?}: {err}");
+        assert!(err.contains("Usage") || err.contains("git clone"), "{err}");
+    }
+}

@@ -1,0 +1,83 @@
+#!/usr/bin/env bash
+# Side-by-side speed: the authors' JAX code against `mcgnode bench`, in
+# interleaved rounds on this machine (issue 24).
+#
+# Usage: scripts/bench_vs_reference.sh [--quick] [--rounds N] [--json OUT] REF_DIR
+#   REF_DIR  a checkout of the authors' repository, made by you:
+#            git clone https://github.com/M3RG-IITD/graph_neural_ODE REF_DIR
+#   --quick  one round, one timed epoch / rollout each (checks the harness)
+#   --rounds N   rounds (default 3; each: mcgnode, JAX 1 thread, JAX 2 threads)
+#   --json OUT   also write every measurement as JSON
+#
+# Their code never enters this repository. The harness
+#  - makes a venv REF_DIR/.venv-bench and installs their dependencies from PyPI
+#    (pinned below; their requirements.txt pins jax 0.2.26 / jax-md 0.1.23,
+#    which no longer install on current Python);
+#  - copies the scripts it runs into REF_DIR/.mcgnode-bench/ and edits the
+#    copies, printing each edit and why (scripts/bench_reference.py, EDITS),
+#    with shims for jax API changes applied at import (SHIMS there);
+#  - generates their 5-spring and 5-pendulum data sets once with their data
+#    scripts, then per round and per row: `mcgnode bench --json --only <figure>`,
+#    their script with 1 thread, their script with 2 threads.
+# Every timed process runs under `flock $BENCH_LOCK` (default /work/build.lock
+# when it exists; set BENCH_LOCK= to disable) so builds do not overlap it.
+# Uses target/release/mcgnode (or $CARGO_TARGET_DIR/release/mcgnode, or
+# $MCGNODE_BIN), copied aside first so a rebuild cannot change it mid-run.
+set -euo pipefail
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+usage() { sed -n '5,10p' "$0" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+QUICK=() ROUNDS=3 JSON=() REF=
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --quick) QUICK=(--quick); shift ;;
+        --rounds) ROUNDS=${2:?}; shift 2 ;;
+        --json) JSON=(--json "$(realpath -m "${2:?}")"); shift 2 ;;
+        -h|--help) usage ;;
+        -*) echo "bench_vs_reference: unknown option $1" >&2; usage ;;
+        *) [ -z "$REF" ] || usage; REF=$1; shift ;;
+    esac
+done
+if [ -z "$REF" ]; then
+    echo "bench_vs_reference: no REF_DIR given" >&2; usage
+fi
+if [ ! -d "$REF/scripts/psystems" ] || [ ! -f "$REF/scripts/Spring-4MCGNODE.py" ]; then
+    echo "bench_vs_reference: $REF is not a checkout of M3RG-IITD/graph_neural_ODE" \
+        "(no scripts/Spring-4MCGNODE.py); make one with" >&2
+    echo "  git clone https://github.com/M3RG-IITD/graph_neural_ODE $REF" >&2
+    exit 2
+fi
+REF=$(cd "$REF" && pwd)
+
+BIN_SRC=${MCGNODE_BIN:-${CARGO_TARGET_DIR:-$ROOT/target}/release/mcgnode}
+if [ ! -x "$BIN_SRC" ]; then
+    echo "bench_vs_reference: no release binary at $BIN_SRC;" \
+        "build it: cargo build --release --bin mcgnode" >&2
+    exit 2
+fi
+LOCK=${BENCH_LOCK-$( [ -e /work/build.lock ] && echo /work/build.lock || true )}
+run_locked() { if [ -n "$LOCK" ]; then flock "$LOCK" "$@"; else "$@"; fi; }
+
+# Versions that exist on PyPI and work together (checked 2026-12 on Python 3.11).
+PY=${BENCH_PYTHON:-python3}
+PINS=("jax[cpu]==0.10.2" "jaxlib==0.10.2" "jax-md==0.2.29" "jraph==0.0.6.dev0"
+      "dm-haiku==0.0.17" "fire==0.7.1" "frozendict==2.4.6" "scikit-learn==1.7.2"
+      "matplotlib==3.10.7")
+VENV=$REF/.venv-bench
+WORK=$REF/.mcgnode-bench
+mkdir -p "$WORK"
+STAMP="$VENV/.mcgnode-pins"
+if [ ! -x "$VENV/bin/python" ] || [ "$(cat "$STAMP" 2>/dev/null)" != "${PINS[*]}" ]; then
+    echo "making $VENV with ${PINS[*]}"
+    "$PY" -m venv "$VENV"
+    run_locked timeout 1800 "$VENV/bin/pip" install -q "${PINS[@]}"
+    echo "${PINS[*]}" >"$STAMP"
+fi
+BIN=$WORK/mcgnode
+cp "$BIN_SRC" "$BIN"
+
+"$PY" "$ROOT/scripts/bench_reference.py" prepare "$REF" "$WORK"
+LOAD=$(uptime)
+echo "load at start: $LOAD"
+exec "$PY" "$ROOT/scripts/bench_reference.py" harness --ref "$REF" --work "$WORK" \
+    --mcgnode "$BIN" --venv-python "$VENV/bin/python" --lock "$LOCK" \
+    --load-before "$LOAD" --jaxmd 0.2.29 --rounds "$ROUNDS" "${QUICK[@]}" "${JSON[@]}"
