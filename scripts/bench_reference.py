@@ -62,6 +62,11 @@ SHIMS = [
     "`from jax.config import config` -> a module `jax.config` holding jax.config (the module is gone)",
     "jax.ops.index_update(x, i, v) -> x.at[i].set(v); jax.ops.index -> jnp.index_exp (removed in jax 0.4)",
     "jax.tree_map -> jax.tree_util.tree_map (removed in jax 0.6)",
+    "jnp.clip(x, a_min=, a_max=) -> jnp.clip(x, min=, max=) (the old keywords were removed)",
+    "jax_md.quantity.canonicalize_mass(m) (gone from jax-md 0.2.29) -> a mass of shape "
+    "[n] reshaped to [n, 1], a scalar kept, as it did",
+    "note, no change: jax-md's NVEState now holds momentum where theirs put the velocity; "
+    "its .velocity divides by the mass, which is 1 in all these scripts: same values",
     "shadow.plot (the authors' private plotting package, not on PyPI) -> a stub: "
     "panel() = matplotlib subplots (Agg), xlabel/ylabel/title on an axis",
     "src.io.loadfile of `fgnode_trained_model*` in a rollout job -> the parameters "
@@ -129,6 +134,27 @@ def install_shims(params_file):
     jax.ops.index = jnp.index_exp
     if not hasattr(jax, "tree_map"):
         jax.tree_map = jax.tree_util.tree_map
+    clip = jnp.clip
+
+    def clip_old(x, *args, a_min=None, a_max=None, **kw):
+        if a_min is not None:
+            kw["min"] = a_min
+        if a_max is not None:
+            kw["max"] = a_max
+        return clip(x, *args, **kw)
+
+    jnp.clip = clip_old
+    import jax_md.quantity
+    if not hasattr(jax_md.quantity, "canonicalize_mass"):
+        def canonicalize_mass(mass):
+            if isinstance(mass, float) or jnp.ndim(mass) == 0:
+                return mass
+            if mass.ndim == 1:
+                return jnp.reshape(mass, (mass.shape[0], 1))
+            if mass.ndim == 2 and mass.shape[1] == 1:
+                return mass
+            raise ValueError(f"mass of shape {mass.shape}")
+        jax_md.quantity.canonicalize_mass = canonicalize_mass
 
     shadow = types.ModuleType("shadow")
     sp = types.ModuleType("shadow.plot")
@@ -338,10 +364,17 @@ def mcg_job(r, a, figure, quick):
 def fmt_range(vals, unit):
     med = statistics.median(vals)
     if unit == "steps/s":
-        f = lambda x: f"{x / 1e3:.1f}k"
-        return f"{f(med)} steps/s ({f(min(vals))}–{f(max(vals))})"
-    f = (lambda x: f"{x * 1e3:.1f} ms") if med < 1 else (lambda x: f"{x:.2f} s")
-    return f"{f(med)} ({f(min(vals))}–{f(max(vals))})"
+        f = lambda x: f"{x / 1e3:.1f}"
+        return f"{f(med)}k steps/s ({f(min(vals))}–{f(max(vals))}k)"
+    if med < 1:
+        f = lambda x: f"{x * 1e3:.1f}"
+        return f"{f(med)} ms ({f(min(vals))}–{f(max(vals))})"
+    f = lambda x: f"{x:.2f}"
+    return f"{f(med)} s ({f(min(vals))}–{f(max(vals))})"
+
+
+def secs(x):
+    return f"{x * 1e3:.0f} ms" if x < 1 else f"{x:.2f} s"
 
 
 def harness(a):
@@ -398,8 +431,10 @@ def table(a, res, items, info, rounds):
             f", jax-md {a.jaxmd}",
             "JAX 1 thread: taskset -c 0, XLA_FLAGS='--xla_cpu_multi_thread_eigen=false "
             "intra_op_parallelism_threads=1'; JAX 2 threads: taskset -c 0,1",
-            "cells: median (min–max over rounds); JAX cpu = user+sys of the timed region; "
-            "mcgnode cpu = user+sys / wall of its whole `bench --only` process"]
+            "cells: median (min–max over rounds); JAX user/sys: CPU time of one timed epoch or "
+            "rollout (getrusage of the process around it; steps/s rows also give its wall); "
+            "mcgnode: the figure `bench --json --only <figure>` reports (its own median), and "
+            "wall/user/sys of that whole process (setup, data and all its repeats)"]
     rows = []
     out = {"header": head, "rows": []}
     for key, label, _, _, _, steps in items:
@@ -410,19 +445,21 @@ def table(a, res, items, info, rounds):
                 vals, unit = [x["wall"] for x in xs], "s"
             else:
                 vals, unit = [steps / x["wall"] for x in xs], "steps/s"
-            cpu = statistics.median(x["user"] + x["sys"] for x in xs)
-            sysc = statistics.median(x["sys"] for x in xs)
-            wall = statistics.median(x["wall"] for x in xs)
-            return vals, unit, f"{fmt_range(vals, unit)}, cpu {cpu / wall:.2f}x wall (sys {sysc / wall:.2f}x)"
+            med = statistics.median
+            wall = med(x["wall"] for x in xs)
+            cpu = f"wall {secs(wall)}, " if unit == "steps/s" else ""
+            cpu += f"user {secs(med(x['user'] for x in xs))}, sys {secs(med(x['sys'] for x in xs))}"
+            return vals, unit, f"{fmt_range(vals, unit)}; {cpu}"
         j1, unit, c1 = jcell(1)
         j2, _, c2 = jcell(2)
         for f in MCG[key]:
             ms = d["mcg"][f]
             mv = [m["value"] for m in ms]
             pw = statistics.median(m["process"]["wall"] for m in ms)
-            pc = statistics.median(m["process"]["user"] + m["process"]["sys"] for m in ms)
+            pu = statistics.median(m["process"]["user"] for m in ms)
             ps = statistics.median(m["process"]["sys"] for m in ms)
-            mcell = f"{fmt_range(mv, unit)}, cpu {pc / pw:.2f}x wall (sys {ps / pw:.2f}x)"
+            mcell = (f"{fmt_range(mv, unit)}; process: wall {secs(pw)}, user {secs(pu)}, "
+                     f"sys {secs(ps)}")
             med = statistics.median
             if unit == "steps/s":
                 rat = [med(mv) / med(j1), med(mv) / med(j2)]
@@ -465,7 +502,6 @@ def main():
     q.add_argument("--reps", type=int, default=3)
     q.add_argument("--params")
     q.add_argument("--allow-end", action="store_true")
-    q.add_argument("rest", nargs=argparse.REMAINDER)
     q = sub.add_parser("harness")
     for o in ["--ref", "--work", "--mcgnode", "--venv-python", "--json", "--lock",
               "--load-before", "--jaxmd"]:
@@ -473,12 +509,14 @@ def main():
     q.add_argument("--rounds", type=int, default=3)
     q.add_argument("--quick", action="store_true")
     q.add_argument("--timeout", type=float, default=1800)
-    a = p.parse_args()
+    argv = sys.argv[1:]
+    cut = argv.index("--") if "--" in argv else len(argv)
+    rest = argv[cut + 1:]
+    a = p.parse_args(argv[:cut])
+    a.rest = rest  # their script's own (fire) arguments, after `--`
     if a.cmd == "prepare":
         prepare(a.ref, a.work)
     elif a.cmd == "job":
-        if a.rest and a.rest[0] == "--":
-            a.rest = a.rest[1:]
         if a.allow_end:  # data scripts: run to their end
             import builtins
             import runpy

@@ -57,11 +57,12 @@ fi
 LOCK=${BENCH_LOCK-$( [ -e /work/build.lock ] && echo /work/build.lock || true )}
 run_locked() { if [ -n "$LOCK" ]; then flock "$LOCK" "$@"; else "$@"; fi; }
 
-# Versions that exist on PyPI and work together (checked 2026-12 on Python 3.11).
+# Versions that exist on PyPI and work together (checked 2026-12-02 on Python
+# 3.11; their dependencies float, `pip freeze` goes to $VENV/freeze.txt).
 PY=${BENCH_PYTHON:-python3}
 PINS=("jax[cpu]==0.10.2" "jaxlib==0.10.2" "jax-md==0.2.29" "jraph==0.0.6.dev0"
-      "dm-haiku==0.0.17" "fire==0.7.1" "frozendict==2.4.6" "scikit-learn==1.7.2"
-      "matplotlib==3.10.7")
+      "dm-haiku==0.0.17" "fire==0.7.1" "frozendict==2.5.1" "scikit-learn==1.9.1"
+      "matplotlib==3.11.2")
 VENV=$REF/.venv-bench
 WORK=$REF/.mcgnode-bench
 mkdir -p "$WORK"
@@ -70,6 +71,7 @@ if [ ! -x "$VENV/bin/python" ] || [ "$(cat "$STAMP" 2>/dev/null)" != "${PINS[*]}
     echo "making $VENV with ${PINS[*]}"
     "$PY" -m venv "$VENV"
     run_locked timeout 1800 "$VENV/bin/pip" install -q "${PINS[@]}"
+    "$VENV/bin/pip" freeze >"$VENV/freeze.txt"
     echo "${PINS[*]}" >"$STAMP"
 fi
 BIN=$WORK/mcgnode
