@@ -1084,7 +1084,10 @@ fn bench_vs_reference_refuses_a_missing_ref_dir() {
             .expect("run bash");
         assert_eq!(o.status.code(), Some(2), "{args:?}");
         let err = String::from_utf8_lossy(&o.stderr);
-        assert!(err.contains(want), "{args:?}: stderr should say {want:?}: {err}");
+        assert!(
+            err.contains(want),
+            "{args:?}: stderr should say {want:?}: {err}"
+        );
         assert!(err.contains("Usage") || err.contains("git clone"), "{err}");
     }
 }
