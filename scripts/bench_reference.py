@@ -62,6 +62,8 @@ SHIMS = [
     "`from jax.config import config` -> a module `jax.config` holding jax.config (the module is gone)",
     "jax.ops.index_update(x, i, v) -> x.at[i].set(v); jax.ops.index -> jnp.index_exp (removed in jax 0.4)",
     "jax.tree_map -> jax.tree_util.tree_map (removed in jax 0.6)",
+    "jax.ops.segment_sum(..., num_segments=n_node) with n_node a 1-element array -> "
+    "its one integer (jax now takes only a scalar)",
     "jnp.clip(x, a_min=, a_max=) -> jnp.clip(x, min=, max=) (the old keywords were removed)",
     "jax_md.quantity.canonicalize_mass(m) (gone from jax-md 0.2.29) -> a mass of shape "
     "[n] reshaped to [n, 1], a scalar kept, as it did",
@@ -144,6 +146,14 @@ def install_shims(params_file):
         return clip(x, *args, **kw)
 
     jnp.clip = clip_old
+    seg = jax.ops.segment_sum
+
+    def segment_sum(data, ids, num_segments=None, *a, **kw):
+        if num_segments is not None and np.ndim(num_segments) == 1 and np.size(num_segments) == 1:
+            num_segments = int(np.asarray(num_segments)[0])
+        return seg(data, ids, num_segments, *a, **kw)
+
+    jax.ops.segment_sum = segment_sum
     import jax_md.quantity
     if not hasattr(jax_md.quantity, "canonicalize_mass"):
         def canonicalize_mass(mass):
@@ -260,14 +270,16 @@ class Runner:
         self.a = a
         self.log = open(os.path.join(a.work, "bench.log"), "a")
 
-    def run(self, cmd, env=None, timeout=3600, cwd=None):
-        """Runs cmd; returns (stdout, wall, user, sys) of the whole process."""
+    def run(self, cmd, env=None, timeout=3600, cwd=None, capture=False):
+        """Runs cmd (its output to the log, or stdout returned with `capture`);
+        returns (stdout, wall, user, sys) of the whole process."""
         r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         self.log.write(f"\n$ {' '.join(cmd)}\n")
         self.log.flush()
         p = subprocess.run(cmd, env=env, cwd=cwd, timeout=timeout,
-                           stdout=subprocess.PIPE, stderr=self.log, text=True)
+                           stdout=subprocess.PIPE if capture else self.log,
+                           stderr=self.log, text=True)
         wall = time.perf_counter() - t0
         r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         if p.returncode != 0:
@@ -350,7 +362,7 @@ def mcg_job(r, a, figure, quick):
     cmd = flock_prefix(a) + [a.mcgnode, "bench", "--json", "--only", figure]
     if quick:
         cmd.insert(len(flock_prefix(a)) + 2, "--quick")
-    out, pwall, puser, psys = r.run(cmd, timeout=a.timeout)
+    out, pwall, puser, psys = r.run(cmd, timeout=a.timeout, capture=True)
     doc = json.loads(out)
     figs = doc if isinstance(doc, list) else doc.get("figures", doc)
     if len(figs) != 1:
