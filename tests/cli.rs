@@ -1078,7 +1078,7 @@ fn bench_vs_reference_refuses_a_missing_ref_dir() {
         (vec!["--bogus".to_string()], "unknown option --bogus"),
     ] {
         let o = Command::new("bash")
-            .arg(&script)
+            .arg(script.as_path())
             .args(&args)
             .output()
             .expect("run bash");
