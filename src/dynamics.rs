@@ -170,7 +170,10 @@ pub trait Dynamics: Send + Sync {
         every: usize,
     ) -> Result<(Vec<State>, Forces), DynamicsError> {
         let states = self.rollout_every(graph, start, dt, steps, every)?;
-        Ok((states, self.forces(graph, start)?))
+        let forces = self
+            .forces(graph, start)
+            .map_err(|e| DynamicsError::Forces(Box::new(e)))?;
+        Ok((states, forces))
     }
 
     /// Velocity-Verlet rollout of `steps` steps of `dt`, keeping `start` and
@@ -379,6 +382,10 @@ pub enum DynamicsError {
     /// The model's own computation failed (candle), with its causes.
     #[error("{0}")]
     Model(String),
+    /// The forces failed although the rollout did not
+    /// ([`Dynamics::rollout_with_forces`]): callers report it as such.
+    #[error("{0}")]
+    Forces(Box<DynamicsError>),
 }
 
 crate::error::typed_errors!(DynamicsError);

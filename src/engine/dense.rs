@@ -143,17 +143,68 @@ impl Linear {
     }
 }
 
+/// One layer on a tile: `y[j] = b[j] + Σ_i w[i][j]·x[i]`, summed in the
+/// order of [`Linear::forward`] (bias, then inputs in turn), [`OUTS`]
+/// outputs at a time.
+#[inline(always)]
+fn dense_tile(l: &Linear, th: &[f64], x: &[f64], y: &mut [f64]) {
+    let w = &th[l.w..l.w + l.inp * l.out];
+    let b = &th[l.b..l.b + l.out];
+    let lane = |x: &[f64], i: usize| -> [f64; TILE] {
+        x[i * TILE..(i + 1) * TILE].try_into().expect("a tile")
+    };
+    let mut j = 0;
+    while j + OUTS <= l.out {
+        let mut acc = [[0.0; TILE]; OUTS];
+        for (o, row) in acc.iter_mut().enumerate() {
+            *row = [b[j + o]; TILE];
+        }
+        for i in 0..l.inp {
+            let xi = lane(x, i);
+            for (o, row) in acc.iter_mut().enumerate() {
+                let wv = w[i * l.out + j + o];
+                for k in 0..TILE {
+                    row[k] += wv * xi[k];
+                }
+            }
+        }
+        for (o, row) in acc.iter().enumerate() {
+            y[(j + o) * TILE..(j + o + 1) * TILE].copy_from_slice(row);
+        }
+        j += OUTS;
+    }
+    for j in j..l.out {
+        let mut row = [b[j]; TILE];
+        for i in 0..l.inp {
+            let (xi, wv) = (lane(x, i), w[i * l.out + j]);
+            for k in 0..TILE {
+                row[k] += wv * xi[k];
+            }
+        }
+        y[j * TILE..(j + 1) * TILE].copy_from_slice(&row);
+    }
+}
+
 /// An MLP with squareplus between layers and a linear output.
 #[derive(Clone, Debug)]
 pub(crate) struct Mlp {
     pub(crate) layers: Vec<Linear>,
 }
 
-/// The hidden activations of one MLP application (one buffer per hidden layer).
+/// The hidden activations of one MLP application (one buffer per hidden
+/// layer), or, for inference, none: then only a tile's scratch.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Tape {
     hidden: Vec<Vec<f64>>,
+    /// Two tiles of `width × TILE` (inference only).
+    tile: Vec<f64>,
 }
+
+/// Rows an inference pass keeps in registers at once: two 8-lane vectors.
+const TILE: usize = 16;
+/// Outputs computed together, so that each input tile loaded serves four
+/// independent accumulator chains (a chain alone waits on its adds).
+const OUTS: usize = 4;
 
 impl Mlp {
     /// Widest layer.
@@ -173,10 +224,22 @@ impl Mlp {
                 .iter()
                 .map(|l| vec![0.0; l.out * rows])
                 .collect(),
+            tile: vec![],
         }
     }
 
-    /// `y = mlp([a; c])` over `r` rows, recording hidden activations in `tape`.
+    /// A tape that records nothing: [`Mlp::forward`] then runs tile by tile
+    /// with every layer's tile in registers (inference).
+    pub(crate) fn inference_tape(&self) -> Tape {
+        Tape {
+            hidden: vec![],
+            tile: vec![0.0; 2 * self.width() * TILE],
+        }
+    }
+
+    /// `y = mlp([a; c])` over `r` rows, recording hidden activations in
+    /// `tape` unless it is an [`Mlp::inference_tape`]. Both give the same
+    /// bits: each output is the same sums in the same order.
     pub(crate) fn forward(
         &self,
         th: &[f64],
@@ -186,6 +249,9 @@ impl Mlp {
         tape: &mut Tape,
         y: &mut [f64],
     ) {
+        if !tape.tile.is_empty() {
+            return self.infer(th, a, c, r, &mut tape.tile, y);
+        }
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
@@ -238,6 +304,101 @@ impl Mlp {
             }
             if li + 1 < nl {
                 squareplus_in_place(dst);
+            }
+        }
+    }
+
+    /// The inference pass of [`Mlp::forward`], dispatched to the widest
+    /// vectors the CPU has.
+    fn infer(&self, th: &[f64], a: &[f64], c: &[f64], r: usize, tile: &mut [f64], y: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the CPU supports AVX-512F (checked just above).
+                return unsafe { self.infer_avx512(th, a, c, r, tile, y) };
+            }
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                return unsafe { self.infer_avx2(th, a, c, r, tile, y) };
+            }
+        }
+        self.infer_any(th, a, c, r, tile, y);
+    }
+
+    /// [`Mlp::infer_any`] compiled for AVX-512F (no fused multiply-adds).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn infer_avx512(
+        &self,
+        th: &[f64],
+        a: &[f64],
+        c: &[f64],
+        r: usize,
+        tile: &mut [f64],
+        y: &mut [f64],
+    ) {
+        self.infer_any(th, a, c, r, tile, y);
+    }
+
+    /// [`Mlp::infer_any`] compiled for AVX2 (no fused multiply-adds).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn infer_avx2(
+        &self,
+        th: &[f64],
+        a: &[f64],
+        c: &[f64],
+        r: usize,
+        tile: &mut [f64],
+        y: &mut [f64],
+    ) {
+        self.infer_any(th, a, c, r, tile, y);
+    }
+
+    /// `y = mlp([a; c])` a tile of [`TILE`] rows at a time: the tile's
+    /// inputs are gathered (zero-padded at the end), pass through every
+    /// layer in `tile`, and the valid rows are written out. Layer by layer
+    /// over all rows ([`Mlp::forward_any`]) streams every hidden row through
+    /// memory once per weight instead.
+    #[inline(always)]
+    fn infer_any(
+        &self,
+        th: &[f64],
+        a: &[f64],
+        c: &[f64],
+        r: usize,
+        tile: &mut [f64],
+        y: &mut [f64],
+    ) {
+        let (Some(first), Some(last)) = (self.layers.first(), self.layers.last()) else {
+            return;
+        };
+        if r == 0 {
+            return;
+        }
+        let na = a.len() / r;
+        let (mut x, mut h) = tile.split_at_mut(tile.len() / 2);
+        for t0 in (0..r).step_by(TILE) {
+            let len = TILE.min(r - t0);
+            for i in 0..first.inp {
+                let src = if i < na {
+                    &a[i * r + t0..i * r + t0 + len]
+                } else {
+                    &c[(i - na) * r + t0..(i - na) * r + t0 + len]
+                };
+                let dst = &mut x[i * TILE..(i + 1) * TILE];
+                dst[..len].copy_from_slice(src);
+                dst[len..].fill(0.0);
+            }
+            for (li, l) in self.layers.iter().enumerate() {
+                dense_tile(l, th, x, h);
+                if li + 1 < self.layers.len() {
+                    squareplus_in_place(&mut h[..l.out * TILE]);
+                }
+                std::mem::swap(&mut x, &mut h);
+            }
+            for j in 0..last.out {
+                y[j * r + t0..j * r + t0 + len].copy_from_slice(&x[j * TILE..j * TILE + len]);
             }
         }
     }
@@ -403,5 +564,19 @@ mod tests {
         );
         assert!(dispatched.0.iter().any(|v| *v != 0.0));
         assert_eq!(dispatched, portable);
+        // The tiled inference pass: the same bits, dispatched or portable,
+        // at row counts below, at and around a tile.
+        for r in [1, 5, TILE - 1, TILE, TILE + 1, 203] {
+            let (a, c) = (wave(4 * r, 0.11), wave(3 * r, 0.23));
+            let mut y = vec![0.0; 3 * r];
+            mlp.forward(&th, &a, &c, r, &mut mlp.tape(r), &mut y);
+            let mut yi = vec![0.0; 3 * r];
+            mlp.forward(&th, &a, &c, r, &mut mlp.inference_tape(), &mut yi);
+            assert_eq!(y, yi, "{r} rows");
+            let mut yp = vec![0.0; 3 * r];
+            let mut tile = mlp.inference_tape().tile;
+            mlp.infer_any(&th, &a, &c, r, &mut tile, &mut yp);
+            assert_eq!(y, yp, "{r} rows, portable");
+        }
     }
 }

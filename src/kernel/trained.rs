@@ -127,6 +127,27 @@ impl TrainedModel {
 }
 
 impl TrainedModel {
+    /// The states [`TrainedModel::verlet`] visits, kept (up to the
+    /// divergence, whose step comes with them).
+    fn states(
+        &self,
+        ws: &mut Workspace,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+        first: impl FnOnce(&mut Workspace, &[f64]),
+    ) -> (Vec<State>, Option<usize>) {
+        let mut out = Vec::with_capacity(steps / every.max(1) + 1);
+        let diverged = self.verlet(ws, start, dt, steps, every, first, |_, q, v| {
+            out.push(State {
+                q: q.to_vec(),
+                v: v.to_vec(),
+            });
+        });
+        (out, diverged)
+    }
+
     /// Forces of the workspace's last evaluation, whose accelerations are `acc`.
     fn forces_of(&self, ws: &mut Workspace, graph: &Graph, acc: &[f64]) -> Forces {
         self.kernel.read_forces(ws);
@@ -171,19 +192,13 @@ impl TrainedModel {
             return Err(DynamicsError::TimeStep(dt));
         }
         let mut kept = self.cache.take(&self.kernel, graph)?;
-        let mut out = Vec::with_capacity(steps / every.max(1) + 1);
         let mut f = None;
         let first = |ws: &mut Workspace, acc: &[f64]| {
             if forces {
                 f = Some(self.forces_of(ws, graph, acc));
             }
         };
-        let diverged = self.verlet(&mut kept.1, start, dt, steps, every, first, |_, q, v| {
-            out.push(State {
-                q: q.to_vec(),
-                v: v.to_vec(),
-            })
-        });
+        let (out, diverged) = self.states(&mut kept.1, start, dt, steps, every, first);
         self.cache.put(kept);
         match diverged {
             None => Ok((out, f)),
@@ -297,15 +312,8 @@ impl Dynamics for TrainedModel {
             group
                 .iter()
                 .map(|start| {
-                    let mut states = Vec::with_capacity(steps / every.max(1) + 1);
-                    let visit = |_: usize, q: &[f64], v: &[f64]| {
-                        states.push(State {
-                            q: q.to_vec(),
-                            v: v.to_vec(),
-                        })
-                    };
-                    let diverged_at =
-                        self.verlet(&mut ws, start, dt, steps, every, |_, _| {}, visit);
+                    let (states, diverged_at) =
+                        self.states(&mut ws, start, dt, steps, every, |_, _| {});
                     Rollout {
                         states,
                         diverged_at,

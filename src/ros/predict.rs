@@ -128,6 +128,10 @@ fn rollout_and_forces(
     integrate(dt, steps, substeps, |h, n, every| {
         model.rollout_with_forces(graph, start, h, n, every)
     })
+    .map_err(|e| match e {
+        PredictError::Rollout(DynamicsError::Forces(e)) => PredictError::Forces(*e),
+        e => e,
+    })
 }
 
 /// The model's states every `dt` for `steps` steps from `start` (the first
@@ -382,5 +386,37 @@ mod tests {
         let e = predict(model.as_ref(), &spring_state(), f64::NAN, 3, 1).unwrap_err();
         assert!(matches!(e, PredictError::BadStep(_)), "{e}");
         assert!(e.to_string().contains("dt"), "{e}");
+    }
+
+    /// Truth for its rollout, but forces that fail: the error must say
+    /// forces, not rollout.
+    struct NoForces(std::sync::Arc<dyn Dynamics>);
+
+    impl Dynamics for NoForces {
+        fn describe(&self) -> String {
+            "no forces".into()
+        }
+        fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
+            self.0.supports(graph)
+        }
+        fn acceleration(
+            &self,
+            graph: &Graph,
+            state: &State,
+            out: &mut [f64],
+        ) -> Result<(), DynamicsError> {
+            self.0.acceleration(graph, state, out)
+        }
+        fn forces(&self, _: &Graph, _: &State) -> Result<Forces, DynamicsError> {
+            Err(DynamicsError::Model("this model has no forces".into()))
+        }
+    }
+
+    #[test]
+    fn failed_forces_are_reported_as_forces() {
+        let model = NoForces(load_truth("truth:spring").unwrap());
+        let e = predict(&model, &spring_state(), 0.001, 3, 1).unwrap_err();
+        assert!(matches!(e, PredictError::Forces(_)), "{e:?}");
+        assert_eq!(e.to_string(), "forces failed: this model has no forces");
     }
 }

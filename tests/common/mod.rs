@@ -123,9 +123,12 @@ pub fn beside_node(driver: &str) -> String {
 
 /// `scripts/netns.sh bash -c script` with BIN, ENV, PARAMS exported.
 pub fn in_netns(script: &str, params: &Path, env_sh: &Path) -> Command {
+    // Whatever the script leaves running when it ends (a node it started
+    // before an early `exit`) is killed with it, never orphaned.
+    let script = format!("trap 'kill -KILL $(jobs -p) 2>/dev/null || true' EXIT\n{script}");
     let mut c = Command::new("bash");
     c.arg("scripts/netns.sh")
-        .args(["bash", "-c", script])
+        .args(["bash", "-c", &script])
         .env("BIN", BIN)
         .env("ENV", env_sh)
         .env("PARAMS", params)
