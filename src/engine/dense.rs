@@ -76,8 +76,9 @@ pub(crate) struct Linear {
 
 impl Linear {
     /// `y = Wᵀ [a; c] + b` over `r` rows; the first `a.len() / r` input
-    /// features come from `a`, the rest from `c` (a concatenation without a copy).
-    #[inline(always)]
+    /// features come from `a`, the rest from `c` (a concatenation without a
+    /// copy). The reference of [`dense_tile`].
+    #[cfg(test)]
     fn forward(&self, th: &[f64], a: &[f64], c: &[f64], r: usize, y: &mut [f64]) {
         let na = a.len() / r;
         let w = &th[self.w..self.w + self.inp * self.out];
@@ -224,12 +225,11 @@ impl Mlp {
                 .iter()
                 .map(|l| vec![0.0; l.out * rows])
                 .collect(),
-            tile: vec![],
+            ..self.inference_tape()
         }
     }
 
-    /// A tape that records nothing: [`Mlp::forward`] then runs tile by tile
-    /// with every layer's tile in registers (inference).
+    /// A tape that records nothing (inference): only a tile's scratch.
     pub(crate) fn inference_tape(&self) -> Tape {
         Tape {
             hidden: vec![],
@@ -238,8 +238,9 @@ impl Mlp {
     }
 
     /// `y = mlp([a; c])` over `r` rows, recording hidden activations in
-    /// `tape` unless it is an [`Mlp::inference_tape`]. Both give the same
-    /// bits: each output is the same sums in the same order.
+    /// `tape` unless it is an [`Mlp::inference_tape`], compiled for the
+    /// widest vectors the CPU has. Every path gives the same bits: each
+    /// output is the same sums in the same order (no fused multiply-adds).
     pub(crate) fn forward(
         &self,
         th: &[f64],
@@ -249,19 +250,34 @@ impl Mlp {
         tape: &mut Tape,
         y: &mut [f64],
     ) {
-        if !tape.tile.is_empty() {
-            return self.infer(th, a, c, r, &mut tape.tile, y);
-        }
         #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            return unsafe { self.forward_avx2(th, a, c, r, tape, y) };
+        {
+            if std::is_x86_feature_detected!("avx512f") {
+                // SAFETY: the CPU supports AVX-512F (checked just above).
+                return unsafe { self.forward_avx512(th, a, c, r, tape, y) };
+            }
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                return unsafe { self.forward_avx2(th, a, c, r, tape, y) };
+            }
         }
         self.forward_any(th, a, c, r, tape, y);
     }
 
-    /// [`Mlp::forward`] compiled for AVX2: the same operations in the same
-    /// order (no fused multiply-adds), so the same bits, on wider vectors.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn forward_avx512(
+        &self,
+        th: &[f64],
+        a: &[f64],
+        c: &[f64],
+        r: usize,
+        tape: &mut Tape,
+        y: &mut [f64],
+    ) {
+        self.forward_any(th, a, c, r, tape, y);
+    }
+
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn forward_avx2(
@@ -276,8 +292,68 @@ impl Mlp {
         self.forward_any(th, a, c, r, tape, y);
     }
 
+    /// [`Mlp::forward`] a tile of [`TILE`] rows at a time: the tile's inputs
+    /// are gathered (zero-padded at the end) and pass through every layer in
+    /// the tape's scratch; the valid rows of each hidden layer go to the tape
+    /// (when it records), those of the output to `y`. Layer by layer over all
+    /// rows ([`Mlp::layerwise`]) would stream every hidden row through memory
+    /// once per weight instead.
     #[inline(always)]
     fn forward_any(
+        &self,
+        th: &[f64],
+        a: &[f64],
+        c: &[f64],
+        r: usize,
+        tape: &mut Tape,
+        y: &mut [f64],
+    ) {
+        let (Some(first), Some(last)) = (self.layers.first(), self.layers.last()) else {
+            return;
+        };
+        if r == 0 {
+            return;
+        }
+        let na = a.len() / r;
+        let record = !tape.hidden.is_empty();
+        let half = tape.tile.len() / 2;
+        let (mut x, mut h) = tape.tile.split_at_mut(half);
+        for t0 in (0..r).step_by(TILE) {
+            let len = TILE.min(r - t0);
+            for i in 0..first.inp {
+                let src = if i < na {
+                    &a[i * r + t0..i * r + t0 + len]
+                } else {
+                    &c[(i - na) * r + t0..(i - na) * r + t0 + len]
+                };
+                let dst = &mut x[i * TILE..(i + 1) * TILE];
+                dst[..len].copy_from_slice(src);
+                dst[len..].fill(0.0);
+            }
+            for (li, l) in self.layers.iter().enumerate() {
+                dense_tile(l, th, x, h);
+                if li + 1 < self.layers.len() {
+                    squareplus_in_place(&mut h[..l.out * TILE]);
+                    if record {
+                        let kept = &mut tape.hidden[li];
+                        for j in 0..l.out {
+                            kept[j * r + t0..j * r + t0 + len]
+                                .copy_from_slice(&h[j * TILE..j * TILE + len]);
+                        }
+                    }
+                }
+                std::mem::swap(&mut x, &mut h);
+            }
+            for j in 0..last.out {
+                y[j * r + t0..j * r + t0 + len].copy_from_slice(&x[j * TILE..j * TILE + len]);
+            }
+        }
+    }
+
+    /// The layer-by-layer pass over all rows: the reference the tiled pass
+    /// is tested against, bit for bit.
+    #[cfg(test)]
+    fn layerwise(
         &self,
         th: &[f64],
         a: &[f64],
@@ -304,101 +380,6 @@ impl Mlp {
             }
             if li + 1 < nl {
                 squareplus_in_place(dst);
-            }
-        }
-    }
-
-    /// The inference pass of [`Mlp::forward`], dispatched to the widest
-    /// vectors the CPU has.
-    fn infer(&self, th: &[f64], a: &[f64], c: &[f64], r: usize, tile: &mut [f64], y: &mut [f64]) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU supports AVX-512F (checked just above).
-                return unsafe { self.infer_avx512(th, a, c, r, tile, y) };
-            }
-            if std::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
-                return unsafe { self.infer_avx2(th, a, c, r, tile, y) };
-            }
-        }
-        self.infer_any(th, a, c, r, tile, y);
-    }
-
-    /// [`Mlp::infer_any`] compiled for AVX-512F (no fused multiply-adds).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    unsafe fn infer_avx512(
-        &self,
-        th: &[f64],
-        a: &[f64],
-        c: &[f64],
-        r: usize,
-        tile: &mut [f64],
-        y: &mut [f64],
-    ) {
-        self.infer_any(th, a, c, r, tile, y);
-    }
-
-    /// [`Mlp::infer_any`] compiled for AVX2 (no fused multiply-adds).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn infer_avx2(
-        &self,
-        th: &[f64],
-        a: &[f64],
-        c: &[f64],
-        r: usize,
-        tile: &mut [f64],
-        y: &mut [f64],
-    ) {
-        self.infer_any(th, a, c, r, tile, y);
-    }
-
-    /// `y = mlp([a; c])` a tile of [`TILE`] rows at a time: the tile's
-    /// inputs are gathered (zero-padded at the end), pass through every
-    /// layer in `tile`, and the valid rows are written out. Layer by layer
-    /// over all rows ([`Mlp::forward_any`]) streams every hidden row through
-    /// memory once per weight instead.
-    #[inline(always)]
-    fn infer_any(
-        &self,
-        th: &[f64],
-        a: &[f64],
-        c: &[f64],
-        r: usize,
-        tile: &mut [f64],
-        y: &mut [f64],
-    ) {
-        let (Some(first), Some(last)) = (self.layers.first(), self.layers.last()) else {
-            return;
-        };
-        if r == 0 {
-            return;
-        }
-        let na = a.len() / r;
-        let (mut x, mut h) = tile.split_at_mut(tile.len() / 2);
-        for t0 in (0..r).step_by(TILE) {
-            let len = TILE.min(r - t0);
-            for i in 0..first.inp {
-                let src = if i < na {
-                    &a[i * r + t0..i * r + t0 + len]
-                } else {
-                    &c[(i - na) * r + t0..(i - na) * r + t0 + len]
-                };
-                let dst = &mut x[i * TILE..(i + 1) * TILE];
-                dst[..len].copy_from_slice(src);
-                dst[len..].fill(0.0);
-            }
-            for (li, l) in self.layers.iter().enumerate() {
-                dense_tile(l, th, x, h);
-                if li + 1 < self.layers.len() {
-                    squareplus_in_place(&mut h[..l.out * TILE]);
-                }
-                std::mem::swap(&mut x, &mut h);
-            }
-            for j in 0..last.out {
-                y[j * r + t0..j * r + t0 + len].copy_from_slice(&x[j * TILE..j * TILE + len]);
             }
         }
     }
@@ -564,19 +545,20 @@ mod tests {
         );
         assert!(dispatched.0.iter().any(|v| *v != 0.0));
         assert_eq!(dispatched, portable);
-        // The tiled inference pass: the same bits, dispatched or portable,
-        // at row counts below, at and around a tile.
+        // The tiled pass against the layer-by-layer one: the same outputs
+        // and tapes, recording or not, at row counts below, at and around a
+        // tile.
         for r in [1, 5, TILE - 1, TILE, TILE + 1, 203] {
             let (a, c) = (wave(4 * r, 0.11), wave(3 * r, 0.23));
-            let mut y = vec![0.0; 3 * r];
-            mlp.forward(&th, &a, &c, r, &mut mlp.tape(r), &mut y);
+            let (mut want_tape, mut want) = (mlp.tape(r), vec![0.0; 3 * r]);
+            mlp.layerwise(&th, &a, &c, r, &mut want_tape, &mut want);
+            let (mut tape, mut y) = (mlp.tape(r), vec![0.0; 3 * r]);
+            mlp.forward(&th, &a, &c, r, &mut tape, &mut y);
+            assert_eq!(y, want, "{r} rows");
+            assert_eq!(tape.hidden, want_tape.hidden, "{r} rows: tape");
             let mut yi = vec![0.0; 3 * r];
             mlp.forward(&th, &a, &c, r, &mut mlp.inference_tape(), &mut yi);
-            assert_eq!(y, yi, "{r} rows");
-            let mut yp = vec![0.0; 3 * r];
-            let mut tile = mlp.inference_tape().tile;
-            mlp.infer_any(&th, &a, &c, r, &mut tile, &mut yp);
-            assert_eq!(y, yp, "{r} rows, portable");
+            assert_eq!(yi, want, "{r} rows, not recording");
         }
     }
 }
