@@ -100,6 +100,8 @@ fn trajectories() -> Vec<Trajectory> {
             },
         ],
         anchors: vec![],
+        interaction_radius: 0.0,
+        kinematic: vec![],
     };
     let pendulum = Graph {
         dim: 3,
@@ -122,6 +124,8 @@ fn trajectories() -> Vec<Trajectory> {
             },
         ],
         anchors: vec![vec![0.0, 0.0, 2.0]],
+        interaction_radius: 0.0,
+        kinematic: vec![],
     };
     let traj = |id: u32, g: &Graph, steps: usize| {
         let nd = g.ndof();

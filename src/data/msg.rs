@@ -310,8 +310,10 @@ impl ParticleState {
     ) -> ParticleState {
         let n = graph.n();
         let dim = graph.dim;
-        let edge_b = graph
-            .edges
+        // Contact edges are rebuilt from positions and the radius by every
+        // reader; only the fixed edges go on the wire.
+        let edges: Vec<&Edge> = graph.fixed_edges().collect();
+        let edge_b = edges
             .iter()
             .map(|e| match e.b {
                 Endpoint::Particle(b) => idx_u32(b),
@@ -336,18 +338,18 @@ impl ParticleState {
                 .as_deref()
                 .map(|a| to_vec3(a, dim))
                 .unwrap_or_default(),
-            edge_a: graph.edges.iter().map(|e| idx_u32(e.a)).collect(),
+            edge_a: edges.iter().map(|e| idx_u32(e.a)).collect(),
             edge_b,
-            edge_kind: graph
-                .edges
+            edge_kind: edges
                 .iter()
                 .map(|e| match e.kind {
                     EdgeKind::Spring => EDGE_SPRING,
-                    EdgeKind::Bar => EDGE_BAR,
+                    // Not reached: `fixed_edges` leaves contacts out.
+                    EdgeKind::Bar | EdgeKind::Contact => EDGE_BAR,
                 })
                 .collect(),
-            edge_rest_length: graph.edges.iter().map(|e| e.rest_length).collect(),
-            edge_stiffness: graph.edges.iter().map(|e| e.stiffness).collect(),
+            edge_rest_length: edges.iter().map(|e| e.rest_length).collect(),
+            edge_stiffness: edges.iter().map(|e| e.stiffness).collect(),
             anchors: graph
                 .anchors
                 .iter()
@@ -512,6 +514,8 @@ impl ParticleState {
             masses: self.masses.clone(),
             edges,
             anchors,
+            interaction_radius: 0.0,
+            kinematic: vec![],
         };
         graph
             .validate()

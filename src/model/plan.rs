@@ -68,6 +68,8 @@ impl GraphPlan {
             .map(|(_, _, e)| match e.kind {
                 EdgeKind::Spring => (e.rest_length, e.stiffness),
                 EdgeKind::Bar => (e.rest_length, 0.0),
+                // Rest length = the radius, stiffness 0 (see EdgeKind::Contact).
+                EdgeKind::Contact => (e.rest_length, e.stiffness),
             })
             .collect();
         let rest = params.iter().chain(&params).map(|p| p.0).collect();

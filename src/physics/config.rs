@@ -205,6 +205,8 @@ impl SystemConfig {
             masses: vec![self.mass; n],
             edges,
             anchors,
+            interaction_radius: 0.0,
+            kinematic: vec![],
         }
     }
 
