@@ -129,7 +129,7 @@ impl Graph {
 
     /// The fixed edges: every edge but contacts (which are rebuilt from
     /// positions and appended after them, [`crate::physics::neighbors`]).
-    pub fn fixed_edges(&self) -> impl Iterator<Item = &Edge> {
+    pub fn fixed_edges(&self) -> impl Iterator<Item = &Edge> + Clone {
         self.edges.iter().filter(|e| e.kind != EdgeKind::Contact)
     }
 
