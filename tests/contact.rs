@@ -380,3 +380,20 @@ fn simulate_records_contact_systems_exactly() {
     }
     assert_ne!(trajs[0].samples[0].state, trajs[1].samples[0].state);
 }
+
+#[test]
+fn the_truth_model_refuses_contacts_it_cannot_compute() {
+    let m = mcgnode::models::truth::load_truth("truth:soft-spheres").unwrap();
+    let g = SystemConfig::new(SystemKind::SoftSpheres, 4).graph();
+    let e = m.supports(&g).unwrap_err().to_string();
+    assert!(
+        e.contains("no contact law") && e.contains("mcgnode simulate"),
+        "{e}"
+    );
+    // Graphs without contacts are served as before.
+    let spring = SystemConfig::new(SystemKind::Spring, 4).graph();
+    mcgnode::models::truth::load_truth("truth:spring")
+        .unwrap()
+        .supports(&spring)
+        .unwrap();
+}

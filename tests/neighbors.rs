@@ -175,7 +175,10 @@ fn a_pair_exactly_at_the_radius_is_not_in_contact() {
         let g = graph(dim, 40, 0.5, vec![]);
         assert!(NeighborSearch::new(&g).search(&line, dim, 0.5).is_empty());
         let want: Vec<_> = (0..39).map(|i| (i, i + 1)).collect();
-        assert_eq!(NeighborSearch::new(&g).search(&line, dim, 0.5000001), want);
+        assert_eq!(
+            NeighborSearch::new(&g).search(&line, dim, 0.500_000_1),
+            want
+        );
     }
 }
 

@@ -66,10 +66,10 @@ impl GraphPlan {
         let params: Vec<(f64, f64)> = graph
             .particle_edges()
             .map(|(_, _, e)| match e.kind {
-                EdgeKind::Spring => (e.rest_length, e.stiffness),
+                // A contact's rest length is the radius, its stiffness 0
+                // (see EdgeKind::Contact).
+                EdgeKind::Spring | EdgeKind::Contact => (e.rest_length, e.stiffness),
                 EdgeKind::Bar => (e.rest_length, 0.0),
-                // Rest length = the radius, stiffness 0 (see EdgeKind::Contact).
-                EdgeKind::Contact => (e.rest_length, e.stiffness),
             })
             .collect();
         let rest = params.iter().chain(&params).map(|p| p.0).collect();

@@ -99,10 +99,11 @@ impl SystemConfig {
     /// of both lattices, chain links); walls and floors are added to them.
     pub fn new(kind: SystemKind, particles: usize) -> Self {
         let (gravity, dt, save_every) = match kind {
-            SystemKind::Spring | SystemKind::Peridynamic => (0.0, 1e-3, 100),
+            SystemKind::Spring | SystemKind::Peridynamic | SystemKind::CollidingLattices => {
+                (0.0, 1e-3, 100)
+            }
             SystemKind::Pendulum => (10.0, 1e-5, 1000),
             SystemKind::SoftSpheres => (1.0, 1e-3, 100),
-            SystemKind::CollidingLattices => (0.0, 1e-3, 100),
             SystemKind::FallingChain => (10.0, 1e-4, 100),
         };
         let (stiffness, interaction_radius, contact_stiffness) = Self::contact_defaults(kind);
@@ -155,8 +156,8 @@ impl SystemConfig {
     /// Checks every parameter; the error names the offending one.
     pub fn validate(&self) -> Result<(), PhysicsError> {
         let min = match self.kind {
-            SystemKind::Spring => 2,
-            SystemKind::Pendulum => 1,
+            SystemKind::Spring | SystemKind::FallingChain => 2,
+            SystemKind::Pendulum | SystemKind::SoftSpheres => 1,
             SystemKind::Peridynamic => {
                 if cube_side(self.particles).is_none() {
                     return Err(PhysicsError::NotACube(self.particles));
@@ -166,7 +167,6 @@ impl SystemConfig {
                 }
                 8
             }
-            SystemKind::SoftSpheres => 1,
             SystemKind::CollidingLattices => {
                 if scenes::lattice_side(self.particles, self.dim).is_none() {
                     return Err(PhysicsError::NotTwoLattices {
@@ -176,7 +176,6 @@ impl SystemConfig {
                 }
                 8
             }
-            SystemKind::FallingChain => 2,
         };
         if self.particles < min {
             return Err(PhysicsError::TooFewParticles {

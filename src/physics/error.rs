@@ -48,6 +48,9 @@ pub enum PhysicsError {
         /// The system.
         kind: SystemKind,
     },
+    /// The ground-truth model asked for a graph with contacts.
+    #[error("the graph has contacts (interaction radius {0}) but the truth:<system> model knows no contact law yet; simulate with `mcgnode simulate` instead")]
+    NoContactLaw(f64),
     /// RK4 data asked for a system with contacts or kinematic particles.
     #[error(
         "RK4 data covers springs and bars only: a {0} system touches; use --integrator verlet"

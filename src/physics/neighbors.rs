@@ -97,7 +97,7 @@ impl NeighborSearch {
     /// [`NeighborSearch::pairs`]. A radius ≤ 0 (or not finite) finds none.
     pub fn search(&mut self, q: &[f64], dim: usize, radius: f64) -> &[(usize, usize)] {
         self.pairs.clear();
-        let n = if dim == 0 { 0 } else { q.len() / dim };
+        let n = q.len().checked_div(dim).unwrap_or(0);
         if n < 2 || !(radius.is_finite() && radius > 0.0) {
             return &self.pairs;
         }
