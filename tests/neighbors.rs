@@ -277,3 +277,33 @@ fn contact_edges_follow_the_fixed_edges() {
         "the buffer is reused"
     );
 }
+
+#[test]
+fn a_thousand_particles_with_six_neighbours_each() {
+    // A jittered triangular lattice (spacing 1) and R = 1.1: about six
+    // contacts per particle, the 1,000-particle contact rollout.
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let side = 32;
+    let n = side * side;
+    let q: Vec<f64> = (0..n)
+        .flat_map(|i| {
+            let (r, c) = ((i / side) as f64, (i % side) as f64);
+            let x = c + 0.5 * (r % 2.0) + rng.random_range(-0.02..0.02);
+            let y = r * 3f64.sqrt() / 2.0 + rng.random_range(-0.02..0.02);
+            [x, y]
+        })
+        .collect();
+    let g = graph(2, n, 1.1, vec![]);
+    let mut s = NeighborSearch::new(&g);
+    let pairs = s.search(&q, 2, 1.1).len();
+    assert_eq!(pairs, brute_force_pairs(&g, &q, 1.1).len());
+    let per = 2.0 * pairs as f64 / n as f64;
+    assert!((5.0..=6.0).contains(&per), "{per} neighbours per particle");
+    let t0 = std::time::Instant::now();
+    let reps = 2000;
+    for _ in 0..reps {
+        assert_eq!(s.search(&q, 2, 1.1).len(), pairs);
+    }
+    let us = t0.elapsed().as_secs_f64() / f64::from(reps) * 1e6;
+    println!("{n} particles, {per:.2} neighbours each: {us:.1} µs per search");
+}

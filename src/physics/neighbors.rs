@@ -16,16 +16,17 @@
 //! (Allen & Tildesley; GNS and LagrangeBench use one): ~40 lines here.
 //!
 //! Cells are cubes of side R (a hair larger, so that rounding in x/R can never
-//! put a pair closer than R two cells apart), hashed into a table of about 2n
-//! buckets: memory stays O(n) however far apart the particles are, and a
-//! bucket shared by two cells only costs distance checks (a candidate is kept
-//! only when it lies in the cell being scanned, so no pair is found twice).
+//! put a pair closer than R two cells apart). When the particles' bounding box
+//! holds at most 4n + 16 cells, they are a dense grid over it; otherwise (a few
+//! particles far apart) the cells are hashed into a table of about 2n buckets,
+//! so memory stays O(n) however far apart the particles are: a bucket shared
+//! by two cells only costs distance checks (a candidate is kept only when it
+//! lies in the cell being scanned, so no pair is found twice).
+//! Particles are counting-sorted by bucket, with copies of their positions
+//! and cells in that order, so a bucket's candidates are contiguous in memory.
 //! Pairs come out sorted (i, then j), so the edges are canonical.
 
 use crate::system::{Edge, EdgeKind, Endpoint, Graph};
-
-/// Marks the end of a bucket's list.
-const NONE: u32 = u32::MAX;
 
 /// The cell list and every buffer a search needs; reused across calls, so a
 /// search allocates nothing once its buffers have grown to the system's size.
@@ -36,11 +37,17 @@ pub struct NeighborSearch {
     bond_with: Vec<usize>,
     /// Kinematic flags (empty: none): pairs of two kinematic particles are skipped.
     kinematic: Vec<bool>,
-    /// Integer cell of each particle (unused axes 0).
+    /// Integer cell of each particle (unused axes 0), and its bucket.
     cell: Vec<[i64; 3]>,
-    /// First particle of each bucket, and the next one in the same bucket.
-    head: Vec<u32>,
-    next: Vec<u32>,
+    bucket: Vec<u32>,
+    /// Where each bucket's particles start in the sorted arrays (`buckets + 1`).
+    start: Vec<u32>,
+    /// The dense grid's cells per axis, or `None` when cells are hashed.
+    grid: Option<[i64; 3]>,
+    /// Particles sorted by bucket: index, position (unused axes 0) and cell.
+    order: Vec<u32>,
+    sorted_q: Vec<[f64; 3]>,
+    sorted_cell: Vec<[i64; 3]>,
     /// The pairs found by the last [`NeighborSearch::search`].
     pairs: Vec<(usize, usize)>,
 }
@@ -107,6 +114,8 @@ impl NeighborSearch {
         for i in 0..n {
             let start = self.pairs.len();
             let ci = self.cell[i];
+            let mut qi = [0.0; 3];
+            qi[..dim.min(3)].copy_from_slice(&q[i * dim..i * dim + dim.min(3)]);
             for dz in -reach[2]..=reach[2] {
                 for dy in -reach[1]..=reach[1] {
                     for dx in -reach[0]..=reach[0] {
@@ -115,7 +124,7 @@ impl NeighborSearch {
                             ci[1].wrapping_add(dy),
                             ci[2].wrapping_add(dz),
                         ];
-                        self.scan(i, c, q, dim, r2);
+                        self.scan(i, qi, c, r2);
                     }
                 }
             }
@@ -129,44 +138,104 @@ impl NeighborSearch {
         &self.pairs
     }
 
-    /// Bins every particle into its cell's bucket.
+    /// Bins every particle into its cell's bucket and sorts them by bucket.
     fn fill_cells(&mut self, q: &[f64], dim: usize, n: usize, radius: f64) {
         // 1 + 1e-9: a pair closer than R is never two cells apart, whatever
         // the rounding of x / side.
         let side = radius * (1.0 + 1e-9);
-        let buckets = (2 * n).next_power_of_two();
-        self.head.clear();
-        self.head.resize(buckets, NONE);
-        self.next.clear();
-        self.next.resize(n, NONE);
+        let origin = self.choose_grid(q, dim, n, side);
+        let buckets = match self.grid {
+            Some(g) => (g[0] * g[1] * g[2]) as usize,
+            None => (2 * n).next_power_of_two(),
+        };
+        self.start.clear();
+        self.start.resize(buckets + 1, 0);
         self.cell.clear();
+        self.bucket.clear();
         for i in 0..n {
             let mut c = [0i64; 3];
             for (k, ck) in c.iter_mut().enumerate().take(dim.min(3)) {
                 // Saturating `as`: far-off or non-finite coordinates still get a cell.
-                *ck = (q[i * dim + k] / side).floor() as i64;
+                *ck = ((q[i * dim + k] - origin[k]) / side).floor() as i64;
             }
+            let b = self.slot(c).unwrap_or(0);
             self.cell.push(c);
-            let b = bucket(c, buckets);
-            self.next[i] = self.head[b];
-            self.head[b] = i as u32;
+            self.bucket.push(b as u32);
+            self.start[b + 1] += 1;
+        }
+        for b in 0..buckets {
+            self.start[b + 1] += self.start[b];
+        }
+        self.order.clear();
+        self.order.resize(n, 0);
+        self.sorted_q.clear();
+        self.sorted_q.resize(n, [0.0; 3]);
+        self.sorted_cell.clear();
+        self.sorted_cell.resize(n, [0; 3]);
+        // Fill each bucket from its end down, so `start[b]` ends at its first slot.
+        for i in (0..n).rev() {
+            let b = self.bucket[i] as usize;
+            self.start[b + 1] -= 1;
+            let k = self.start[b + 1] as usize;
+            self.order[k] = i as u32;
+            self.sorted_cell[k] = self.cell[i];
+            let mut p = [0.0; 3];
+            p[..dim.min(3)].copy_from_slice(&q[i * dim..i * dim + dim.min(3)]);
+            self.sorted_q[k] = p;
+        }
+        // `start[b + 1]` now holds bucket b's first slot; shift to start[b].
+        self.start.copy_within(1.., 0);
+        self.start[buckets] = n as u32;
+    }
+
+    /// Picks a dense grid over the bounding box when it is small enough
+    /// (else hashing) and returns the origin cells are counted from.
+    fn choose_grid(&mut self, q: &[f64], dim: usize, n: usize, side: f64) -> [f64; 3] {
+        let (mut lo, mut hi) = ([0.0_f64; 3], [0.0_f64; 3]);
+        for k in 0..dim.min(3) {
+            let axis = (0..n).map(|i| q[i * dim + k]);
+            lo[k] = axis.clone().fold(f64::INFINITY, f64::min);
+            hi[k] = axis.fold(f64::NEG_INFINITY, f64::max);
+        }
+        self.grid = None;
+        if lo.iter().chain(&hi).all(|x| x.is_finite()) {
+            let cells = |k: usize| ((hi[k] - lo[k]) / side).floor() + 1.0;
+            let total = cells(0) * cells(1) * cells(2);
+            if total <= 4.0 * n as f64 + 16.0 {
+                self.grid = Some([0, 1, 2].map(|k| cells(k) as i64));
+            }
+            return lo;
+        }
+        [0.0; 3]
+    }
+
+    /// The bucket of cell `c`: its index in the dense grid (`None` outside
+    /// it), or its hash.
+    fn slot(&self, c: [i64; 3]) -> Option<usize> {
+        match self.grid {
+            Some(g) => {
+                let inside = (0..3).all(|k| (0..g[k]).contains(&c[k]));
+                inside.then(|| (c[0] + g[0] * (c[1] + g[1] * c[2])) as usize)
+            }
+            None => Some(bucket(c, self.start.len() - 1)),
         }
     }
 
-    /// Adds the partners j > i of particle `i` lying in cell `c`.
-    fn scan(&mut self, i: usize, c: [i64; 3], q: &[f64], dim: usize, r2: f64) {
-        let mut j = self.head[bucket(c, self.head.len())];
-        while j != NONE {
-            let ju = j as usize;
-            j = self.next[ju];
-            if ju <= i || self.cell[ju] != c {
+    /// Adds the partners j > i of particle `i` (at `qi`) lying in cell `c`.
+    fn scan(&mut self, i: usize, qi: [f64; 3], c: [i64; 3], r2: f64) {
+        let Some(b) = self.slot(c) else {
+            return;
+        };
+        let (from, to) = (self.start[b] as usize, self.start[b + 1] as usize);
+        for k in from..to {
+            let j = self.order[k] as usize;
+            if j <= i || self.sorted_cell[k] != c {
                 continue;
             }
-            let d2: f64 = (0..dim)
-                .map(|k| (q[i * dim + k] - q[ju * dim + k]).powi(2))
-                .sum();
-            if d2 < r2 && !self.excluded(i, ju) {
-                self.pairs.push((i, ju));
+            let p = self.sorted_q[k];
+            let d2 = (qi[0] - p[0]).powi(2) + (qi[1] - p[1]).powi(2) + (qi[2] - p[2]).powi(2);
+            if d2 < r2 && !self.excluded(i, j) {
+                self.pairs.push((i, j));
             }
         }
     }
