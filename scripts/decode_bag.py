@@ -71,6 +71,9 @@ def main() -> int:
             "gravity": vecs([m.gravity])[0] if hasattr(m, "gravity") else [f(0), f(0), f(0)],
             "drag": f(getattr(m, "drag", 0.0)),
             "force": vecs([m.force])[0] if hasattr(m, "force") else [f(0), f(0), f(0)],
+            # Messages from before contacts: radius 0, no kinematic particle.
+            "interaction_radius": f(getattr(m, "interaction_radius", 0.0)),
+            "kinematic": [bool(x) for x in getattr(m, "kinematic", [])],
         }
 
     from mcap.reader import make_reader

@@ -147,6 +147,8 @@ def main() -> int:
                 gravity=V3(x=0.0, y=0.0, z=0.0),
                 drag=0.0,
                 force=V3(x=0.0, y=0.0, z=0.0),
+                interaction_radius=0.0,
+                kinematic=np.zeros(0, dtype=bool),
             )
             writer.write(conn, ns, bytes(store.serialize_cdr(msg, T)))
     writer.close()

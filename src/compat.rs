@@ -60,9 +60,18 @@ impl EdgeKinds {
     /// The kinds the simulator's system has.
     pub fn of_kind(kind: SystemKind) -> EdgeKinds {
         match kind {
-            SystemKind::Spring | SystemKind::Peridynamic => EdgeKinds {
-                springs: true,
-                bars: false,
+            SystemKind::Spring | SystemKind::Peridynamic | SystemKind::CollidingLattices => {
+                EdgeKinds {
+                    springs: true,
+                    bars: false,
+                    anchors: false,
+                }
+            }
+            // Contacts are rebuilt from positions: not among the fixed kinds.
+            SystemKind::SoftSpheres => EdgeKinds::default(),
+            SystemKind::FallingChain => EdgeKinds {
+                springs: false,
+                bars: true,
                 anchors: false,
             },
             SystemKind::Pendulum => EdgeKinds {

@@ -4,6 +4,12 @@
 //! velocity, joined by edges that are either springs or rigid bars. Fixed anchor
 //! points (a pendulum's pivot) can be the far end of an edge. Positions and
 //! velocities are stored flat, `dim` numbers per particle (2 or 3).
+//!
+//! Systems that touch add an interaction radius (every pair of particles
+//! closer than it interacts through a contact edge rebuilt from positions,
+//! [`crate::physics::neighbors`]) and kinematic particles (walls, floors,
+//! pushers: their motion is given, never predicted). Both default to off, and
+//! a graph without them behaves, serialises and validates exactly as before.
 
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -15,6 +21,11 @@ pub enum EdgeKind {
     Spring,
     /// Rigid: holonomic constraint |q_a − q_b| = rest.
     Bar,
+    /// Contact between two particles closer than [`Graph::interaction_radius`]:
+    /// rebuilt from positions at every step, never one of a bag's fixed edges
+    /// (`rest_length` is the radius, `stiffness` 0: the law is the model's or
+    /// the simulator's, not the graph's).
+    Contact,
 }
 
 /// One end of an edge: a particle, or a fixed anchor point.
@@ -54,6 +65,22 @@ pub struct Graph {
     pub edges: Vec<Edge>,
     /// Fixed points, `dim` coordinates each.
     pub anchors: Vec<Vec<f64>>,
+    /// Pairs of particles closer than this interact through contact edges
+    /// (strictly closer: a pair exactly at the radius does not); 0 = fixed
+    /// edges only. Absent from files written before it existed.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub interaction_radius: f64,
+    /// Which particles are kinematic (motion given, never predicted): empty =
+    /// none, else one entry per particle.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub kinematic: Vec<bool>,
+}
+
+/// Serde's test for leaving a radius of 0 out, so that a graph without
+/// contacts serialises exactly as before the field existed.
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde passes a reference
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 impl Graph {
@@ -83,6 +110,27 @@ impl Graph {
     /// Number of rigid bars, i.e. rows of the constraint matrix A(q).
     pub fn n_bars(&self) -> usize {
         self.bars().count()
+    }
+
+    /// Whether particle `i` is kinematic (its motion is given).
+    pub fn is_kinematic(&self, i: usize) -> bool {
+        self.kinematic.get(i).copied().unwrap_or(false)
+    }
+
+    /// Number of kinematic particles.
+    pub fn n_kinematic(&self) -> usize {
+        self.kinematic.iter().filter(|k| **k).count()
+    }
+
+    /// Whether contact edges are rebuilt from positions (a radius > 0).
+    pub fn has_contacts(&self) -> bool {
+        self.interaction_radius > 0.0
+    }
+
+    /// The fixed edges: every edge but contacts (which are rebuilt from
+    /// positions and appended after them, [`crate::physics::neighbors`]).
+    pub fn fixed_edges(&self) -> impl Iterator<Item = &Edge> + Clone {
+        self.edges.iter().filter(|e| e.kind != EdgeKind::Contact)
     }
 
     /// Checks indices, lengths and finiteness; the error says what is wrong.
@@ -131,6 +179,12 @@ impl Graph {
                         problem: format!("joins particle {b} to itself"),
                     })
                 }
+                Endpoint::Anchor(_) if e.kind == EdgeKind::Contact => {
+                    return Err(SystemError::Edge {
+                        edge: k,
+                        problem: "a contact edge joins two particles, not an anchor".into(),
+                    })
+                }
                 Endpoint::Anchor(b) if b >= self.anchors.len() => {
                     return Err(SystemError::Edge {
                         edge: k,
@@ -149,6 +203,22 @@ impl Graph {
                     problem: "rest length must be finite and ≥ 0, stiffness finite".into(),
                 });
             }
+        }
+        self.validate_contacts()
+    }
+
+    /// The interaction radius and the kinematic flags.
+    fn validate_contacts(&self) -> Result<(), SystemError> {
+        let r = self.interaction_radius;
+        if !(r.is_finite() && r >= 0.0) {
+            return Err(SystemError::Radius(r));
+        }
+        let n = self.n();
+        if !self.kinematic.is_empty() && self.kinematic.len() != n {
+            return Err(SystemError::Kinematic {
+                flags: self.kinematic.len(),
+                particles: n,
+            });
         }
         Ok(())
     }
@@ -280,6 +350,20 @@ pub enum SystemError {
     /// A state holds NaN or infinite values.
     #[error("state contains NaN or infinite values")]
     NonFinite,
+    /// The interaction radius is negative or not finite.
+    #[error("interaction radius {0} must be a finite number ≥ 0 (0: fixed edges only)")]
+    Radius(f64),
+    /// Not one kinematic flag per particle.
+    #[error(
+        "{flags} kinematic flags for {particles} particles: give one per particle, \
+         or none when no particle is kinematic"
+    )]
+    Kinematic {
+        /// Flags given.
+        flags: usize,
+        /// Particles in the graph.
+        particles: usize,
+    },
 }
 
 crate::error::typed_errors!(SystemError);

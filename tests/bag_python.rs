@@ -122,6 +122,13 @@ fn python_decode(bag: &Path, decoder: &str) -> (Vec<(String, ParticleState)>, se
                         z: g[2],
                     }
                 },
+                interaction_radius: f(&m["interaction_radius"]),
+                kinematic: m["kinematic"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|k| k.as_bool().expect("bool"))
+                    .collect(),
             };
             (m["topic"].as_str().unwrap().to_string(), msg)
         })
@@ -180,5 +187,27 @@ fn rosbags_decodes_our_bags_identically() {
     assert_eq!(msgs.len(), want.len());
     for ((_, got), want) in msgs.iter().zip(&want) {
         assert_eq!(got, want, "rosbags decoded a different message");
+    }
+}
+
+#[test]
+fn python_decoders_read_the_contact_entries() {
+    let dir = tmpdir();
+    let mut g = chain_2d();
+    g.interaction_radius = 0.75;
+    g.kinematic = (0..g.n()).map(|i| i % 2 == 0).collect();
+    let trajs = vec![trajectory(4, "soft-spheres", g, 3, 0.0, true)];
+    let path = dir.path().join("contacts.mcap");
+    write_trajectories(&path, &trajs, &BTreeMap::new()).unwrap();
+    let want = expected_messages(&trajs);
+    assert_eq!(want[0].interaction_radius, 0.75);
+    for decoder in ["mcap", "rosbags"] {
+        let (mut msgs, _) = python_decode(&path, decoder);
+        msgs.sort_by_key(|(_, m)| (m.trajectory_id, m.step));
+        assert_eq!(msgs.len(), want.len());
+        for ((_, got), want) in msgs.iter().zip(&want) {
+            assert_eq!(got, want, "{decoder} decoded a different message");
+            assert_eq!(got.kinematic, vec![true, false, true], "{decoder}");
+        }
     }
 }

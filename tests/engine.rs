@@ -32,6 +32,8 @@ fn graph(dim: usize, n: usize, edges: Vec<Edge>, anchors: Vec<Vec<f64>>) -> Grap
         masses: (0..n).map(|i| 1.0 + 0.1 * i as f64).collect(),
         edges,
         anchors,
+        interaction_radius: 0.0,
+        kinematic: vec![],
     }
 }
 

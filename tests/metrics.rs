@@ -39,6 +39,8 @@ fn two_body() -> (Graph, Field) {
             stiffness: 2.0,
         }],
         anchors: vec![],
+        interaction_radius: 0.0,
+        kinematic: vec![],
     };
     (
         g,

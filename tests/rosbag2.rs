@@ -2,21 +2,22 @@
 //! rosbag2 directories with MCAP or sqlite3 storage, per-message, per-file and
 //! chunk compression, split bags, bags without message definitions, the first
 //! message layout; and the reverse (ours read by rosbags), including a bag
-//! cut by a crash after `mcgnode bag repair`.
+//! cut by a crash after `mcgnode bag repair`; bags with contacts (radius,
+//! kinematic particles) and bags of the layout before them.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use mcgnode::data::msg::{
-    encode_cdr, ros2msg_schema, ParticleStateV1, DEP_HEADER, DEP_POINT, DEP_TIME, DEP_VECTOR3,
-    FIELD_KNOWN, PARTICLE_STATE_MSG_V1, PARTICLE_STATE_TYPE,
+    encode_cdr, ros2msg_schema, ParticleStateV1, ParticleStateV2, DEP_HEADER, DEP_POINT, DEP_TIME,
+    DEP_VECTOR3, FIELD_KNOWN, PARTICLE_STATE_MSG_V1, PARTICLE_STATE_MSG_V2, PARTICLE_STATE_TYPE,
 };
 use mcgnode::data::{
     read_bags, read_trajectories, write_trajectories, write_trajectories_with_field, Bag,
     BagWriter, ParticleState, ReadOptions,
 };
-use mcgnode::physics::Field;
+use mcgnode::physics::{Field, SystemConfig, SystemKind};
 use mcgnode::system::{Edge, EdgeKind, Endpoint, Graph, Sample, State, Trajectory};
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
@@ -100,6 +101,8 @@ fn trajectories() -> Vec<Trajectory> {
             },
         ],
         anchors: vec![],
+        interaction_radius: 0.0,
+        kinematic: vec![],
     };
     let pendulum = Graph {
         dim: 3,
@@ -122,6 +125,8 @@ fn trajectories() -> Vec<Trajectory> {
             },
         ],
         anchors: vec![vec![0.0, 0.0, 2.0]],
+        interaction_radius: 0.0,
+        kinematic: vec![],
     };
     let traj = |id: u32, g: &Graph, steps: usize| {
         let nd = g.ndof();
@@ -865,4 +870,180 @@ fn a_python_simulator_lattice_trains_and_evaluates_with_no_project_metadata() {
         .unwrap()
         .iter()
         .all(|x| x.as_f64().unwrap() < 1e-12));
+}
+
+/// Writes every sample of `trajs` as `encode(message)` under `schema_main`.
+fn write_layout(
+    p: &Path,
+    trajs: &[Trajectory],
+    field: Option<&Field>,
+    schema_main: &str,
+    encode: impl Fn(ParticleState) -> Vec<u8>,
+) {
+    let mut w = BagWriter::create(p).unwrap();
+    let schema = ros2msg_schema(schema_main, &[DEP_HEADER, DEP_TIME, DEP_VECTOR3, DEP_POINT]);
+    let ch = w
+        .add_channel("/particle_state", PARTICLE_STATE_TYPE, &schema)
+        .unwrap();
+    for tr in trajs {
+        for (k, s) in tr.samples.iter().enumerate() {
+            let m = ParticleState::from_sample(tr.id, k as u32, &tr.system, &tr.graph, s)
+                .with_field(field);
+            let t = m.header.stamp.as_nanos() as u64;
+            w.write(ch, t, &encode(m)).unwrap();
+        }
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn bags_of_the_layout_before_contacts_stay_readable() {
+    let dir = tempfile::tempdir().unwrap();
+    let trajs = trajectories();
+    let field = Field {
+        gravity: 10.0,
+        ..Field::default()
+    };
+    let p = dir.path().join("v2.mcap");
+    write_layout(&p, &trajs, Some(&field), PARTICLE_STATE_MSG_V2, |m| {
+        let full = m.to_cdr().unwrap();
+        let v2 = ParticleStateV2 {
+            header: m.header,
+            trajectory_id: m.trajectory_id,
+            step: m.step,
+            system: m.system,
+            dimension: m.dimension,
+            types: m.types,
+            masses: m.masses,
+            positions: m.positions,
+            velocities: m.velocities,
+            accelerations: m.accelerations,
+            edge_a: m.edge_a,
+            edge_b: m.edge_b,
+            edge_kind: m.edge_kind,
+            edge_rest_length: m.edge_rest_length,
+            edge_stiffness: m.edge_stiffness,
+            anchors: m.anchors,
+            field_status: m.field_status,
+            gravity: m.gravity,
+            drag: m.drag,
+            force: m.force,
+        };
+        let bytes = encode_cdr(&v2).unwrap();
+        // Shorter than the current layout: really the older wire format.
+        assert!(bytes.len() + 12 <= full.len());
+        bytes
+    });
+    let new = dir.path().join("new.mcap");
+    write_trajectories_with_field(&new, &trajs, &BTreeMap::new(), Some(&field)).unwrap();
+    let want = read(&new);
+    let got = read(&p);
+    assert_eq!(got.trajectories, want.trajectories);
+    assert_eq!(got.field, Some(field));
+    assert!(got
+        .trajectories
+        .iter()
+        .all(|t| !t.graph.has_contacts() && t.graph.kinematic.is_empty()));
+    // Re-serialised by rosbags from the bag's own schema, with and without
+    // stored definitions (the reader then tries each layout).
+    for (name, args) in [
+        ("v2_dir", &["--compression", "message"][..]),
+        (
+            "v2_db3_nodefs",
+            &["--storage", "sqlite3", "--no-definitions"][..],
+        ),
+    ] {
+        let out = dir.path().join(name);
+        rosbags_write(&p, &out, args);
+        assert_eq!(read(&out).trajectories, want.trajectories, "{name}");
+    }
+}
+
+#[test]
+fn contact_bags_keep_radius_and_kinematic_through_rosbags() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = SystemConfig::new(SystemKind::SoftSpheres, 6);
+    cfg.states = 3;
+    cfg.save_every = 10;
+    let trajs = cfg.try_simulate(2, 1).unwrap();
+    let p = dir.path().join("spheres.mcap");
+    write_trajectories_with_field(&p, &trajs, &BTreeMap::new(), Some(&cfg.field)).unwrap();
+    let ours = read(&p);
+    for (a, b) in ours.trajectories.iter().zip(&trajs) {
+        assert_eq!(a.graph, b.graph);
+        assert!(a
+            .samples
+            .iter()
+            .zip(&b.samples)
+            .all(|(x, y)| x.state == y.state));
+    }
+    let g = &ours.trajectories[0].graph;
+    assert_eq!(g.interaction_radius, 1.0);
+    assert_eq!(g.n_kinematic(), g.n() - 6);
+    for (name, args) in [
+        ("mcap_dir", &["--storage", "mcap"][..]),
+        (
+            "db3_nodefs",
+            &["--storage", "sqlite3", "--no-definitions"][..],
+        ),
+    ] {
+        let out = dir.path().join(name);
+        rosbags_write(&p, &out, args);
+        assert_eq!(read(&out).trajectories, ours.trajectories, "{name}");
+    }
+    let info = ok(&mcgnode(&["bag", "info", "spheres.mcap"], dir.path()));
+    let walls = g.n_kinematic();
+    assert!(
+        info.contains(&format!(
+            "contacts: interaction radius 1 (closer pairs touch), {walls} kinematic particles"
+        )),
+        "{info}"
+    );
+    let plain = dir.path().join("plain.mcap");
+    write_trajectories(&plain, &trajectories(), &BTreeMap::new()).unwrap();
+    let info = ok(&mcgnode(&["bag", "info", "plain.mcap"], dir.path()));
+    assert!(
+        info.contains(
+            "contacts: none (interaction radius 0: fixed edges only), no kinematic particles"
+        ),
+        "{info}"
+    );
+}
+
+#[test]
+fn a_bag_with_one_kinematic_flag_too_few_is_refused_naming_the_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("bad.mcap");
+    let trajs = trajectories();
+    let n = trajs[0].graph.n();
+    write_layout(
+        &p,
+        &trajs[..1],
+        None,
+        mcgnode::data::msg::PARTICLE_STATE_MSG,
+        |mut m| {
+            m.kinematic = vec![true; n - 1];
+            m.interaction_radius = 0.5;
+            m.to_cdr().unwrap()
+        },
+    );
+    let e = read_trajectories(&p).unwrap_err().to_string();
+    assert!(
+        e.contains(&format!("{} kinematic flags for {n} particles", n - 1))
+            && e.contains("one per particle"),
+        "{e}"
+    );
+    // A negative radius likewise.
+    write_layout(
+        &p,
+        &trajs[..1],
+        None,
+        mcgnode::data::msg::PARTICLE_STATE_MSG,
+        |mut m| {
+            m.interaction_radius = -1.0;
+            m.to_cdr().unwrap()
+        },
+    );
+    let e = read_trajectories(&p).unwrap_err().to_string();
+    assert!(e.contains("interaction radius -1"), "{e}");
 }

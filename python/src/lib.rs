@@ -201,6 +201,8 @@ impl Parts<'_, '_> {
             masses,
             edges,
             anchors,
+            interaction_radius: 0.0,
+            kinematic: vec![],
         };
         graph.validate().map_err(lib_err)?;
         let state = State {
@@ -266,7 +268,8 @@ fn paths(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<PathBuf>> {
 /// - `stamps`: float64 (states,), seconds from the trajectory's first stamp
 /// - `masses` (particles,), `types` (particles,) uint32
 /// - `edges`: float64 (edges, 5), rows (a, b, kind, rest_length, stiffness);
-///   b >= particles is anchor b - particles; kind 0 spring, 1 bar
+///   b >= particles is anchor b - particles; kind 0 spring, 1 bar (2, a
+///   contact, never comes from a bag: contacts are rebuilt from positions)
 /// - `anchors`: float64 (anchors, dim)
 /// - `field`: {"gravity", "drag", "force"} as the messages (else the bag's
 ///   simulator record) state it, or None when the bag does not say
@@ -323,6 +326,7 @@ fn read_bag<'py>(
             let kind = match e.kind {
                 EdgeKind::Spring => 0.0,
                 EdgeKind::Bar => 1.0,
+                EdgeKind::Contact => 2.0,
             };
             edges.extend_from_slice(&[e.a as f64, b as f64, kind, e.rest_length, e.stiffness]);
         }

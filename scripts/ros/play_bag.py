@@ -127,11 +127,12 @@ def main():
             if delay > 0:
                 time.sleep(delay)
             try:
-                if b"field_status" in _schema.data:
+                if b"interaction_radius" in _schema.data:
                     msg = deserialize_message(message.data, cls)
                 else:
-                    # The first ParticleState layout (no field entries): decode it
-                    # with the bag's own schema; the field stays FIELD_UNKNOWN.
+                    # An earlier ParticleState layout (no contact or no field
+                    # entries): decode it with the bag's own schema; what it
+                    # lacks keeps its default (radius 0, field FIELD_UNKNOWN).
                     old = decoders.setdefault(_schema.id, old_decoder(_schema))(message.data)
                     msg = ru.fill(cls(), plain_from(old, cls))
             except Exception as e:  # noqa: BLE001 - report which message and go on

@@ -248,6 +248,7 @@ fn info(a: InfoArgs) -> Result<()> {
             ),
         };
         println!("  field: {field}");
+        println!("  contacts: {}", contacts(&bag.trajectories));
         if !bag.derived_velocities.is_empty() {
             println!(
                 "  velocities: derived from positions and stamps (position-only) in {} trajectories",
@@ -260,6 +261,39 @@ fn info(a: InfoArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The interaction radii and kinematic particle counts of the trajectories:
+/// "radius 1 (particles closer touch), 120 kinematic particles" or "none".
+fn contacts(trajs: &[crate::system::Trajectory]) -> String {
+    let mut radii: Vec<f64> = vec![];
+    let mut kinematic: Vec<usize> = vec![];
+    for tr in trajs {
+        if !radii.contains(&tr.graph.interaction_radius) {
+            radii.push(tr.graph.interaction_radius);
+        }
+        if !kinematic.contains(&tr.graph.n_kinematic()) {
+            kinematic.push(tr.graph.n_kinematic());
+        }
+    }
+    let join = |v: Vec<String>| v.join("/");
+    let radius = if radii == [0.0] {
+        "none (interaction radius 0: fixed edges only)".to_string()
+    } else {
+        format!(
+            "interaction radius {} (closer pairs touch)",
+            join(radii.iter().map(ToString::to_string).collect())
+        )
+    };
+    let held = if kinematic == [0] {
+        "no kinematic particles".to_string()
+    } else {
+        format!(
+            "{} kinematic particles",
+            join(kinematic.iter().map(ToString::to_string).collect())
+        )
+    };
+    format!("{radius}, {held}")
 }
 
 fn repair(a: RepairArgs) -> Result<()> {

@@ -8,14 +8,28 @@ use std::path::PathBuf;
 /// Options of `simulate`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct Args {
-    /// System: spring (ring of springs), pendulum (chain of rigid bars) or
-    /// peridynamic (3D elastic cube of k³ particles, e.g. 125, compressed and released).
+    /// System: spring (ring of springs), pendulum (chain of rigid bars),
+    /// peridynamic (3D elastic cube of k³ particles, e.g. 125, compressed and
+    /// released), or one whose particles touch: soft-spheres (balls in a box of
+    /// kinematic walls, under gravity), colliding-lattices (two spring lattices
+    /// thrown at each other, no field), falling-chain (bars falling onto a
+    /// kinematic floor).
     #[arg(long, default_value = "spring")]
     pub system: SystemKind,
     /// Number of particles (default: 125 for peridynamic, which needs a cube
-    /// number such as 8, 27, 64, 125; 5 otherwise).
+    /// number such as 8, 27, 64, 125; 100 soft spheres; colliding lattices
+    /// 2·k^dim, default 32 in 2D and 54 in 3D; 10 chain links; 5 otherwise).
+    /// Walls and floors come on top of these.
     #[arg(long)]
     pub particles: Option<usize>,
+    /// Interaction radius R: pairs closer than it touch (default: soft
+    /// spheres and colliding lattices 1, falling chain 0.5; others 0, none).
+    #[arg(long)]
+    pub radius: Option<f64>,
+    /// Contact stiffness k_c of the potential ½ k_c (R − r)² (default: soft
+    /// spheres 1000, colliding lattices 100, falling chain 1e4).
+    #[arg(long)]
+    pub contact_stiffness: Option<f64>,
     /// Number of trajectories (random initial conditions).
     #[arg(long, default_value_t = 100)]
     pub trajectories: usize,
@@ -31,16 +45,16 @@ pub struct Args {
     /// Constant external force on every particle, "fx,fy[,fz]".
     #[arg(long, value_parser = super::parse_vector)]
     pub force: Option<super::Vector>,
-    /// Integration step [s] (default: pendulum 1e-5, spring and peridynamic 1e-3).
+    /// Integration step [s] (default: pendulum 1e-5, falling chain 1e-4, others 1e-3).
     #[arg(long)]
     pub dt: Option<f64>,
-    /// Integration steps between saved states (default: pendulum 1000, spring and peridynamic 100).
+    /// Integration steps between saved states (default: pendulum 1000, others 100).
     #[arg(long)]
     pub save_every: Option<usize>,
     /// Saved states per trajectory, including the first (default 100).
     #[arg(long)]
     pub states: Option<usize>,
-    /// Gravity along −y (default: pendulum 10, spring and peridynamic 0).
+    /// Gravity along −y (default: pendulum and falling chain 10, soft spheres 1, others 0).
     #[arg(long)]
     pub gravity: Option<f64>,
     /// Spatial dimension, 2 or 3 (default: 3 for peridynamic, which must be 3D; 2 otherwise).
@@ -54,13 +68,22 @@ pub struct Args {
 
 /// Builds the simulator configuration from the options.
 pub fn config(a: &Args) -> Result<SystemConfig> {
+    let dim = a.dim.unwrap_or(a.system.default_dim());
     let particles = a.particles.unwrap_or(match a.system {
         SystemKind::Peridynamic => 125,
+        SystemKind::SoftSpheres => 100,
+        SystemKind::CollidingLattices if dim == 3 => 54,
+        SystemKind::CollidingLattices => 32,
+        SystemKind::FallingChain => 10,
         _ => 5,
     });
     let mut c = SystemConfig::new(a.system, particles);
-    if let Some(d) = a.dim {
-        c.dim = d;
+    c.dim = dim;
+    if let Some(r) = a.radius {
+        c.interaction_radius = r;
+    }
+    if let Some(k) = a.contact_stiffness {
+        c.contact_stiffness = k;
     }
     if let Some(d) = a.drag {
         c.field.drag = d;
@@ -90,11 +113,12 @@ pub fn run(a: Args) -> Result<()> {
     let t0 = std::time::Instant::now();
     simulate_with(&cfg, a.integrator, a.trajectories, a.seed, &a.out)?;
     eprintln!(
-        "wrote {} trajectories of a {}-particle {}D {} ({} states every {} s, dt {}, {}) to {} in {:.1} s",
+        "wrote {} trajectories of a {}-particle {}D {}{} ({} states every {} s, dt {}, {}) to {} in {:.1} s",
         a.trajectories,
         cfg.particles,
         cfg.dim,
         cfg.kind.name(),
+        contacts(&cfg),
         cfg.states,
         cfg.dt * cfg.save_every as f64,
         cfg.dt,
@@ -103,4 +127,16 @@ pub fn run(a: Args) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// ", contact radius R, k_c K, W walls/floor" for the systems that touch.
+fn contacts(cfg: &SystemConfig) -> String {
+    if cfg.interaction_radius == 0.0 {
+        return String::new();
+    }
+    let walls = cfg.graph().n_kinematic();
+    format!(
+        ", contact radius {}, k_c {}, {walls} kinematic particles",
+        cfg.interaction_radius, cfg.contact_stiffness
+    )
 }

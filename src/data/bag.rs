@@ -12,7 +12,7 @@ use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOp
 
 use super::msg::{
     particle_state_schema, Layout, ParticleState, Time, PARTICLE_STATE_MSG, PARTICLE_STATE_MSG_V1,
-    PARTICLE_STATE_TYPE,
+    PARTICLE_STATE_MSG_V2, PARTICLE_STATE_TYPE,
 };
 use super::source::{bag_parts, decompress_file, scan_sqlite, Codec, Storage};
 use super::DataError;
@@ -612,8 +612,9 @@ fn declarations(msg: &str) -> Vec<String> {
 }
 
 /// Which layout a bag's ParticleState schema declares (otherwise CDR would
-/// decode into the wrong fields): this build's, the first one, or unknown when
-/// the bag stores no definition (old sqlite3 bags).
+/// decode into the wrong fields): this build's, the second (before contacts),
+/// the first one, or unknown when the bag stores no definition (old sqlite3
+/// bags).
 fn check_schema(raw: &RawMessage) -> Result<Layout, DataError> {
     if raw.message_encoding != "cdr" {
         return Err(DataError::Invalid(format!(
@@ -639,11 +640,13 @@ fn check_schema(raw: &RawMessage) -> Result<Layout, DataError> {
     let decl = declarations(&main);
     if decl == declarations(PARTICLE_STATE_MSG) {
         Ok(Layout::Current)
+    } else if decl == declarations(PARTICLE_STATE_MSG_V2) {
+        Ok(Layout::V2)
     } else if decl == declarations(PARTICLE_STATE_MSG_V1) {
         Ok(Layout::V1)
     } else {
         Err(DataError::Invalid(
-            "its ParticleState schema differs from this build's msg/ParticleState.msg (and from its first layout)".into(),
+            "its ParticleState schema differs from this build's msg/ParticleState.msg (and from its earlier layouts)".into(),
         ))
     }
 }

@@ -20,6 +20,10 @@ pub const PARTICLE_STATE_MSG: &str = include_str!("../../msg/ParticleState.msg")
 /// `force`), kept so that bags written with it stay readable.
 pub const PARTICLE_STATE_MSG_V1: &str = include_str!("particle_state_v1.msg");
 
+/// The second layout (before `interaction_radius` and `kinematic`), kept so
+/// that bags written with it stay readable.
+pub const PARTICLE_STATE_MSG_V2: &str = include_str!("particle_state_v2.msg");
+
 /// `field_status` value: gravity, drag and force are not known (`FIELD_UNKNOWN`).
 pub const FIELD_UNKNOWN: u8 = 0;
 /// `field_status` value: exactly gravity, drag and force act (`FIELD_KNOWN`).
@@ -200,6 +204,87 @@ pub struct ParticleState {
     pub drag: f64,
     /// Constant force on every particle.
     pub force: Vector3,
+    /// Pairs closer than this interact through contact edges rebuilt from
+    /// positions (0: fixed edges only).
+    pub interaction_radius: f64,
+    /// Per particle: motion given, never predicted; empty when none is.
+    pub kinematic: Vec<bool>,
+}
+
+/// The message in its second layout ([`PARTICLE_STATE_MSG_V2`]): what bags
+/// written before contacts hold. Decodes into a [`ParticleState`] with no
+/// contacts (radius 0) and no kinematic particle.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ParticleStateV2 {
+    /// See [`ParticleState::header`].
+    pub header: Header,
+    /// See [`ParticleState::trajectory_id`].
+    pub trajectory_id: u32,
+    /// See [`ParticleState::step`].
+    pub step: u32,
+    /// See [`ParticleState::system`].
+    pub system: String,
+    /// See [`ParticleState::dimension`].
+    pub dimension: u8,
+    /// See [`ParticleState::types`].
+    pub types: Vec<u32>,
+    /// See [`ParticleState::masses`].
+    pub masses: Vec<f64>,
+    /// See [`ParticleState::positions`].
+    pub positions: Vec<Vector3>,
+    /// See [`ParticleState::velocities`].
+    pub velocities: Vec<Vector3>,
+    /// See [`ParticleState::accelerations`].
+    pub accelerations: Vec<Vector3>,
+    /// See [`ParticleState::edge_a`].
+    pub edge_a: Vec<u32>,
+    /// See [`ParticleState::edge_b`].
+    pub edge_b: Vec<u32>,
+    /// See [`ParticleState::edge_kind`].
+    pub edge_kind: Vec<u8>,
+    /// See [`ParticleState::edge_rest_length`].
+    pub edge_rest_length: Vec<f64>,
+    /// See [`ParticleState::edge_stiffness`].
+    pub edge_stiffness: Vec<f64>,
+    /// See [`ParticleState::anchors`].
+    pub anchors: Vec<Point>,
+    /// See [`ParticleState::field_status`].
+    pub field_status: u8,
+    /// See [`ParticleState::gravity`].
+    pub gravity: Vector3,
+    /// See [`ParticleState::drag`].
+    pub drag: f64,
+    /// See [`ParticleState::force`].
+    pub force: Vector3,
+}
+
+impl From<ParticleStateV2> for ParticleState {
+    fn from(m: ParticleStateV2) -> Self {
+        ParticleState {
+            header: m.header,
+            trajectory_id: m.trajectory_id,
+            step: m.step,
+            system: m.system,
+            dimension: m.dimension,
+            types: m.types,
+            masses: m.masses,
+            positions: m.positions,
+            velocities: m.velocities,
+            accelerations: m.accelerations,
+            edge_a: m.edge_a,
+            edge_b: m.edge_b,
+            edge_kind: m.edge_kind,
+            edge_rest_length: m.edge_rest_length,
+            edge_stiffness: m.edge_stiffness,
+            anchors: m.anchors,
+            field_status: m.field_status,
+            gravity: m.gravity,
+            drag: m.drag,
+            force: m.force,
+            interaction_radius: 0.0,
+            kinematic: vec![],
+        }
+    }
 }
 
 /// The message in its first layout ([`PARTICLE_STATE_MSG_V1`]): what bags
@@ -271,6 +356,8 @@ impl From<ParticleStateV1> for ParticleState {
 pub enum Layout {
     /// This build's msg/ParticleState.msg.
     Current,
+    /// [`PARTICLE_STATE_MSG_V2`] (before contacts).
+    V2,
     /// [`PARTICLE_STATE_MSG_V1`].
     V1,
     /// No schema text to tell (e.g. an old sqlite3 bag): try both.
@@ -310,8 +397,10 @@ impl ParticleState {
     ) -> ParticleState {
         let n = graph.n();
         let dim = graph.dim;
-        let edge_b = graph
-            .edges
+        // Contact edges are rebuilt from positions and the radius by every
+        // reader; only the fixed edges go on the wire.
+        let edges: Vec<&Edge> = graph.fixed_edges().collect();
+        let edge_b = edges
             .iter()
             .map(|e| match e.b {
                 Endpoint::Particle(b) => idx_u32(b),
@@ -336,18 +425,18 @@ impl ParticleState {
                 .as_deref()
                 .map(|a| to_vec3(a, dim))
                 .unwrap_or_default(),
-            edge_a: graph.edges.iter().map(|e| idx_u32(e.a)).collect(),
+            edge_a: edges.iter().map(|e| idx_u32(e.a)).collect(),
             edge_b,
-            edge_kind: graph
-                .edges
+            edge_kind: edges
                 .iter()
                 .map(|e| match e.kind {
                     EdgeKind::Spring => EDGE_SPRING,
-                    EdgeKind::Bar => EDGE_BAR,
+                    // Not reached: `fixed_edges` leaves contacts out.
+                    EdgeKind::Bar | EdgeKind::Contact => EDGE_BAR,
                 })
                 .collect(),
-            edge_rest_length: graph.edges.iter().map(|e| e.rest_length).collect(),
-            edge_stiffness: graph.edges.iter().map(|e| e.stiffness).collect(),
+            edge_rest_length: edges.iter().map(|e| e.rest_length).collect(),
+            edge_stiffness: edges.iter().map(|e| e.stiffness).collect(),
             anchors: graph
                 .anchors
                 .iter()
@@ -360,6 +449,8 @@ impl ParticleState {
                     }
                 })
                 .collect(),
+            interaction_radius: graph.interaction_radius,
+            kinematic: graph.kinematic.clone(),
             ..ParticleState::default()
         }
     }
@@ -512,6 +603,8 @@ impl ParticleState {
             masses: self.masses.clone(),
             edges,
             anchors,
+            interaction_radius: self.interaction_radius,
+            kinematic: self.kinematic.clone(),
         };
         graph
             .validate()
@@ -582,21 +675,24 @@ impl ParticleState {
     }
 
     /// Decodes CDR bytes in the given layout. [`Layout::Unknown`] (a bag that
-    /// stores no definition) tries this build's layout, then the first one
-    /// ([`ParticleStateV1`], field unknown): whole messages of either cannot
-    /// pass for the other (one is short of bytes, the other has bytes over),
-    /// but a current message cut exactly after `anchors` would read as V1, so
+    /// stores no definition) tries this build's layout, then the second
+    /// ([`ParticleStateV2`], no contacts), then the first
+    /// ([`ParticleStateV1`], field unknown): a whole message of one cannot
+    /// pass for another (a shorter one is short of bytes, a longer one has
+    /// more than 3 bytes over: each layout appends at least 12), but a message
+    /// cut exactly at an older layout's end would read as that layout, so
     /// this is used only when the bag cannot say.
     pub fn from_cdr_as(bytes: &[u8], layout: Layout) -> Result<ParticleState, DataError> {
         match layout {
             Layout::Current => decode_cdr(bytes),
+            Layout::V2 => decode_cdr::<ParticleStateV2>(bytes).map(ParticleState::from),
             Layout::V1 => decode_cdr::<ParticleStateV1>(bytes).map(ParticleState::from),
-            Layout::Unknown => match decode_cdr::<ParticleState>(bytes) {
-                Ok(m) => Ok(m),
-                Err(e) => decode_cdr::<ParticleStateV1>(bytes)
+            Layout::Unknown => decode_cdr::<ParticleState>(bytes).or_else(|e| {
+                decode_cdr::<ParticleStateV2>(bytes)
                     .map(ParticleState::from)
-                    .map_err(|_| e),
-            },
+                    .or_else(|_| decode_cdr::<ParticleStateV1>(bytes).map(ParticleState::from))
+                    .map_err(|_| e)
+            }),
         }
     }
 }

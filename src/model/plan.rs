@@ -66,7 +66,9 @@ impl GraphPlan {
         let params: Vec<(f64, f64)> = graph
             .particle_edges()
             .map(|(_, _, e)| match e.kind {
-                EdgeKind::Spring => (e.rest_length, e.stiffness),
+                // A contact's rest length is the radius, its stiffness 0
+                // (see EdgeKind::Contact).
+                EdgeKind::Spring | EdgeKind::Contact => (e.rest_length, e.stiffness),
                 EdgeKind::Bar => (e.rest_length, 0.0),
             })
             .collect();

@@ -28,6 +28,12 @@ impl Dynamics for Truth {
 
     fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
         graph.validate()?;
+        // It knows no contact stiffness, so it would drop the contact forces.
+        if graph.has_contacts() {
+            return Err(
+                crate::physics::PhysicsError::NoContactLaw(graph.interaction_radius).into(),
+            );
+        }
         Ok(self.field.validate(graph.dim)?)
     }
 

@@ -16,8 +16,8 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use super::constraints::acceleration;
 use super::integrator::Integrator;
+use super::scenes::{self, SceneSpec};
 use super::{Field, PhysicsError, SystemKind};
 use crate::system::{Edge, EdgeKind, Endpoint, Graph, Sample, State, SystemError, Trajectory};
 
@@ -69,6 +69,20 @@ pub struct SystemConfig {
     pub save_every: usize,
     /// Saved states per trajectory (including the initial one).
     pub states: usize,
+    /// Interaction radius R of contacts (0: fixed edges only; the systems that
+    /// touch need it). Absent from records written before it existed.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub interaction_radius: f64,
+    /// Contact stiffness k_c of the soft-sphere potential ½ k_c (R − r)².
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub contact_stiffness: f64,
+}
+
+/// Serde's test for leaving an unused contact parameter out, so records of the
+/// paper's systems read and write as before.
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde passes a reference
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 impl SystemConfig {
@@ -76,16 +90,28 @@ impl SystemConfig {
     /// saved every 1000 steps; spring and peridynamic g = 0, dt = 1e-3, saved
     /// every 100 steps; 100 saved states; no drag or external force; 2D
     /// ([`SystemKind::default_dim`]: 3D for the peridynamic solid).
+    ///
+    /// The systems that touch ([`SystemConfig::contact_defaults`]): soft
+    /// spheres R = 1, k_c = 1000, g = 1, dt 1e-3 every 100 steps; colliding
+    /// lattices spacing 1, spring k = 10, R = 1, k_c = 100, no field, dt 1e-3
+    /// every 100; falling chain bars of 1, R = 0.5, k_c = 1e4, g = 10, dt 1e-4
+    /// every 100 steps. `particles` counts the free particles (balls, sites
+    /// of both lattices, chain links); walls and floors are added to them.
     pub fn new(kind: SystemKind, particles: usize) -> Self {
         let (gravity, dt, save_every) = match kind {
-            SystemKind::Spring | SystemKind::Peridynamic => (0.0, 1e-3, 100),
+            SystemKind::Spring | SystemKind::Peridynamic | SystemKind::CollidingLattices => {
+                (0.0, 1e-3, 100)
+            }
             SystemKind::Pendulum => (10.0, 1e-5, 1000),
+            SystemKind::SoftSpheres => (1.0, 1e-3, 100),
+            SystemKind::FallingChain => (10.0, 1e-4, 100),
         };
+        let (stiffness, interaction_radius, contact_stiffness) = Self::contact_defaults(kind);
         SystemConfig {
             kind,
             particles,
             dim: kind.default_dim(),
-            stiffness: 1.0,
+            stiffness,
             rest_length: 1.0,
             bar_length: 1.0,
             mass: 1.0,
@@ -97,20 +123,56 @@ impl SystemConfig {
             dt,
             save_every,
             states: 100,
+            interaction_radius,
+            contact_stiffness,
+        }
+    }
+
+    /// Spring stiffness, interaction radius and contact stiffness of `kind`
+    /// by default (see [`SystemConfig::new`]).
+    fn contact_defaults(kind: SystemKind) -> (f64, f64, f64) {
+        match kind {
+            SystemKind::Spring | SystemKind::Pendulum | SystemKind::Peridynamic => (1.0, 0.0, 0.0),
+            SystemKind::SoftSpheres => (1.0, 1.0, 1000.0),
+            SystemKind::CollidingLattices => (10.0, 1.0, 100.0),
+            SystemKind::FallingChain => (1.0, 0.5, 1e4),
+        }
+    }
+
+    /// What the scenes of [`scenes`] are built from.
+    fn scene(&self) -> SceneSpec {
+        SceneSpec {
+            free: self.particles,
+            dim: self.dim,
+            radius: self.interaction_radius,
+            stiffness: self.stiffness,
+            spacing: self.rest_length,
+            bar_length: self.bar_length,
+            mass: self.mass,
+            gravity: self.field.gravity,
         }
     }
 
     /// Checks every parameter; the error names the offending one.
     pub fn validate(&self) -> Result<(), PhysicsError> {
         let min = match self.kind {
-            SystemKind::Spring => 2,
-            SystemKind::Pendulum => 1,
+            SystemKind::Spring | SystemKind::FallingChain => 2,
+            SystemKind::Pendulum | SystemKind::SoftSpheres => 1,
             SystemKind::Peridynamic => {
                 if cube_side(self.particles).is_none() {
                     return Err(PhysicsError::NotACube(self.particles));
                 }
                 if self.dim != 3 {
                     return Err(PhysicsError::SolidDimension(self.dim));
+                }
+                8
+            }
+            SystemKind::CollidingLattices => {
+                if scenes::lattice_side(self.particles, self.dim).is_none() {
+                    return Err(PhysicsError::NotTwoLattices {
+                        particles: self.particles,
+                        dim: self.dim,
+                    });
                 }
                 8
             }
@@ -137,6 +199,7 @@ impl SystemConfig {
                 return Err(PhysicsError::NotPositive { name, value: x });
             }
         }
+        self.validate_contacts()?;
         if self.save_every == 0 {
             return Err(PhysicsError::AtLeastOne("save_every"));
         }
@@ -144,6 +207,30 @@ impl SystemConfig {
             return Err(PhysicsError::AtLeastOne("states"));
         }
         self.field.validate(self.dim)
+    }
+
+    /// The contact parameters: finite and ≥ 0, and positive for the systems
+    /// that touch.
+    fn validate_contacts(&self) -> Result<(), PhysicsError> {
+        let contact = [
+            ("interaction_radius", self.interaction_radius),
+            ("contact_stiffness", self.contact_stiffness),
+        ];
+        for (name, x) in contact {
+            let ok = if self.kind.has_contacts() {
+                x.is_finite() && x > 0.0
+            } else {
+                x.is_finite() && x >= 0.0
+            };
+            if !ok {
+                return Err(PhysicsError::ContactParameter {
+                    name,
+                    value: x,
+                    kind: self.kind,
+                });
+            }
+        }
+        Ok(())
     }
 
     /// The system's graph. Spring: a ring of springs i–(i+1 mod n) (a single
@@ -160,6 +247,9 @@ impl SystemConfig {
     /// one k_s/√2. Bonds are listed with a < b. No anchors. A particle count
     /// that is not a cube (rejected by [`SystemConfig::validate`]) fills the
     /// first n sites of the smallest enclosing cube.
+    ///
+    /// The systems that touch are described in [`scenes`]. Every graph has
+    /// the configuration's interaction radius (0 for the paper's systems).
     pub fn graph(&self) -> Graph {
         let n = self.particles;
         let mut edges = vec![];
@@ -198,6 +288,11 @@ impl SystemConfig {
                 dim = 3;
                 edges = self.peridynamic_bonds();
             }
+            SystemKind::SoftSpheres => return scenes::soft_spheres_graph(&self.scene()),
+            SystemKind::CollidingLattices => {
+                return scenes::colliding_lattices_graph(&self.scene())
+            }
+            SystemKind::FallingChain => return scenes::falling_chain_graph(&self.scene()),
         }
         Graph {
             dim,
@@ -205,6 +300,8 @@ impl SystemConfig {
             masses: vec![self.mass; n],
             edges,
             anchors,
+            interaction_radius: self.interaction_radius,
+            kinematic: vec![],
         }
     }
 
@@ -237,6 +334,11 @@ impl SystemConfig {
             SystemKind::Spring => self.spring_start(graph, rng),
             SystemKind::Pendulum => self.pendulum_start(graph, rng),
             SystemKind::Peridynamic => self.peridynamic_start(graph, rng),
+            SystemKind::SoftSpheres => scenes::soft_spheres_start(&self.scene(), graph, rng),
+            SystemKind::CollidingLattices => {
+                scenes::colliding_lattices_start(&self.scene(), graph, rng)
+            }
+            SystemKind::FallingChain => scenes::falling_chain_start(&self.scene(), graph, rng),
         }
     }
 
@@ -460,7 +562,8 @@ impl SystemConfig {
         id: u32,
     ) -> Result<Trajectory, PhysicsError> {
         self.validate()?;
-        let mut it = Integrator::new(graph, &self.field, self.dt, start)?;
+        let k_c = self.contact_stiffness;
+        let mut it = Integrator::with_contacts(graph, &self.field, k_c, self.dt, start)?;
         let mut samples = Vec::with_capacity(self.states);
         for k in 0..self.states {
             if k > 0 {
@@ -469,7 +572,7 @@ impl SystemConfig {
             let state = it.state().clone();
             samples.push(Sample {
                 t: (k * self.save_every) as f64 * self.dt,
-                acc: Some(acceleration(graph, &self.field, &state)),
+                acc: Some(it.exact_acceleration()),
                 state,
             });
         }

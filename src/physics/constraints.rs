@@ -201,12 +201,26 @@ pub fn bar_jacobian(graph: &Graph, state: &State) -> (DMatrix<f64>, DVector<f64>
 ///
 /// Without bars this is simply M⁻¹F. Redundant bars get least-squares
 /// multipliers. The state must match the graph (see [`State::validate`]).
+///
+/// Kinematic particles (held still) get zero.
 pub fn acceleration(graph: &Graph, field: &Field, state: &State) -> Vec<f64> {
     let mut out = vec![0.0; graph.ndof()];
+    acceleration_with(graph, field, state, &mut out, |_, _| {});
+    out
+}
+
+/// [`acceleration`] with forces `extra(q, f)` adds to the applied ones
+/// (contacts) before the bar multipliers are solved.
+pub(crate) fn acceleration_with(
+    graph: &Graph,
+    field: &Field,
+    state: &State,
+    out: &mut [f64],
+    extra: impl FnOnce(&[f64], &mut [f64]),
+) {
     let mut bars = Bars::new(graph);
     let mut dirs = vec![0.0; bars.k() * graph.dim];
-    constrained_acceleration(graph, field, state, &mut bars, &mut dirs, &mut out);
-    out
+    constrained_acceleration(graph, field, state, &mut bars, &mut dirs, out, extra);
 }
 
 /// [`acceleration`] with caller-provided scratch space.
@@ -217,12 +231,15 @@ pub(crate) fn constrained_acceleration(
     bars: &mut Bars,
     dirs: &mut [f64],
     out: &mut [f64],
+    extra: impl FnOnce(&[f64], &mut [f64]),
 ) {
     let d = graph.dim;
     applied_forces(graph, field, &state.q, &state.v, out);
+    extra(&state.q, out);
     for (i, m) in graph.masses.iter().enumerate() {
+        let held = graph.is_kinematic(i);
         for c in 0..d {
-            out[i * d + c] /= m;
+            out[i * d + c] = if held { 0.0 } else { out[i * d + c] / m };
         }
     }
     if bars.k() == 0 {

@@ -30,6 +30,32 @@ pub enum PhysicsError {
     /// A peridynamic solid's particle count is not a cube.
     #[error("a peridynamic solid needs a cube number of particles (8, 27, 64, 125, ...), got {0}")]
     NotACube(usize),
+    /// Colliding lattices need two equal square/cubic lattices.
+    #[error("colliding lattices need 2·k^dim particles (two {dim}D lattices of side k ≥ 2: 2D 8, 18, 32, 50, ...; 3D 16, 54, 128, ...), got {particles}")]
+    NotTwoLattices {
+        /// Particles asked for.
+        particles: usize,
+        /// The dimension.
+        dim: usize,
+    },
+    /// A contact parameter out of range.
+    #[error("{name} = {value} is invalid for a {kind} system: it must be finite, positive for the systems that touch, ≥ 0 otherwise")]
+    ContactParameter {
+        /// The parameter.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// The system.
+        kind: SystemKind,
+    },
+    /// The ground-truth model asked for a graph with contacts.
+    #[error("the graph has contacts (interaction radius {0}) but the truth:<system> model knows no contact law yet; simulate with `mcgnode simulate` instead")]
+    NoContactLaw(f64),
+    /// RK4 data asked for a system with contacts or kinematic particles.
+    #[error(
+        "RK4 data covers springs and bars only: a {0} system touches; use --integrator verlet"
+    )]
+    Rk4Contacts(SystemKind),
     /// A peridynamic solid asked for in 2D.
     #[error("a peridynamic solid is 3-dimensional: dimension must be 3, got {0}")]
     SolidDimension(usize),
@@ -84,6 +110,15 @@ pub enum PhysicsError {
     /// A bar of length zero or less.
     #[error("bar from particle {0} has non-positive length")]
     BarLength(usize),
+    /// A kinematic particle starts moving (the simulator holds them still).
+    #[error("kinematic particle {0} has a non-zero velocity: the simulator holds kinematic particles still, start them at rest")]
+    KinematicMoving(usize),
+    /// A rigid bar ends at a kinematic particle.
+    #[error("a bar from particle {0} ends at a kinematic particle: bars must join free particles (or an anchor)")]
+    KinematicBar(usize),
+    /// The contact stiffness is negative or not finite.
+    #[error("contact stiffness {0} must be a finite number ≥ 0")]
+    ContactStiffness(f64),
 }
 
 crate::error::typed_errors!(PhysicsError);

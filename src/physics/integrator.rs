@@ -8,7 +8,13 @@
 //! * RATTLE: v' −= M⁻¹A(q')ᵀμ with μ solving A(q') v' = 0 exactly.
 //!
 //! RATTLE is symplectic, so without drag the energy error stays bounded.
+//!
+//! Contacts ([`super::contact`]) add their forces at every evaluation, from
+//! pairs searched anew at that q. Kinematic particles are held still: their
+//! acceleration is zero and they must start at rest, so they never move but
+//! exert and receive forces like any other.
 
+use super::contact::Contacts;
 use super::forces::applied_forces;
 use super::projection::Projector;
 use super::verlet;
@@ -29,6 +35,8 @@ pub struct Integrator {
     /// half-step velocity (the value the next step starts from).
     acc: Vec<f64>,
     projector: Projector,
+    /// Contact forces when the graph has a radius and k_c > 0.
+    contacts: Option<Contacts>,
     steps: u64,
 }
 
@@ -39,8 +47,22 @@ impl Integrator {
     /// [`Integrator::shake_failures`]).
     pub const MAX_ITER: usize = Projector::MAX_ITER;
 
-    /// Checks the inputs and computes the starting acceleration.
+    /// Checks the inputs and computes the starting acceleration (no contact
+    /// forces: [`Integrator::with_contacts`] adds them).
     pub fn new(graph: &Graph, field: &Field, dt: f64, start: State) -> Result<Self, PhysicsError> {
+        Self::with_contacts(graph, field, 0.0, dt, start)
+    }
+
+    /// [`Integrator::new`] with contact stiffness k_c: pairs closer than the
+    /// graph's interaction radius repel by ½ k_c (R − r)² (nothing when the
+    /// radius or k_c is 0).
+    pub fn with_contacts(
+        graph: &Graph,
+        field: &Field,
+        contact_stiffness: f64,
+        dt: f64,
+        start: State,
+    ) -> Result<Self, PhysicsError> {
         graph.validate()?;
         field.validate(graph.dim)?;
         start.validate(graph)?;
@@ -50,6 +72,12 @@ impl Integrator {
         if let Some(e) = graph.bars().find(|e| e.rest_length <= 0.0) {
             return Err(PhysicsError::BarLength(e.a));
         }
+        check_kinematic(graph, &start)?;
+        if !(contact_stiffness.is_finite() && contact_stiffness >= 0.0) {
+            return Err(PhysicsError::ContactStiffness(contact_stiffness));
+        }
+        let contacts = (graph.has_contacts() && contact_stiffness > 0.0)
+            .then(|| Contacts::new(graph, contact_stiffness));
         let mut it = Integrator {
             graph: graph.clone(),
             field: field.clone(),
@@ -57,6 +85,7 @@ impl Integrator {
             state: start,
             acc: vec![0.0; graph.ndof()],
             projector: Projector::new(graph),
+            contacts,
             steps: 0,
         };
         it.update_acc();
@@ -66,15 +95,17 @@ impl Integrator {
     /// acc = M⁻¹ F(q, v) for the current state.
     fn update_acc(&mut self) {
         let s = &self.state;
-        true_acceleration(&self.graph, &self.field, &s.q, &s.v, &mut self.acc);
+        let c = self.contacts.as_mut();
+        true_acceleration(&self.graph, &self.field, c, &s.q, &s.v, &mut self.acc);
     }
 
     /// One step of length dt.
     pub fn step(&mut self) {
         let (graph, field) = (&self.graph, &self.field);
+        let contacts = self.contacts.as_mut();
         let s = &mut self.state;
         let accel = |q: &[f64], v: &[f64], acc: &mut [f64]| {
-            true_acceleration(graph, field, q, v, acc);
+            true_acceleration(graph, field, contacts, q, v, acc);
             Ok::<(), std::convert::Infallible>(())
         };
         let Ok(()) = verlet::step(
@@ -130,6 +161,28 @@ impl Integrator {
         self.projector.iterations()
     }
 
+    /// The exact constrained acceleration at the current state, contacts
+    /// included (kinematic particles: 0), as bags record it.
+    pub fn exact_acceleration(&mut self) -> Vec<f64> {
+        let mut out = vec![0.0; self.graph.ndof()];
+        let (graph, field, s) = (&self.graph, &self.field, &self.state);
+        let contacts = self.contacts.as_mut();
+        super::constraints::acceleration_with(graph, field, s, &mut out, |q, f| {
+            if let Some(c) = contacts {
+                c.add_forces(q, graph.dim, f);
+            }
+        });
+        out
+    }
+
+    /// Contact energy Σ ½ k_c (R − r)² at the current state (0 without contacts).
+    pub fn contact_energy(&mut self) -> f64 {
+        match self.contacts.as_mut() {
+            Some(c) => c.energy(&self.state.q, self.graph.dim),
+            None => 0.0,
+        }
+    }
+
     /// Steps whose SHAKE iteration did not reach [`Integrator::TOL`] within
     /// [`Integrator::MAX_ITER`] iterations, or whose constraint matrix could
     /// not be solved (degenerate bars). 0 for a healthy run.
@@ -138,14 +191,44 @@ impl Integrator {
     }
 }
 
-/// acc = M⁻¹ F(q, v): the applied forces over the masses (bars are the
-/// projector's job).
-fn true_acceleration(graph: &Graph, field: &Field, q: &[f64], v: &[f64], acc: &mut [f64]) {
+/// acc = M⁻¹ F(q, v): the applied and contact forces over the masses (bars
+/// are the projector's job), zero for kinematic particles.
+fn true_acceleration(
+    graph: &Graph,
+    field: &Field,
+    contacts: Option<&mut Contacts>,
+    q: &[f64],
+    v: &[f64],
+    acc: &mut [f64],
+) {
     let d = graph.dim;
     applied_forces(graph, field, q, v, acc);
+    if let Some(c) = contacts {
+        c.add_forces(q, d, acc);
+    }
     for (i, m) in graph.masses.iter().enumerate() {
+        let held = graph.is_kinematic(i);
         for c in 0..d {
-            acc[i * d + c] /= m;
+            acc[i * d + c] = if held { 0.0 } else { acc[i * d + c] / m };
         }
     }
+}
+
+/// Kinematic particles are held still: they must start at rest and no bar may
+/// end at one (SHAKE would move it).
+fn check_kinematic(graph: &Graph, start: &State) -> Result<(), PhysicsError> {
+    let d = graph.dim;
+    if let Some(i) = (0..graph.n())
+        .find(|&i| graph.is_kinematic(i) && start.v[i * d..(i + 1) * d].iter().any(|x| *x != 0.0))
+    {
+        return Err(PhysicsError::KinematicMoving(i));
+    }
+    let touches = |e: &&crate::system::Edge| {
+        graph.is_kinematic(e.a)
+            || matches!(e.b, crate::system::Endpoint::Particle(b) if graph.is_kinematic(b))
+    };
+    if let Some(e) = graph.bars().find(touches) {
+        return Err(PhysicsError::KinematicBar(e.a));
+    }
+    Ok(())
 }

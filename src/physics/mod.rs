@@ -7,19 +7,26 @@
 //! * [`integrator`]: velocity Verlet + SHAKE/RATTLE on the true forces;
 //! * [`config`]: the paper's spring, pendulum and peridynamic-solid systems,
 //!   initial states, trajectory generation;
-//! * [`rk4`]: RK4 on (q, p), the paper's HGN training data.
+//! * [`rk4`]: RK4 on (q, p), the paper's HGN training data;
+//! * [`neighbors`]: contact pairs within a radius (cell list) and their edges;
+//! * [`contact`]: the soft-sphere contact force and energy on those pairs;
+//! * [`scenes`]: the systems that touch (soft spheres in a box, colliding
+//!   lattices, a chain falling on a floor), with kinematic walls.
 //!
 //! The same physics as a model behind [`crate::dynamics::Dynamics`] is
 //! [`crate::models::truth::Truth`], above the trait.
 
 pub mod config;
 pub mod constraints;
+pub mod contact;
 mod error;
 pub mod forces;
 pub mod integrator;
 mod linalg;
+pub mod neighbors;
 pub mod projection;
 pub mod rk4;
+pub mod scenes;
 pub mod verlet;
 
 use serde::{Deserialize, Serialize};
@@ -46,14 +53,28 @@ pub enum SystemKind {
     /// are springs to every particle within the horizon
     /// [`config::PERIDYNAMIC_HORIZON`]), compressed isotropically and released.
     Peridynamic,
+    /// Elastic soft spheres in a box whose walls are kinematic particles,
+    /// under gravity ([`scenes`]).
+    #[serde(rename = "soft-spheres")]
+    SoftSpheres,
+    /// Two spring lattices thrown at each other, no field: a closed system
+    /// whose lattices touch through contacts.
+    #[serde(rename = "colliding-lattices")]
+    CollidingLattices,
+    /// A chain of rigid bars falling onto a floor of kinematic particles.
+    #[serde(rename = "falling-chain")]
+    FallingChain,
 }
 
 impl SystemKind {
     /// Every kind, in the order they are listed to users.
-    pub const ALL: [SystemKind; 3] = [
+    pub const ALL: [SystemKind; 6] = [
         SystemKind::Spring,
         SystemKind::Pendulum,
         SystemKind::Peridynamic,
+        SystemKind::SoftSpheres,
+        SystemKind::CollidingLattices,
+        SystemKind::FallingChain,
     ];
 
     /// The spatial dimension [`SystemConfig::new`] gives this kind: 3 for the
@@ -61,8 +82,17 @@ impl SystemKind {
     pub fn default_dim(self) -> usize {
         match self {
             SystemKind::Peridynamic => 3,
-            SystemKind::Spring | SystemKind::Pendulum => 2,
+            _ => 2,
         }
+    }
+
+    /// Whether its particles touch: contact edges within a radius (the
+    /// systems of [`scenes`]).
+    pub fn has_contacts(self) -> bool {
+        matches!(
+            self,
+            SystemKind::SoftSpheres | SystemKind::CollidingLattices | SystemKind::FallingChain
+        )
     }
 
     /// The name used on the command line and in trajectories.
@@ -71,6 +101,9 @@ impl SystemKind {
             SystemKind::Spring => "spring",
             SystemKind::Pendulum => "pendulum",
             SystemKind::Peridynamic => "peridynamic",
+            SystemKind::SoftSpheres => "soft-spheres",
+            SystemKind::CollidingLattices => "colliding-lattices",
+            SystemKind::FallingChain => "falling-chain",
         }
     }
 }

@@ -51,6 +51,10 @@ pub fn rk4_trajectories(
 ) -> Result<Vec<Trajectory>, PhysicsError> {
     c.validate()?;
     let g = c.graph();
+    // The (q, p) flow here knows no contacts and would move kinematic walls.
+    if g.has_contacts() || g.n_kinematic() > 0 {
+        return Err(PhysicsError::Rk4Contacts(c.kind));
+    }
     let d = g.dim;
     let mut out = Vec::with_capacity(trajectories);
     for i in 0..trajectories {
