@@ -1,10 +1,12 @@
 //! Loading any model file, GNODE family or baseline, behind [`Dynamics`];
 //! and a model to serve or replay ([`load_model`]: a file checked against its
-//! training data, or the ground truth `truth:<system>`).
+//! training data, or the ground truth `truth:<system>`); what a model
+//! reference says it was trained on ([`trained_for`]).
 
 use super::truth;
 use crate::baselines::file::FORMAT as BASELINE_FORMAT;
 use crate::baselines::TrainedBaseline;
+use crate::compat::TrainedFor;
 use crate::dynamics::Dynamics;
 use crate::error::{Context, Result};
 use crate::kernel::TrainedModel;
@@ -76,6 +78,28 @@ pub fn load_model(model: &str) -> Result<Arc<dyn Dynamics>> {
         return Ok(truth::load_truth(model)?);
     }
     let m = load_any_model(Path::new(model)).with_context(|| format!("loading model {model}"))?;
-    let trained = super::trained_for(Path::new(model))?;
+    let trained = trained_for(Path::new(model))?;
     Ok(Arc::new(super::Checked::new(m.dynamics, trained)))
+}
+
+/// What the model at `path` was trained on: its file's training description
+/// ([`TrainedFor::from_model_file`]), or for the reference `still`
+/// ([`crate::dynamics::Still`]) nothing, since it fits any data.
+pub fn trained_for(path: &Path) -> crate::error::Result<TrainedFor> {
+    if path == Path::new(crate::dynamics::STILL) {
+        // The reference fits any data.
+        return Ok(TrainedFor {
+            model: crate::dynamics::STILL.into(),
+            ..TrainedFor::default()
+        });
+    }
+    if let Some(name) = path.to_str().filter(|p| truth::is_truth(p)) {
+        // The simulator fits its own system (the dimension and edges are
+        // checked by the simulator itself; the field is its default's).
+        return truth::load_truth(name)?
+            .trained_for()
+            .cloned()
+            .ok_or_else(|| crate::error::err!("{name} does not say what it simulates"));
+    }
+    TrainedFor::from_model_file(path)
 }

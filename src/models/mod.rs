@@ -12,8 +12,8 @@ mod load;
 mod train;
 pub mod truth;
 
-pub use checked::{trained_for, Checked};
+pub use checked::Checked;
 pub use kind::ModelKind;
-pub use load::{load_any_model, load_model, LoadedModel};
+pub use load::{load_any_model, load_model, trained_for, LoadedModel};
 pub use train::{train_any_from_bags, train_from_bags, TrainedFile};
 pub use truth::Truth;
