@@ -4,7 +4,8 @@
 //! with rclpy; see scripts/ros/ for rclpy stand-ins of the ros2 CLI.
 //!
 //! - [`params`] (+ [`yaml`]): the ROS 2 parameter file and `--set` overrides;
-//! - [`msgs`]: wire structs of our interfaces;
+//! - [`wire`]: the wire structs of every interface, each with its ROS type
+//!   name, one file per family;
 //! - [`names`]: ROS 2 names and `--ros-args` as rcl reads them (namespace,
 //!   node name, remaps);
 //! - [`input`]: an incoming state parsed once, with the velocities of
@@ -15,13 +16,15 @@
 //! - [`record`]: MCAP recording of states, predictions and forces;
 //! - [`handles`]: what the tasks share: parameters, model, diagnostics,
 //!   recorder, each a handle of its own;
-//! - [`qos`]: QoS profiles and ROS names;
+//! - [`qos`]: QoS profiles, ROS names, and topics and servers created by
+//!   their wire type;
 //! - [`node`]: the DDS entities and the event loop; it wires the modules
 //!   below, none of which imports it;
 //! - [`training`]: the Train and LoadModel services, training in the
 //!   background and atomic model swaps announced on `/mcgnode/model_swap`;
 //! - [`action`]: the Train action (per-epoch feedback, cancel), on top of
 //!   [`training`];
+//! - [`topics`]: every topic, service and action name;
 //! - [`clock`]: system or simulated (`/clock`) time;
 //! - [`service`]: the one loop serving every service;
 //! - [`lifecycle`]: the managed-node states and transitions (no DDS), and
@@ -37,7 +40,6 @@ pub mod input;
 pub mod lifecycle;
 pub mod lifecycle_services;
 pub mod markers;
-pub mod msgs;
 pub mod names;
 pub mod node;
 pub mod params;
@@ -45,7 +47,9 @@ pub mod predict;
 pub mod qos;
 pub mod record;
 pub mod service;
+pub mod topics;
 pub mod training;
+pub mod wire;
 pub mod yaml;
 
 use std::path::PathBuf;

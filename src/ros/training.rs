@@ -30,9 +30,8 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use crate::error::err;
 use ros2_client::log::LogLevel;
-use ros2_client::{MessageTypeName, Node, Publisher, Server, ServiceMapping, ServiceTypeName};
+use ros2_client::{Node, Publisher, Server};
 
 use crate::data::msg::{Header, Time};
 use crate::dynamics::Dynamics;
@@ -43,19 +42,14 @@ use crate::train::{Auto, EpochReport, ModelOptions, Recipe, TrainConfig};
 
 use super::clock::Clock;
 use super::handles::{Diagnostics, ModelHandle, RecorderHandle};
-use super::msgs::{
-    LoadModelRequest, LoadModelResponse, ModelSwap, TrainRequest, TrainResponse, PACKAGE,
-};
 use super::names::Names;
 use super::params::NodeParams;
-use super::qos::{reliable_qos, ros_name as name};
+use super::qos::{publisher, reliable_qos, server};
+use super::topics::{LOAD_MODEL_SERVICE, MODEL_SWAP_TOPIC, TRAIN_SERVICE};
+use super::wire::{
+    LoadModel, LoadModelRequest, LoadModelResponse, ModelSwap, Train, TrainRequest, TrainResponse,
+};
 
-/// Name of the Train service.
-pub const TRAIN_SERVICE: &str = "~/train";
-/// Name of the LoadModel service.
-pub const LOAD_MODEL_SERVICE: &str = "~/load_model";
-/// Topic announcing every model swap (`mcgnode_msgs/msg/ModelSwap`).
-pub const MODEL_SWAP_TOPIC: &str = "~/model_swap";
 /// Variant trained when a request leaves it empty.
 pub const DEFAULT_VARIANT: Variant = Variant::Mcgnode;
 
@@ -120,35 +114,9 @@ pub fn create(
     names: &Names,
     handles: TrainerHandles,
 ) -> crate::error::Result<(Arc<Trainer>, TrainingServers)> {
-    let qos = reliable_qos();
-    let topic = node
-        .create_topic(
-            &name(names, MODEL_SWAP_TOPIC)?,
-            MessageTypeName::new(PACKAGE, "ModelSwap"),
-            &qos,
-        )
-        .map_err(|e| err!("creating topic {MODEL_SWAP_TOPIC}: {e:?}"))?;
-    let swap = node
-        .create_publisher(&topic, Some(qos.clone()))
-        .map_err(|e| err!("creating the model swap publisher: {e:?}"))?;
-    let train = node
-        .create_server(
-            ServiceMapping::Enhanced,
-            &name(names, TRAIN_SERVICE)?,
-            &ServiceTypeName::new(PACKAGE, "Train"),
-            qos.clone(),
-            qos.clone(),
-        )
-        .map_err(|e| err!("creating the Train service: {e:?}"))?;
-    let load = node
-        .create_server(
-            ServiceMapping::Enhanced,
-            &name(names, LOAD_MODEL_SERVICE)?,
-            &ServiceTypeName::new(PACKAGE, "LoadModel"),
-            qos.clone(),
-            qos,
-        )
-        .map_err(|e| err!("creating the LoadModel service: {e:?}"))?;
+    let swap = publisher(node, names, MODEL_SWAP_TOPIC, &reliable_qos())?;
+    let train = server::<Train>(node, names, TRAIN_SERVICE)?;
+    let load = server::<LoadModel>(node, names, LOAD_MODEL_SERVICE)?;
     let TrainerHandles {
         model,
         recorder,
