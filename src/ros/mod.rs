@@ -52,7 +52,7 @@ pub mod training;
 pub mod wire;
 pub mod yaml;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::Args;
 
@@ -91,9 +91,11 @@ pub fn run_serve(args: ServeArgs) -> crate::error::Result<()> {
         return Ok(());
     }
     let ros = ros_args(&args)?;
-    let model = crate::models::load_model(&params.model)?;
+    let reference: crate::models::ModelRef = params.model.parse()?;
+    let model = crate::models::load_model(&reference)?;
     let domain_id = domain_id_from_env()?;
-    node::serve(params, &ros, model, domain_id)
+    let file = reference.file().map(Path::to_path_buf);
+    node::serve(params, &ros, (model, file), domain_id)
 }
 
 /// What follows `--ros-args`.

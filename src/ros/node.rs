@@ -5,6 +5,7 @@
 //! tasks keep going while a long rollout computes. Every failure is logged and
 //! counted; nothing in the loop panics on bad input.
 
+use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -361,18 +362,13 @@ impl Endpoints {
     }
 }
 
-/// The file a `model` parameter names (`None` for `truth:*`).
-fn model_file(model: &str) -> Option<std::path::PathBuf> {
-    (!crate::models::truth::is_truth(model)).then(|| model.into())
-}
-
 /// The handles of a node serving `model`, logging through `node` at
 /// `log_level` and above.
 fn handles(
     node: &Node,
     (params, names, log_level): (&NodeParams, &Names, Option<LogLevel>),
     live: LiveParams,
-    model: Arc<dyn Dynamics>,
+    (model, file): (Arc<dyn Dynamics>, Option<PathBuf>),
 ) -> crate::error::Result<Handles> {
     let recorder = if params.record_dir.is_empty() {
         None
@@ -385,7 +381,7 @@ fn handles(
     ));
     Ok(Handles {
         params: live,
-        model: Arc::new(ModelHandle::new(model, model_file(&params.model))),
+        model: Arc::new(ModelHandle::new(model, file)),
         recorder: Arc::new(RecorderHandle::new(recorder, diag.clone())),
         diag,
         clock: Arc::new(super::clock::Clock::new(params.use_sim_time)),
@@ -400,11 +396,12 @@ fn handles(
 }
 
 /// Runs the node in `domain_id` until SIGINT or SIGTERM, named and
-/// remapped as `ros` (`--ros-args`) says.
+/// remapped as `ros` (`--ros-args`) says, serving `model` (loaded from
+/// `file`, when it is one: what fine-tuning starts from).
 pub fn serve(
     params: NodeParams,
     ros: &RosArgs,
-    model: Arc<dyn Dynamics>,
+    model: (Arc<dyn Dynamics>, Option<PathBuf>),
     domain_id: u16,
 ) -> crate::error::Result<()> {
     let names = ros.names()?;

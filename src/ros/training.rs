@@ -37,7 +37,7 @@ use crate::data::msg::{Header, Time};
 use crate::dynamics::Dynamics;
 use crate::kernel::TrainedModel;
 use crate::model::{ModelFile, Variant};
-use crate::models::{train_from_bags, ModelKind};
+use crate::models::{train_from_bags, ModelKind, ModelRef};
 use crate::train::{Auto, EpochReport, ModelOptions, Recipe, TrainConfig};
 
 use super::clock::Clock;
@@ -698,11 +698,15 @@ pub fn load_and_swap(shared: &Trainer, path: &str) -> LoadModelResponse {
     if path.trim().is_empty() {
         return fail("no path given".into());
     }
-    match crate::models::load_model(path) {
+    let loaded = path
+        .parse::<ModelRef>()
+        .map_err(crate::Error::from)
+        .and_then(|r| Ok((crate::models::load_model(&r)?, r)));
+    match loaded {
         Err(e) => fail(format!("cannot load {path}: {e:#}")),
-        Ok(model) => {
+        Ok((model, reference)) => {
             let description = model.describe();
-            let file = (!crate::models::truth::is_truth(path)).then(|| PathBuf::from(path));
+            let file = reference.file().map(Path::to_path_buf);
             let locked = swap(shared, model, file, &format!("LoadModel: model {path}"));
             LoadModelResponse {
                 success: true,
