@@ -2,12 +2,15 @@
 
 mod bag;
 mod bench;
+// Public: the types of `train::Args`' fields.
+pub mod choices;
 mod demo;
 mod evaluate;
 mod field;
 mod replay;
 mod reproduce;
 mod rollout;
+mod serve;
 mod simulate;
 mod vector;
 // Public for the Python package's `mcgnode.train` (python/), which parses its
@@ -48,7 +51,7 @@ enum Command {
     /// Run every experiment of the paper (biases, baselines, zero-shot, peridynamic solid, drag/force, noise, data efficiency) and write DIR/report.md with figures.
     Reproduce(reproduce::Args),
     /// Run the ROS 2 node.
-    Serve(crate::ros::ServeArgs),
+    Serve(serve::Args),
     /// Inspect bags (`bag info`) and repair one cut short by a crash (`bag repair`).
     Bag(bag::Args),
 }
@@ -81,7 +84,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Bench(a) => bench::run(a),
         Command::Replay(a) => replay::run(a),
         Command::Reproduce(a) => reproduce::run(a),
-        Command::Serve(a) => Ok(crate::ros::run_serve(a)?),
+        Command::Serve(a) => serve::run(a),
         Command::Bag(a) => bag::run(a),
     }
 }
