@@ -51,7 +51,7 @@ enum Command {
     /// Run every experiment of the paper (biases, baselines, zero-shot, peridynamic solid, drag/force, noise, data efficiency) and write DIR/report.md with figures.
     Reproduce(reproduce::Args),
     /// Run the ROS 2 node.
-    Serve(serve::Args),
+    Serve(serve::ServeArgs),
     /// Inspect bags (`bag info`) and repair one cut short by a crash (`bag repair`).
     Bag(bag::Args),
 }

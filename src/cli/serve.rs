@@ -7,7 +7,7 @@ use crate::ros::{domain_id_from_env, serve, NodeParams, ParamError};
 
 /// Options of `mcgnode serve`.
 #[derive(clap::Args, Debug, Clone)]
-pub struct Args {
+pub struct ServeArgs {
     /// Parameter file in the ROS 2 format (`mcgnode: ros__parameters: ...`);
     /// see launch_params/.
     #[arg(long)]
@@ -31,12 +31,12 @@ pub struct Args {
 }
 
 /// Runs the node until SIGINT/SIGTERM.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     // The library's errors, converted once (as every subcommand reports them).
     Ok(run_node(args)?)
 }
 
-fn run_node(args: Args) -> crate::error::Result<()> {
+fn run_node(args: ServeArgs) -> crate::error::Result<()> {
     let params = effective_params(&args)?;
     if args.print_params {
         print!("{}", params.to_yaml());
@@ -51,13 +51,13 @@ fn run_node(args: Args) -> crate::error::Result<()> {
 }
 
 /// What follows `--ros-args`.
-pub fn ros_args(args: &Args) -> Result<RosArgs, NameError> {
+pub fn ros_args(args: &ServeArgs) -> Result<RosArgs, NameError> {
     RosArgs::parse(args.ros_args.as_deref().unwrap_or_default())
 }
 
 /// Parameters from the file, `--set` overrides, `--ros-args` (parameter
 /// files, `-p`) and `--model`, in that order.
-pub fn effective_params(args: &Args) -> Result<NodeParams, ParamError> {
+pub fn effective_params(args: &ServeArgs) -> Result<NodeParams, ParamError> {
     let ros = ros_args(args)?;
     let mut p = NodeParams::load_with(args.params.as_deref(), &args.set, &ros)?;
     if let Some(m) = &args.model {

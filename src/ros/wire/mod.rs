@@ -4,14 +4,14 @@
 //! that pair them ([`RosService`], [`RosAction`]). Type names are spelled
 //! here only.
 //!
-//! - [`mcgnode`]: our messages (msg/*.msg);
-//! - [`services`]: our services (msg/*.srv);
-//! - [`action`]: our Train action;
-//! - [`diagnostics`]: `diagnostic_msgs`;
-//! - [`lifecycle`]: `lifecycle_msgs`;
-//! - [`markers`]: `visualization_msgs/MarkerArray` and its parts;
-//! - [`clock`]: `rosgraph_msgs/Clock`;
-//! - [`state`]: the type names of ParticleState and its parts, whose structs
+//! - [`mcgnode`], our messages (msg/*.msg);
+//! - [`services`], our services (msg/*.srv);
+//! - [`action`], our Train action;
+//! - [`diagnostics`], `diagnostic_msgs`;
+//! - [`lifecycle`], `lifecycle_msgs`;
+//! - [`markers`], `visualization_msgs/MarkerArray` and its parts;
+//! - [`clock`], `rosgraph_msgs/Clock`;
+//! - [`state`], the type names of ParticleState and its parts, whose structs
 //!   live in [`crate::data::msg`] because the library reads bags without ROS.
 
 use ros2_client::{ActionTypeName, Message, MessageTypeName, ServiceTypeName};
