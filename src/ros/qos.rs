@@ -3,6 +3,7 @@
 //! each, so topics and services stay compatible).
 
 use crate::error::err;
+use ros2_client::dds::rustdds::Topic;
 use ros2_client::qos::{Durability, History, WhenFull};
 use ros2_client::{Name, Node, Publisher, QosProfile, Server, ServiceMapping, Subscription};
 
@@ -49,6 +50,17 @@ pub fn ros_name(names: &Names, s: &str) -> crate::error::Result<Name> {
     Name::parse(&full).map_err(|e| err!("invalid ROS name {full:?}: {e:?}"))
 }
 
+/// The topic `name` (resolved for `names`) of message type `T`.
+fn topic<T: RosType>(
+    node: &Node,
+    names: &Names,
+    name: &str,
+    qos: &QosProfile,
+) -> crate::error::Result<Topic> {
+    node.create_topic(&ros_name(names, name)?, T::message_type_name(), qos)
+        .map_err(|e| err!("creating topic {name}: {e:?}"))
+}
+
 /// A publisher of message type `T` on the topic `name` (resolved for
 /// `names`).
 pub fn publisher<T: RosType>(
@@ -57,9 +69,7 @@ pub fn publisher<T: RosType>(
     name: &str,
     qos: &QosProfile,
 ) -> crate::error::Result<Publisher<T>> {
-    let topic = node
-        .create_topic(&ros_name(names, name)?, T::message_type_name(), qos)
-        .map_err(|e| err!("creating topic {name}: {e:?}"))?;
+    let topic = topic::<T>(node, names, name, qos)?;
     node.create_publisher(&topic, Some(qos.clone()))
         .map_err(|e| err!("creating the publisher of {name}: {e:?}"))
 }
@@ -72,9 +82,7 @@ pub fn subscription<T: RosType>(
     name: &str,
     qos: &QosProfile,
 ) -> crate::error::Result<Subscription<T>> {
-    let topic = node
-        .create_topic(&ros_name(names, name)?, T::message_type_name(), qos)
-        .map_err(|e| err!("creating topic {name}: {e:?}"))?;
+    let topic = topic::<T>(node, names, name, qos)?;
     node.create_subscription(&topic, Some(qos.clone()))
         .map_err(|e| err!("creating the subscription to {name}: {e:?}"))
 }
