@@ -10,7 +10,7 @@ use mcgnode::baselines::Kind;
 use mcgnode::data::bag::read_trajectories;
 use mcgnode::evaluate::{evaluate, EvalOptions};
 use mcgnode::model::Variant;
-use mcgnode::models::{load_any_model, train_any_from_bags, ModelKind};
+use mcgnode::models::{load_any_model, train_any_from_bags, ModelKind, ModelRef};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::simulate::{simulate_with, DataIntegrator};
 use mcgnode::train::{ModelOptions, TrainConfig};
@@ -57,7 +57,7 @@ fn main() -> mcgnode::Result<()> {
             |_| true,
             &out,
         )?;
-        let m = load_any_model(&out)?;
+        let m = load_any_model(&ModelRef::File(out.clone()))?;
         let e = evaluate(
             m.dynamics.as_ref(),
             &m.start_fingerprints,

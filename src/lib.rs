@@ -8,6 +8,14 @@
 //! ([`models`] loads and trains any kind) →
 //! [`kernel`] rollouts ([`dynamics`], [`ros`]) → [`data`] → [`evaluate`] /
 //! [`replay`] → [`metrics`].
+//!
+//! What a library user needs is re-exported here: naming and loading a
+//! model ([`ModelRef`], [`load_model`], [`load_any_model`]), rolling it out
+//! ([`Dynamics`]), training one from bags ([`train_any_from_bags`]),
+//! reading bags ([`read_trajectories`], [`read_bags`], [`ParticleState`])
+//! and the systems ([`Graph`], [`State`], [`SystemKind`], [`SystemConfig`],
+//! [`Field`]). The modules stay public for the command line's edge, the
+//! Python package and the tests.
 
 #![deny(missing_docs)]
 
@@ -37,4 +45,14 @@ pub mod system;
 pub mod testing;
 pub mod train;
 
+pub use data::{read_bags, read_trajectories, Bag, ParticleState, ReadOptions};
+pub use dynamics::{Dynamics, DynamicsError, Forces, Rollout};
 pub use error::{Error, Result};
+pub use evaluate::{evaluate, EvalOptions, Evaluation};
+pub use models::{
+    load_any_model, load_model, train_any_from_bags, trained_for, LoadedModel, ModelKind, ModelRef,
+};
+pub use physics::{Field, SystemConfig, SystemKind};
+pub use replay::{replay, ReplayOptions, ReplayReport};
+pub use system::{Graph, State, Trajectory};
+pub use train::{ModelOptions, TrainConfig};

@@ -6,6 +6,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 use mcgnode::compat::TrainedFor;
+use mcgnode::models::ModelRef;
 use mcgnode::physics::{Field, SystemConfig, SystemKind};
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
@@ -75,7 +76,7 @@ fn the_shipped_spring_model_knows_what_it_was_trained_on() {
 
 #[test]
 fn truth_models_check_the_field_and_refuse_through_supports() {
-    let m = mcgnode::models::load_model("truth:pendulum").unwrap();
+    let m = mcgnode::models::load_model(&"truth:pendulum".parse().unwrap()).unwrap();
     let t = m.trained_for().expect("truth models say what they are");
     assert_eq!(t.field.as_ref().map(|f| f.gravity), Some(10.0));
     t.check(
@@ -89,8 +90,10 @@ fn truth_models_check_the_field_and_refuse_through_supports() {
         .to_string();
     assert!(e.contains("gravity 10") && e.contains("no field"), "{e}");
     // A file model wrapped by load_model refuses a foreign graph in supports.
-    let m =
-        mcgnode::models::load_model(&format!("{ROOT}/bags/models/pendulum5-mcgnode.json")).unwrap();
+    let m = mcgnode::models::load_model(&ModelRef::File(
+        format!("{ROOT}/bags/models/pendulum5-mcgnode.json").into(),
+    ))
+    .unwrap();
     let e = m
         .supports(&graph(SystemKind::Spring, 5))
         .unwrap_err()

@@ -27,7 +27,7 @@ use mcgnode::data::msg::{encode_cdr, particle_state_schema, Layout, ParticleStat
 use mcgnode::data::msg::{PARTICLE_STATE_MSG_V1, PARTICLE_STATE_TYPE};
 use mcgnode::data::{read_trajectories, ParticleState, METADATA_NAME, PARTICLE_STATE_TOPIC};
 use mcgnode::model::{ArchPreset, ModelFile, Net, Norm, Variant};
-use mcgnode::models::load_any_model;
+use mcgnode::models::{load_any_model, ModelRef};
 use mcgnode::physics::{Field, SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State, Trajectory};
 use proptest::prelude::*;
@@ -649,7 +649,8 @@ fn make_seeds() -> Seeds {
     for (what, text, g, s) in models.iter().chain(&baselines) {
         let p = dir.path().join("check.json");
         std::fs::write(&p, text).expect("write");
-        let m = load_any_model(&p).unwrap_or_else(|e| panic!("seed {what} does not load: {e}"));
+        let m = load_any_model(&ModelRef::File(p.clone()))
+            .unwrap_or_else(|e| panic!("seed {what} does not load: {e}"));
         let mut out = vec![0.0; g.ndof()];
         m.dynamics
             .acceleration(g, s, &mut out)
@@ -1224,7 +1225,7 @@ fn load_and_run(path: &Path, graph: &Graph, state: &State) -> Outcome {
             return Outcome::Rejected(String::new());
         }
     }
-    let m = match load_any_model(path) {
+    let m = match load_any_model(&ModelRef::File(path.to_path_buf())) {
         Ok(m) => m,
         Err(e) => return rejected(&e),
     };

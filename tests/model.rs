@@ -9,6 +9,7 @@ use mcgnode::model::batch::Batch;
 use mcgnode::model::plan::GraphPlan;
 use mcgnode::model::solve::solve;
 use mcgnode::model::{Hyper, ModelFile, Net, Variant};
+use mcgnode::models::ModelRef;
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State};
 use rand::{Rng, SeedableRng};
@@ -294,7 +295,8 @@ fn model_file_round_trip_and_bad_files() {
     std::fs::write(dir.path().join("junk.json"), "{ not json").unwrap();
     // The typed cause is found again through the context: a caller can
     // branch on a missing file without matching the message.
-    let Err(e) = mcgnode::models::load_any_model(&dir.path().join("junk.json")) else {
+    let Err(e) = mcgnode::models::load_any_model(&ModelRef::File(dir.path().join("junk.json")))
+    else {
         panic!("junk.json loaded");
     };
     assert!(

@@ -217,29 +217,277 @@ fn names_after(code: &str, prefix: &str) -> BTreeSet<String> {
     out
 }
 
-/// Per folder of `src/`, which of its files name which other files of it
-/// (`super::x` from a file beside `x.rs`, or `crate::folder::x`).
-fn file_imports() -> BTreeMap<PathBuf, BTreeMap<String, BTreeSet<String>>> {
-    let mut out: BTreeMap<PathBuf, BTreeMap<String, BTreeSet<String>>> = BTreeMap::new();
-    for (path, code) in sources() {
-        let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) else {
-            continue;
-        };
-        let me = path.file_stem().unwrap().to_string_lossy().to_string();
-        if me == "mod" {
+/// The module a file of `src/` is (`ros/node.rs` → `[ros, node]`,
+/// `ros/mod.rs` → `[ros]`, `lib.rs` → `[]`).
+fn module_of(path: &Path) -> Vec<String> {
+    let mut m: Vec<String> = path
+        .iter()
+        .map(|c| c.to_string_lossy().trim_end_matches(".rs").to_string())
+        .collect();
+    if matches!(m.last().map(String::as_str), Some("mod" | "lib")) {
+        m.pop();
+    }
+    m
+}
+
+/// The paths that start at `at` in `code` (`crate::a::{b, c::{d, self}}`
+/// → `[crate, a, b]`, `[crate, a, c, d]`, `[crate, a, c]`).
+fn path_tree(code: &[char], at: &mut usize) -> Vec<Vec<String>> {
+    let skip_ws = |at: &mut usize| {
+        while code.get(*at).is_some_and(|c| c.is_whitespace()) {
+            *at += 1;
+        }
+    };
+    let mut segs: Vec<String> = vec![];
+    loop {
+        skip_ws(at);
+        if code.get(*at) == Some(&'{') {
+            *at += 1;
+            let mut out = vec![];
+            loop {
+                skip_ws(at);
+                match code.get(*at) {
+                    None => break,
+                    Some('}') => {
+                        *at += 1;
+                        break;
+                    }
+                    Some(',') => *at += 1,
+                    Some(_) => {
+                        let before = *at;
+                        for sub in path_tree(code, at) {
+                            let sub: Vec<String> =
+                                sub.into_iter().filter(|s| s != "self").collect();
+                            out.push([segs.clone(), sub].concat());
+                        }
+                        // `x as y`, or anything unparsed: on to the next member.
+                        while code.get(*at).is_some_and(|c| !matches!(c, ',' | '}')) {
+                            *at += 1;
+                        }
+                        if *at == before {
+                            *at += 1;
+                        }
+                    }
+                }
+            }
+            return out;
+        }
+        let start = *at;
+        while code
+            .get(*at)
+            .is_some_and(|c| c.is_alphanumeric() || *c == '_' || *c == '*')
+        {
+            *at += 1;
+        }
+        if *at == start {
+            return vec![segs];
+        }
+        segs.push(code[start..*at].iter().collect());
+        if code.get(*at) == Some(&':') && code.get(*at + 1) == Some(&':') {
+            *at += 2;
+        } else {
+            return vec![segs];
+        }
+    }
+}
+
+/// Every path in `code` that starts with one of `starts` (followed by `::`,
+/// and not itself the tail of a longer path), expanded.
+fn paths_in(code: &str, starts: &BTreeSet<String>) -> Vec<Vec<String>> {
+    let chars: Vec<char> = code.chars().collect();
+    let mut out = vec![];
+    let mut i = 0;
+    while i < chars.len() {
+        let boundary =
+            i == 0 || !(chars[i - 1].is_alphanumeric() || matches!(chars[i - 1], '_' | ':'));
+        if boundary && (chars[i].is_alphanumeric() || chars[i] == '_') {
+            let mut j = i;
+            while chars
+                .get(j)
+                .is_some_and(|c| c.is_alphanumeric() || *c == '_')
+            {
+                j += 1;
+            }
+            let word: String = chars[i..j].iter().collect();
+            if starts.contains(&word)
+                && chars.get(j) == Some(&':')
+                && chars.get(j + 1) == Some(&':')
+            {
+                let mut at = i;
+                out.extend(path_tree(&chars, &mut at));
+                i = at.max(i + 1);
+                continue;
+            }
+            i = j;
             continue;
         }
-        let sibling = |n: &str| {
-            root().join(dir).join(format!("{n}.rs")).exists() || root().join(dir).join(n).is_dir()
+        i += 1;
+    }
+    out
+}
+
+/// `path`, named in the file that is module `me`, as a path from the crate's
+/// root (`super::x` in `ros/node.rs` → `[ros, x]`); relative paths are
+/// children of `me`.
+fn absolute(me: &[String], path: &[String]) -> Vec<String> {
+    let mut base = me.to_vec();
+    let mut rest = path;
+    match rest.first().map(String::as_str) {
+        Some("crate") => {
+            base.clear();
+            rest = &rest[1..];
+        }
+        Some("self") => rest = &rest[1..],
+        _ => {}
+    }
+    while rest.first().map(String::as_str) == Some("super") {
+        base.pop();
+        rest = &rest[1..];
+    }
+    [base, rest.to_vec()].concat()
+}
+
+/// `code` without its `pub use` statements, and the paths of all its `use`
+/// statements. A folder's mod.rs re-exporting what its files define curates
+/// its surface, it does not use them; and a file naming an item that mod.rs
+/// imports (`super::Item`) is taken to name the file that defines it.
+fn split_uses(code: &str) -> (String, Vec<String>) {
+    let (mut kept, mut uses) = (String::new(), vec![]);
+    let mut rest = code;
+    while let Some(i) = rest.find("use ").filter(|_| !rest.is_empty()) {
+        let boundary = rest[..i]
+            .chars()
+            .next_back()
+            .is_none_or(|c| c.is_whitespace() || c == ')' || c == ';' || c == '}');
+        if !boundary {
+            kept.push_str(&rest[..i + 4]);
+            rest = &rest[i + 4..];
+            continue;
+        }
+        let end = rest[i..].find(';').map_or(rest.len(), |e| i + e + 1);
+        let public = rest[..i].trim_end().ends_with("pub") || rest[..i].trim_end().ends_with(')');
+        uses.push(rest[i + 4..end].trim_end_matches(';').to_string());
+        if public {
+            let line = rest[..i].rfind('\n').map_or(0, |l| l + 1);
+            kept.push_str(&rest[..line]);
+        } else {
+            kept.push_str(&rest[..end]);
+        }
+        rest = &rest[end..];
+    }
+    kept.push_str(rest);
+    (kept, uses)
+}
+
+/// Per module of `src/` that is a folder, which of its files name which other
+/// files of it: the nodes are its files and subfolders (a subfolder stands
+/// for every file in it) and its own `mod.rs` (`lib.rs` at the root). Whole
+/// files are read, except comment lines and the unit tests' block: tests
+/// building their fixtures from a sibling are not a dependency of the code
+/// that ships (they compile only under cfg(test)), and excluding them lets a
+/// test use whatever it checks against.
+fn file_imports() -> BTreeMap<Vec<String>, BTreeMap<String, BTreeSet<String>>> {
+    let sources: Vec<(PathBuf, String)> = sources()
+        .into_iter()
+        .filter(|(p, _)| p != Path::new("main.rs"))
+        .collect();
+    let mut modules: BTreeSet<Vec<String>> = BTreeSet::new();
+    let mut folders: BTreeSet<Vec<String>> = BTreeSet::new();
+    for (p, _) in &sources {
+        let m = module_of(p);
+        if matches!(
+            p.file_name().and_then(|f| f.to_str()),
+            Some("mod.rs" | "lib.rs")
+        ) {
+            folders.insert(m.clone());
+        }
+        for k in 0..=m.len() {
+            modules.insert(m[..k].to_vec());
+        }
+    }
+    // The module a path names: its longest prefix that is a module, with a
+    // folder's re-export followed to the file that defines the item.
+    let mut reexported: BTreeMap<(Vec<String>, String), Vec<String>> = BTreeMap::new();
+    let resolve = |abs: &[String]| -> Vec<String> {
+        (0..=abs.len())
+            .rev()
+            .map(|k| abs[..k].to_vec())
+            .find(|m| modules.contains(m))
+            .unwrap_or_default()
+    };
+    let starts: BTreeSet<String> = ["crate", "super", "self"].map(String::from).into();
+    let mut named: Vec<(Vec<String>, Vec<Vec<String>>)> = vec![];
+    for (p, code) in &sources {
+        let me = module_of(p);
+        let (code, reexports) = if folders.contains(&me) {
+            split_uses(code)
+        } else {
+            (code.clone(), vec![])
         };
-        let module = dir.to_string_lossy().replace('/', "::");
-        let mut names = names_after(&code, "super::");
-        names.extend(names_after(&code, &format!("crate::{module}::")));
-        let uses: BTreeSet<String> = names
-            .into_iter()
-            .filter(|n| *n != me && sibling(n))
+        let children: BTreeSet<String> = modules
+            .iter()
+            .filter(|m| m.len() == me.len() + 1 && m.starts_with(&me))
+            .map(|m| m[me.len()].clone())
             .collect();
-        out.entry(dir.to_path_buf()).or_default().insert(me, uses);
+        for r in &reexports {
+            let tree = paths_in(
+                &format!(" {r}"),
+                &starts.union(&children).cloned().collect(),
+            );
+            for path in tree {
+                let abs = absolute(&me, &path);
+                if let Some(item) = abs.last() {
+                    reexported.insert((me.clone(), item.clone()), resolve(&abs));
+                }
+            }
+        }
+        // A folder's mod.rs names its files without a prefix (`node::serve`),
+        // and with `pub use` cut out its remaining `use`s are its own.
+        let mut paths = paths_in(&code, &starts);
+        if folders.contains(&me) {
+            paths.extend(paths_in(&code, &children));
+        }
+        named.push((me.clone(), paths.iter().map(|p| absolute(&me, p)).collect()));
+    }
+    let target = |abs: &[String]| -> Vec<String> {
+        let m = resolve(abs);
+        match abs.get(m.len()) {
+            Some(item) if folders.contains(&m) => reexported
+                .get(&(m.clone(), item.clone()))
+                .cloned()
+                .unwrap_or(m),
+            _ => m,
+        }
+    };
+    let mut out: BTreeMap<Vec<String>, BTreeMap<String, BTreeSet<String>>> = BTreeMap::new();
+    let node = |folder: &[String], m: &[String]| -> Option<String> {
+        if !m.starts_with(folder) {
+            return None;
+        }
+        Some(m.get(folder.len()).cloned().unwrap_or_else(|| {
+            if folder.is_empty() {
+                "lib.rs"
+            } else {
+                "mod.rs"
+            }
+            .to_string()
+        }))
+    };
+    for folder in &folders {
+        let g = out.entry(folder.clone()).or_default();
+        for (me, paths) in &named {
+            let Some(from) = node(folder, me) else {
+                continue;
+            };
+            let uses = g.entry(from.clone()).or_default();
+            for p in paths {
+                if let Some(to) = node(folder, &target(p)) {
+                    if to != from {
+                        uses.insert(to);
+                    }
+                }
+            }
+        }
     }
     out
 }
@@ -278,24 +526,35 @@ fn circle(g: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
 #[test]
 fn no_circle_between_the_files_of_a_module() {
     let all = file_imports();
-    let ros = &all[Path::new("ros")];
+    let ros = &all[&vec!["ros".to_string()]];
     assert!(
         ros.get("node")
             .is_some_and(|u| u.contains("handles") && u.contains("input")),
         "the scan found no imports between files: {ros:?}"
     );
+    let cli = &all[&vec!["cli".to_string()]];
+    assert!(
+        cli.get("mod.rs").is_some_and(|u| u.contains("train")),
+        "the scan does not read mod.rs: {cli:?}"
+    );
+    let repro = &all[&vec!["reproduce".to_string()]];
+    assert!(
+        repro.contains_key("experiments"),
+        "the scan does not see subfolders: {repro:?}"
+    );
     let mut g = BTreeMap::new();
     g.insert("a".to_string(), BTreeSet::from(["b".to_string()]));
-    g.insert("b".to_string(), BTreeSet::from(["a".to_string()]));
+    g.insert("b".to_string(), BTreeSet::from(["c".to_string()]));
+    g.insert("c".to_string(), BTreeSet::from(["a".to_string()]));
     assert_eq!(
         circle(&g),
-        Some(vec!["a".into(), "b".into(), "a".into()]),
+        Some(vec!["a".into(), "b".into(), "c".into(), "a".into()]),
         "the check finds one"
     );
     let circles: Vec<String> = all
         .iter()
         .filter_map(|(dir, g)| {
-            circle(g).map(|c| format!("src/{}: {}", dir.display(), c.join(" -> ")))
+            circle(g).map(|c| format!("src/{}: {}", dir.join("/"), c.join(" -> ")))
         })
         .collect();
     assert!(
@@ -303,4 +562,26 @@ fn no_circle_between_the_files_of_a_module() {
         "files importing each other in a circle:\n{}",
         circles.join("\n")
     );
+}
+
+#[test]
+fn the_path_scan_expands_groups_and_resolves_super() {
+    let starts: BTreeSet<String> = ["crate", "super", "self"].map(String::from).into();
+    let got = paths_in(
+        "use crate::a::{b, c::{d, self}};\nlet x = super::e::f(Self::g, my::super_h);",
+        &starts,
+    );
+    let want: Vec<Vec<String>> = [
+        &["crate", "a", "b"][..],
+        &["crate", "a", "c", "d"],
+        &["crate", "a", "c"],
+        &["super", "e", "f"],
+    ]
+    .iter()
+    .map(|p| p.iter().map(ToString::to_string).collect())
+    .collect();
+    assert_eq!(got, want);
+    let me = ["ros".to_string(), "node".to_string()];
+    assert_eq!(absolute(&me, &want[3]), ["ros", "e", "f"]);
+    assert_eq!(module_of(Path::new("ros/mod.rs")), ["ros"]);
 }

@@ -386,8 +386,9 @@ struct Model {
 fn load_model(py: Python<'_>, r#ref: PathBuf) -> PyResult<Model> {
     let reference = r#ref.display().to_string();
     py.detach(|| {
-        let loaded = mcgnode::models::load_any_model(&r#ref)?;
-        let trained = mcgnode::models::trained_for(&r#ref)?;
+        let model = mcgnode::models::ModelRef::from_path(&r#ref)?;
+        let loaded = mcgnode::models::load_any_model(&model)?;
+        let trained = mcgnode::models::trained_for(&model)?;
         Ok::<_, mcgnode::Error>(Model {
             reference,
             name: loaded.name,

@@ -315,9 +315,8 @@ fn repair(a: RepairArgs) -> Result<()> {
 
 /// Draws one MarkerArray of `a.bag` to `a.png`.
 fn draw(a: &DrawArgs) -> Result<()> {
-    use crate::ros::markers::{
-        MarkerArray, ARROW, CUBE_LIST, LINE_LIST, MARKER_ARRAY_TYPE, SPHERE_LIST,
-    };
+    use crate::ros::wire::markers::{MarkerArray, ARROW, CUBE_LIST, LINE_LIST, SPHERE_LIST};
+    use crate::ros::wire::RosType as _;
     let bytes = std::fs::read(&a.bag).with_context(|| format!("reading {}", a.bag.display()))?;
     let mut arrays = vec![];
     for m in mcap::MessageStream::new(&bytes)
@@ -327,7 +326,7 @@ fn draw(a: &DrawArgs) -> Result<()> {
         if m.channel
             .schema
             .as_ref()
-            .is_some_and(|s| s.name == MARKER_ARRAY_TYPE)
+            .is_some_and(|s| s.name == MarkerArray::TYPE_NAME)
         {
             arrays.push((m.log_time, m.channel.topic.clone(), m.data.into_owned()));
         }
@@ -346,7 +345,7 @@ fn draw(a: &DrawArgs) -> Result<()> {
     let arr: MarkerArray = crate::data::msg::decode_cdr(data)
         .with_context(|| format!("decoding MarkerArray {i} of {}", a.bag.display()))?;
     let v = |p: &crate::data::msg::Point| [p.x, p.y, p.z];
-    let rgb = |c: &crate::ros::markers::ColorRgba| {
+    let rgb = |c: &crate::ros::wire::markers::ColorRgba| {
         let u = |x: f32| (x.clamp(0.0, 1.0) * 255.0).round() as u8;
         plotters::style::RGBColor(u(c.r), u(c.g), u(c.b))
     };
@@ -355,7 +354,7 @@ fn draw(a: &DrawArgs) -> Result<()> {
     for m in arr
         .markers
         .iter()
-        .filter(|m| m.action == crate::ros::markers::ADD)
+        .filter(|m| m.action == crate::ros::wire::markers::ADD)
     {
         stamp.get_or_insert((
             m.header.stamp.sec,

@@ -45,7 +45,8 @@ pub struct Args {
 
 /// Runs `evaluate`.
 pub fn run(a: Args) -> Result<()> {
-    let model = crate::models::load_any_model(&a.model)?;
+    let reference = crate::models::ModelRef::from_path(&a.model)?;
+    let model = crate::models::load_any_model(&reference)?;
     let bag = read_bags(
         &a.bag,
         &ReadOptions {
@@ -55,7 +56,7 @@ pub fn run(a: Args) -> Result<()> {
     .context("reading the test bag")?;
     let flag_field = a.field.field()?;
     // Refuse data the model was not trained for (dimension, edges, field).
-    let trained = crate::models::trained_for(&a.model)?;
+    let trained = crate::models::trained_for(&reference)?;
     check_fits(&trained, &bag, flag_field.as_ref())?;
     super::field::warn_out_of_range(&trained, &bag, "test");
     let opts = EvalOptions {

@@ -2,18 +2,26 @@
 
 mod bag;
 mod bench;
+// Public: the types of `train::Args`' fields.
+pub mod choices;
 mod demo;
 mod evaluate;
 mod field;
 mod replay;
 mod reproduce;
 mod rollout;
+mod serve;
 mod simulate;
+mod vector;
 // Public for the Python package's `mcgnode.train` (python/), which parses its
 // options with these Args and trains through `train::train`.
 pub mod train;
 
 use clap::{Parser, Subcommand};
+
+pub use vector::Vector;
+// For the subcommands' flags (`simulate --force`).
+pub(crate) use vector::parse_vector;
 
 /// mcgnode: learn the dynamics of particle systems from trajectories (GNODE,
 /// CGNODE, CDGNODE, MCGNODE; Bishnoi et al.) and serve them to robots over ROS 2.
@@ -43,7 +51,7 @@ enum Command {
     /// Run every experiment of the paper (biases, baselines, zero-shot, peridynamic solid, drag/force, noise, data efficiency) and write DIR/report.md with figures.
     Reproduce(reproduce::Args),
     /// Run the ROS 2 node.
-    Serve(crate::ros::ServeArgs),
+    Serve(serve::ServeArgs),
     /// Inspect bags (`bag info`) and repair one cut short by a crash (`bag repair`).
     Bag(bag::Args),
 }
@@ -76,24 +84,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Bench(a) => bench::run(a),
         Command::Replay(a) => replay::run(a),
         Command::Reproduce(a) => reproduce::run(a),
-        Command::Serve(a) => Ok(crate::ros::run_serve(a)?),
+        Command::Serve(a) => serve::run(a),
         Command::Bag(a) => bag::run(a),
     }
-}
-
-/// A vector given as one argument, "x,y[,z]" (a newtype, so that clap takes
-/// it as one value rather than a list of numbers).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Vector(pub Vec<f64>);
-
-/// Parses "x,y[,z]".
-pub(crate) fn parse_vector(s: &str) -> anyhow::Result<Vector> {
-    s.split(',')
-        .map(|x| match x.trim().parse::<f64>() {
-            Ok(v) if v.is_finite() => Ok(v),
-            Ok(_) => Err(anyhow::anyhow!("not finite")),
-            Err(_) => Err(anyhow::anyhow!("{x:?} is not a number")),
-        })
-        .collect::<anyhow::Result<Vec<f64>>>()
-        .map(Vector)
 }

@@ -76,7 +76,7 @@ pub struct Args {
 
 /// Runs `replay`.
 pub fn run(a: Args) -> Result<()> {
-    let model = crate::models::load_model(&a.model)?;
+    let model = crate::models::load_model(&a.model.parse()?)?;
     let bag = read_bags(
         &a.bag,
         &ReadOptions {

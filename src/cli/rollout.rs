@@ -2,7 +2,7 @@
 
 use crate::data::bag::{read_bags, write_trajectories_with_field, ReadOptions};
 use crate::data::field::bag_system;
-use crate::models::load_any_model;
+use crate::models::{load_any_model, ModelRef};
 use crate::physics::{SystemConfig, SystemKind};
 use crate::system::{Sample, Trajectory};
 use anyhow::{bail, Context, Result};
@@ -52,8 +52,9 @@ pub struct Args {
 
 /// Runs `rollout`.
 pub fn run(a: Args) -> Result<()> {
-    let model = load_any_model(&a.model)?.dynamics;
-    let trained = crate::models::trained_for(&a.model)?;
+    let reference = ModelRef::from_path(&a.model)?;
+    let model = load_any_model(&reference)?.dynamics;
+    let trained = crate::models::trained_for(&reference)?;
     let (graph, start, system, mut cfg, field, stamp_dt) = if let Some(paths) = &a.initial {
         let bag = read_bags(
             paths,

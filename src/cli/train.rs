@@ -1,11 +1,9 @@
 //! `mcgnode train`.
 
+use super::choices::{ArchArg, BodyForceArg, EdgeInputArg, EngineArg, MessageFnArg, RecipeArg};
 use crate::model::file::TrainingReport;
-use crate::model::{ArchPreset, EdgeInput, MessageFn};
 use crate::models::{train_any_from_bags, ModelKind};
-use crate::train::{
-    Auto, BodyForce, Checkpointing, EngineKind, EpochReport, ModelOptions, Recipe, TrainConfig,
-};
+use crate::train::{Auto, Checkpointing, EpochReport, ModelOptions, Recipe, TrainConfig};
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
@@ -72,17 +70,17 @@ pub struct Args {
     /// Architecture: authors (their code, behind the paper's numbers: two
     /// hidden layers per MLP, MLP messages, h_i ⊙ h_j edge updates) or paper
     /// (the paper's text: one hidden layer, linear messages, h_i ‖ h_j).
-    #[arg(long, value_enum, default_value_t = ArchPreset::Authors)]
-    pub arch: ArchPreset,
+    #[arg(long, value_enum, default_value_t = ArchArg::Authors)]
+    pub arch: ArchArg,
     /// Hidden layers per graph MLP (overrides --arch).
     #[arg(long)]
     pub hidden_layers: Option<usize>,
     /// Message and edge-update functions (overrides --arch).
     #[arg(long, value_enum)]
-    pub messages: Option<MessageFn>,
+    pub messages: Option<MessageFnArg>,
     /// Edge-update input (overrides --arch).
     #[arg(long, value_enum)]
-    pub edge_update: Option<EdgeInput>,
+    pub edge_update: Option<EdgeInputArg>,
     /// Hidden sizes of one block, e.g. `edge_out=16,16` (repeatable; blocks:
     /// node_em, edge_em, mp0.v, mp0.e, glob_em, node_out, edge_out, body_out).
     #[arg(long, value_name = "BLOCK=SIZES", value_parser = parse_block)]
@@ -98,12 +96,12 @@ pub struct Args {
     /// MCGNODE body-force branch: auto (off for a closed system, as the bag's
     /// messages or metadata state or its data show; refused when none tells),
     /// on, off.
-    #[arg(long, value_enum, default_value_t = BodyForce::Auto)]
-    pub body_force: BodyForce,
+    #[arg(long, value_enum, default_value_t = BodyForceArg::Auto)]
+    pub body_force: BodyForceArg,
     /// Gradient engine of the GNODE family: native (hand-written, all
     /// cores) or candle (the autodiff reference). Baselines always use candle.
-    #[arg(long, value_enum, default_value_t = EngineKind::Native)]
-    pub engine: EngineKind,
+    #[arg(long, value_enum, default_value_t = EngineArg::Native)]
+    pub engine: EngineArg,
     /// Training threads of the native engine (default: all cores). The
     /// trained weights do not depend on it.
     #[arg(long)]
@@ -138,24 +136,6 @@ pub struct Args {
     /// Print nothing but errors.
     #[arg(long)]
     pub quiet: bool,
-}
-
-/// `--recipe`.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum RecipeArg {
-    /// Chosen from the data (the default).
-    Auto,
-    /// The paper's appendix.
-    Paper,
-}
-
-impl From<RecipeArg> for Recipe {
-    fn from(r: RecipeArg) -> Recipe {
-        match r {
-            RecipeArg::Auto => Recipe::Auto,
-            RecipeArg::Paper => Recipe::Paper,
-        }
-    }
 }
 
 /// `EPOCH:LR`.
@@ -251,7 +231,7 @@ pub fn train(
         seed: a.seed,
         noise: a.noise,
         points: a.points,
-        engine: a.engine,
+        engine: a.engine.into(),
         lr_drops: a.lr_drop.clone(),
         time_budget: a.max_seconds,
         checkpoint: a.checkpoint.clone().map(|path| Checkpointing {
@@ -272,13 +252,13 @@ pub fn train(
         hidden: a.hidden,
         embed: a.embed,
         rounds: a.rounds,
-        body_force: a.body_force,
+        body_force: a.body_force.into(),
         types: None,
         topic: a.topic.clone(),
-        arch: a.arch,
+        arch: a.arch.into(),
         hidden_layers: a.hidden_layers,
-        message: a.messages,
-        edge_input: a.edge_update,
+        message: a.messages.map(Into::into),
+        edge_input: a.edge_update.map(Into::into),
         block_hidden: a.block_hidden.iter().cloned().collect(),
         edge_physics: a.edge_physics,
         recipe,

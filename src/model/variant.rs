@@ -79,7 +79,7 @@ impl crate::names::Named for Variant {
 crate::impl_named!(Variant);
 
 /// Message and edge-update functions of a message-passing round.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum MessageFn {
     /// One linear map (the paper's equations).
@@ -89,7 +89,7 @@ pub enum MessageFn {
 }
 
 /// What the edge update W_E reads from the two end nodes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum EdgeInput {
     /// h_i ‖ h_j (the paper's equation).
@@ -99,7 +99,7 @@ pub enum EdgeInput {
 }
 
 /// Architecture presets.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ArchPreset {
     /// What the authors' code ran, behind the paper's numbers: two hidden
     /// layers per MLP, MLP message functions, h_i ⊙ h_j in the edge update.

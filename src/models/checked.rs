@@ -1,35 +1,10 @@
-//! A model wrapped with what it was trained on ([`Checked`]), and what a
-//! model path says it was trained on ([`trained_for`], which knows the
-//! reference `still`).
+//! A model wrapped with what it was trained on ([`Checked`]).
 
-use std::path::Path;
 use std::sync::Arc;
 
 use crate::compat::TrainedFor;
 use crate::dynamics::{Dynamics, DynamicsError, Forces, Rollout};
 use crate::system::{Graph, State};
-
-/// What the model at `path` was trained on: its file's training description
-/// ([`TrainedFor::from_model_file`]), or for the reference `still`
-/// ([`crate::dynamics::Still`]) nothing, since it fits any data.
-pub fn trained_for(path: &Path) -> crate::error::Result<TrainedFor> {
-    if path == Path::new(crate::dynamics::STILL) {
-        // The reference fits any data.
-        return Ok(TrainedFor {
-            model: crate::dynamics::STILL.into(),
-            ..TrainedFor::default()
-        });
-    }
-    if let Some(name) = path.to_str().filter(|p| super::truth::is_truth(p)) {
-        // The simulator fits its own system (the dimension and edges are
-        // checked by the simulator itself; the field is its default's).
-        return super::truth::load_truth(name)?
-            .trained_for()
-            .cloned()
-            .ok_or_else(|| crate::error::err!("{name} does not say what it simulates"));
-    }
-    TrainedFor::from_model_file(path)
-}
 
 /// A model with what it was trained on: [`Dynamics::supports`] also refuses
 /// graphs the model was not trained for, and

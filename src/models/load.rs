@@ -1,14 +1,16 @@
 //! Loading any model file, GNODE family or baseline, behind [`Dynamics`];
 //! and a model to serve or replay ([`load_model`]: a file checked against its
-//! training data, or the ground truth `truth:<system>`).
+//! training data, or the ground truth `truth:<system>`); what a model
+//! reference says it was trained on ([`trained_for`]).
 
+use super::reference::ModelRef;
 use super::truth;
 use crate::baselines::file::FORMAT as BASELINE_FORMAT;
 use crate::baselines::TrainedBaseline;
+use crate::compat::TrainedFor;
 use crate::dynamics::Dynamics;
 use crate::error::{Context, Result};
 use crate::kernel::TrainedModel;
-use std::path::Path;
 use std::sync::Arc;
 
 /// A loaded model of either kind.
@@ -21,26 +23,29 @@ pub struct LoadedModel {
     pub start_fingerprints: Vec<String>,
 }
 
-/// Loads a model file of the GNODE family or a baseline, by its `format` field;
-/// or, for the path `still`, the "nothing moves" reference
-/// [`crate::dynamics::Still`]; or, for `truth:<system>`, the simulator itself,
-/// whose errors at another step (`evaluate --dt`) are the floor that step puts
-/// under every model's.
-pub fn load_any_model(path: &Path) -> Result<LoadedModel> {
-    if path == Path::new(crate::dynamics::STILL) {
-        return Ok(LoadedModel {
-            name: crate::dynamics::STILL.to_string(),
-            start_fingerprints: vec![],
-            dynamics: Arc::new(crate::dynamics::Still),
-        });
-    }
-    if let Some(name) = path.to_str().filter(|p| truth::is_truth(p)) {
-        return Ok(LoadedModel {
-            name: name.to_string(),
-            start_fingerprints: vec![],
-            dynamics: truth::load_truth(name)?,
-        });
-    }
+/// Loads what `model` names: a model file of the GNODE family or a
+/// baseline, by its `format` field; the "nothing moves" reference
+/// [`crate::dynamics::Still`]; or the simulator itself (`truth:<system>`),
+/// whose errors at another step (`evaluate --dt`) are the floor that step
+/// puts under every model's.
+pub fn load_any_model(model: &ModelRef) -> Result<LoadedModel> {
+    let path = match model {
+        ModelRef::Still => {
+            return Ok(LoadedModel {
+                name: crate::dynamics::STILL.to_string(),
+                start_fingerprints: vec![],
+                dynamics: Arc::new(crate::dynamics::Still),
+            })
+        }
+        ModelRef::Truth(kind) => {
+            return Ok(LoadedModel {
+                name: model.to_string(),
+                start_fingerprints: vec![],
+                dynamics: truth::truth(*kind),
+            })
+        }
+        ModelRef::File(path) => path,
+    };
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read model file {}", path.display()))?;
     let format = serde_json::from_str::<serde_json::Value>(&text)
@@ -68,14 +73,33 @@ pub fn load_any_model(path: &Path) -> Result<LoadedModel> {
     })
 }
 
-/// `truth:<system>`, or a trained model file (GNODE family or baseline)
-/// wrapped in [`super::Checked`] so it refuses data it was not
-/// trained for: the model the node serves and `replay` rolls out.
-pub fn load_model(model: &str) -> Result<Arc<dyn Dynamics>> {
-    if truth::is_truth(model) {
-        return Ok(truth::load_truth(model)?);
+/// The ground truth, or a model (file or `still`) wrapped in
+/// [`super::Checked`] so it refuses data it was not trained for: the model
+/// the node serves and `replay` rolls out.
+pub fn load_model(model: &ModelRef) -> Result<Arc<dyn Dynamics>> {
+    if let ModelRef::Truth(kind) = model {
+        return Ok(truth::truth(*kind));
     }
-    let m = load_any_model(Path::new(model)).with_context(|| format!("loading model {model}"))?;
-    let trained = super::trained_for(Path::new(model))?;
+    let m = load_any_model(model).with_context(|| format!("loading model {model}"))?;
+    let trained = trained_for(model)?;
     Ok(Arc::new(super::Checked::new(m.dynamics, trained)))
+}
+
+/// What `model` was trained on: its file's training description
+/// ([`TrainedFor::from_model_file`]); for the reference `still`
+/// ([`crate::dynamics::Still`]) nothing, since it fits any data; for the
+/// simulator, its own system (the dimension and edges are checked by the
+/// simulator itself; the field is its default's).
+pub fn trained_for(model: &ModelRef) -> Result<TrainedFor> {
+    match model {
+        ModelRef::Still => Ok(TrainedFor {
+            model: crate::dynamics::STILL.into(),
+            ..TrainedFor::default()
+        }),
+        ModelRef::Truth(kind) => truth::truth(*kind)
+            .trained_for()
+            .cloned()
+            .ok_or_else(|| crate::error::err!("{model} does not say what it simulates")),
+        ModelRef::File(path) => TrainedFor::from_model_file(path),
+    }
 }

@@ -168,22 +168,28 @@ pub fn is_truth(model: &str) -> bool {
 }
 
 /// The exact dynamics in the field of the paper's `spring` or `pendulum`
-/// system (no gravity for springs, g = 10 for pendulums); they work for any
-/// graph of springs and bars, not only the paper's.
+/// system named `truth:<system>` (see [`truth`]).
 pub fn load_truth(model: &str) -> Result<Arc<dyn Dynamics>, TruthError> {
     let name = model
         .strip_prefix(TRUTH_PREFIX)
         .ok_or_else(|| TruthError::NotTruth(model.to_string()))?;
-    let kind: SystemKind = name.parse()?;
+    Ok(truth(name.parse()?))
+}
+
+/// The exact dynamics in the field of the paper's `kind` system (no gravity
+/// for springs, g = 10 for pendulums), named `truth:<kind>`; they work for
+/// any graph of springs and bars, not only the paper's.
+pub fn truth(kind: SystemKind) -> Arc<dyn Dynamics> {
+    let model = format!("{TRUTH_PREFIX}{kind}");
     let field = SystemConfig::new(kind, 1).field;
-    let trained = crate::compat::TrainedFor::truth(model, field.clone());
-    Ok(Arc::new(super::Checked::new(
+    let trained = crate::compat::TrainedFor::truth(&model, field.clone());
+    Arc::new(super::Checked::new(
         Arc::new(TruthModel {
-            name: model.to_string(),
+            name: model,
             truth: Truth { field },
         }),
         trained,
-    )))
+    ))
 }
 
 /// A model name that selects no ground truth.

@@ -8,7 +8,7 @@ use crate::data::bag::read_trajectories;
 use crate::error::{Context, Result};
 use crate::evaluate::{evaluate, EvalOptions, Evaluation};
 use crate::model::file::TrainingReport;
-use crate::models::{load_any_model, train_any_from_bags, ModelKind};
+use crate::models::{load_any_model, train_any_from_bags, ModelKind, ModelRef};
 use crate::physics::SystemConfig;
 use crate::simulate::{simulate_with, DataIntegrator};
 use crate::train::{Checkpointing, ModelOptions, TrainConfig};
@@ -161,7 +161,7 @@ impl Lab<'_> {
         dt: Option<f64>,
         max: usize,
     ) -> Result<Evaluation> {
-        let m = load_any_model(model)?;
+        let m = load_any_model(&ModelRef::from_path(model)?)?;
         let b = read_trajectories(bag)?;
         evaluate(
             m.dynamics.as_ref(),

@@ -32,9 +32,9 @@ use crate::physics::Field;
 use crate::system::{Graph, State};
 
 use super::input::Input;
-use super::msgs::LiveAccuracy;
 use super::params::NodeParams;
 use super::predict::Prediction;
+use super::wire::LiveAccuracy;
 
 pub use crate::data::stream::Nanos;
 

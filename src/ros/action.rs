@@ -15,97 +15,22 @@ use ros2_client::action::{
 use ros2_client::action_msgs::GoalId;
 use ros2_client::log::LogLevel;
 use ros2_client::qos::{Durability, History};
-use ros2_client::{ActionTypeName, Message, Node, QosProfile, ServiceMapping};
+use ros2_client::{Node, QosProfile, ServiceMapping};
 
 use super::names::Names;
-use serde::{Deserialize, Serialize};
 
-use crate::train::EpochReport;
-
-use super::msgs::{TrainRequest, TrainResponse, PACKAGE};
 use super::qos::reliable_qos;
+use super::topics::TRAIN_ACTION;
 use super::training::{claim, run_training, Claim, Trainer, BUSY};
+use super::wire::{
+    RosAction, TrainAction, TrainFeedback, TrainGoal, TrainRequest, TrainResponse, TrainResult,
+};
 
-/// Name of the Train action.
-pub const TRAIN_ACTION: &str = "~/train_action";
-
-/// Goal of `mcgnode_msgs/action/Train` (the Train service's request).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct TrainGoal {
-    /// Bags to train on; empty = what the node recorded.
-    pub bags: Vec<String>,
-    /// Model variant; empty = mcgnode.
-    pub variant: String,
-    /// Training epochs.
-    pub epochs: u32,
-    /// Random seed.
-    pub seed: u64,
-    /// Start from the served model file (weights and Adam state).
-    pub fine_tune: bool,
-}
-impl Message for TrainGoal {}
-
-/// Result of `mcgnode_msgs/action/Train` (the Train service's response).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct TrainResult {
-    /// Whether the new model was swapped in.
-    pub success: bool,
-    /// Details or the failure reason.
-    pub message: String,
-    /// Where the model was written.
-    pub model_path: String,
-    /// Training loss at the kept epoch.
-    pub train_loss: f64,
-    /// Validation loss at the kept epoch.
-    pub validation_loss: f64,
-    /// Fraction of the validation targets' mean square explained (NaN:
-    /// unknown).
-    pub explained: f64,
-}
-impl Message for TrainResult {}
-
-/// Feedback of `mcgnode_msgs/action/Train`, one per epoch.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct TrainFeedback {
-    /// Epoch just finished, from 1.
-    pub epoch: u32,
-    /// Epochs asked for.
-    pub epochs: u32,
-    /// Mean training loss of the epoch.
-    pub train_loss: f64,
-    /// Validation loss after the epoch.
-    pub validation_loss: f64,
-    /// Best validation loss so far.
-    pub best_validation_loss: f64,
-}
-impl Message for TrainFeedback {}
-
-impl From<&EpochReport> for TrainFeedback {
-    fn from(r: &EpochReport) -> Self {
-        TrainFeedback {
-            epoch: u32::try_from(r.epoch).unwrap_or(u32::MAX),
-            epochs: u32::try_from(r.epochs).unwrap_or(u32::MAX),
-            train_loss: r.train_loss,
-            validation_loss: r.validation_loss,
-            best_validation_loss: r.best,
-        }
-    }
-}
-
-impl From<TrainResponse> for TrainResult {
-    fn from(r: TrainResponse) -> Self {
-        TrainResult {
-            success: r.success,
-            message: r.message,
-            model_path: r.model_path,
-            train_loss: r.train_loss,
-            validation_loss: r.validation_loss,
-            explained: r.explained,
-        }
-    }
-}
-
-type ActionServer = AsyncActionServer<TrainGoal, TrainResult, TrainFeedback>;
+type ActionServer = AsyncActionServer<
+    <TrainAction as RosAction>::Goal,
+    <TrainAction as RosAction>::Result,
+    <TrainAction as RosAction>::Feedback,
+>;
 
 /// The Train action server, handed to [`spawn`].
 pub struct TrainActionServer(ActionServer, String);
@@ -131,7 +56,7 @@ pub fn create(node: &mut Node, names: &Names) -> crate::error::Result<TrainActio
         .create_action_server(
             ServiceMapping::Enhanced,
             &name,
-            &ActionTypeName::new(PACKAGE, "Train"),
+            &TrainAction::action_type_name(),
             qos,
         )
         .map_err(|e| err!("creating the Train action: {e:?}"))?;
@@ -304,35 +229,5 @@ async fn cancel_loop(shared: Arc<Trainer>, server: Arc<ActionServer>, running: R
                 &format!("Train action: answering a cancel failed: {e:?}"),
             );
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn feedback_and_result_carry_the_figures() {
-        let r = EpochReport {
-            epoch: 3,
-            epochs: 7,
-            train_loss: 0.5,
-            validation_loss: 0.25,
-            best: 0.2,
-            elapsed: 1.0,
-        };
-        let fb = TrainFeedback::from(&r);
-        assert_eq!((fb.epoch, fb.epochs), (3, 7));
-        assert_eq!(fb.best_validation_loss, 0.2);
-        let res = TrainResult::from(TrainResponse {
-            success: true,
-            message: "m".into(),
-            model_path: "/x.json".into(),
-            train_loss: 1.0,
-            validation_loss: 2.0,
-            explained: 0.5,
-        });
-        assert!(res.success && res.model_path == "/x.json" && res.validation_loss == 2.0);
-        assert_eq!(res.explained, 0.5);
     }
 }

@@ -6,21 +6,9 @@
 use std::sync::atomic::{AtomicI64, Ordering};
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use ros2_client::Message;
-use serde::{Deserialize, Serialize};
-
 use crate::data::msg::{Header, Time};
 
-/// The simulated-time topic.
-pub const CLOCK_TOPIC: &str = "/clock";
-
-/// `rosgraph_msgs/msg/Clock`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct ClockMsg {
-    /// The simulated time.
-    pub clock: Time,
-}
-impl Message for ClockMsg {}
+use super::wire::ClockMsg;
 
 /// Wall or simulated time, in nanoseconds since the epoch.
 #[derive(Debug)]

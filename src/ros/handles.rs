@@ -20,10 +20,10 @@ use crate::dynamics::Dynamics;
 
 use super::accuracy::Live;
 use super::clock::Clock;
-use super::msgs::NodeDiagnostics;
 use super::names::severity;
 use super::params::NodeParams;
 use super::record::{RecordError, Recorder};
+use super::wire::NodeDiagnostics;
 
 /// The parameters now: those settable at run time
 /// ([`super::params::Spec::runtime`]) change while the node runs.

@@ -1,6 +1,6 @@
 //! The managed-node lifecycle (ROS 2 design "Managed nodes"): its states,
-//! transitions and `lifecycle_msgs` wire types, with no DDS here (the
-//! services are in [`super::lifecycle_services`]). Served with
+//! transitions over the `lifecycle_msgs` wire types ([`super::wire::lifecycle`]),
+//! with no DDS here (the services are in [`super::lifecycle_services`]). Served with
 //! ros2-client's plain services since it has no lifecycle node: the node
 //! answers `lifecycle_msgs` `change_state`, `get_state`,
 //! `get_available_states`, `get_available_transitions` and
@@ -13,111 +13,10 @@
 
 use std::sync::atomic::{AtomicU8, Ordering};
 
-use serde::{Deserialize, Serialize};
-
-/// Package of the lifecycle interfaces.
-pub const LIFECYCLE_PACKAGE: &str = "lifecycle_msgs";
-
-/// `lifecycle_msgs/msg/State`.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct StateMsg {
-    /// `PRIMARY_STATE_*` id.
-    pub id: u8,
-    /// Its label (`unconfigured`, `inactive`, `active`, `finalized`).
-    pub label: String,
-}
-
-/// `lifecycle_msgs/msg/Transition`.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct TransitionMsg {
-    /// `TRANSITION_*` id (0: pick by label).
-    pub id: u8,
-    /// Its label (`configure`, `cleanup`, `activate`, `deactivate`, `shutdown`).
-    pub label: String,
-}
-
-/// `lifecycle_msgs/msg/TransitionDescription`.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct TransitionDescription {
-    /// The transition.
-    pub transition: TransitionMsg,
-    /// Where it starts.
-    pub start_state: StateMsg,
-    /// Where it ends.
-    pub goal_state: StateMsg,
-}
-
-/// `lifecycle_msgs/msg/TransitionEvent`.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct TransitionEvent {
-    /// Nanoseconds since the epoch (the node's clock).
-    pub timestamp: u64,
-    /// The transition taken.
-    pub transition: TransitionMsg,
-    /// From.
-    pub start_state: StateMsg,
-    /// To.
-    pub goal_state: StateMsg,
-}
-
-/// `lifecycle_msgs/srv/ChangeState` request.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct ChangeStateRequest {
-    /// The transition asked for.
-    pub transition: TransitionMsg,
-}
-
-/// `lifecycle_msgs/srv/ChangeState` response.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct ChangeStateResponse {
-    /// Whether the transition was taken.
-    pub success: bool,
-}
-
-/// The request of the `Get*` lifecycle services, which has no fields (CDR
-/// carries one placeholder byte, as rosidl generates).
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct EmptyRequest {
-    /// rosidl's `structure_needs_at_least_one_member`.
-    pub structure_needs_at_least_one_member: u8,
-}
-
-/// `lifecycle_msgs/srv/GetState` response.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct GetStateResponse {
-    /// The state now.
-    pub current_state: StateMsg,
-}
-
-/// `lifecycle_msgs/srv/GetAvailableStates` response.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct GetAvailableStatesResponse {
-    /// Every primary state.
-    pub available_states: Vec<StateMsg>,
-}
-
-/// `lifecycle_msgs/srv/GetAvailableTransitions` response (also what `get_transition_graph` answers).
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct GetAvailableTransitionsResponse {
-    /// Transitions from the state now (or every transition, for the graph).
-    pub available_transitions: Vec<TransitionDescription>,
-}
-
-macro_rules! messages {
-    ($($t:ty),*) => {$( impl ros2_client::Message for $t {} )*};
-}
-messages!(
-    StateMsg,
-    TransitionMsg,
-    TransitionDescription,
-    TransitionEvent,
-    ChangeStateRequest,
-    ChangeStateResponse,
-    EmptyRequest,
-    GetStateResponse,
-    GetAvailableStatesResponse,
-    GetAvailableTransitionsResponse
-);
+use super::wire::{
+    GetAvailableStatesResponse, GetAvailableTransitionsResponse, GetStateResponse, StateMsg,
+    TransitionDescription, TransitionMsg,
+};
 
 /// A primary state of a managed node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -2,19 +2,22 @@
 //! `get_state`, ...) and its `~/transition_event` publisher, over the state
 //! machine of [`super::lifecycle`].
 
-use super::lifecycle::{
-    available_states, get_state, transition_graph, ChangeStateRequest, ChangeStateResponse,
-    EmptyRequest, GetAvailableStatesResponse, GetAvailableTransitionsResponse, GetStateResponse,
-    Lifecycle, TransitionEvent, LIFECYCLE_PACKAGE,
+use super::lifecycle::{available_states, get_state, transition_graph, Lifecycle};
+use super::wire::{
+    ChangeState, ChangeStateRequest, ChangeStateResponse, GetAvailableStates,
+    GetAvailableStatesRequest, GetAvailableStatesResponse, GetAvailableTransitions,
+    GetAvailableTransitionsRequest, GetAvailableTransitionsResponse, GetState, GetStateRequest,
+    GetStateResponse, RosService, TransitionEvent,
 };
 
 /// The lifecycle services and the transition-event publisher.
 pub struct LifecycleServers {
     change: ros2_client::Server<ChangeStateRequest, ChangeStateResponse>,
-    get: ros2_client::Server<EmptyRequest, GetStateResponse>,
-    states: ros2_client::Server<EmptyRequest, GetAvailableStatesResponse>,
-    transitions: ros2_client::Server<EmptyRequest, GetAvailableTransitionsResponse>,
-    graph: ros2_client::Server<EmptyRequest, GetAvailableTransitionsResponse>,
+    get: ros2_client::Server<GetStateRequest, GetStateResponse>,
+    states: ros2_client::Server<GetAvailableStatesRequest, GetAvailableStatesResponse>,
+    transitions:
+        ros2_client::Server<GetAvailableTransitionsRequest, GetAvailableTransitionsResponse>,
+    graph: ros2_client::Server<GetAvailableTransitionsRequest, GetAvailableTransitionsResponse>,
     events: ros2_client::Publisher<TransitionEvent>,
 }
 
@@ -24,38 +27,19 @@ pub fn create(
     node: &mut ros2_client::Node,
     names: &super::names::Names,
 ) -> crate::error::Result<LifecycleServers> {
-    use super::qos::{reliable_qos, ros_name};
-    use crate::error::err;
-    use ros2_client::{MessageTypeName, ServiceMapping, ServiceTypeName};
-    macro_rules! server {
-        ($srv:literal, $ty:literal) => {
-            node.create_server(
-                ServiceMapping::Enhanced,
-                &ros_name(names, &format!("~/{}", $srv))?,
-                &ServiceTypeName::new(LIFECYCLE_PACKAGE, $ty),
-                reliable_qos(),
-                reliable_qos(),
-            )
-            .map_err(|e| err!("creating the lifecycle service {}: {e:?}", $srv))?
-        };
-    }
-    let topic = node
-        .create_topic(
-            &ros_name(names, "~/transition_event")?,
-            MessageTypeName::new(LIFECYCLE_PACKAGE, "TransitionEvent"),
-            &reliable_qos(),
-        )
-        .map_err(|e| err!("creating the transition_event topic: {e:?}"))?;
+    use super::qos::{publisher, reliable_qos, server};
+    use super::topics::lifecycle::{
+        CHANGE_STATE, GET_AVAILABLE_STATES, GET_AVAILABLE_TRANSITIONS, GET_STATE,
+        GET_TRANSITION_GRAPH, TRANSITION_EVENT,
+    };
     Ok(LifecycleServers {
-        change: server!("change_state", "ChangeState"),
-        get: server!("get_state", "GetState"),
-        states: server!("get_available_states", "GetAvailableStates"),
-        transitions: server!("get_available_transitions", "GetAvailableTransitions"),
+        change: server::<ChangeState>(node, names, CHANGE_STATE)?,
+        get: server::<GetState>(node, names, GET_STATE)?,
+        states: server::<GetAvailableStates>(node, names, GET_AVAILABLE_STATES)?,
+        transitions: server::<GetAvailableTransitions>(node, names, GET_AVAILABLE_TRANSITIONS)?,
         // rclcpp serves the graph with the GetAvailableTransitions type too.
-        graph: server!("get_transition_graph", "GetAvailableTransitions"),
-        events: node
-            .create_publisher(&topic, Some(reliable_qos()))
-            .map_err(|e| err!("creating the transition_event publisher: {e:?}"))?,
+        graph: server::<GetAvailableTransitions>(node, names, GET_TRANSITION_GRAPH)?,
+        events: publisher(node, names, TRANSITION_EVENT, &reliable_qos())?,
     })
 }
 
@@ -115,7 +99,7 @@ pub fn spawn(
         ctx.clone(),
         d(),
         s.change,
-        "ChangeState",
+        ChangeState::NAME,
         Quiet,
         change_state,
     ));
@@ -123,7 +107,7 @@ pub fn spawn(
         ctx.clone(),
         d(),
         s.get,
-        "GetState",
+        GetState::NAME,
         Quiet,
         |c: &Ctx, _| get_state(&c.lifecycle),
     ));
@@ -131,7 +115,7 @@ pub fn spawn(
         ctx.clone(),
         d(),
         s.states,
-        "GetAvailableStates",
+        GetAvailableStates::NAME,
         Quiet,
         |_: &Ctx, _| available_states(),
     ));
@@ -139,7 +123,7 @@ pub fn spawn(
         ctx.clone(),
         d(),
         s.transitions,
-        "GetAvailableTransitions",
+        GetAvailableTransitions::NAME,
         Quiet,
         |c: &Ctx, _| GetAvailableTransitionsResponse {
             available_transitions: c.lifecycle.available(),

@@ -4,30 +4,12 @@
 //! frame. The node publishes it on `markers_topic` and records it beside the
 //! states, so a recorded bag opens in Foxglove's 3D panel.
 
-use ros2_client::Message;
-use serde::{Deserialize, Serialize};
+use crate::data::msg::{ParticleState, Point, Vector3};
 
-use crate::data::msg::{
-    ros2msg_schema, Header, ParticleState, Point, Vector3, DEP_HEADER, DEP_TIME,
+use super::wire::markers::{
+    ColorRgba, Marker, MarkerArray, ADD, ARROW, CUBE_LIST, DELETEALL, LINE_LIST, SPHERE_LIST,
 };
-
-use super::msgs::{ParticleForces, PredictedTrajectory};
-
-/// `visualization_msgs/msg/MarkerArray`'s type name.
-pub const MARKER_ARRAY_TYPE: &str = "visualization_msgs/msg/MarkerArray";
-
-/// `Marker.type`: an arrow from `points[0]` to `points[1]`.
-pub const ARROW: i32 = 0;
-/// `Marker.type`: a line segment between each pair of `points`.
-pub const LINE_LIST: i32 = 5;
-/// `Marker.type`: a cube at each of `points`.
-pub const CUBE_LIST: i32 = 6;
-/// `Marker.type`: a sphere at each of `points`.
-pub const SPHERE_LIST: i32 = 7;
-/// `Marker.action`: add or replace.
-pub const ADD: i32 = 0;
-/// `Marker.action`: remove every marker shown so far.
-pub const DELETEALL: i32 = 3;
+use super::wire::{ParticleForces, PredictedTrajectory};
 
 /// Above this many particles the forces are drawn as one line list instead
 /// of one arrow marker each (an arrow costs a whole marker on the wire).
@@ -37,173 +19,6 @@ pub const MAX_ARROWS: usize = 200;
 /// the last), so that a 1,000-particle, 100-step prediction does not double
 /// the node's traffic with a 5 MB picture.
 pub const MAX_PATH_SEGMENTS: usize = 20_000;
-
-/// `builtin_interfaces/Duration`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Duration {
-    /// Seconds.
-    pub sec: i32,
-    /// Nanoseconds.
-    pub nanosec: u32,
-}
-
-/// `geometry_msgs/Quaternion`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Quaternion {
-    /// x.
-    pub x: f64,
-    /// y.
-    pub y: f64,
-    /// z.
-    pub z: f64,
-    /// w.
-    pub w: f64,
-}
-
-impl Default for Quaternion {
-    fn default() -> Self {
-        Quaternion {
-            x: 0.0,
-            y: 0.0,
-            z: 0.0,
-            w: 1.0,
-        }
-    }
-}
-
-/// `geometry_msgs/Pose`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Pose {
-    /// Position.
-    pub position: Point,
-    /// Orientation.
-    pub orientation: Quaternion,
-}
-
-/// `std_msgs/ColorRGBA`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct ColorRgba {
-    /// Red, 0–1.
-    pub r: f32,
-    /// Green, 0–1.
-    pub g: f32,
-    /// Blue, 0–1.
-    pub b: f32,
-    /// Opacity, 0–1.
-    pub a: f32,
-}
-
-/// `sensor_msgs/CompressedImage` (a marker's texture; unused here).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct CompressedImage {
-    /// Header.
-    pub header: Header,
-    /// Image format.
-    pub format: String,
-    /// Bytes.
-    pub data: Vec<u8>,
-}
-
-/// `visualization_msgs/UVCoordinate` (texture coordinates; unused here).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct UvCoordinate {
-    /// u.
-    pub u: f32,
-    /// v.
-    pub v: f32,
-}
-
-/// `visualization_msgs/MeshFile` (an embedded mesh; unused here).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct MeshFile {
-    /// File name.
-    pub filename: String,
-    /// Bytes.
-    pub data: Vec<u8>,
-}
-
-/// `visualization_msgs/Marker`, fields in the order of ROS 2 Kilted's .msg.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[allow(missing_docs)] // the .msg documents them
-pub struct Marker {
-    pub header: Header,
-    pub ns: String,
-    pub id: i32,
-    #[serde(rename = "type")]
-    pub kind: i32,
-    pub action: i32,
-    pub pose: Pose,
-    pub scale: Vector3,
-    pub color: ColorRgba,
-    pub lifetime: Duration,
-    pub frame_locked: bool,
-    pub points: Vec<Point>,
-    pub colors: Vec<ColorRgba>,
-    pub texture_resource: String,
-    pub texture: CompressedImage,
-    pub uv_coordinates: Vec<UvCoordinate>,
-    pub text: String,
-    pub mesh_resource: String,
-    pub mesh_file: MeshFile,
-    pub mesh_use_embedded_materials: bool,
-}
-
-/// `visualization_msgs/MarkerArray`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct MarkerArray {
-    /// The markers, drawn together.
-    pub markers: Vec<Marker>,
-}
-
-impl Message for MarkerArray {}
-
-/// Full ros2msg schema of `MarkerArray` (as rosbag2 records it), so that
-/// Foxglove and mcap-ros2-support decode recorded markers.
-pub fn marker_array_schema() -> String {
-    const MARKER: &str = "int32 ARROW=0\nint32 CUBE=1\nint32 SPHERE=2\nint32 CYLINDER=3\n\
-        int32 LINE_STRIP=4\nint32 LINE_LIST=5\nint32 CUBE_LIST=6\nint32 SPHERE_LIST=7\n\
-        int32 POINTS=8\nint32 TEXT_VIEW_FACING=9\nint32 MESH_RESOURCE=10\nint32 TRIANGLE_LIST=11\n\
-        int32 ARROW_STRIP=12\nint32 ADD=0\nint32 MODIFY=0\nint32 DELETE=2\nint32 DELETEALL=3\n\
-        std_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\n\
-        geometry_msgs/Pose pose\ngeometry_msgs/Vector3 scale\nstd_msgs/ColorRGBA color\n\
-        builtin_interfaces/Duration lifetime\nbool frame_locked\ngeometry_msgs/Point[] points\n\
-        std_msgs/ColorRGBA[] colors\nstring texture_resource\n\
-        sensor_msgs/CompressedImage texture\nUVCoordinate[] uv_coordinates\nstring text\n\
-        string mesh_resource\nMeshFile mesh_file\nbool mesh_use_embedded_materials\n";
-    const XYZ: &str = "float64 x\nfloat64 y\nfloat64 z\n";
-    ros2msg_schema(
-        "Marker[] markers\n",
-        &[
-            ("visualization_msgs/Marker", MARKER),
-            DEP_HEADER,
-            DEP_TIME,
-            (
-                "geometry_msgs/Pose",
-                "Point position\nQuaternion orientation\n",
-            ),
-            ("geometry_msgs/Point", XYZ),
-            (
-                "geometry_msgs/Quaternion",
-                "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
-            ),
-            ("geometry_msgs/Vector3", XYZ),
-            (
-                "std_msgs/ColorRGBA",
-                "float32 r\nfloat32 g\nfloat32 b\nfloat32 a\n",
-            ),
-            ("builtin_interfaces/Duration", "int32 sec\nuint32 nanosec\n"),
-            (
-                "sensor_msgs/CompressedImage",
-                "std_msgs/Header header\nstring format\nuint8[] data\n",
-            ),
-            ("visualization_msgs/UVCoordinate", "float32 u\nfloat32 v\n"),
-            (
-                "visualization_msgs/MeshFile",
-                "string filename\nuint8[] data\n",
-            ),
-        ],
-    )
-}
 
 /// Frame of markers whose input state names none (RViz needs one).
 pub const DEFAULT_FRAME: &str = "world";
@@ -506,26 +321,5 @@ mod tests {
         let last: Vec<Point> = t.positions_at(99).iter().map(point).collect();
         let ends: Vec<Point> = paths.points.iter().skip(1).step_by(2).copied().collect();
         assert_eq!(&ends[ends.len() - 1000..], &last[..]);
-    }
-
-    #[test]
-    fn the_schema_names_every_nested_type() {
-        let s = marker_array_schema();
-        for t in [
-            "visualization_msgs/Marker",
-            "std_msgs/Header",
-            "builtin_interfaces/Time",
-            "geometry_msgs/Pose",
-            "geometry_msgs/Point",
-            "geometry_msgs/Quaternion",
-            "geometry_msgs/Vector3",
-            "std_msgs/ColorRGBA",
-            "builtin_interfaces/Duration",
-            "sensor_msgs/CompressedImage",
-            "visualization_msgs/UVCoordinate",
-            "visualization_msgs/MeshFile",
-        ] {
-            assert!(s.contains(&format!("MSG: {t}\n")), "schema lacks {t}");
-        }
     }
 }

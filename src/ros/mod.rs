@@ -1,10 +1,12 @@
-//! The ROS 2 node (`mcgnode serve`): subscribes to `ParticleState`, publishes a
-//! predicted trajectory and the forces for each state, serves Rollout, and
-//! publishes diagnostics. Built on ros2-client (pure Rust DDS), interoperable
-//! with rclpy; see scripts/ros/ for rclpy stand-ins of the ros2 CLI.
+//! The ROS 2 node (`mcgnode serve`, whose options are in `cli/serve.rs`):
+//! subscribes to `ParticleState`, publishes a predicted trajectory and the
+//! forces for each state, serves Rollout, and publishes diagnostics. Built on
+//! ros2-client (pure Rust DDS), interoperable with rclpy; see scripts/ros/
+//! for rclpy stand-ins of the ros2 CLI.
 //!
 //! - [`params`] (+ [`yaml`]): the ROS 2 parameter file and `--set` overrides;
-//! - [`msgs`]: wire structs of our interfaces;
+//! - [`wire`]: the wire structs of every interface, each with its ROS type
+//!   name, one file per family;
 //! - [`names`]: ROS 2 names and `--ros-args` as rcl reads them (namespace,
 //!   node name, remaps);
 //! - [`input`]: an incoming state parsed once, with the velocities of
@@ -15,13 +17,15 @@
 //! - [`record`]: MCAP recording of states, predictions and forces;
 //! - [`handles`]: what the tasks share: parameters, model, diagnostics,
 //!   recorder, each a handle of its own;
-//! - [`qos`]: QoS profiles and ROS names;
+//! - [`qos`]: QoS profiles, ROS names, and topics and servers created by
+//!   their wire type;
 //! - [`node`]: the DDS entities and the event loop; it wires the modules
 //!   below, none of which imports it;
 //! - [`training`]: the Train and LoadModel services, training in the
 //!   background and atomic model swaps announced on `/mcgnode/model_swap`;
 //! - [`action`]: the Train action (per-epoch feedback, cancel), on top of
 //!   [`training`];
+//! - [`topics`]: every topic, service and action name;
 //! - [`clock`]: system or simulated (`/clock`) time;
 //! - [`service`]: the one loop serving every service;
 //! - [`lifecycle`]: the managed-node states and transitions (no DDS), and
@@ -37,7 +41,6 @@ pub mod input;
 pub mod lifecycle;
 pub mod lifecycle_services;
 pub mod markers;
-pub mod msgs;
 pub mod names;
 pub mod node;
 pub mod params;
@@ -45,71 +48,13 @@ pub mod predict;
 pub mod qos;
 pub mod record;
 pub mod service;
+pub mod topics;
 pub mod training;
+pub mod wire;
 pub mod yaml;
 
-use std::path::PathBuf;
-
-use clap::Args;
-
+pub use node::serve;
 pub use params::{NodeParams, ParamError};
-
-/// Options of `mcgnode serve`.
-#[derive(Args, Debug, Clone)]
-pub struct ServeArgs {
-    /// Parameter file in the ROS 2 format (`mcgnode: ros__parameters: ...`);
-    /// see launch_params/.
-    #[arg(long)]
-    pub params: Option<PathBuf>,
-    /// Model to serve (overrides the `model` parameter): a trained model file,
-    /// or `truth:spring` / `truth:pendulum` for the ground-truth physics.
-    #[arg(long)]
-    pub model: Option<String>,
-    /// Override one parameter, `key=value` (repeatable; applied after --params).
-    #[arg(long = "set", value_name = "KEY=VALUE")]
-    pub set: Vec<String>,
-    /// Print the effective parameters as a parameter file and exit.
-    #[arg(long)]
-    pub print_params: bool,
-    /// ROS 2 arguments, as rcl takes them, to the end of the command line:
-    /// `-r __ns:=/robot1`, `-r __node:=NAME`, `-r FROM:=TO`, `-p NAME:=VALUE`,
-    /// `--params-file FILE` (repeatable), `--log-level LEVEL`. Applied after
-    /// --params and --set; others are refused with the reason.
-    #[arg(long = "ros-args", num_args = 0.., allow_hyphen_values = true, value_name = "ARG")]
-    pub ros_args: Option<Vec<String>>,
-}
-
-/// Runs the node until SIGINT/SIGTERM.
-pub fn run_serve(args: ServeArgs) -> crate::error::Result<()> {
-    let params = effective_params(&args)?;
-    if args.print_params {
-        print!("{}", params.to_yaml());
-        return Ok(());
-    }
-    let ros = ros_args(&args)?;
-    let model = crate::models::load_model(&params.model)?;
-    let domain_id = domain_id_from_env()?;
-    node::serve(params, &ros, model, domain_id)
-}
-
-/// What follows `--ros-args`.
-pub fn ros_args(args: &ServeArgs) -> Result<names::RosArgs, names::NameError> {
-    names::RosArgs::parse(args.ros_args.as_deref().unwrap_or_default())
-}
-
-/// Parameters from the file, `--set` overrides, `--ros-args` (parameter
-/// files, `-p`) and `--model`, in that order.
-pub fn effective_params(args: &ServeArgs) -> Result<NodeParams, ParamError> {
-    let ros = ros_args(args)?;
-    let mut p = NodeParams::load_with(args.params.as_deref(), &args.set, &ros)?;
-    if let Some(m) = &args.model {
-        p.model.clone_from(m);
-    }
-    if p.model.is_empty() {
-        return Err(ParamError::NoModel);
-    }
-    Ok(p)
-}
 
 /// The DDS domain from `ROS_DOMAIN_ID` (0 when unset), which ros2-client does
 /// not read by itself.

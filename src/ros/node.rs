@@ -5,6 +5,7 @@
 //! tasks keep going while a long rollout computes. Every failure is logged and
 //! counted; nothing in the loop panics on bad input.
 
+use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -13,11 +14,11 @@ use crate::error::{err, Context as _};
 use ros2_client::log::LogLevel;
 use ros2_client::parameters::{NumericRange, ParameterDescriptor, ParameterType};
 use ros2_client::{
-    Context, ContextOptions, Message, MessageTypeName, Node, NodeName, NodeOptions, ParameterValue,
-    Publisher, QosProfile, Server, ServiceMapping, ServiceTypeName, Subscription,
+    Context, ContextOptions, Node, NodeName, NodeOptions, ParameterValue, Publisher, Server,
+    Subscription,
 };
 
-use crate::data::msg::{ParticleState, PARTICLE_STATE_TYPE};
+use crate::data::msg::ParticleState;
 use crate::dynamics::Dynamics;
 
 use super::accuracy::{self, Level};
@@ -26,19 +27,21 @@ use super::handles::{
     Diagnostics, Handles, LiveParams, Logger, ModelHandle, RecorderHandle, Warning,
 };
 use super::input::Accepted;
-use super::markers::{prediction_markers, MarkerArray};
-use super::msgs::{
-    DiagnosticArray, DiagnosticStatus, KeyValue, LiveAccuracy, NodeDiagnostics, ParticleForces,
-    PredictedTrajectory, ReplayRequest, ReplayResponse, RolloutRequest, RolloutResponse,
-    DIAGNOSTIC_OK, DIAGNOSTIC_WARN, PACKAGE,
-};
+use super::markers::prediction_markers;
 use super::names::{Names, RosArgs};
 use super::params::{runtime_settable, NodeParams, ParamError, ParamValue, Spec, NODE_NAME, SPECS};
 use super::predict::{self, Prediction};
-use super::qos::{clock_qos, reliable_qos, ros_name, topic_qos};
+use super::qos::{clock_qos, publisher, reliable_qos, server, subscription, topic_qos};
 use super::record::Recorder;
 use super::service::{self, OnFailure::Warn};
+use super::topics::{CLOCK_TOPIC, LIVE_ACCURACY_TOPIC, REPLAY_SERVICE, STANDARD_DIAGNOSTICS_TOPIC};
 use super::training::{self, Trainer, TrainerHandles, TrainingServers};
+use super::wire::{ClockMsg, LoadModel, MarkerArray, Replay, Rollout, RosService, Train};
+use super::wire::{
+    DiagnosticArray, DiagnosticStatus, KeyValue, LiveAccuracy, NodeDiagnostics, ParticleForces,
+    PredictedTrajectory, ReplayRequest, ReplayResponse, RolloutRequest, RolloutResponse,
+    DIAGNOSTIC_OK, DIAGNOSTIC_WARN,
+};
 use super::yaml::Scalar;
 use crate::data::stream::Reset;
 
@@ -129,7 +132,7 @@ fn node_diagnostics(h: &Handles) -> NodeDiagnostics {
 }
 
 /// Follows `/clock` (with `use_sim_time`).
-async fn clock_loop(h: Handles, sub: Subscription<super::clock::ClockMsg>) {
+async fn clock_loop(h: Handles, sub: Subscription<ClockMsg>) {
     loop {
         match sub.async_take().await {
             Ok((msg, _)) => h.clock.set(&msg),
@@ -284,7 +287,7 @@ struct Endpoints {
     rollout: Server<RolloutRequest, RolloutResponse>,
     replay: Server<ReplayRequest, ReplayResponse>,
     /// With `use_sim_time` only.
-    clock: Option<Subscription<super::clock::ClockMsg>>,
+    clock: Option<Subscription<ClockMsg>>,
 }
 
 impl Endpoints {
@@ -294,81 +297,26 @@ impl Endpoints {
         params: &NodeParams,
         names: &Names,
     ) -> crate::error::Result<Endpoints> {
-        let e = |what: &'static str| move |err| err!("creating {what}: {err:?}");
-        let topic = |name: &str, pkg: &str, ty: &str, qos: &QosProfile| {
-            node.create_topic(&ros_name(names, name)?, MessageTypeName::new(pkg, ty), qos)
-                .map_err(|e| err!("creating topic {name}: {e:?}"))
-        };
         let qos = topic_qos(params);
-        let state_type = PARTICLE_STATE_TYPE
-            .rsplit('/')
-            .next()
-            .unwrap_or("ParticleState");
-        let input_topic = topic(&params.input_topic, PACKAGE, state_type, &qos)?;
-        let traj_topic = topic(
-            &params.trajectory_topic,
-            PACKAGE,
-            "PredictedTrajectory",
-            &qos,
-        )?;
-        let forces_topic = topic(&params.forces_topic, PACKAGE, "ParticleForces", &qos)?;
-        let diag_topic = topic(&params.diagnostics_topic, PACKAGE, "NodeDiagnostics", &qos)?;
-        let accuracy_topic = topic(LIVE_ACCURACY_TOPIC, PACKAGE, "LiveAccuracy", &qos)?;
-        let markers_topic = topic(
-            &params.markers_topic,
-            "visualization_msgs",
-            "MarkerArray",
-            &qos,
-        )?;
-        let std_diag_topic = topic(
-            STANDARD_DIAGNOSTICS_TOPIC,
-            "diagnostic_msgs",
-            "DiagnosticArray",
-            &reliable_qos(),
-        )?;
-        let clock_topic = if params.use_sim_time {
-            let t = topic(
-                super::clock::CLOCK_TOPIC,
-                "rosgraph_msgs",
-                "Clock",
-                &clock_qos(),
-            )?;
-            Some(t)
-        } else {
-            None
-        };
-        let rollout = create_server(node, names, &params.rollout_service, "Rollout")?;
-        let replay = create_server(node, names, REPLAY_SERVICE, "Replay")?;
         Ok(Endpoints {
-            input: node
-                .create_subscription(&input_topic, Some(qos.clone()))
-                .map_err(e("the input subscription"))?,
-            trajectory: node
-                .create_publisher(&traj_topic, Some(qos.clone()))
-                .map_err(e("the trajectory publisher"))?,
-            forces: node
-                .create_publisher(&forces_topic, Some(qos.clone()))
-                .map_err(e("the forces publisher"))?,
-            accuracy: node
-                .create_publisher(&accuracy_topic, Some(qos.clone()))
-                .map_err(e("the live accuracy publisher"))?,
-            markers: node
-                .create_publisher(&markers_topic, Some(qos.clone()))
-                .map_err(e("the markers publisher"))?,
-            diagnostics: node
-                .create_publisher(&diag_topic, Some(qos))
-                .map_err(e("the diagnostics publisher"))?,
-            standard_diagnostics: node
-                .create_publisher(&std_diag_topic, Some(reliable_qos()))
-                .map_err(e("the /diagnostics publisher"))?,
-            rollout,
-            replay,
-            clock: match clock_topic {
-                Some(t) => Some(
-                    node.create_subscription(&t, Some(clock_qos()))
-                        .map_err(e("the /clock subscription"))?,
-                ),
-                None => None,
+            input: subscription(node, names, &params.input_topic, &qos)?,
+            trajectory: publisher(node, names, &params.trajectory_topic, &qos)?,
+            forces: publisher(node, names, &params.forces_topic, &qos)?,
+            accuracy: publisher(node, names, LIVE_ACCURACY_TOPIC, &qos)?,
+            markers: publisher(node, names, &params.markers_topic, &qos)?,
+            diagnostics: publisher(node, names, &params.diagnostics_topic, &qos)?,
+            standard_diagnostics: publisher(
+                node,
+                names,
+                STANDARD_DIAGNOSTICS_TOPIC,
+                &reliable_qos(),
+            )?,
+            rollout: server::<Rollout>(node, names, &params.rollout_service)?,
+            replay: server::<Replay>(node, names, REPLAY_SERVICE)?,
+            clock: if params.use_sim_time {
+                Some(subscription(node, names, CLOCK_TOPIC, &clock_qos())?)
+            } else {
+                None
             },
         })
     }
@@ -398,7 +346,7 @@ impl Endpoints {
             h.clone(),
             d.clone(),
             self.rollout,
-            "Rollout",
+            Rollout::NAME,
             Warn,
             rollout_call,
         );
@@ -407,33 +355,11 @@ impl Endpoints {
             h.clone(),
             d,
             self.replay,
-            "Replay",
+            Replay::NAME,
             Warn,
             replay_call,
         ));
     }
-}
-
-/// A server of our service type `ty` named `name`, with rclpy's QoS.
-fn create_server<Req: Message + Clone + 'static, Resp: Message + Clone + 'static>(
-    node: &mut Node,
-    names: &Names,
-    name: &str,
-    ty: &str,
-) -> crate::error::Result<Server<Req, Resp>> {
-    node.create_server(
-        ServiceMapping::Enhanced,
-        &ros_name(names, name)?,
-        &ServiceTypeName::new(PACKAGE, ty),
-        reliable_qos(),
-        reliable_qos(),
-    )
-    .map_err(|err| err!("creating the {ty} service: {err:?}"))
-}
-
-/// The file a `model` parameter names (`None` for `truth:*`).
-fn model_file(model: &str) -> Option<std::path::PathBuf> {
-    (!crate::models::truth::is_truth(model)).then(|| model.into())
 }
 
 /// The handles of a node serving `model`, logging through `node` at
@@ -442,7 +368,7 @@ fn handles(
     node: &Node,
     (params, names, log_level): (&NodeParams, &Names, Option<LogLevel>),
     live: LiveParams,
-    model: Arc<dyn Dynamics>,
+    (model, file): (Arc<dyn Dynamics>, Option<PathBuf>),
 ) -> crate::error::Result<Handles> {
     let recorder = if params.record_dir.is_empty() {
         None
@@ -455,7 +381,7 @@ fn handles(
     ));
     Ok(Handles {
         params: live,
-        model: Arc::new(ModelHandle::new(model, model_file(&params.model))),
+        model: Arc::new(ModelHandle::new(model, file)),
         recorder: Arc::new(RecorderHandle::new(recorder, diag.clone())),
         diag,
         clock: Arc::new(super::clock::Clock::new(params.use_sim_time)),
@@ -470,11 +396,12 @@ fn handles(
 }
 
 /// Runs the node in `domain_id` until SIGINT or SIGTERM, named and
-/// remapped as `ros` (`--ros-args`) says.
+/// remapped as `ros` (`--ros-args`) says, serving `model` (loaded from
+/// `file`, when it is one: what fine-tuning starts from).
 pub fn serve(
     params: NodeParams,
     ros: &RosArgs,
-    model: Arc<dyn Dynamics>,
+    model: (Arc<dyn Dynamics>, Option<PathBuf>),
     domain_id: u16,
 ) -> crate::error::Result<()> {
     let names = ros.names()?;
@@ -553,7 +480,7 @@ fn spawn_training(
         trainer.clone(),
         d.clone(),
         train,
-        "Train",
+        Train::NAME,
         Quiet,
         training::train_call,
     ));
@@ -561,7 +488,7 @@ fn spawn_training(
         trainer.clone(),
         d,
         load,
-        "LoadModel",
+        LoadModel::NAME,
         Quiet,
         training::load_call,
     ));
@@ -642,9 +569,6 @@ async fn wait_for_shutdown() -> crate::error::Result<()> {
     }
     Ok(())
 }
-
-/// Topic of live accuracy (`mcgnode_msgs/msg/LiveAccuracy`).
-pub const LIVE_ACCURACY_TOPIC: &str = "~/live_accuracy";
 
 /// What the input loop publishes.
 struct Outputs {
@@ -873,9 +797,6 @@ pub fn rollout_response(
     }
 }
 
-/// Name of the Replay service (`mcgnode_msgs/srv/Replay`).
-pub const REPLAY_SERVICE: &str = "~/replay";
-
 /// The Replay service's work: the bag through the model served now, with the
 /// node's dt and horizon (see [`crate::replay::replay_as_node`]).
 fn replay_call(h: &Handles, req: ReplayRequest) -> ReplayResponse {
@@ -909,9 +830,6 @@ fn replay_call(h: &Handles, req: ReplayRequest) -> ReplayResponse {
         },
     }
 }
-
-/// The standard diagnostics topic (`diagnostic_msgs/msg/DiagnosticArray`).
-pub const STANDARD_DIAGNOSTICS_TOPIC: &str = "/diagnostics";
 
 /// The counters as a standard `DiagnosticArray` with one status, `mcgnode:
 /// predictions`: WARN when states were rejected or dropped since the previous
@@ -1087,7 +1005,7 @@ mod tests {
         };
         let (level, why) = accuracy::alarm(std::slice::from_ref(&f), 0.01, 0.1);
         let s = accuracy_status(&[f], level, &why, 0);
-        assert_eq!(s.level, crate::ros::msgs::DIAGNOSTIC_WARN);
+        assert_eq!(s.level, crate::ros::wire::DIAGNOSTIC_WARN);
         assert!(s.message.contains("lead 0.5 s"), "{}", s.message);
         let get = |k: &str| s.values.iter().find(|v| v.key == k).map(|v| &v.value);
         assert_eq!(get("compared@0.5s").map(String::as_str), Some("4"));

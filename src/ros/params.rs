@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
+use super::topics;
 use super::yaml::{self, Scalar, Value, YamlError};
 
 /// Why parameters were refused: each names the key, what was given and what
@@ -297,19 +298,19 @@ node_params! {
     model: String = "truth:spring".into(), Kind::Str, restart,
         "model to serve: truth:spring, truth:pendulum or a model file";
     /// Topic the node reads `ParticleState` from.
-    input_topic: String = "particle_state".into(), Kind::Topic, restart,
+    input_topic: String = topics::INPUT_TOPIC.into(), Kind::Topic, restart,
         "topic of incoming ParticleState messages";
     /// Topic of the predicted trajectories.
-    trajectory_topic: String = "~/predicted_trajectory".into(), Kind::Topic, restart,
+    trajectory_topic: String = topics::TRAJECTORY_TOPIC.into(), Kind::Topic, restart,
         "topic of PredictedTrajectory messages";
     /// Topic of the predicted forces.
-    forces_topic: String = "~/predicted_forces".into(), Kind::Topic, restart,
+    forces_topic: String = topics::FORCES_TOPIC.into(), Kind::Topic, restart,
         "topic of ParticleForces messages";
     /// Topic of the periodic `NodeDiagnostics`.
-    diagnostics_topic: String = "~/diagnostics".into(), Kind::Topic, restart,
+    diagnostics_topic: String = topics::DIAGNOSTICS_TOPIC.into(), Kind::Topic, restart,
         "topic of NodeDiagnostics messages";
     /// Name of the Rollout service.
-    rollout_service: String = "~/rollout".into(), Kind::Topic, restart,
+    rollout_service: String = topics::ROLLOUT_SERVICE.into(), Kind::Topic, restart,
         "name of the Rollout service";
     /// Steps predicted for each incoming state.
     horizon: u32 = 100, Kind::Int(1, 100_000), runtime,
@@ -393,7 +394,7 @@ node_params! {
         "publish and record a visualization_msgs/MarkerArray of predictions (particles, \
          edges, predicted paths, forces) for RViz and Foxglove";
     /// Topic of the MarkerArray.
-    markers_topic: String = "~/markers".into(), Kind::Topic, restart,
+    markers_topic: String = topics::MARKERS_TOPIC.into(), Kind::Topic, restart,
         "topic of the MarkerArray";
     /// Minimum seconds between two MarkerArrays (0: one per prediction).
     markers_period: f64 = 0.1, Kind::Double(false), runtime,

@@ -7,7 +7,7 @@ use crate::data::DataError;
 use crate::dynamics::{Dynamics, DynamicsError, Forces};
 use crate::system::{Graph, State};
 
-use super::msgs::{ParticleForces, PredictedTrajectory};
+use super::wire::{ParticleForces, PredictedTrajectory};
 
 /// Why a state gets no prediction; each message says what to change.
 #[derive(Debug, thiserror::Error)]

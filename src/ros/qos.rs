@@ -1,12 +1,15 @@
-//! QoS profiles and ROS names, shared by every module that creates DDS
-//! entities (one definition each, so topics and services stay compatible).
+//! QoS profiles, ROS names and topics and servers created by their wire
+//! type, shared by every module that creates DDS entities (one definition
+//! each, so topics and services stay compatible).
 
 use crate::error::err;
+use ros2_client::dds::rustdds::Topic;
 use ros2_client::qos::{Durability, History, WhenFull};
-use ros2_client::{Name, QosProfile};
+use ros2_client::{Name, Node, Publisher, QosProfile, Server, ServiceMapping, Subscription};
 
 use super::names::Names;
 use super::params::NodeParams;
+use super::wire::{RosService, RosType};
 
 /// Topic QoS from the parameters: volatile, keep-last `qos_depth`.
 pub fn topic_qos(p: &NodeParams) -> QosProfile {
@@ -45,4 +48,58 @@ pub fn reliable_qos() -> QosProfile {
 pub fn ros_name(names: &Names, s: &str) -> crate::error::Result<Name> {
     let full = names.resolve(s)?;
     Name::parse(&full).map_err(|e| err!("invalid ROS name {full:?}: {e:?}"))
+}
+
+/// The topic `name` (resolved for `names`) of message type `T`.
+fn topic<T: RosType>(
+    node: &Node,
+    names: &Names,
+    name: &str,
+    qos: &QosProfile,
+) -> crate::error::Result<Topic> {
+    node.create_topic(&ros_name(names, name)?, T::message_type_name(), qos)
+        .map_err(|e| err!("creating topic {name}: {e:?}"))
+}
+
+/// A publisher of message type `T` on the topic `name` (resolved for
+/// `names`).
+pub fn publisher<T: RosType>(
+    node: &mut Node,
+    names: &Names,
+    name: &str,
+    qos: &QosProfile,
+) -> crate::error::Result<Publisher<T>> {
+    let topic = topic::<T>(node, names, name, qos)?;
+    node.create_publisher(&topic, Some(qos.clone()))
+        .map_err(|e| err!("creating the publisher of {name}: {e:?}"))
+}
+
+/// A subscription to the topic `name` (resolved for `names`) of message type
+/// `T`.
+pub fn subscription<T: RosType>(
+    node: &mut Node,
+    names: &Names,
+    name: &str,
+    qos: &QosProfile,
+) -> crate::error::Result<Subscription<T>> {
+    let topic = topic::<T>(node, names, name, qos)?;
+    node.create_subscription(&topic, Some(qos.clone()))
+        .map_err(|e| err!("creating the subscription to {name}: {e:?}"))
+}
+
+/// A server of service type `S` named `name` (resolved for `names`), with
+/// rclpy's QoS.
+pub fn server<S: RosService>(
+    node: &mut Node,
+    names: &Names,
+    name: &str,
+) -> crate::error::Result<Server<S::Request, S::Response>> {
+    node.create_server(
+        ServiceMapping::Enhanced,
+        &ros_name(names, name)?,
+        &S::service_type_name(),
+        reliable_qos(),
+        reliable_qos(),
+    )
+    .map_err(|e| err!("creating the {} service {name}: {e:?}", S::NAME))
 }

@@ -16,9 +16,8 @@ use crate::data::msg::{
 use crate::data::{BagMetadata, BagWriter, ChannelId, DataError, ParticleState, METADATA_NAME};
 use crate::error::BoxedError;
 
-use super::markers::{marker_array_schema, MarkerArray, MARKER_ARRAY_TYPE};
-use super::msgs::{ParticleForces, PredictedTrajectory, PACKAGE};
 use super::params::NodeParams;
+use super::wire::{marker_array_schema, MarkerArray, ParticleForces, PredictedTrajectory, RosType};
 
 /// `msg/PredictedTrajectory.msg`.
 pub const PREDICTED_TRAJECTORY_MSG: &str = include_str!("../../msg/PredictedTrajectory.msg");
@@ -29,7 +28,7 @@ pub const PARTICLE_FORCES_MSG: &str = include_str!("../../msg/ParticleForces.msg
 pub fn predicted_trajectory_schema() -> String {
     let state = (
         // Dependency blocks are named pkg/Type, as rosbag2 writes them.
-        "mcgnode_msgs/ParticleState",
+        ParticleState::SCHEMA_NAME,
         PARTICLE_STATE_MSG,
     );
     ros2msg_schema(
@@ -157,18 +156,15 @@ impl Recorder {
         let mut writer = BagWriter::new(file).map_err(|e| ctx(e.into()))?;
         let types = [
             (
-                format!("{PACKAGE}/msg/ParticleState"),
+                ParticleState::TYPE_NAME,
                 crate::data::msg::particle_state_schema(),
             ),
             (
-                format!("{PACKAGE}/msg/PredictedTrajectory"),
+                PredictedTrajectory::TYPE_NAME,
                 predicted_trajectory_schema(),
             ),
-            (
-                format!("{PACKAGE}/msg/ParticleForces"),
-                particle_forces_schema(),
-            ),
-            (MARKER_ARRAY_TYPE.to_string(), marker_array_schema()),
+            (ParticleForces::TYPE_NAME, particle_forces_schema()),
+            (MarkerArray::TYPE_NAME, marker_array_schema()),
         ];
         let mut channels = [ChannelId(0); 4];
         for (c, (topic, (ty, schema))) in channels.iter_mut().zip(self.topics.iter().zip(&types)) {

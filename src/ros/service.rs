@@ -14,7 +14,7 @@ use ros2_client::log::LogLevel;
 use ros2_client::{Message, Server};
 
 use super::handles::{Diagnostics, Warning};
-use super::msgs::{LoadModelResponse, ReplayResponse, RolloutResponse, TrainResponse};
+use super::wire::{LoadModelResponse, ReplayResponse, RolloutResponse, TrainResponse};
 
 /// A service reply that can say it failed.
 pub trait Reply: Message + Send + Sync + 'static {

@@ -30,32 +30,26 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use crate::error::err;
 use ros2_client::log::LogLevel;
-use ros2_client::{MessageTypeName, Node, Publisher, Server, ServiceMapping, ServiceTypeName};
+use ros2_client::{Node, Publisher, Server};
 
 use crate::data::msg::{Header, Time};
 use crate::dynamics::Dynamics;
 use crate::kernel::TrainedModel;
 use crate::model::{ModelFile, Variant};
-use crate::models::{train_from_bags, ModelKind};
+use crate::models::{train_from_bags, ModelKind, ModelRef};
 use crate::train::{Auto, EpochReport, ModelOptions, Recipe, TrainConfig};
 
 use super::clock::Clock;
 use super::handles::{Diagnostics, ModelHandle, RecorderHandle};
-use super::msgs::{
-    LoadModelRequest, LoadModelResponse, ModelSwap, TrainRequest, TrainResponse, PACKAGE,
-};
 use super::names::Names;
 use super::params::NodeParams;
-use super::qos::{reliable_qos, ros_name as name};
+use super::qos::{publisher, reliable_qos, server};
+use super::topics::{LOAD_MODEL_SERVICE, MODEL_SWAP_TOPIC, TRAIN_SERVICE};
+use super::wire::{
+    LoadModel, LoadModelRequest, LoadModelResponse, ModelSwap, Train, TrainRequest, TrainResponse,
+};
 
-/// Name of the Train service.
-pub const TRAIN_SERVICE: &str = "~/train";
-/// Name of the LoadModel service.
-pub const LOAD_MODEL_SERVICE: &str = "~/load_model";
-/// Topic announcing every model swap (`mcgnode_msgs/msg/ModelSwap`).
-pub const MODEL_SWAP_TOPIC: &str = "~/model_swap";
 /// Variant trained when a request leaves it empty.
 pub const DEFAULT_VARIANT: Variant = Variant::Mcgnode;
 
@@ -120,35 +114,9 @@ pub fn create(
     names: &Names,
     handles: TrainerHandles,
 ) -> crate::error::Result<(Arc<Trainer>, TrainingServers)> {
-    let qos = reliable_qos();
-    let topic = node
-        .create_topic(
-            &name(names, MODEL_SWAP_TOPIC)?,
-            MessageTypeName::new(PACKAGE, "ModelSwap"),
-            &qos,
-        )
-        .map_err(|e| err!("creating topic {MODEL_SWAP_TOPIC}: {e:?}"))?;
-    let swap = node
-        .create_publisher(&topic, Some(qos.clone()))
-        .map_err(|e| err!("creating the model swap publisher: {e:?}"))?;
-    let train = node
-        .create_server(
-            ServiceMapping::Enhanced,
-            &name(names, TRAIN_SERVICE)?,
-            &ServiceTypeName::new(PACKAGE, "Train"),
-            qos.clone(),
-            qos.clone(),
-        )
-        .map_err(|e| err!("creating the Train service: {e:?}"))?;
-    let load = node
-        .create_server(
-            ServiceMapping::Enhanced,
-            &name(names, LOAD_MODEL_SERVICE)?,
-            &ServiceTypeName::new(PACKAGE, "LoadModel"),
-            qos.clone(),
-            qos,
-        )
-        .map_err(|e| err!("creating the LoadModel service: {e:?}"))?;
+    let swap = publisher(node, names, MODEL_SWAP_TOPIC, &reliable_qos())?;
+    let train = server::<Train>(node, names, TRAIN_SERVICE)?;
+    let load = server::<LoadModel>(node, names, LOAD_MODEL_SERVICE)?;
     let TrainerHandles {
         model,
         recorder,
@@ -730,11 +698,15 @@ pub fn load_and_swap(shared: &Trainer, path: &str) -> LoadModelResponse {
     if path.trim().is_empty() {
         return fail("no path given".into());
     }
-    match crate::models::load_model(path) {
+    let loaded = path
+        .parse::<ModelRef>()
+        .map_err(crate::Error::from)
+        .and_then(|r| Ok((crate::models::load_model(&r)?, r)));
+    match loaded {
         Err(e) => fail(format!("cannot load {path}: {e:#}")),
-        Ok(model) => {
+        Ok((model, reference)) => {
             let description = model.describe();
-            let file = (!crate::models::truth::is_truth(path)).then(|| PathBuf::from(path));
+            let file = reference.file().map(Path::to_path_buf);
             let locked = swap(shared, model, file, &format!("LoadModel: model {path}"));
             LoadModelResponse {
                 success: true,

@@ -783,7 +783,7 @@ pub fn train(
 }
 
 /// Which engine computes the GNODE family's gradients.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EngineKind {
     /// Hand-written reverse mode on the kernel's layout, over all cores (default).
     Native,
@@ -792,7 +792,7 @@ pub enum EngineKind {
 }
 
 /// Whether MCGNODE learns a body-force branch.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BodyForce {
     /// On unless the bag says the system is closed (no field, no anchors).
     Auto,
