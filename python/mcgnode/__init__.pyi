@@ -28,6 +28,8 @@ class Error(Exception):
 #   edges: (edges, 5) float64 rows (a, b, kind, rest_length, stiffness),
 #          b >= particles meaning anchor b - particles, kind 0 spring / 1 bar,
 #   anchors: (anchors, dim) float64,
+#   interaction_radius: float (0: fixed edges only),
+#   kinematic: (particles,) bool (True: motion given, never predicted),
 #   field: {"gravity": float, "drag": float, "force": list[float]} or None,
 #   dt: float or None, save_every: int (mcgnode rollout --initial's defaults),
 #   velocities_derived: bool.

@@ -271,6 +271,10 @@ fn paths(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<PathBuf>> {
 ///   b >= particles is anchor b - particles; kind 0 spring, 1 bar (2, a
 ///   contact, never comes from a bag: contacts are rebuilt from positions)
 /// - `anchors`: float64 (anchors, dim)
+/// - `interaction_radius`: float, 0 when the system has fixed edges only
+///   (closer pairs touch through contact edges rebuilt from positions)
+/// - `kinematic`: bool (particles,), True for a particle whose motion is
+///   given (a wall, a floor, a pusher); all False when the bag marks none
 /// - `field`: {"gravity", "drag", "force"} as the messages (else the bag's
 ///   simulator record) state it, or None when the bag does not say
 /// - `dt`, `save_every`: the step and saving interval `mcgnode rollout
@@ -353,6 +357,9 @@ fn read_bag<'py>(
         t.set_item("types", PyArray1::from_vec(py, g.types.clone()))?;
         t.set_item("edges", to_numpy(py, edges, &[g.edges.len(), 5])?)?;
         t.set_item("anchors", to_numpy(py, anchors, &[g.anchors.len(), d])?)?;
+        t.set_item("interaction_radius", g.interaction_radius)?;
+        let kinematic: Vec<bool> = (0..n).map(|i| g.kinematic.get(i) == Some(&true)).collect();
+        t.set_item("kinematic", PyArray1::from_vec(py, kinematic))?;
         match &field {
             Some(f) => t.set_item("field", field_dict(py, f)?)?,
             None => t.set_item("field", py.None())?,

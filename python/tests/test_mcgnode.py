@@ -168,6 +168,25 @@ def test_read_bag_gives_the_pendulum_graph_with_anchors(bags):
     assert t["accelerations"].shape == t["positions"].shape
 
 
+def test_read_bag_gives_contacts_as_bag_info_does(bags):
+    spheres = bags["dir"] / "spheres.mcap"
+    cli("simulate", "--system", "soft-spheres", "--particles", 12, "--trajectories", 1,
+        "--states", 3, "--seed", 5, "--out", spheres)
+    info = cli("bag", "info", spheres).stdout
+    m = re.search(r"contacts: interaction radius ([0-9.e-]+) .*?(\d+) kinematic particles", info)
+    assert m, info
+    (t,) = mcgnode.read_bag(spheres)
+    assert t["interaction_radius"] == float(m[1]) > 0
+    assert t["kinematic"].dtype == np.bool_ and t["kinematic"].shape == (t["masses"].shape[0],)
+    assert int(t["kinematic"].sum()) == int(m[2]) > 0
+    # Free balls move, the walls do not.
+    moved = np.abs(t["positions"][-1] - t["positions"][0]).max(axis=1) > 0
+    assert moved[~t["kinematic"]].all() and not moved[t["kinematic"]].any()
+    # A bag without contacts: radius 0, nothing kinematic.
+    plain = mcgnode.read_bag(bags["spring"])[0]
+    assert plain["interaction_radius"] == 0.0 and not plain["kinematic"].any()
+
+
 # -- rollouts against `mcgnode rollout` --------------------------------------
 
 
