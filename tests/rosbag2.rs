@@ -356,17 +356,7 @@ fn bags_of_the_first_message_layout_stay_readable() {
     assert_eq!(got.field, None);
     // Old-layout messages re-serialised by rosbags (its types from the bag's
     // own schema), in a directory with and without stored definitions.
-    for (name, args) in [
-        ("v1_dir", &["--compression", "message"][..]),
-        (
-            "v1_db3_nodefs",
-            &["--storage", "sqlite3", "--no-definitions"][..],
-        ),
-    ] {
-        let out = dir.path().join(name);
-        rosbags_write(&p, &out, args);
-        assert_eq!(read(&out).trajectories, want.trajectories, "{name}");
-    }
+    rosbags_round_trips(&p, dir.path(), "v1", &want.trajectories);
 }
 
 #[test]
@@ -946,17 +936,7 @@ fn bags_of_the_layout_before_contacts_stay_readable() {
         .all(|t| !t.graph.has_contacts() && t.graph.kinematic.is_empty()));
     // Re-serialised by rosbags from the bag's own schema, with and without
     // stored definitions (the reader then tries each layout).
-    for (name, args) in [
-        ("v2_dir", &["--compression", "message"][..]),
-        (
-            "v2_db3_nodefs",
-            &["--storage", "sqlite3", "--no-definitions"][..],
-        ),
-    ] {
-        let out = dir.path().join(name);
-        rosbags_write(&p, &out, args);
-        assert_eq!(read(&out).trajectories, want.trajectories, "{name}");
-    }
+    rosbags_round_trips(&p, dir.path(), "v2", &want.trajectories);
 }
 
 #[test]
@@ -1046,4 +1026,21 @@ fn a_bag_with_one_kinematic_flag_too_few_is_refused_naming_the_fix() {
     );
     let e = read_trajectories(&p).unwrap_err().to_string();
     assert!(e.contains("interaction radius -1"), "{e}");
+}
+
+/// `bag` re-serialised by rosbags from its own schema into a directory, with
+/// and without stored definitions (the reader then tries each layout), reads
+/// back as `want`.
+fn rosbags_round_trips(bag: &Path, dir: &Path, tag: &str, want: &[mcgnode::system::Trajectory]) {
+    for (name, args) in [
+        ("dir", &["--compression", "message"][..]),
+        (
+            "db3_nodefs",
+            &["--storage", "sqlite3", "--no-definitions"][..],
+        ),
+    ] {
+        let out = dir.join(format!("{tag}_{name}"));
+        rosbags_write(bag, &out, args);
+        assert_eq!(read(&out).trajectories, want, "{tag}_{name}");
+    }
 }
