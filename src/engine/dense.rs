@@ -146,39 +146,46 @@ impl Linear {
 
 /// One layer on a tile: `y[j] = b[j] + Σ_i w[i][j]·x[i]`, summed in the
 /// order of [`Linear::forward`] (bias, then inputs in turn), [`OUTS`]
-/// outputs at a time, then the rest one by one.
+/// outputs at a time. The blocked loop and the one-output tail are written
+/// out apart on purpose: folded into one const-generic helper, the
+/// 500-spring rollout ran at half the speed (4.6–6.3k against 9.0–11.9k
+/// steps/s, interleaved, 2026-12-02).
 #[inline(always)]
 fn dense_tile(l: &Linear, th: &[f64], x: &[f64], y: &mut [f64]) {
+    let w = &th[l.w..l.w + l.inp * l.out];
+    let b = &th[l.b..l.b + l.out];
+    let lane = |x: &[f64], i: usize| -> [f64; TILE] {
+        x[i * TILE..(i + 1) * TILE].try_into().expect("a tile")
+    };
     let mut j = 0;
     while j + OUTS <= l.out {
-        outputs::<OUTS>(l, th, x, y, j);
+        let mut acc = [[0.0; TILE]; OUTS];
+        for (o, row) in acc.iter_mut().enumerate() {
+            *row = [b[j + o]; TILE];
+        }
+        for i in 0..l.inp {
+            let xi = lane(x, i);
+            for (o, row) in acc.iter_mut().enumerate() {
+                let wv = w[i * l.out + j + o];
+                for k in 0..TILE {
+                    row[k] += wv * xi[k];
+                }
+            }
+        }
+        for (o, row) in acc.iter().enumerate() {
+            y[(j + o) * TILE..(j + o + 1) * TILE].copy_from_slice(row);
+        }
         j += OUTS;
     }
     for j in j..l.out {
-        outputs::<1>(l, th, x, y, j);
-    }
-}
-
-/// Outputs `j..j + K` of [`dense_tile`]: `K` independent accumulator chains
-/// sharing each input tile loaded.
-#[inline(always)]
-fn outputs<const K: usize>(l: &Linear, th: &[f64], x: &[f64], y: &mut [f64], j: usize) {
-    let w = &th[l.w..l.w + l.inp * l.out];
-    let mut acc = [[0.0; TILE]; K];
-    for (o, row) in acc.iter_mut().enumerate() {
-        *row = [th[l.b + j + o]; TILE];
-    }
-    for i in 0..l.inp {
-        let xi: &[f64; TILE] = x[i * TILE..(i + 1) * TILE].try_into().expect("a tile");
-        for (o, row) in acc.iter_mut().enumerate() {
-            let wv = w[i * l.out + j + o];
+        let mut row = [b[j]; TILE];
+        for i in 0..l.inp {
+            let (xi, wv) = (lane(x, i), w[i * l.out + j]);
             for k in 0..TILE {
                 row[k] += wv * xi[k];
             }
         }
-    }
-    for (o, row) in acc.iter().enumerate() {
-        y[(j + o) * TILE..(j + o + 1) * TILE].copy_from_slice(row);
+        y[j * TILE..(j + 1) * TILE].copy_from_slice(&row);
     }
 }
 
