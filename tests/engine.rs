@@ -104,6 +104,29 @@ fn lattice() -> Graph {
     graph(3, 8, e, vec![])
 }
 
+/// Systems that touch: `n` free particles, springs joining every other
+/// pair (0–1, 2–3, …; a bonded pair keeps its bond) or, with `bars`, the
+/// chain of bars from an anchor, then `kin` kinematic particles joined to
+/// nothing; contacts within radius 1.5, so that the states of [`data`]
+/// (about 0.7·√d apart along a diagonal) have a varying number of them.
+fn touching(dim: usize, n: usize, kin: usize, bars: bool) -> Graph {
+    let mut g = if bars {
+        chain(dim, n)
+    } else {
+        let e = (0..n / 2)
+            .map(|i| edge(2 * i, Endpoint::Particle(2 * i + 1), EdgeKind::Spring, 1.0))
+            .collect();
+        graph(dim, n, e, vec![])
+    };
+    for _ in 0..kin {
+        g.types.push(1);
+        g.masses.push(1.0);
+    }
+    g.kinematic = (0..n + kin).map(|i| i >= n).collect();
+    g.interaction_radius = 1.5;
+    g
+}
+
 /// Random states near the graph's rest shape, and random targets.
 fn data(g: &Graph, k: usize, seed: u64) -> (Vec<State>, Vec<Vec<f64>>) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -147,6 +170,9 @@ fn cases() -> Vec<Case> {
         ("tree2d-6", tree(2, 6)),
         ("tree3d-7", tree(3, 7)),
         ("lattice3d-8", lattice()),
+        ("touching2d-7+2", touching(2, 7, 2, false)),
+        ("touching3d-6+3", touching(3, 6, 3, false)),
+        ("touching-bars2d-4+2", touching(2, 4, 2, true)),
     ];
     for (gi, (gname, g)) in graphs.into_iter().enumerate() {
         for v in Variant::ALL {
@@ -158,6 +184,7 @@ fn cases() -> Vec<Case> {
                     let mut h = Hyper::new(v, g.dim, 2, particles).with_preset(preset);
                     h.body_force = body;
                     h.rounds = 1 + gi % 2;
+                    h.interaction_radius = g.interaction_radius;
                     // The authors' preset runs with non-trivial input and output scales.
                     if preset == ArchPreset::Authors {
                         h.norm = Some(Norm {
@@ -273,7 +300,15 @@ fn engine_gradients_equal_candle_and_finite_differences() {
         let mut a = vec![0.0; g.ndof()];
         for (s, st) in states[..3].iter().enumerate() {
             model.kernel.acceleration(&mut ws, &st.q, &st.v, &mut a);
-            let r = rel(&acc_e[s], &a);
+            // The kernel holds kinematic particles (their acceleration is 0).
+            let mut acc_e = acc_e[s].clone();
+            for (f, x) in acc_e.iter_mut().enumerate() {
+                if g.is_kinematic(f / g.dim) {
+                    assert_eq!(a[f], 0.0, "{name}: a kinematic particle accelerates");
+                    *x = 0.0;
+                }
+            }
+            let r = rel(&acc_e, &a);
             assert!(r <= 1e-12, "{name}: engine vs kernel accelerations {r:.2e}");
         }
     }
@@ -367,4 +402,82 @@ fn both_engines_end_a_seeded_training_at_the_same_loss() {
         );
         assert_eq!(n.best_epoch, c.best_epoch, "{v}");
     }
+}
+
+/// The contact cases above test what they claim: their states have contacts,
+/// in numbers that vary from state to state, the ones a brute-force search
+/// finds; both executors see every one; and kinematic particles' targets
+/// change neither loss.
+#[test]
+fn contact_cases_have_varying_contacts_and_kinematic_targets_do_not_count() {
+    for g in [
+        touching(2, 7, 2, false),
+        touching(3, 6, 3, false),
+        touching(2, 4, 2, true),
+    ] {
+        let (states, mut targets) = data(&g, 40, 7);
+        let plan = GraphPlan::new(&g);
+        let mut search = plan.contact_search();
+        let mut counts = vec![];
+        for st in &states {
+            let mut pairs = vec![];
+            plan.contacts(&mut search, &st.q, &mut pairs);
+            let brute = mcgnode::physics::neighbors::brute_force_pairs(&g, &st.q, 1.5);
+            assert_eq!(pairs, brute);
+            counts.push(pairs.len());
+        }
+        let (lo, hi) = (counts.iter().min().unwrap(), counts.iter().max().unwrap());
+        assert!(*lo < *hi && *hi > 0, "contacts per state {counts:?}");
+        let sr: Vec<&State> = states.iter().collect();
+        let batch = Batch::new(&plan, &sr, None, 2).unwrap();
+        let total: usize = counts.iter().sum();
+        assert_eq!(
+            batch.n_directed,
+            2 * (states.len() * plan.n_edges() + total)
+        );
+        let flags = batch.contact.sum_all().unwrap().to_scalar::<f64>().unwrap();
+        assert_eq!(flags, (2 * total) as f64);
+        // Kinematic targets: loss unchanged, in candle and in the engine.
+        let mut h = Hyper::new(Variant::Mcgnode, g.dim, 2, 5);
+        h.interaction_radius = 1.5;
+        let net = Net::new(h.clone(), &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
+        let mut eng = Engine::new(&h, &g, 1).unwrap();
+        let theta = eng.layout().flatten(&net.store.weights().unwrap()).unwrap();
+        let idx: Vec<usize> = (0..states.len()).collect();
+        let losses = |t: &[Vec<f64>], eng: &mut Engine| {
+            let tr: Vec<&[f64]> = t.iter().map(Vec::as_slice).collect();
+            let c = net.loss(&Batch::new(&plan, &sr, Some(&tr), 2).unwrap());
+            let c = c.unwrap().to_scalar::<f64>().unwrap();
+            (c, eng.loss(&theta, &states, t, &idx))
+        };
+        let before = losses(&targets, &mut eng);
+        for t in &mut targets {
+            for (f, x) in t.iter_mut().enumerate() {
+                if g.is_kinematic(f / g.dim) {
+                    *x += 100.0;
+                }
+            }
+        }
+        assert_eq!(losses(&targets, &mut eng), before);
+    }
+}
+
+/// A model trained without contacts refuses a system with them, and one
+/// trained with a radius refuses another radius, each naming `--radius`.
+#[test]
+fn a_model_serves_only_its_radius() {
+    let g = touching(2, 5, 1, false);
+    let mut h = Hyper::new(Variant::Mcgnode, 2, 2, 5);
+    let e = Engine::new(&h, &g, 1)
+        .err()
+        .expect("no contacts in the model");
+    assert!(e.to_string().contains("train --radius 1.5"), "{e}");
+    h.interaction_radius = 2.0;
+    let e = Engine::new(&h, &g, 1).err().expect("another radius");
+    assert!(
+        e.to_string().contains("trained with interaction radius 2"),
+        "{e}"
+    );
+    h.interaction_radius = 1.5;
+    assert!(Engine::new(&h, &g, 1).is_ok());
 }

@@ -30,6 +30,9 @@ pub fn train_baseline(
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainedBaseline> {
     check_data(graph, states, acc, cfg)?;
+    if let Some(why) = super::trained::without_contacts(graph) {
+        bail!("{why}");
+    }
     crate::alloc::prepare_for_candle();
     if cfg.init.is_some() {
         bail!("--init (warm start) is for the GNODE family; baselines train from scratch");

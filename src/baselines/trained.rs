@@ -68,6 +68,9 @@ impl Dynamics for TrainedBaseline {
 
     fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
         graph.validate()?;
+        if let Some(why) = without_contacts(graph) {
+            return Err(DynamicsError::Model(why));
+        }
         let h = &self.file.hyper;
         if graph.dim != h.dim {
             return Err(DynamicsError::Dimension {
@@ -142,6 +145,17 @@ impl Dynamics for TrainedBaseline {
             edges: vec![],
         })
     }
+}
+
+/// Why a baseline cannot model `graph`, if it cannot: LGN, HGN and GNS do not
+/// yet see contact edges or leave kinematic particles out of their loss, so
+/// they refuse such systems rather than learn them wrongly.
+pub(crate) fn without_contacts(graph: &Graph) -> Option<String> {
+    (graph.has_contacts() || graph.n_kinematic() > 0).then(|| {
+        "LGN, HGN and GNS do not model contacts or kinematic particles yet: \
+         train a GNODE-family model (--model mcgnode, gnode, cgnode or cdgnode) on these data"
+            .to_string()
+    })
 }
 
 #[cfg(test)]

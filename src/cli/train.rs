@@ -111,6 +111,12 @@ pub struct Args {
     /// edges differ from those it was trained on).
     #[arg(long)]
     pub edge_physics: bool,
+    /// Contacts: every pair of particles closer than R interacts through a
+    /// contact edge found at each state (an edge input marks it), overriding
+    /// the bags' interaction_radius; 0 trains on fixed edges only. Recorded
+    /// in the model file, which then serves only systems of this radius.
+    #[arg(long, value_name = "R")]
+    pub radius: Option<f64>,
     /// Train on unscaled inputs and outputs (by default they are scaled by
     /// statistics of the training split, stored in the model file).
     #[arg(long)]
@@ -261,6 +267,7 @@ pub fn train(
         edge_input: a.edge_update.map(Into::into),
         block_hidden: a.block_hidden.iter().cloned().collect(),
         edge_physics: a.edge_physics,
+        radius: a.radius,
         recipe,
     };
     Ok(train_any_from_bags(

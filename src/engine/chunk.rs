@@ -9,6 +9,7 @@ use crate::model::arch::{Arch, Block, Decoder, NodeInput};
 use crate::model::plan::{BarEnd, GraphPlan};
 use crate::model::solve::lu_solve_in_place;
 use crate::model::variant::EdgeInput;
+use crate::physics::neighbors::NeighborSearch;
 use crate::system::State;
 
 /// The read-only part: architecture, parameter offsets, graph.
@@ -82,6 +83,12 @@ pub(crate) struct Chunk {
     record: bool,
     /// States the edge index arrays are laid out for.
     laid: usize,
+    /// Directed edges laid out (fixed and contact, over all `laid` states),
+    /// and how many the buffers hold.
+    edges: usize,
+    edge_cap: usize,
+    /// Contact pairs of the states being run, found afresh each run.
+    contacts: Contacts,
     recv: Vec<usize>,
     send: Vec<usize>,
     /// Raw inputs (one-hot, q, q̇) for the constraint; NODE: scaled (q, q̇).
@@ -141,12 +148,44 @@ pub(crate) struct Chunk {
     pub(crate) sse: f64,
 }
 
+/// The contact pairs of a chunk's states: state `s`'s are
+/// `pairs[starts[s]..starts[s + 1]]`.
+#[derive(Clone, Debug, Default)]
+struct Contacts {
+    search: Option<NeighborSearch>,
+    pairs: Vec<(usize, usize)>,
+    starts: Vec<usize>,
+}
+
+impl Contacts {
+    /// Finds the contacts of each state `positions` yields; returns the
+    /// number of directed edges of those states, fixed and contact.
+    fn find<'a>(&mut self, plan: &GraphPlan, positions: impl Iterator<Item = &'a [f64]>) -> usize {
+        self.pairs.clear();
+        self.starts.clear();
+        self.starts.push(0);
+        let search = self.search.get_or_insert_with(|| plan.contact_search());
+        for q in positions {
+            plan.contacts(search, q, &mut self.pairs);
+            self.starts.push(self.pairs.len());
+        }
+        2 * ((self.starts.len() - 1) * plan.n_edges() + self.pairs.len())
+    }
+}
+
 impl Chunk {
-    /// Makes room for `bs` states (allocates only when growing).
-    fn reserve(&mut self, m: &Model, bs: usize, record: bool) {
-        if bs <= self.cap && record == self.record {
+    /// Makes room for `bs` states with `edges` directed edges in all
+    /// (allocates only when growing; contact counts grow with headroom, so a
+    /// rollout whose contacts vary a little stops allocating).
+    fn reserve(&mut self, m: &Model, bs: usize, edges: usize, record: bool) {
+        if bs <= self.cap && edges <= self.edge_cap && record == self.record {
             return;
         }
+        let edges = if m.plan.has_contacts() {
+            edges.max(self.edge_cap) + edges / 4 + 16
+        } else {
+            edges
+        };
         let a = &m.arch;
         // NODE's `embed` and `types` size no weight: they must size no
         // buffer either (a corrupt file's 2^32 would be an abort).
@@ -157,7 +196,6 @@ impl Chunk {
         };
         let (n, d) = (m.plan.n, m.plan.dim);
         let nodes = bs * n;
-        let edges = bs * m.plan.recv.len();
         let rmax = nodes.max(edges).max(bs).max(1);
         let width = m.mlps.iter().map(|(_, x)| x.width()).max().unwrap_or(1);
         let z = |len: usize| vec![0.0; len];
@@ -168,10 +206,14 @@ impl Chunk {
         } else {
             d * n * bs
         };
+        let contacts = std::mem::take(&mut self.contacts);
         *self = Chunk {
             cap: bs,
             record,
             laid: 0,
+            edges: 0,
+            edge_cap: edges,
+            contacts,
             recv: vec![0; edges],
             send: vec![0; edges],
             x: z(if a.biases.graph {
@@ -242,31 +284,50 @@ impl Chunk {
         };
     }
 
-    /// Directed edges of `bs` copies of the graph: first every copy's forward
-    /// edges, then every copy's reversed ones, so edge `e` and `e + half` are
-    /// the two directions of one bar or spring.
+    /// Directed edges of `bs` states of the graph, in the plan's order
+    /// ([`GraphPlan::directed_edges`]): first every state's edges one way
+    /// (fixed, then its contacts), then all reversed, so edge `e` and
+    /// `e + half` are the two directions of one bar, spring or contact. The
+    /// constant edge inputs after q_i − q_j (rest length and stiffness, the
+    /// contact flag) are written with them. Without contacts the layout
+    /// depends on `bs` alone and is kept.
     fn lay_out(&mut self, m: &Model, bs: usize) {
-        if self.laid == bs {
+        let contacts = m.plan.has_contacts();
+        if self.laid == bs && !contacts {
             return;
         }
-        let (n, e) = (m.plan.n, m.plan.n_edges());
-        let edges = bs * m.plan.recv.len();
-        let mut k = 0;
-        for half in 0..2 {
-            for s in 0..bs {
-                for j in half * e..(half + 1) * e {
-                    self.recv[k] = s * n + m.plan.recv[j];
-                    self.send[k] = s * n + m.plan.send[j];
-                    if m.arch.edge_physics {
-                        // Constant inputs after q_i − q_j: rest length, stiffness.
-                        for (f, x) in m.arch.edge_physics_of(&m.plan, j).iter().enumerate() {
-                            self.w_in[(m.plan.dim + f) * edges + k] = *x;
-                        }
-                    }
-                    k += 1;
+        let a = &m.arch;
+        let edges = if contacts {
+            2 * (bs * m.plan.n_edges() + self.contacts.pairs.len())
+        } else {
+            bs * m.plan.recv.len()
+        };
+        let (recv, send, w_in) = (&mut self.recv, &mut self.send, &mut self.w_in);
+        let (physics, flag) = (a.dim, a.contact_feature());
+        let contact_physics = m.plan.contact_physics();
+        let scale = a.edge_physics_scale();
+        let (pairs, starts) = if contacts {
+            (&self.contacts.pairs[..], &self.contacts.starts[..])
+        } else {
+            (&[][..], &[][..])
+        };
+        m.plan.directed_edges(bs, pairs, starts, |k, e| {
+            recv[k] = e.recv;
+            send[k] = e.send;
+            if a.edge_physics {
+                let x = match e.fixed {
+                    Some(j) => a.edge_physics_of(&m.plan, j),
+                    None => std::array::from_fn(|f| contact_physics[f] / scale[f]),
+                };
+                for (f, x) in x.iter().enumerate() {
+                    w_in[(physics + f) * edges + k] = *x;
                 }
             }
-        }
+            if a.contacts() {
+                w_in[flag * edges + k] = if e.fixed.is_some() { 0.0 } else { 1.0 };
+            }
+        });
+        self.edges = edges;
         self.laid = bs;
     }
 
@@ -282,7 +343,13 @@ impl Chunk {
         scale: Option<f64>,
     ) {
         let bs = idx.len();
-        self.reserve(m, bs, true);
+        let edges = if m.plan.has_contacts() {
+            let q = idx.iter().map(|&k| states[k].q.as_slice());
+            self.contacts.find(&m.plan, q)
+        } else {
+            bs * m.plan.recv.len()
+        };
+        self.reserve(m, bs, edges, true);
         self.lay_out(m, bs);
         if m.arch.biases.graph {
             self.fill_graph_inputs(m, states, targets, idx);
@@ -293,7 +360,17 @@ impl Chunk {
         }
         let len = self.rows_out(m, bs);
         let mut sse = 0.0;
+        let (n, d) = (m.plan.n, m.plan.dim);
+        let graph = m.arch.biases.graph;
         for i in 0..len {
+            // Kinematic particles' motion is given: no loss, no gradient.
+            let particle = if graph { i % n } else { i / bs / d };
+            if m.plan.is_kinematic(particle) {
+                if scale.is_some() {
+                    self.gacc[i] = 0.0;
+                }
+                continue;
+            }
             let e = self.acc[i] - self.tgt[i];
             sse += e * e;
             if let Some(s) = scale {
@@ -445,17 +522,26 @@ impl Chunk {
         }
     }
 
-    /// Sizes the buffers for one state (inference).
+    /// Sizes the buffers for one state (inference) and, without contacts,
+    /// lays out its edges; with contacts the edges are found at each state.
     pub(crate) fn reserve_one(&mut self, m: &Model) {
-        self.reserve(m, 1, false);
-        self.lay_out(m, 1);
+        self.reserve(m, 1, m.plan.recv.len(), false);
+        if !m.plan.has_contacts() {
+            self.lay_out(m, 1);
+        }
     }
 
     /// Forward pass of one state given as node-major slices, for inference:
     /// no targets, no loss, no reverse pass. Read the results with
     /// [`Chunk::acceleration`], [`Chunk::decoded`] and [`Chunk::edge_outputs`].
     pub(crate) fn forward_one(&mut self, m: &Model, th: &[f64], q: &[f64], v: &[f64]) {
-        self.reserve_one(m);
+        if m.plan.has_contacts() {
+            let edges = self.contacts.find(&m.plan, std::iter::once(q));
+            self.reserve(m, 1, edges, false);
+            self.lay_out(m, 1);
+        } else {
+            self.reserve_one(m);
+        }
         if m.arch.biases.graph {
             self.clear_one_hot(m, m.plan.n);
             self.put_graph_state(m, 0, m.plan.n, q, v);
@@ -476,6 +562,12 @@ impl Chunk {
     /// feature-major `d × edges`, before antisymmetrising and scaling.
     pub(crate) fn edge_outputs(&self) -> &[f64] {
         &self.f_edge
+    }
+
+    /// The directed edges of the last run: receivers, senders (rows; for one
+    /// state, particles), fixed and contact.
+    pub(crate) fn laid_edges(&self) -> (&[usize], &[usize]) {
+        (&self.recv[..self.edges], &self.send[..self.edges])
     }
 
     /// The graph models' forward pass, compiled for the widest vectors the
@@ -515,7 +607,7 @@ impl Chunk {
         let (d, t, em) = (m.plan.dim, a.types, a.embed);
         let bs = self.laid;
         let nodes = bs * m.plan.n;
-        let edges = bs * m.plan.recv.len();
+        let edges = self.edges;
         let nf = a.node_features();
         // Encode: nodes from (one-hot[, q, q̇]), edges from w_ij = q_i − q_j.
         let node_in = match a.node_input {
@@ -842,7 +934,7 @@ impl Chunk {
         let a = &m.arch;
         let (d, t, em) = (m.plan.dim, a.types, a.embed);
         let nodes = bs * m.plan.n;
-        let edges = bs * m.plan.recv.len();
+        let edges = self.edges;
         let nf = a.node_features();
         if a.constrained {
             self.constrain_backward(m, th, bs);

@@ -31,10 +31,18 @@ impl Forward {
         &self.model.plan
     }
 
-    /// Accelerations at (q, v) under the parameters `theta`, node-major into `acc`.
+    /// Accelerations at (q, v) under the parameters `theta`, node-major into
+    /// `acc`; kinematic particles' are 0 (their motion is given, not
+    /// predicted: held at their velocity unless a caller moves them).
     pub fn run(&mut self, theta: &[f64], q: &[f64], v: &[f64], acc: &mut [f64]) {
         self.chunk.forward_one(&self.model, theta, q, v);
         self.chunk.acceleration(self.model.shape(), 1, 0, acc);
+        let plan = &self.model.plan;
+        for (i, a) in acc.chunks_mut(plan.dim).enumerate() {
+            if plan.is_kinematic(i) {
+                a.fill(0.0);
+            }
+        }
     }
 
     /// The decoded forces of the last [`Forward::run`] (constrained models:
@@ -49,16 +57,30 @@ impl Forward {
         }
     }
 
+    /// The undirected edges of the last [`Forward::run`], fixed then contact,
+    /// as (a, b) particle pairs: what [`Forward::edge_forces`] is indexed by.
+    pub fn edge_pairs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        let (recv, send) = self.chunk.laid_edges();
+        let half = recv.len() / 2;
+        recv[..half]
+            .iter()
+            .copied()
+            .zip(send[..half].iter().copied())
+    }
+
     /// Pairwise forces of the last [`Forward::run`] (pairwise decoders; else
-    /// nothing is written): `out[e·d + c]` on `plan.recv[e]` due to
-    /// `plan.send[e]`, for each undirected edge `e`. These are the terms the
-    /// decoder sums into [`Forward::forces`].
-    pub fn edge_forces(&self, out: &mut [f64]) {
+    /// `out` is emptied): `out[e·d + c]` on `a` due to `b` of the `e`-th of
+    /// [`Forward::edge_pairs`]. These are the terms the decoder sums into
+    /// [`Forward::forces`]. `out` is resized (it allocates only when a state
+    /// has more edges than any before).
+    pub fn edge_forces(&self, out: &mut Vec<f64>) {
+        out.clear();
         if !matches!(self.model.arch.decoder, Decoder::Pairwise { .. }) {
             return;
         }
-        let (d, ne) = (self.model.plan.dim, self.model.plan.recv.len());
+        let (d, ne) = (self.model.plan.dim, self.chunk.laid_edges().0.len());
         let (half, k) = (ne / 2, self.model.arch.norm.out_scale);
+        out.resize(half * d, 0.0);
         let fe = self.chunk.edge_outputs();
         for e in 0..half {
             for c in 0..d {

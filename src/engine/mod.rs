@@ -167,7 +167,7 @@ impl Engine {
         idx: &[usize],
         grad: &mut [f64],
     ) -> f64 {
-        let count = (idx.len() * self.model.plan.ndof()) as f64;
+        let count = (idx.len() * self.model.plan.free_ndof()) as f64;
         grad.fill(0.0);
         let mut sse = 0.0;
         self.run(theta, states, targets, idx, Some(1.0 / count), |c| {
@@ -187,7 +187,7 @@ impl Engine {
         targets: &[Vec<f64>],
         idx: &[usize],
     ) -> f64 {
-        let count = (idx.len() * self.model.plan.ndof()) as f64;
+        let count = (idx.len() * self.model.plan.free_ndof()) as f64;
         let mut sse = 0.0;
         self.run(theta, states, targets, idx, None, |c| sse += c.sse);
         sse / count

@@ -34,8 +34,9 @@ pub struct Workspace {
     forward: Forward,
     /// Forces of the last evaluation, `n·d` (constrained variants).
     pub force: Vec<f64>,
-    /// Antisymmetric pairwise forces of the last evaluation, `E·d`, on
-    /// `plan().recv[e]` due to `plan().send[e]` (MCGNODE).
+    /// Antisymmetric pairwise forces of the last evaluation, `E·d`, on `a`
+    /// due to `b` of the `e`-th of [`Workspace::edge_pairs`] (MCGNODE): the
+    /// fixed edges, then the contacts of that state.
     pub edge_force: Vec<f64>,
     /// SHAKE/RATTLE onto the bars with the learned masses, for rollouts of
     /// constrained models on graphs with bars (see [`Kernel::set_project_bars`]).
@@ -46,6 +47,11 @@ impl Workspace {
     /// The graph as the kernel sees it.
     pub fn plan(&self) -> &GraphPlan {
         self.forward.plan()
+    }
+
+    /// The edges of the last evaluation as (a, b) pairs: fixed, then contacts.
+    pub fn edge_pairs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        self.forward.edge_pairs()
     }
 }
 

@@ -161,13 +161,14 @@ impl TrainedModel {
                 .map(|(i, a)| a * graph.masses[i / graph.dim])
                 .collect()
         };
-        let (d, plan) = (graph.dim, ws.plan());
+        let d = graph.dim;
         let edges = if b.pairwise {
-            (0..plan.n_edges())
-                .map(|e| EdgeForce {
-                    a: plan.recv[e],
-                    b: plan.send[e],
-                    force: ws.edge_force[e * d..(e + 1) * d].to_vec(),
+            ws.edge_pairs()
+                .zip(ws.edge_force.chunks(d))
+                .map(|((a, b), f)| EdgeForce {
+                    a,
+                    b,
+                    force: f.to_vec(),
                 })
                 .collect()
         } else {

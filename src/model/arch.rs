@@ -119,6 +119,9 @@ pub struct Arch {
     pub norm: Norm,
     /// Edges read (rest length, stiffness) after q_i − q_j.
     pub edge_physics: bool,
+    /// Contact edges are found at each state within this radius, and every
+    /// edge reads whether it is one (0: fixed edges only, no such input).
+    pub radius: f64,
     /// The biases it was derived from.
     pub biases: Biases,
 }
@@ -182,7 +185,8 @@ impl Arch {
         };
         let d2 = d.saturating_mul(2);
         let msg_hidden = h.message == MessageFn::Mlp;
-        let edge_extra = if h.edge_physics { EDGE_PHYSICS } else { 0 };
+        let edge_extra =
+            if h.edge_physics { EDGE_PHYSICS } else { 0 } + usize::from(h.interaction_radius > 0.0);
         let edge_in = match h.edge_input {
             EdgeInput::Concat => em.saturating_mul(2),
             EdgeInput::Product => em,
@@ -244,6 +248,7 @@ impl Arch {
             edge_input: h.edge_input,
             norm: h.norm.clone().unwrap_or_else(|| Norm::identity(d)),
             edge_physics: h.edge_physics,
+            radius: h.interaction_radius,
             biases: b,
         })
     }
@@ -280,6 +285,12 @@ impl Arch {
                 types: self.types,
             });
         }
+        if graph.interaction_radius != self.radius {
+            return Err(ArchError::Radius {
+                model: self.radius,
+                system: graph.interaction_radius,
+            });
+        }
         if !self.biases.graph && graph.n() != self.particles {
             return Err(ArchError::Particles {
                 built: self.particles,
@@ -289,8 +300,19 @@ impl Arch {
         Ok(())
     }
 
-    /// Edge input features: q_i − q_j, then (rest, stiffness) with edge physics.
+    /// Edge input features: q_i − q_j, then (rest, stiffness) with edge
+    /// physics, then the contact flag (1 for a contact edge) with contacts.
     pub fn edge_features(&self) -> usize {
+        self.dim + if self.edge_physics { EDGE_PHYSICS } else { 0 } + usize::from(self.contacts())
+    }
+
+    /// Whether the model finds contact edges and reads the contact flag.
+    pub fn contacts(&self) -> bool {
+        self.radius > 0.0
+    }
+
+    /// Index of the contact flag among the edge inputs.
+    pub fn contact_feature(&self) -> usize {
         self.dim + if self.edge_physics { EDGE_PHYSICS } else { 0 }
     }
 
@@ -372,6 +394,17 @@ pub enum ArchError {
         /// Types the model knows.
         types: usize,
     },
+    /// The graph's interaction radius is not the model's.
+    #[error(
+        "{}",
+        radius_mismatch(*model, *system)
+    )]
+    Radius {
+        /// The model's radius (0: trained without contacts).
+        model: f64,
+        /// The graph's.
+        system: f64,
+    },
     /// NODE (not inductive) meets another particle count.
     #[error("NODE model is built for {built} particles, system has {has} (NODE is not inductive)")]
     Particles {
@@ -383,3 +416,23 @@ pub enum ArchError {
 }
 
 crate::error::typed_errors!(ArchError);
+
+/// What a radius mismatch says, with its fix.
+fn radius_mismatch(model: f64, system: f64) -> String {
+    if model == 0.0 {
+        format!(
+            "the system has contacts (interaction radius {system}) but the model was trained \
+             without them: train one on these data (train --radius {system})"
+        )
+    } else if system == 0.0 {
+        format!(
+            "the model finds contacts within radius {model}, the system has none: give the \
+             system interaction_radius {model}, or use a model trained without --radius"
+        )
+    } else {
+        format!(
+            "the model was trained with interaction radius {model}, the system has {system}: \
+             train one for this radius (train --radius {system})"
+        )
+    }
+}

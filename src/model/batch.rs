@@ -30,6 +30,11 @@ pub struct Batch {
     pub n_directed: usize,
     /// Rest length and stiffness of each directed edge, `(2·B·E, 2)`.
     pub edge_params: Tensor,
+    /// 1 for a contact edge, 0 for a fixed one, `(2·B·E, 1)`.
+    pub contact: Tensor,
+    /// With kinematic particles: 1 for a free particle's coordinates, 0 for a
+    /// kinematic one's, `(B·n, d)` (losses average over the free ones).
+    pub free: Option<Tensor>,
     /// Constraint rows when the graph has bars: A `(B, k, D)`, Aᵀ `(B, D, k)`, Ȧq̇ `(B, k, 1)`.
     pub constraint: Option<(Tensor, Tensor, Tensor)>,
     /// Target accelerations `(B·n, d)`, when training.
@@ -68,19 +73,34 @@ impl Batch {
             q.extend_from_slice(&st.q);
             v.extend_from_slice(&st.v);
         }
-        let e = plan.n_edges();
-        let mut recv = Vec::with_capacity(2 * b * e);
-        let mut send = Vec::with_capacity(2 * b * e);
-        let mut params = Vec::with_capacity(4 * b * e);
-        for half in 0..2 {
-            for s in 0..b {
-                for k in half * e..(half + 1) * e {
-                    recv.push((s * n + plan.recv[k]) as u32);
-                    send.push((s * n + plan.send[k]) as u32);
-                    params.extend(plan.edge_physics(k));
-                }
-            }
+        // Contacts at each state, then every directed edge in the plan's order.
+        let (mut pairs, mut starts) = (vec![], vec![0]);
+        let mut search = plan.contact_search();
+        for st in states {
+            plan.contacts(&mut search, &st.q, &mut pairs);
+            starts.push(pairs.len());
         }
+        let (mut recv, mut send, mut params, mut contact) = (vec![], vec![], vec![], vec![]);
+        plan.directed_edges(b, &pairs, &starts, |_, e| {
+            recv.push(e.recv as u32);
+            send.push(e.send as u32);
+            match e.fixed {
+                Some(k) => params.extend(plan.edge_physics(k)),
+                None => params.extend(plan.contact_physics()),
+            }
+            contact.push(if e.fixed.is_some() { 0.0 } else { 1.0 });
+        });
+        let free = if plan.kinematic.iter().any(|k| *k) {
+            let one = (0..b * n)
+                .flat_map(|r| {
+                    let x = if plan.is_kinematic(r % n) { 0.0 } else { 1.0 };
+                    std::iter::repeat_n(x, d)
+                })
+                .collect();
+            Some(Tensor::from_vec(one, (b * n, d), dev)?)
+        } else {
+            None
+        };
         let k = plan.bars.len();
         let constraint = if k > 0 {
             let mut a = vec![0.0; b * k * nd];
@@ -136,6 +156,8 @@ impl Batch {
             send: Tensor::from_vec(send, n_directed, dev)?,
             n_directed,
             edge_params: Tensor::from_vec(params, (n_directed, EDGE_PHYSICS), dev)?,
+            contact: Tensor::from_vec(contact, (n_directed, 1), dev)?,
+            free,
             constraint,
             target,
         })

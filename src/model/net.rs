@@ -124,6 +124,9 @@ impl Net {
                 let scale = Tensor::from_slice(&scale, (1, EDGE_PHYSICS), &Device::Cpu)?;
                 w = Tensor::cat(&[&w, &b.edge_params.broadcast_mul(&scale)?], 1)?;
             }
+            if arch.contacts() {
+                w = Tensor::cat(&[&w, &b.contact], 1)?;
+            }
             Some(squareplus(&p.need(Block::EdgeEmbed)?.forward(s, &w)?)?)
         } else {
             None
@@ -222,12 +225,20 @@ impl Net {
         Ok(acc)
     }
 
-    /// Mean squared error of predicted accelerations against the batch targets.
+    /// Mean squared error of predicted accelerations against the batch
+    /// targets, over the free particles (kinematic ones are given).
     pub fn loss(&self, b: &Batch) -> Result<Tensor> {
         let Some(t) = &b.target else {
             bail!("batch has no targets");
         };
-        Ok((self.forward(b)?.acc - t)?.sqr()?.mean_all()?)
+        let err = (self.forward(b)?.acc - t)?.sqr()?;
+        Ok(match &b.free {
+            None => err.mean_all()?,
+            Some(free) => {
+                let count = free.sum_all()?.to_scalar::<f64>()?.max(1.0);
+                ((err * free)?.sum_all()? / count)?
+            }
+        })
     }
 
     /// The variant.

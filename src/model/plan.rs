@@ -1,7 +1,13 @@
 //! A graph prepared for learned models: directed message-passing edges and the
 //! rigid-bar constraint rows A(q), Ȧq̇. Shared by the candle model and the engine
 //! so both read the graph the same way.
+//!
+//! A graph with an interaction radius has, besides its fixed edges, contact
+//! edges that depend on the state: [`GraphPlan::contacts`] finds them for
+//! one state, and [`GraphPlan::directed_edges`] lays out the directed edges
+//! of several states, fixed and contact, in the one order both executors use.
 
+use crate::physics::neighbors::NeighborSearch;
 use crate::system::{EdgeKind, Endpoint, Graph};
 
 /// Edge-physics input features per edge: rest length and stiffness.
@@ -57,14 +63,37 @@ pub struct GraphPlan {
     pub rest: Vec<f64>,
     /// Stiffness of each directed edge (0 for bars).
     pub stiffness: Vec<f64>,
+    /// Pairs closer than this interact through contact edges found at each
+    /// state (0: the fixed edges above are all).
+    pub radius: f64,
+    /// Which particles are kinematic (motion given): empty = none.
+    pub kinematic: Vec<bool>,
+}
+
+/// One directed edge of a laid-out set of states: receiver and sender rows
+/// (state-offset particle indices), and whether it is a contact.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Directed {
+    /// Receiver row.
+    pub recv: usize,
+    /// Sender row.
+    pub send: usize,
+    /// Index into the plan's fixed directed edges, or `None` for a contact.
+    pub fixed: Option<usize>,
 }
 
 impl GraphPlan {
     /// Prepares a (validated) graph.
     pub fn new(graph: &Graph) -> Self {
-        let pairs: Vec<(usize, usize)> = graph.particle_edges().map(|(a, b, _)| (a, b)).collect();
-        let params: Vec<(f64, f64)> = graph
-            .particle_edges()
+        // With a radius, contacts come from positions: a contact edge stored
+        // in the graph would be counted twice.
+        let edges = || {
+            graph
+                .particle_edges()
+                .filter(|(_, _, e)| !(graph.has_contacts() && e.kind == EdgeKind::Contact))
+        };
+        let pairs: Vec<(usize, usize)> = edges().map(|(a, b, _)| (a, b)).collect();
+        let params: Vec<(f64, f64)> = edges()
             .map(|(_, _, e)| match e.kind {
                 // A contact's rest length is the radius, its stiffness 0
                 // (see EdgeKind::Contact).
@@ -99,7 +128,96 @@ impl GraphPlan {
             bars,
             rest,
             stiffness,
+            radius: graph.interaction_radius,
+            kinematic: graph.kinematic.clone(),
         }
+    }
+
+    /// Whether contact edges are found at each state.
+    pub fn has_contacts(&self) -> bool {
+        self.radius > 0.0
+    }
+
+    /// Whether particle `i` is kinematic.
+    pub fn is_kinematic(&self, i: usize) -> bool {
+        self.kinematic.get(i).copied().unwrap_or(false)
+    }
+
+    /// Generalised coordinates of the particles that are not kinematic: what
+    /// losses average over.
+    pub fn free_ndof(&self) -> usize {
+        (self.n - self.kinematic.iter().filter(|k| **k).count()) * self.dim
+    }
+
+    /// A neighbour search that leaves out the pairs of this plan's fixed edges
+    /// and pairs of two kinematic particles (reusable: it allocates only
+    /// while growing).
+    pub fn contact_search(&self) -> NeighborSearch {
+        let e = self.n_edges();
+        let bonds = (0..e).map(|k| (self.recv[k], self.send[k]));
+        NeighborSearch::excluding(self.n, bonds, self.kinematic.clone())
+    }
+
+    /// The contact pairs (i < j, sorted) at positions `q`, appended to `out`
+    /// (none without a radius).
+    pub fn contacts(&self, search: &mut NeighborSearch, q: &[f64], out: &mut Vec<(usize, usize)>) {
+        if self.has_contacts() {
+            out.extend_from_slice(search.search(q, self.dim, self.radius));
+        }
+    }
+
+    /// The directed edges of `states` states side by side (state `s`'s
+    /// particles at rows `s·n..`), whose contact pairs are
+    /// `pairs[starts[s]..starts[s + 1]]`: first every state's edges one way
+    /// (its fixed edges, then its contacts a←b), then all of them reversed in
+    /// the same order, so that edge `k` and `k + half` are one pair's two
+    /// directions. `visit(k, edge)` sees each in order.
+    pub fn directed_edges(
+        &self,
+        states: usize,
+        pairs: &[(usize, usize)],
+        starts: &[usize],
+        mut visit: impl FnMut(usize, Directed),
+    ) {
+        let (n, e) = (self.n, self.n_edges());
+        let mut k = 0;
+        for half in 0..2 {
+            for s in 0..states {
+                for j in half * e..(half + 1) * e {
+                    let (recv, send) = (s * n + self.recv[j], s * n + self.send[j]);
+                    visit(
+                        k,
+                        Directed {
+                            recv,
+                            send,
+                            fixed: Some(j),
+                        },
+                    );
+                    k += 1;
+                }
+                if let (Some(&a), Some(&b)) = (starts.get(s), starts.get(s + 1)) {
+                    for &(i, j) in &pairs[a..b] {
+                        let (recv, send) = if half == 0 { (i, j) } else { (j, i) };
+                        let (recv, send) = (s * n + recv, s * n + send);
+                        visit(
+                            k,
+                            Directed {
+                                recv,
+                                send,
+                                fixed: None,
+                            },
+                        );
+                        k += 1;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The raw edge-physics inputs of a contact edge: the radius as its rest
+    /// length, stiffness 0 (the law is learned).
+    pub fn contact_physics(&self) -> [f64; EDGE_PHYSICS] {
+        [self.radius, 0.0]
     }
 
     /// The physical inputs of directed edge `e` before scaling: rest length

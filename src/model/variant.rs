@@ -184,6 +184,7 @@ impl Norm {
         q_mean.iter_mut().for_each(|m| *m /= count.max(1) as f64);
         let (mut q2, mut v2, mut w2, mut a2) = (0.0, 0.0, 0.0, 0.0);
         let mut edges = 0usize;
+        let mut search = crate::physics::neighbors::NeighborSearch::new(graph);
         for s in states {
             for (i, x) in s.q.iter().enumerate() {
                 q2 += (x - q_mean[i % d]).powi(2);
@@ -195,9 +196,22 @@ impl Norm {
                 }
                 edges += 1;
             }
+            // Contact edges are edges too: a box of soft spheres has no other.
+            if graph.has_contacts() {
+                for &(a, b) in search.search(&s.q, d, graph.interaction_radius) {
+                    for c in 0..d {
+                        w2 += (s.q[a * d + c] - s.q[b * d + c]).powi(2);
+                    }
+                    edges += 1;
+                }
+            }
         }
+        // Kinematic particles' accelerations are given, never predicted.
+        let free = |f: &usize| !graph.is_kinematic(f / d);
+        let mut outputs = 0usize;
         for t in targets {
-            a2 += t.iter().map(|x| x * x).sum::<f64>();
+            a2 += (0..t.len()).filter(free).map(|f| t[f] * t[f]).sum::<f64>();
+            outputs += (0..t.len()).filter(free).count();
         }
         let n = states.iter().map(|s| s.q.len()).sum::<usize>();
         Self {
@@ -205,7 +219,7 @@ impl Norm {
             q_scale: scale(q2, n),
             v_scale: scale(v2, n),
             w_scale: scale(w2, edges * d),
-            out_scale: scale(a2, targets.iter().map(|t| t.len()).sum()),
+            out_scale: scale(a2, outputs),
             k_scale: scale(
                 graph
                     .particle_edges()
@@ -219,6 +233,13 @@ impl Norm {
 
 fn one() -> usize {
     1
+}
+
+/// Serde's test for leaving a radius of 0 out, so that models without
+/// contacts write the same file as before the field existed.
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde passes a reference
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 fn linear() -> MessageFn {
@@ -273,6 +294,12 @@ pub struct Hyper {
     /// edges differ from those it was trained on).
     #[serde(default)]
     pub edge_physics: bool,
+    /// Contacts: pairs of particles closer than this interact through edges
+    /// found at each state, which the model reads as contacts (an edge input);
+    /// 0 (and absent from files written before it existed): fixed edges only.
+    /// A model serves only graphs of its radius.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub interaction_radius: f64,
     /// Input and output scales (none: unscaled, as in files written before
     /// normalisation existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -306,6 +333,7 @@ impl Hyper {
             edge_input,
             block_hidden: Default::default(),
             edge_physics: false,
+            interaction_radius: 0.0,
             norm: None,
         }
     }

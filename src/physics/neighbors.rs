@@ -56,11 +56,22 @@ impl NeighborSearch {
     /// A search excluding the pairs joined by `graph`'s fixed particle edges
     /// and the pairs of two of its kinematic particles.
     pub fn new(graph: &Graph) -> Self {
+        let bonds = graph.fixed_edges().filter_map(particle_pair);
+        Self::excluding(graph.n(), bonds, graph.kinematic.clone())
+    }
+
+    /// A search over `n` particles leaving out the `bonds` pairs and pairs of
+    /// two `kinematic` ones (empty: none kinematic).
+    pub fn excluding(
+        n: usize,
+        bonds: impl Iterator<Item = (usize, usize)> + Clone,
+        kinematic: Vec<bool>,
+    ) -> Self {
         let mut s = NeighborSearch {
-            kinematic: graph.kinematic.clone(),
+            kinematic,
             ..NeighborSearch::default()
         };
-        s.set_bonds(graph.n(), graph.fixed_edges().filter_map(particle_pair));
+        s.set_bonds(n, bonds);
         s
     }
 

@@ -653,10 +653,20 @@ fn resume(
 /// zero acceleration, i.e. the targets' mean square (every entry weighs the
 /// same, as in the training loss).
 pub fn trivial_loss(acc: &[Vec<f64>], idx: &[usize]) -> f64 {
+    trivial_loss_free(acc, idx, |_| true)
+}
+
+/// [`trivial_loss`] over the coordinates `free(f)` keeps (the free
+/// particles', as the GNODE family's loss).
+pub fn trivial_loss_free(acc: &[Vec<f64>], idx: &[usize], free: impl Fn(usize) -> bool) -> f64 {
     let (mut sum, mut count) = (0.0, 0usize);
     for &i in idx {
-        sum += acc[i].iter().map(|a| a * a).sum::<f64>();
-        count += acc[i].len();
+        for (f, a) in acc[i].iter().enumerate() {
+            if free(f) {
+                sum += a * a;
+                count += 1;
+            }
+        }
     }
     if count == 0 {
         0.0
@@ -763,7 +773,7 @@ pub fn train(
             &mut native
         }
     };
-    let trivial = trivial_loss(acc, &sp.validation);
+    let trivial = trivial_loss_free(acc, &sp.validation, |f| !graph.is_kinematic(f / graph.dim));
     let report = fit(
         &mut theta, sp, cfg, &mut rng, objective, &mut adam, on_epoch,
     )?
@@ -829,6 +839,9 @@ pub struct ModelOptions {
     pub block_hidden: std::collections::BTreeMap<String, Vec<usize>>,
     /// Edges read their rest length and stiffness.
     pub edge_physics: bool,
+    /// The interaction radius to train with, overriding the bags' (none:
+    /// theirs).
+    pub radius: Option<f64>,
     /// With [`Recipe::Auto`], the blocks that embed and decode edges get the
     /// recipe's widths ([`recipe::edge_blocks`]) unless `block_hidden` names
     /// them; [`Recipe::Paper`] (the default here) adds nothing.
@@ -850,6 +863,7 @@ impl Default for ModelOptions {
             edge_input: None,
             block_hidden: Default::default(),
             edge_physics: false,
+            radius: None,
             recipe: Recipe::Paper,
         }
     }
@@ -1031,6 +1045,20 @@ pub(crate) fn train_from_bags(
 ) -> Result<crate::model::ModelFile> {
     log(&format!("training {variant}"));
     let mut data = load_training_data_from(bags, opts.topic.as_deref(), &mut log)?;
+    if let Some(r) = opts.radius {
+        if !(r.is_finite() && r >= 0.0) {
+            bail!("--radius {r} must be a finite number ≥ 0 (0: fixed edges only)");
+        }
+        data.dataset.graph.interaction_radius = r;
+    }
+    let g = &data.dataset.graph;
+    if g.has_contacts() || g.n_kinematic() > 0 {
+        log(&format!(
+            "contacts within radius {} (found at every state); {} kinematic particles, left out of the loss",
+            g.interaction_radius,
+            g.n_kinematic()
+        ));
+    }
     apply_data_options(&mut data.dataset, cfg, &mut log)?;
     data.trained_on.states = data.dataset.len();
     let ds = &data.dataset;
@@ -1048,6 +1076,7 @@ pub(crate) fn train_from_bags(
             .unwrap_or(1),
     );
     let mut hyper = opts.hyper(variant, ds.graph.dim, types, ds.graph.n())?;
+    hyper.interaction_radius = ds.graph.interaction_radius;
     hyper.body_force = match opts.body_force {
         BodyForce::On => true,
         BodyForce::Off => false,
