@@ -108,13 +108,54 @@ pub fn rollout_seconds(
 ) -> Result<f64> {
     let cfg = SystemConfig::new(system, n);
     let g = cfg.graph();
-    let (_, m) = random_model(variant, &g, 0)?;
     let s0 = cfg.start_for(&g, 5, 0);
-    let mut ws = m.kernel.workspace(&g).map_err(crate::error::Error::msg)?;
+    graph_rollout_seconds(&g, &s0, cfg.dt, variant, steps, repeats)
+}
+
+/// `side`² free particles on a triangular lattice 0.8 apart, jittered by
+/// 2 %, with contacts within radius 1: six neighbours each inside (a dense
+/// granular packing), the graph the contact rollout figure runs on, at rest.
+pub fn contact_packing(side: usize) -> (Graph, State) {
+    use rand::{Rng, SeedableRng};
+    let n = side * side;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let (a, h) = (0.8, 0.8 * 3f64.sqrt() / 2.0);
+    let mut q = Vec::with_capacity(2 * n);
+    for k in 0..n {
+        let (i, j) = ((k % side) as f64, (k / side) as f64);
+        let shift = if (k / side) % 2 == 1 { a / 2.0 } else { 0.0 };
+        q.push(i * a + shift + rng.random_range(-0.016..0.016));
+        q.push(j * h + rng.random_range(-0.016..0.016));
+    }
+    let g = Graph {
+        dim: 2,
+        types: vec![0; n],
+        masses: vec![1.0; n],
+        edges: vec![],
+        anchors: vec![],
+        interaction_radius: 1.0,
+        kinematic: vec![],
+    };
+    let v = vec![0.0; 2 * n];
+    (g, State { q, v })
+}
+
+/// Median time of a kernel rollout of `steps` steps of `variant` (random
+/// weights) on `g` from `s0`.
+pub fn graph_rollout_seconds(
+    g: &Graph,
+    s0: &State,
+    dt: f64,
+    variant: Variant,
+    steps: usize,
+    repeats: usize,
+) -> Result<f64> {
+    let (_, m) = random_model(variant, g, 0)?;
+    let mut ws = m.kernel.workspace(g).map_err(crate::error::Error::msg)?;
     let mut times = vec![];
     for _ in 0..repeats {
         let t = Instant::now();
-        let r = m.rollout_with(&mut ws, &s0, cfg.dt, steps, steps, |_, _, _| {});
+        let r = m.rollout_with(&mut ws, s0, dt, steps, steps, |_, _, _| {});
         times.push(t.elapsed().as_secs_f64());
         r.map_err(crate::error::Error::msg)?;
     }
@@ -233,5 +274,60 @@ pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
             repeats: r.min(5),
         });
     }
+    let (g, s0) = contact_packing(32);
+    let name = format!(
+        "{}-particle contact MCGNODE rollout speed (6 neighbours each)",
+        g.n()
+    );
+    if want(&name) {
+        let steps = if quick { 200 } else { 2_000 };
+        let s = graph_rollout_seconds(&g, &s0, 1e-3, Variant::Mcgnode, steps, r.min(5))?;
+        out.push(Figure {
+            name,
+            value: steps as f64 / s,
+            unit: "steps/s".into(),
+            jax: None,
+            repeats: r.min(5),
+        });
+        // The share of a step the neighbour search takes (one search per
+        // evaluation, one evaluation per step).
+        let mut search = crate::physics::neighbors::NeighborSearch::new(&g);
+        let times: Vec<f64> = (0..r.min(5))
+            .map(|_| {
+                let t = Instant::now();
+                for _ in 0..steps {
+                    std::hint::black_box(search.search(&s0.q, 2, 1.0).len());
+                }
+                t.elapsed().as_secs_f64()
+            })
+            .collect();
+        out.push(Figure {
+            name: format!("{}-particle contact rollout: neighbour search share", g.n()),
+            value: 100.0 * median(times) / s,
+            unit: "% of a step".into(),
+            jax: None,
+            repeats: r.min(5),
+        });
+    }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    /// The contact figure's packing has the six neighbours it claims inside
+    /// (fewer on its rim), none bonded.
+    #[test]
+    fn the_contact_packing_has_six_neighbours_inside() {
+        let (g, s) = super::contact_packing(32);
+        let pairs = crate::physics::neighbors::brute_force_pairs(&g, &s.q, 1.0);
+        let mut count = vec![0usize; g.n()];
+        for (a, b) in pairs {
+            count[a] += 1;
+            count[b] += 1;
+        }
+        let inside = |k: usize| (2..30).contains(&(k % 32)) && (2..30).contains(&(k / 32));
+        assert!((0..g.n()).filter(|&k| inside(k)).all(|k| count[k] == 6));
+        let mean = count.iter().sum::<usize>() as f64 / g.n() as f64;
+        assert!((5.5..6.0).contains(&mean), "{mean}");
+    }
 }

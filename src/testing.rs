@@ -12,8 +12,15 @@ use rand_chacha::ChaCha8Rng;
 /// training). As `train` would configure it: MCGNODE has a body-force branch
 /// only when the graph has anchors (springs are closed systems).
 pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, TrainedModel)> {
-    let mut hyper = Hyper::new(variant, graph.dim, 1, graph.n());
+    let types = graph
+        .types
+        .iter()
+        .map(|&t| t as usize + 1)
+        .max()
+        .unwrap_or(1);
+    let mut hyper = Hyper::new(variant, graph.dim, types, graph.n());
     hyper.body_force = !graph.anchors.is_empty();
+    hyper.interaction_radius = graph.interaction_radius;
     let net = Net::new(hyper.clone(), &mut ChaCha8Rng::seed_from_u64(seed))?;
     let file = crate::model::ModelFile {
         format: crate::model::file::FORMAT.into(),

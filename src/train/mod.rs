@@ -113,6 +113,12 @@ impl TrainConfig {
     /// default recipe for `states` states of `graph` (before the split), and
     /// a line saying what was chosen (`None` when nothing was).
     pub fn resolved(&self, graph: &Graph, states: usize) -> (TrainConfig, Option<String>) {
+        self.resolved_for(recipe::directed_edges(graph), states)
+    }
+
+    /// [`TrainConfig::resolved`] for states of `edges` directed edges each
+    /// (with contacts: [`recipe::directed_edges_in`]).
+    pub fn resolved_for(&self, edges: usize, states: usize) -> (TrainConfig, Option<String>) {
         let a = self.auto;
         let mut c = self.clone();
         c.auto = Auto::default();
@@ -121,7 +127,7 @@ impl TrainConfig {
         }
         let warm = self.init.is_some();
         if a.batch {
-            c.batch = recipe::batch_for(graph);
+            c.batch = recipe::batch_for_edges(edges);
         }
         if a.lr {
             c.lr = if warm { 1e-3 } else { 1e-2 };
@@ -142,7 +148,7 @@ impl TrainConfig {
         let line = format!(
             "recipe: batch {} states ({} directed edges each), {} epochs, lr {:e}{drops}{}",
             c.batch,
-            recipe::directed_edges(graph),
+            edges,
             c.epochs,
             c.lr,
             if warm { " (warm start)" } else { "" }
@@ -1062,7 +1068,8 @@ pub(crate) fn train_from_bags(
     apply_data_options(&mut data.dataset, cfg, &mut log)?;
     data.trained_on.states = data.dataset.len();
     let ds = &data.dataset;
-    let (cfg, chosen) = cfg.resolved(&ds.graph, ds.len());
+    let edges = recipe::directed_edges_in(&ds.graph, &ds.states);
+    let (cfg, chosen) = cfg.resolved_for(edges, ds.len());
     let cfg = &cfg;
     if let Some(line) = chosen {
         log(&line);

@@ -110,9 +110,35 @@ pub fn directed_edges(graph: &Graph) -> usize {
         .max(1)
 }
 
+/// Directed edges of an average state of `states` of `graph`: its fixed
+/// edges and, with contacts, the mean number of contact edges (both ways)
+/// over at most 64 states spread through the data.
+pub fn directed_edges_in(graph: &Graph, states: &[crate::system::State]) -> usize {
+    let fixed = directed_edges(graph);
+    if !graph.has_contacts() || states.is_empty() {
+        return fixed;
+    }
+    let mut search = crate::physics::neighbors::NeighborSearch::new(graph);
+    let step = states.len().div_ceil(64);
+    let (mut pairs, mut seen) = (0, 0);
+    for s in states.iter().step_by(step) {
+        pairs += search
+            .search(&s.q, graph.dim, graph.interaction_radius)
+            .len();
+        seen += 1;
+    }
+    let fixed = if graph.edges.is_empty() { 0 } else { fixed };
+    (fixed + (2 * pairs).div_ceil(seen)).max(1)
+}
+
 /// The default recipe's batch, in states, for states of `graph`.
 pub fn batch_for(graph: &Graph) -> usize {
-    (BATCH_EDGES / directed_edges(graph)).clamp(1, MAX_BATCH)
+    batch_for_edges(directed_edges(graph))
+}
+
+/// The default recipe's batch, in states, for states of `edges` directed edges.
+pub fn batch_for_edges(edges: usize) -> usize {
+    (BATCH_EDGES / edges.max(1)).clamp(1, MAX_BATCH)
 }
 
 /// The default recipe's epochs for `train_states` training states in batches
