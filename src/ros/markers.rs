@@ -27,6 +27,8 @@ const GREY: ColorRgba = rgba(0.6, 0.6, 0.6, 1.0);
 const DARK: ColorRgba = rgba(0.2, 0.2, 0.2, 1.0);
 const PATH: ColorRgba = rgba(0.1, 0.45, 0.9, 0.8);
 const FORCE: ColorRgba = rgba(0.9, 0.25, 0.1, 1.0);
+/// Contact edges: a light cyan, apart from springs, bars and forces.
+const CONTACT: ColorRgba = rgba(0.3, 0.85, 0.95, 0.9);
 
 const fn rgba(r: f32, g: f32, b: f32, a: f32) -> ColorRgba {
     ColorRgba { r, g, b, a }
@@ -149,6 +151,11 @@ pub fn prediction_markers(
     if !edges.points.is_empty() {
         out.push(edges);
     }
+    if let Some(contacts) = contact_lines(s) {
+        let mut m = base("contacts", 0, LINE_LIST, 0.04 * l, CONTACT);
+        m.points = contacts;
+        out.push(m);
+    }
     if !s.anchors.is_empty() {
         let mut anchors = base("anchors", 0, CUBE_LIST, 0.2 * l, DARK);
         anchors.points.clone_from(&s.anchors);
@@ -173,6 +180,36 @@ pub fn prediction_markers(
     }
     out.extend(force_markers(&base, s, &forces.total, l));
     MarkerArray { markers: out }
+}
+
+/// The contact edges of the input state as line ends: every pair closer than
+/// its interaction radius that no edge joins and that are not both
+/// kinematic, as the models find them (`None` without a radius or contacts).
+fn contact_lines(s: &ParticleState) -> Option<Vec<Point>> {
+    let n = s.positions.len();
+    if !(s.interaction_radius > 0.0) || n < 2 {
+        return None;
+    }
+    let bonds = s
+        .edge_a
+        .iter()
+        .zip(&s.edge_b)
+        .map(|(&a, &b)| (a as usize, b as usize))
+        .filter(move |&(a, b)| a < n && b < n && a != b);
+    let kinematic = if s.kinematic.len() == n {
+        s.kinematic.clone()
+    } else {
+        vec![]
+    };
+    let mut search = crate::physics::neighbors::NeighborSearch::excluding(n, bonds, kinematic);
+    let q: Vec<f64> = s.positions.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+    let pairs = search.search(&q, 3, s.interaction_radius);
+    (!pairs.is_empty()).then(|| {
+        pairs
+            .iter()
+            .flat_map(|&(a, b)| [point(&s.positions[a]), point(&s.positions[b])])
+            .collect()
+    })
 }
 
 /// Arrows (or, above [`MAX_ARROWS`] particles, one line list) from each
@@ -243,6 +280,38 @@ mod tests {
         let model = load_truth(&format!("truth:{}", kind.name())).unwrap();
         let p = super::super::predict::predict(model.as_ref(), &msg, 0.01, horizon, 1).unwrap();
         (p.trajectory, p.forces)
+    }
+
+    /// Contacts are drawn in their own colour: one segment per pair the
+    /// brute-force search finds at the input state, none on walls alone.
+    #[test]
+    fn contacts_get_their_own_lines() {
+        let cfg = SystemConfig::new(SystemKind::CollidingLattices, 32);
+        let graph = cfg.graph();
+        let mut state = cfg.start_for(&graph, 3, 0);
+        // Squeezed to half size: unbonded pairs of each lattice come closer than R.
+        state.q.iter_mut().for_each(|x| *x *= 0.5);
+        let pairs = crate::physics::neighbors::brute_force_pairs(&graph, &state.q, 1.0);
+        assert!(!pairs.is_empty());
+        let sample = Sample {
+            t: 0.0,
+            state,
+            acc: None,
+        };
+        let msg = ParticleState::from_sample(0, 0, "", &graph, &sample);
+        let p = super::super::predict::predict(&crate::dynamics::Still, &msg, 0.01, 3, 1).unwrap();
+        let m = prediction_markers(&p.trajectory, &p.forces);
+        let c = by_ns(&m, "contacts");
+        assert_eq!(c.len(), 1);
+        assert_eq!(c[0].points.len(), 2 * pairs.len());
+        assert_eq!(c[0].color, CONTACT);
+        let (a, b) = pairs[0];
+        let at = |i: usize| point(&msg.positions[i]);
+        assert_eq!(c[0].points[..2], [at(a), at(b)]);
+        // Without a radius: no contact lines.
+        let mut plain = msg.clone();
+        plain.interaction_radius = 0.0;
+        assert!(contact_lines(&plain).is_none());
     }
 
     fn by_ns<'a>(m: &'a MarkerArray, ns: &str) -> Vec<&'a Marker> {
