@@ -5,8 +5,10 @@
 //! cut by a crash after `mcgnode bag repair`; bags with contacts (radius,
 //! kinematic particles) and bags of the layout before them.
 
+mod common;
+
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 use mcgnode::data::msg::{
@@ -14,24 +16,14 @@ use mcgnode::data::msg::{
     DEP_VECTOR3, FIELD_KNOWN, PARTICLE_STATE_MSG_V1, PARTICLE_STATE_MSG_V2, PARTICLE_STATE_TYPE,
 };
 use mcgnode::data::{
-    read_bags, read_trajectories, write_trajectories, write_trajectories_with_field, Bag,
-    BagWriter, ParticleState, ReadOptions,
+    read_bags, read_trajectories, write_trajectories, write_trajectories_with_field, BagWriter,
+    ParticleState, ReadOptions,
 };
 use mcgnode::physics::{Field, SystemConfig, SystemKind};
 use mcgnode::system::{Edge, EdgeKind, Endpoint, Graph, Sample, State, Trajectory};
 
-const ROOT: &str = env!("CARGO_MANIFEST_DIR");
-const BIN: &str = env!("CARGO_BIN_EXE_mcgnode");
-
-fn venv_python() -> PathBuf {
-    let py = Path::new(ROOT).join(".venv/bin/python3");
-    assert!(
-        py.exists(),
-        "{} is missing: run scripts/setup_venv.sh (in {ROOT}), then re-run this test",
-        py.display()
-    );
-    py
-}
+use common::cli::{evaluate_json, mcgnode, ok, read, venv_python};
+use common::ROOT;
 
 /// Runs scripts/write_rosbag2.py IN OUT ARGS and checks it succeeded.
 fn rosbags_write(input: &Path, out: &Path, args: &[&str]) {
@@ -57,24 +49,6 @@ fn rosbags_decode(bag: &Path) -> Output {
         .args(["--decoder", "rosbags", "--bits"])
         .output()
         .expect("run decode_bag.py")
-}
-
-fn mcgnode(args: &[&str], dir: &Path) -> Output {
-    Command::new(BIN)
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run mcgnode")
-}
-
-fn ok(o: &Output) -> String {
-    assert!(
-        o.status.success(),
-        "mcgnode failed:\nstdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
 /// A 2D chain of three particles (springs) and a 3D two-bar pendulum with an
@@ -153,10 +127,6 @@ fn trajectories() -> Vec<Trajectory> {
         traj(7, &pendulum, 5),
         traj(9, &chain, 4),
     ]
-}
-
-fn read(path: &Path) -> Bag {
-    read_trajectories(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
 }
 
 #[test]
@@ -514,13 +484,6 @@ fn bag_info_describes_files_topics_systems_and_field() {
     );
     assert!(out.contains("field: gravity 10 along -y, drag 0"), "{out}");
     assert!(out.contains("duration: 0.100 s"), "{out}");
-}
-
-/// `mcgnode evaluate ... --json`, parsed.
-fn evaluate_json(d: &Path, args: &[&str]) -> serde_json::Value {
-    let mut all = vec!["evaluate", "--json"];
-    all.extend_from_slice(args);
-    serde_json::from_str(&ok(&mcgnode(&all, d))).expect("evaluate --json")
 }
 
 fn stderr_of(o: &Output) -> String {
