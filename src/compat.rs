@@ -60,13 +60,14 @@ impl EdgeKinds {
     /// The kinds the simulator's system has.
     pub fn of_kind(kind: SystemKind) -> EdgeKinds {
         match kind {
-            SystemKind::Spring | SystemKind::Peridynamic | SystemKind::CollidingLattices => {
-                EdgeKinds {
-                    springs: true,
-                    bars: false,
-                    anchors: false,
-                }
-            }
+            SystemKind::Spring
+            | SystemKind::Peridynamic
+            | SystemKind::CollidingLattices
+            | SystemKind::HeldChain => EdgeKinds {
+                springs: true,
+                bars: false,
+                anchors: false,
+            },
             // Contacts are rebuilt from positions: not among the fixed kinds.
             SystemKind::SoftSpheres => EdgeKinds::default(),
             SystemKind::FallingChain => EdgeKinds {

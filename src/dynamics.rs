@@ -4,7 +4,7 @@
 
 use crate::compat::Mismatch;
 use crate::model::arch::ArchError;
-use crate::physics::{verlet, PhysicsError};
+use crate::physics::{verlet, Drive, DriveError, PhysicsError};
 use crate::system::{Graph, State, SystemError};
 
 /// Forces a model attributes to a state.
@@ -212,6 +212,64 @@ pub trait Dynamics: Send + Sync {
         Ok(out)
     }
 
+    /// [`Dynamics::rollout_every`] with the kinematic particles moved along
+    /// `drive` (one row per integration step, at least `steps` of them):
+    /// before each evaluation they are placed where it has them, so the free
+    /// particles respond to that motion. The start's driven particles are
+    /// placed at row 0 too. The default evaluates [`Dynamics::acceleration`]
+    /// per step; models with a forward pass run it on their workspace.
+    fn rollout_driven(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+        drive: &Drive,
+    ) -> Result<Vec<State>, DynamicsError> {
+        self.supports(graph)?;
+        start.validate(graph)?;
+        drive.check(graph, steps)?;
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(DynamicsError::TimeStep(dt));
+        }
+        let every = every.max(1);
+        let mut out = Vec::with_capacity(steps / every + 1);
+        let mut s = start.clone();
+        drive.place(0, &mut s.q, &mut s.v);
+        let mut a = vec![0.0; graph.ndof()];
+        self.acceleration(graph, &s, &mut a)?;
+        out.push(s.clone());
+        for step in 1..=steps {
+            let mut failed = None;
+            let State { q, v } = &mut s;
+            verlet::step_placed(
+                q,
+                v,
+                &mut a,
+                dt,
+                None,
+                |q, v| drive.place(step, q, v),
+                |q, v, a| {
+                    let st = State {
+                        q: q.to_vec(),
+                        v: v.to_vec(),
+                    };
+                    self.acceleration(graph, &st, a)
+                        .map_err(|e| failed = Some(e))
+                },
+            )
+            .map_err(|()| failed.take().unwrap_or(DynamicsError::Diverged(step)))?;
+            if s.q.iter().chain(&s.v).any(|x| !x.is_finite()) {
+                return Err(DynamicsError::Diverged(step));
+            }
+            if step % every == 0 {
+                out.push(s.clone());
+            }
+        }
+        Ok(out)
+    }
+
     /// Accelerations of several states of one graph, one `n * dim` vector per
     /// state. The default calls [`Dynamics::acceleration`] per state.
     fn acceleration_batch(
@@ -316,6 +374,28 @@ impl Dynamics for Still {
         Ok(vec![Self::at_rest(start); steps / every.max(1) + 1])
     }
 
+    /// The free particles stand still; the driven ones follow their motion.
+    fn rollout_driven(
+        &self,
+        graph: &Graph,
+        start: &State,
+        _dt: f64,
+        steps: usize,
+        every: usize,
+        drive: &Drive,
+    ) -> Result<Vec<State>, DynamicsError> {
+        start.validate(graph)?;
+        drive.check(graph, steps)?;
+        Ok((0..=steps)
+            .step_by(every.max(1))
+            .map(|k| {
+                let mut s = Self::at_rest(start);
+                drive.place(k, &mut s.q, &mut s.v);
+                s
+            })
+            .collect())
+    }
+
     fn rollout_many(
         &self,
         graph: &Graph,
@@ -373,6 +453,9 @@ pub enum DynamicsError {
         /// n · dim.
         need: usize,
     },
+    /// The kinematic particles' given motion does not fit the rollout.
+    #[error(transparent)]
+    Drive(#[from] DriveError),
     /// The rolled-out state turned non-finite at this step.
     #[error("rollout diverged (non-finite state) at step {0}")]
     Diverged(usize),

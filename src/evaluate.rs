@@ -170,6 +170,49 @@ pub fn evaluate(
     })
 }
 
+/// Whether a recording moves its kinematic particles (a gripper, a pusher):
+/// then rollouts follow that recorded motion instead of holding them.
+pub fn kinematic_moves(tr: &crate::system::Trajectory) -> bool {
+    let (g, d) = (&tr.graph, tr.graph.dim);
+    let Some(first) = tr.samples.first() else {
+        return false;
+    };
+    (0..g.n()).filter(|&i| g.is_kinematic(i)).any(|i| {
+        let start = &first.state.q[i * d..(i + 1) * d];
+        tr.samples
+            .iter()
+            .any(|s| &s.state.q[i * d..(i + 1) * d] != start)
+    })
+}
+
+/// A rollout of `model` from the recording's first state with its kinematic
+/// particles moved as recorded (cubic Hermite between the recorded states,
+/// [`crate::physics::Drive::from_samples`]); a rollout that diverges keeps
+/// only its start and the step it diverged at.
+fn driven_rollout(
+    model: &dyn Dynamics,
+    tr: &crate::system::Trajectory,
+    dt: f64,
+    steps: usize,
+    every: usize,
+) -> Result<crate::dynamics::Rollout> {
+    let g = &tr.graph;
+    let drive = crate::physics::Drive::from_samples(g, &tr.samples, dt, steps)
+        .map_err(|e| crate::error::err!("trajectory {}: {e}", tr.id))?;
+    let start = tr.samples[0].state.clone();
+    match model.rollout_driven(g, &start, dt, steps, every, &drive) {
+        Ok(states) => Ok(crate::dynamics::Rollout {
+            states,
+            diverged_at: None,
+        }),
+        Err(crate::dynamics::DynamicsError::Diverged(step)) => Ok(crate::dynamics::Rollout {
+            states: vec![start],
+            diverged_at: Some(step),
+        }),
+        Err(e) => Err(crate::error::err!("trajectory {}: {e}", tr.id)),
+    }
+}
+
 /// One rollout group: (save every, steps, members of `trajs`).
 type Group = (usize, usize, Vec<usize>);
 
@@ -192,9 +235,17 @@ fn score(
             .iter()
             .map(|&i| trajs[i].samples[0].state.clone())
             .collect();
-        let rollouts = model
-            .rollout_many(g, &starts, dt, *steps, *every)
-            .map_err(|e| crate::error::err!("trajectory {}: {e}", trajs[members[0]].id))?;
+        let driven = members.iter().any(|&i| kinematic_moves(trajs[i]));
+        let rollouts = if driven {
+            members
+                .iter()
+                .map(|&i| driven_rollout(model, trajs[i], dt, *steps, *every))
+                .collect::<Result<Vec<_>>>()?
+        } else {
+            model
+                .rollout_many(g, &starts, dt, *steps, *every)
+                .map_err(|e| crate::error::err!("trajectory {}: {e}", trajs[members[0]].id))?
+        };
         steps_total = *steps;
         for (&i, r) in members.iter().zip(rollouts) {
             let tr = trajs[i];

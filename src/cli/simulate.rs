@@ -13,13 +13,14 @@ pub struct Args {
     /// released), or one whose particles touch: soft-spheres (balls in a box of
     /// kinematic walls, under gravity), colliding-lattices (two spring lattices
     /// thrown at each other, no field), falling-chain (bars falling onto a
-    /// kinematic floor).
+    /// kinematic floor); or held-chain (springs hanging from a kinematic
+    /// gripper that moves along a random smooth path, under gravity).
     #[arg(long, default_value = "spring")]
     pub system: SystemKind,
     /// Number of particles (default: 125 for peridynamic, which needs a cube
     /// number such as 8, 27, 64, 125; 100 soft spheres; colliding lattices
-    /// 2·k^dim, default 32 in 2D and 54 in 3D; 10 chain links; 5 otherwise).
-    /// Walls and floors come on top of these.
+    /// 2·k^dim, default 32 in 2D and 54 in 3D; 10 chain links, falling or
+    /// held; 5 otherwise). Walls, floors and grippers come on top of these.
     #[arg(long)]
     pub particles: Option<usize>,
     /// Interaction radius R: pairs closer than it touch (default: soft
@@ -74,7 +75,7 @@ pub fn config(a: &Args) -> Result<SystemConfig> {
         SystemKind::SoftSpheres => 100,
         SystemKind::CollidingLattices if dim == 3 => 54,
         SystemKind::CollidingLattices => 32,
-        SystemKind::FallingChain => 10,
+        SystemKind::FallingChain | SystemKind::HeldChain => 10,
         _ => 5,
     });
     let mut c = SystemConfig::new(a.system, particles);

@@ -4,7 +4,7 @@ use super::{Kernel, Workspace};
 use crate::dynamics::{Dynamics, DynamicsError, EdgeForce, Forces, Rollout};
 use crate::error::Result;
 use crate::model::file::ModelFile;
-use crate::physics::verlet;
+use crate::physics::{verlet, Drive};
 use crate::system::{Graph, State};
 use std::convert::Infallible;
 use std::path::Path;
@@ -79,7 +79,7 @@ impl TrainedModel {
         every: usize,
         visit: impl FnMut(usize, &[f64], &[f64]),
     ) -> Result<(), DynamicsError> {
-        match self.verlet(ws, start, dt, steps, every, |_, _| {}, visit) {
+        match self.verlet(ws, start, dt, steps, every, None, |_, _| {}, visit) {
             None => Ok(()),
             Some(step) => Err(DynamicsError::Diverged(step)),
         }
@@ -96,12 +96,16 @@ impl TrainedModel {
         dt: f64,
         steps: usize,
         every: usize,
+        drive: Option<&Drive>,
         first: impl FnOnce(&mut Workspace, &[f64]),
         mut visit: impl FnMut(usize, &[f64], &[f64]),
     ) -> Option<usize> {
         let d = start.q.len();
         let mut q = start.q.clone();
         let mut v = start.v.clone();
+        if let Some(drive) = drive {
+            drive.place(0, &mut q, &mut v);
+        }
         let mut a = vec![0.0; d];
         self.kernel.acceleration(ws, &q, &v, &mut a);
         first(ws, &a);
@@ -110,10 +114,17 @@ impl TrainedModel {
         for step in 1..=steps {
             // The projector and the forward pass borrow the workspace apart.
             let mut projector = ws.projector.take();
-            let Ok(()) = verlet::step(&mut q, &mut v, &mut a, dt, projector.as_mut(), |q, v, a| {
+            let place = |q: &mut [f64], v: &mut [f64]| {
+                if let Some(drive) = drive {
+                    drive.place(step, q, v);
+                }
+            };
+            let accel = |q: &[f64], v: &[f64], a: &mut [f64]| {
                 self.kernel.acceleration(ws, q, v, a);
                 Ok::<(), Infallible>(())
-            });
+            };
+            let Ok(()) =
+                verlet::step_placed(&mut q, &mut v, &mut a, dt, projector.as_mut(), place, accel);
             ws.projector = projector;
             if q.iter().chain(&v).any(|x| !x.is_finite()) {
                 return Some(step);
@@ -129,6 +140,7 @@ impl TrainedModel {
 impl TrainedModel {
     /// The states [`TrainedModel::verlet`] visits, kept (up to the
     /// divergence, whose step comes with them).
+    #[allow(clippy::too_many_arguments)]
     fn states(
         &self,
         ws: &mut Workspace,
@@ -136,10 +148,11 @@ impl TrainedModel {
         dt: f64,
         steps: usize,
         every: usize,
+        drive: Option<&Drive>,
         first: impl FnOnce(&mut Workspace, &[f64]),
     ) -> (Vec<State>, Option<usize>) {
         let mut out = Vec::with_capacity(steps / every.max(1) + 1);
-        let diverged = self.verlet(ws, start, dt, steps, every, first, |_, q, v| {
+        let diverged = self.verlet(ws, start, dt, steps, every, drive, first, |_, q, v| {
             out.push(State {
                 q: q.to_vec(),
                 v: v.to_vec(),
@@ -179,6 +192,7 @@ impl TrainedModel {
 
     /// A rollout on the kept workspace, with the forces of its first
     /// evaluation when `forces` is set.
+    #[allow(clippy::too_many_arguments)]
     fn rollout_and_forces(
         &self,
         graph: &Graph,
@@ -186,9 +200,13 @@ impl TrainedModel {
         dt: f64,
         steps: usize,
         every: usize,
+        drive: Option<&Drive>,
         forces: bool,
     ) -> Result<(Vec<State>, Option<Forces>), DynamicsError> {
         start.validate(graph)?;
+        if let Some(drive) = drive {
+            drive.check(graph, steps)?;
+        }
         if !(dt.is_finite() && dt > 0.0) {
             return Err(DynamicsError::TimeStep(dt));
         }
@@ -199,7 +217,7 @@ impl TrainedModel {
                 f = Some(self.forces_of(ws, graph, acc));
             }
         };
-        let (out, diverged) = self.states(&mut kept.1, start, dt, steps, every, first);
+        let (out, diverged) = self.states(&mut kept.1, start, dt, steps, every, drive, first);
         self.cache.put(kept);
         match diverged {
             None => Ok((out, f)),
@@ -269,7 +287,23 @@ impl Dynamics for TrainedModel {
         every: usize,
     ) -> Result<Vec<State>, DynamicsError> {
         Ok(self
-            .rollout_and_forces(graph, start, dt, steps, every, false)?
+            .rollout_and_forces(graph, start, dt, steps, every, None, false)?
+            .0)
+    }
+
+    /// On the kept workspace, the driven particles placed before every
+    /// evaluation (no allocation in the loop).
+    fn rollout_driven(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+        drive: &Drive,
+    ) -> Result<Vec<State>, DynamicsError> {
+        Ok(self
+            .rollout_and_forces(graph, start, dt, steps, every, Some(drive), false)?
             .0)
     }
 
@@ -283,7 +317,8 @@ impl Dynamics for TrainedModel {
         steps: usize,
         every: usize,
     ) -> Result<(Vec<State>, Forces), DynamicsError> {
-        let (states, forces) = self.rollout_and_forces(graph, start, dt, steps, every, true)?;
+        let (states, forces) =
+            self.rollout_and_forces(graph, start, dt, steps, every, None, true)?;
         Ok((states, forces.unwrap_or_default()))
     }
 
@@ -314,7 +349,7 @@ impl Dynamics for TrainedModel {
                 .iter()
                 .map(|start| {
                     let (states, diverged_at) =
-                        self.states(&mut ws, start, dt, steps, every, |_, _| {});
+                        self.states(&mut ws, start, dt, steps, every, None, |_, _| {});
                     Rollout {
                         states,
                         diverged_at,

@@ -157,8 +157,10 @@ impl Norm {
         }
     }
 
-    /// Statistics of states (on `graph`'s particle edges) and their target
-    /// accelerations. A zero or non-finite spread gives scale 1.
+    /// Statistics of states (on `graph`'s particle edges, and its contact
+    /// edges at each state) and their target accelerations; velocities and
+    /// accelerations of the free particles only (kinematic ones are given).
+    /// A zero or non-finite spread gives scale 1.
     pub fn from_data(
         graph: &crate::system::Graph,
         states: &[&crate::system::State],
@@ -189,7 +191,12 @@ impl Norm {
             for (i, x) in s.q.iter().enumerate() {
                 q2 += (x - q_mean[i % d]).powi(2);
             }
-            v2 += s.v.iter().map(|x| x * x).sum::<f64>();
+            // Velocities of the free particles: kinematic walls at rest would
+            // shrink the scale below the speeds the model must read.
+            v2 += (0..s.v.len())
+                .filter(|f| !graph.is_kinematic(f / d))
+                .map(|f| s.v[f] * s.v[f])
+                .sum::<f64>();
             for (a, b, _) in graph.particle_edges() {
                 for c in 0..d {
                     w2 += (s.q[a * d + c] - s.q[b * d + c]).powi(2);
@@ -214,10 +221,11 @@ impl Norm {
             outputs += (0..t.len()).filter(free).count();
         }
         let n = states.iter().map(|s| s.q.len()).sum::<usize>();
+        let n_free = states.len() * (graph.n() - graph.n_kinematic()) * d;
         Self {
             q_mean,
             q_scale: scale(q2, n),
-            v_scale: scale(v2, n),
+            v_scale: scale(v2, n_free),
             w_scale: scale(w2, edges * d),
             out_scale: scale(a2, outputs),
             k_scale: scale(

@@ -75,6 +75,20 @@ impl Dynamics for Checked {
         self.inner.rollout_every(graph, start, dt, steps, every)
     }
 
+    fn rollout_driven(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+        drive: &crate::physics::Drive,
+    ) -> Result<Vec<State>, DynamicsError> {
+        self.trained.check(graph, None)?;
+        self.inner
+            .rollout_driven(graph, start, dt, steps, every, drive)
+    }
+
     fn acceleration_batch(
         &self,
         graph: &Graph,

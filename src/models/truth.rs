@@ -146,6 +146,34 @@ impl Dynamics for Truth {
         Ok(out)
     }
 
+    /// The simulator's integrator with the kinematic particles on `drive`.
+    fn rollout_driven(
+        &self,
+        graph: &Graph,
+        start: &State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+        drive: &crate::physics::Drive,
+    ) -> Result<Vec<State>, DynamicsError> {
+        self.supports(graph)?;
+        drive.check(graph, steps)?;
+        let every = every.max(1);
+        let mut it = Integrator::driven(graph, &self.field, 0.0, dt, start.clone(), drive.clone())?;
+        let mut out = Vec::with_capacity(steps / every + 1);
+        out.push(it.state().clone());
+        for step in 1..=steps {
+            it.step();
+            if it.state().validate(graph).is_err() {
+                return Err(DynamicsError::Diverged(step));
+            }
+            if step % every == 0 {
+                out.push(it.state().clone());
+            }
+        }
+        Ok(out)
+    }
+
     /// [`Dynamics::rollout_every`] (RATTLE) per start; the truth does not diverge.
     fn rollout_many(
         &self,
@@ -269,6 +297,19 @@ impl Dynamics for TruthModel {
         every: usize,
     ) -> Result<Vec<crate::dynamics::Rollout>, DynamicsError> {
         self.truth.rollout_many(graph, starts, dt, steps, every)
+    }
+
+    fn rollout_driven(
+        &self,
+        graph: &crate::system::Graph,
+        start: &crate::system::State,
+        dt: f64,
+        steps: usize,
+        every: usize,
+        drive: &crate::physics::Drive,
+    ) -> Result<Vec<crate::system::State>, DynamicsError> {
+        self.truth
+            .rollout_driven(graph, start, dt, steps, every, drive)
     }
 
     fn acceleration_batch(

@@ -16,6 +16,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
+use super::drive::Drive;
 use super::integrator::Integrator;
 use super::scenes::{self, SceneSpec};
 use super::{Field, PhysicsError, SystemKind};
@@ -95,8 +96,11 @@ impl SystemConfig {
     /// spheres R = 1, k_c = 1000, g = 1, dt 1e-3 every 100 steps; colliding
     /// lattices spacing 1, spring k = 10, R = 1, k_c = 100, no field, dt 1e-3
     /// every 100; falling chain bars of 1, R = 0.5, k_c = 1e4, g = 10, dt 1e-4
-    /// every 100 steps. `particles` counts the free particles (balls, sites
-    /// of both lattices, chain links); walls and floors are added to them.
+    /// every 100 steps; held chain springs of rest 1 and k = 500 (the top
+    /// one stretched 0.2 by ten links), g = 10, dt 1e-3 every 100 steps, its
+    /// gripper on a random smooth path ([`SystemConfig::drive_for`]).
+    /// `particles` counts the free particles (balls, sites of both lattices,
+    /// chain links); walls, floors and grippers are added to them.
     pub fn new(kind: SystemKind, particles: usize) -> Self {
         let (gravity, dt, save_every) = match kind {
             SystemKind::Spring | SystemKind::Peridynamic | SystemKind::CollidingLattices => {
@@ -105,6 +109,7 @@ impl SystemConfig {
             SystemKind::Pendulum => (10.0, 1e-5, 1000),
             SystemKind::SoftSpheres => (1.0, 1e-3, 100),
             SystemKind::FallingChain => (10.0, 1e-4, 100),
+            SystemKind::HeldChain => (10.0, 1e-3, 100),
         };
         let (stiffness, interaction_radius, contact_stiffness) = Self::contact_defaults(kind);
         SystemConfig {
@@ -136,6 +141,7 @@ impl SystemConfig {
             SystemKind::SoftSpheres => (1.0, 1.0, 1000.0),
             SystemKind::CollidingLattices => (10.0, 1.0, 100.0),
             SystemKind::FallingChain => (1.0, 0.5, 1e4),
+            SystemKind::HeldChain => (500.0, 0.0, 0.0),
         }
     }
 
@@ -157,6 +163,7 @@ impl SystemConfig {
     pub fn validate(&self) -> Result<(), PhysicsError> {
         let min = match self.kind {
             SystemKind::Spring | SystemKind::FallingChain => 2,
+            SystemKind::HeldChain => 1,
             SystemKind::Pendulum | SystemKind::SoftSpheres => 1,
             SystemKind::Peridynamic => {
                 if cube_side(self.particles).is_none() {
@@ -293,6 +300,7 @@ impl SystemConfig {
                 return scenes::colliding_lattices_graph(&self.scene())
             }
             SystemKind::FallingChain => return scenes::falling_chain_graph(&self.scene()),
+            SystemKind::HeldChain => return scenes::held_chain_graph(&self.scene()),
         }
         Graph {
             dim,
@@ -339,6 +347,7 @@ impl SystemConfig {
                 scenes::colliding_lattices_start(&self.scene(), graph, rng)
             }
             SystemKind::FallingChain => scenes::falling_chain_start(&self.scene(), graph, rng),
+            SystemKind::HeldChain => scenes::held_chain_start(&self.scene(), graph, rng),
         }
     }
 
@@ -542,6 +551,26 @@ impl SystemConfig {
         self.initial_state(graph, &mut rng)
     }
 
+    /// The given motion of the kinematic particles of trajectory `index` of
+    /// the set generated with `seed`, over the `states` saved states: the
+    /// held chain's gripper path (its own random stream, so the start is
+    /// drawn as without it); `None` where kinematic particles are held still.
+    pub fn drive_for(&self, seed: u64, index: usize) -> Option<Drive> {
+        /// Mixed into the trajectory's seed for the drive's stream ("drive").
+        const DRIVE_STREAM: u64 = 0x64_7269_7665;
+        let steps = self.save_every * self.states.saturating_sub(1);
+        let mut rng = ChaCha8Rng::seed_from_u64(Self::trajectory_seed(seed, index) ^ DRIVE_STREAM);
+        match self.kind {
+            SystemKind::HeldChain => Some(scenes::held_chain_drive(
+                &self.scene(),
+                &mut rng,
+                self.dt,
+                steps,
+            )),
+            _ => None,
+        }
+    }
+
     /// One trajectory from `start`: `states` samples, `save_every` steps of
     /// `dt` apart (t = k·save_every·dt), each with its exact constrained
     /// acceleration.
@@ -561,9 +590,29 @@ impl SystemConfig {
         start: State,
         id: u32,
     ) -> Result<Trajectory, PhysicsError> {
+        self.try_simulate_driven(graph, start, None, id)
+    }
+
+    /// [`SystemConfig::try_simulate_one`] with the kinematic particles moved
+    /// along `drive` (which must cover the trajectory's steps).
+    pub fn try_simulate_driven(
+        &self,
+        graph: &Graph,
+        start: State,
+        drive: Option<Drive>,
+        id: u32,
+    ) -> Result<Trajectory, PhysicsError> {
         self.validate()?;
         let k_c = self.contact_stiffness;
-        let mut it = Integrator::with_contacts(graph, &self.field, k_c, self.dt, start)?;
+        let mut it = match drive {
+            Some(d) => {
+                let steps = self.save_every * self.states.saturating_sub(1);
+                d.check(graph, steps)
+                    .map_err(|e| PhysicsError::Drive(e.to_string()))?;
+                Integrator::driven(graph, &self.field, k_c, self.dt, start, d)?
+            }
+            None => Integrator::with_contacts(graph, &self.field, k_c, self.dt, start)?,
+        };
         let mut samples = Vec::with_capacity(self.states);
         for k in 0..self.states {
             if k > 0 {
@@ -617,7 +666,7 @@ impl SystemConfig {
             .min(trajectories.max(1));
         let run = |i: usize| {
             let start = self.start_for(&graph, seed, i);
-            self.try_simulate_one(&graph, start, i as u32)
+            self.try_simulate_driven(&graph, start, self.drive_for(seed, i), i as u32)
         };
         let mut out: Vec<Option<Result<Trajectory, PhysicsError>>> = vec![None; trajectories];
         std::thread::scope(|s| {

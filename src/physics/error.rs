@@ -119,6 +119,9 @@ pub enum PhysicsError {
     /// The contact stiffness is negative or not finite.
     #[error("contact stiffness {0} must be a finite number ≥ 0")]
     ContactStiffness(f64),
+    /// The kinematic particles' given motion does not fit the system.
+    #[error("{0}")]
+    Drive(String),
 }
 
 crate::error::typed_errors!(PhysicsError);

@@ -10,11 +10,13 @@
 //! RATTLE is symplectic, so without drag the energy error stays bounded.
 //!
 //! Contacts ([`super::contact`]) add their forces at every evaluation, from
-//! pairs searched anew at that q. Kinematic particles are held still: their
-//! acceleration is zero and they must start at rest, so they never move but
-//! exert and receive forces like any other.
+//! pairs searched anew at that q. Kinematic particles have zero acceleration
+//! and exert and receive forces like any other: without a [`Drive`] they must
+//! start at rest and so never move; with one ([`Integrator::driven`])
+//! they are placed where it has them before every evaluation.
 
 use super::contact::Contacts;
+use super::drive::Drive;
 use super::forces::applied_forces;
 use super::projection::Projector;
 use super::verlet;
@@ -37,6 +39,8 @@ pub struct Integrator {
     projector: Projector,
     /// Contact forces when the graph has a radius and k_c > 0.
     contacts: Option<Contacts>,
+    /// The kinematic particles' given motion, one row per step.
+    drive: Option<Drive>,
     steps: u64,
 }
 
@@ -63,6 +67,32 @@ impl Integrator {
         dt: f64,
         start: State,
     ) -> Result<Self, PhysicsError> {
+        Self::build(graph, field, contact_stiffness, dt, start, None)
+    }
+
+    /// [`Integrator::with_contacts`] with the kinematic particles moved along
+    /// `drive` (which should cover the steps that will be taken; past its end
+    /// they stay at its last row): placed at its row 0 at the start and at
+    /// row k before the evaluation of step k, so they may start moving.
+    pub fn driven(
+        graph: &Graph,
+        field: &Field,
+        contact_stiffness: f64,
+        dt: f64,
+        start: State,
+        drive: Drive,
+    ) -> Result<Self, PhysicsError> {
+        Self::build(graph, field, contact_stiffness, dt, start, Some(drive))
+    }
+
+    fn build(
+        graph: &Graph,
+        field: &Field,
+        contact_stiffness: f64,
+        dt: f64,
+        mut start: State,
+        drive: Option<Drive>,
+    ) -> Result<Self, PhysicsError> {
         graph.validate()?;
         field.validate(graph.dim)?;
         start.validate(graph)?;
@@ -72,7 +102,15 @@ impl Integrator {
         if let Some(e) = graph.bars().find(|e| e.rest_length <= 0.0) {
             return Err(PhysicsError::BarLength(e.a));
         }
-        check_kinematic(graph, &start)?;
+        check_bars(graph)?;
+        match &drive {
+            None => check_at_rest(graph, &start)?,
+            Some(d) => {
+                d.check(graph, 0)
+                    .map_err(|e| PhysicsError::Drive(e.to_string()))?;
+                d.place(0, &mut start.q, &mut start.v);
+            }
+        }
         if !(contact_stiffness.is_finite() && contact_stiffness >= 0.0) {
             return Err(PhysicsError::ContactStiffness(contact_stiffness));
         }
@@ -86,6 +124,7 @@ impl Integrator {
             acc: vec![0.0; graph.ndof()],
             projector: Projector::new(graph),
             contacts,
+            drive,
             steps: 0,
         };
         it.update_acc();
@@ -108,12 +147,19 @@ impl Integrator {
             true_acceleration(graph, field, contacts, q, v, acc);
             Ok::<(), std::convert::Infallible>(())
         };
-        let Ok(()) = verlet::step(
+        let (drive, row) = (self.drive.as_ref(), self.steps as usize + 1);
+        let place = |q: &mut [f64], v: &mut [f64]| {
+            if let Some(d) = drive {
+                d.place(row.min(d.steps()), q, v);
+            }
+        };
+        let Ok(()) = verlet::step_placed(
             &mut s.q,
             &mut s.v,
             &mut self.acc,
             self.dt,
             Some(&mut self.projector),
+            place,
             accel,
         );
         self.steps += 1;
@@ -214,15 +260,20 @@ fn true_acceleration(
     }
 }
 
-/// Kinematic particles are held still: they must start at rest and no bar may
-/// end at one (SHAKE would move it).
-fn check_kinematic(graph: &Graph, start: &State) -> Result<(), PhysicsError> {
+/// Without a drive kinematic particles are held still, so they must start at
+/// rest.
+fn check_at_rest(graph: &Graph, start: &State) -> Result<(), PhysicsError> {
     let d = graph.dim;
     if let Some(i) = (0..graph.n())
         .find(|&i| graph.is_kinematic(i) && start.v[i * d..(i + 1) * d].iter().any(|x| *x != 0.0))
     {
         return Err(PhysicsError::KinematicMoving(i));
     }
+    Ok(())
+}
+
+/// No bar may end at a kinematic particle (SHAKE would move it).
+fn check_bars(graph: &Graph) -> Result<(), PhysicsError> {
     let touches = |e: &&crate::system::Edge| {
         graph.is_kinematic(e.a)
             || matches!(e.b, crate::system::Endpoint::Particle(b) if graph.is_kinematic(b))

@@ -10,8 +10,10 @@
 //! * [`rk4`]: RK4 on (q, p), the paper's HGN training data;
 //! * [`neighbors`]: contact pairs within a radius (cell list) and their edges;
 //! * [`contact`]: the soft-sphere contact force and energy on those pairs;
+//! * [`drive`]: given motion of kinematic particles (grippers, pushers);
 //! * [`scenes`]: the systems that touch (soft spheres in a box, colliding
-//!   lattices, a chain falling on a floor), with kinematic walls.
+//!   lattices, a chain falling on a floor), with kinematic walls, and a
+//!   chain held by a moving kinematic gripper.
 //!
 //! The same physics as a model behind [`crate::dynamics::Dynamics`] is
 //! [`crate::models::truth::Truth`], above the trait.
@@ -19,6 +21,7 @@
 pub mod config;
 pub mod constraints;
 pub mod contact;
+pub mod drive;
 mod error;
 pub mod forces;
 pub mod integrator;
@@ -33,6 +36,7 @@ use serde::{Deserialize, Serialize};
 
 pub use config::SystemConfig;
 pub use constraints::{acceleration, bar_jacobian, constraint_residual};
+pub use drive::{Drive, DriveError};
 pub use error::PhysicsError;
 pub use forces::{applied_forces, hamiltonian, kinetic_energy, potential_energy};
 pub use integrator::Integrator;
@@ -64,17 +68,22 @@ pub enum SystemKind {
     /// A chain of rigid bars falling onto a floor of kinematic particles.
     #[serde(rename = "falling-chain")]
     FallingChain,
+    /// A chain of springs hanging from a kinematic gripper that moves along a
+    /// random smooth path, under gravity ([`scenes`]): action-rich data.
+    #[serde(rename = "held-chain")]
+    HeldChain,
 }
 
 impl SystemKind {
     /// Every kind, in the order they are listed to users.
-    pub const ALL: [SystemKind; 6] = [
+    pub const ALL: [SystemKind; 7] = [
         SystemKind::Spring,
         SystemKind::Pendulum,
         SystemKind::Peridynamic,
         SystemKind::SoftSpheres,
         SystemKind::CollidingLattices,
         SystemKind::FallingChain,
+        SystemKind::HeldChain,
     ];
 
     /// The spatial dimension [`SystemConfig::new`] gives this kind: 3 for the
@@ -104,6 +113,7 @@ impl SystemKind {
             SystemKind::SoftSpheres => "soft-spheres",
             SystemKind::CollidingLattices => "colliding-lattices",
             SystemKind::FallingChain => "falling-chain",
+            SystemKind::HeldChain => "held-chain",
         }
     }
 }

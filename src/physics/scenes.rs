@@ -316,3 +316,74 @@ pub fn falling_chain_start(s: &SceneSpec, graph: &Graph, rng: &mut impl Rng) -> 
     }
     State { q, v }
 }
+
+/// Held chain: `free` links (type 0) joined by springs (i−1)–i of rest
+/// `spacing` and stiffness `stiffness`, link 0 joined the same way to a
+/// kinematic gripper (type 1, the last particle) whose motion is given: what
+/// a robot holding a rope, a cable or a chain of beads sees. No contacts.
+pub fn held_chain_graph(s: &SceneSpec) -> Graph {
+    let gripper = s.free;
+    let spring = |a: usize, b: usize| Edge {
+        a,
+        b: Endpoint::Particle(b),
+        kind: EdgeKind::Spring,
+        rest_length: s.spacing,
+        stiffness: s.stiffness,
+    };
+    let mut edges = vec![spring(0, gripper)];
+    edges.extend((1..s.free).map(|i| spring(i, i - 1)));
+    with_kinematic(s, 1, edges)
+}
+
+/// Held chain's start: the gripper at the origin, the links hanging straight
+/// down from it at their static equilibrium under gravity (spring i carries
+/// the weight of the links below it), each link given a velocity of
+/// U(−0.1, 0.1)·√(g·spacing) per component, the gripper at rest.
+pub fn held_chain_start(s: &SceneSpec, graph: &Graph, rng: &mut impl Rng) -> State {
+    let (d, n) = (s.dim, s.free);
+    let mut q = vec![0.0; graph.ndof()];
+    let mut v = vec![0.0; graph.ndof()];
+    let vscale = (s.gravity.max(1.0) * s.spacing).sqrt();
+    let mut y = 0.0;
+    for i in 0..n {
+        let below = (n - i) as f64 * s.mass * s.gravity;
+        y -= s.spacing + below / s.stiffness;
+        q[i * d + 1] = y;
+        for c in 0..d {
+            v[i * d + c] = rng.random_range(-0.1..0.1) * vscale;
+        }
+    }
+    State { q, v }
+}
+
+/// The gripper's random smooth motion over `steps` steps of `dt`: along each
+/// axis Σ_j A_j (1 − cos ω_j t) over three terms, A_j ~ U(−0.4, 0.4)·spacing,
+/// ω_j ~ U(0.5, 3) rad/s, so it starts where the start put it, at rest, and
+/// moves smoothly (velocities exact).
+pub fn held_chain_drive(
+    s: &SceneSpec,
+    rng: &mut impl Rng,
+    dt: f64,
+    steps: usize,
+) -> super::drive::Drive {
+    let d = s.dim;
+    let terms: Vec<[(f64, f64); 3]> = (0..d)
+        .map(|_| {
+            std::array::from_fn(|_| {
+                (
+                    rng.random_range(-0.4..0.4) * s.spacing,
+                    rng.random_range(0.5..3.0),
+                )
+            })
+        })
+        .collect();
+    super::drive::Drive::from_path(vec![s.free], d, dt, steps, |t, q, v| {
+        for c in 0..d {
+            q[c] = terms[c]
+                .iter()
+                .map(|(a, w)| a * (1.0 - (w * t).cos()))
+                .sum();
+            v[c] = terms[c].iter().map(|(a, w)| a * w * (w * t).sin()).sum();
+        }
+    })
+}

@@ -32,7 +32,24 @@ pub fn step<E>(
     v: &mut [f64],
     a: &mut [f64],
     dt: f64,
+    projector: Option<&mut Projector>,
+    accel: impl FnOnce(&[f64], &[f64], &mut [f64]) -> Result<(), E>,
+) -> Result<(), E> {
+    step_placed(q, v, a, dt, projector, |_, _| {}, accel)
+}
+
+/// [`step`] with `place(q, v)` between the drift and the evaluation: it puts
+/// driven (kinematic) particles where their given motion has them at the new
+/// step ([`super::drive::Drive::place`]), so the forces are those of that
+/// configuration. Driven particles have zero q̈, so the kick leaves the
+/// velocity placed.
+pub fn step_placed<E>(
+    q: &mut [f64],
+    v: &mut [f64],
+    a: &mut [f64],
+    dt: f64,
     mut projector: Option<&mut Projector>,
+    place: impl FnOnce(&mut [f64], &mut [f64]),
     accel: impl FnOnce(&[f64], &[f64], &mut [f64]) -> Result<(), E>,
 ) -> Result<(), E> {
     if let Some(p) = projector.as_deref_mut() {
@@ -42,6 +59,7 @@ pub fn step<E>(
     if let Some(p) = projector.as_deref_mut() {
         p.shake(q, v, dt);
     }
+    place(q, v);
     accel(q, v, a)?;
     kick(v, a, dt);
     if let Some(p) = projector {
