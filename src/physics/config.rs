@@ -163,8 +163,7 @@ impl SystemConfig {
     pub fn validate(&self) -> Result<(), PhysicsError> {
         let min = match self.kind {
             SystemKind::Spring | SystemKind::FallingChain => 2,
-            SystemKind::HeldChain => 1,
-            SystemKind::Pendulum | SystemKind::SoftSpheres => 1,
+            SystemKind::HeldChain | SystemKind::Pendulum | SystemKind::SoftSpheres => 1,
             SystemKind::Peridynamic => {
                 if cube_side(self.particles).is_none() {
                     return Err(PhysicsError::NotACube(self.particles));

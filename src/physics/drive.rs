@@ -135,7 +135,7 @@ impl Drive {
                 continue;
             };
             let h = b.t - a.t;
-            if !(h > 0.0) {
+            if h.is_nan() || h <= 0.0 {
                 return Err(DriveError::Shape(format!(
                     "recorded times {} and {} do not increase",
                     a.t, b.t

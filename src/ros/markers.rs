@@ -187,7 +187,7 @@ pub fn prediction_markers(
 /// kinematic, as the models find them (`None` without a radius or contacts).
 fn contact_lines(s: &ParticleState) -> Option<Vec<Point>> {
     let n = s.positions.len();
-    if !(s.interaction_radius > 0.0) || n < 2 {
+    if s.interaction_radius.is_nan() || s.interaction_radius <= 0.0 || n < 2 {
         return None;
     }
     let bonds = s
