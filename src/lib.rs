@@ -6,8 +6,8 @@
 //! Data flows one way: [`physics`] → [`simulate`] → [`data`] (bags) →
 //! [`train`] (on the [`engine`], or candle via [`model`]) → model file
 //! ([`models`] loads and trains any kind) →
-//! [`kernel`] rollouts ([`dynamics`], [`ros`]) → [`data`] → [`evaluate`] /
-//! [`replay`] → [`metrics`].
+//! [`kernel`] rollouts ([`dynamics`], [`ros`]) and plans ([`plan`]) →
+//! [`data`] → [`evaluate`] / [`replay`] → [`metrics`].
 //!
 //! What a library user needs is re-exported here: naming and loading a
 //! model ([`ModelRef`], [`load_model`], [`load_any_model`]), rolling it out
@@ -35,6 +35,7 @@ pub mod model;
 pub mod models;
 pub mod names;
 pub mod physics;
+pub mod plan;
 pub mod plot;
 pub mod replay;
 pub mod reproduce;

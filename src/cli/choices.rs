@@ -3,6 +3,7 @@
 //! values, and turns into the library's enum with `From`.
 
 use crate::model::{ArchPreset, EdgeInput, MessageFn};
+use crate::plan::CostKind;
 use crate::train::{BodyForce, EngineKind, Recipe};
 
 /// A clap value enum `$arg` mirroring the library's `$lib`, variant for
@@ -86,4 +87,25 @@ value_enum! {
         /// Candle's autodiff: the reference.
         Candle,
     }
+}
+
+value_enum! {
+    /// `plan --cost`.
+    CostArg => CostKind {
+        /// Distance to the targets at the end of the horizon.
+        Final,
+        /// Mean distance over the horizon's control steps: get there soon and stay.
+        Along,
+    }
+}
+
+/// `plan --sampler`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SamplerArg {
+    /// One round of random sequences around the warm start.
+    Random,
+    /// Cross-entropy method: rounds refitted to the elites.
+    Cem,
+    /// Model-predictive path integral: rounds averaged with weights exp(−cost/λ).
+    Mppi,
 }

@@ -7,11 +7,13 @@ pub mod choices;
 mod demo;
 mod evaluate;
 mod field;
+mod plan;
 mod replay;
 mod reproduce;
 mod rollout;
 mod serve;
 mod simulate;
+mod start;
 mod vector;
 // Public for the Python package's `mcgnode.train` (python/), which parses its
 // options with these Args and trains through `train::train`.
@@ -40,6 +42,8 @@ enum Command {
     Train(train::Args),
     /// Roll a trained model out from an initial state and write the trajectory as a bag.
     Rollout(rollout::Args),
+    /// Plan the motion of the kinematic particles (a gripper) that brings chosen particles to targets: sampled candidates rolled out through a model (JSON out).
+    Plan(plan::Args),
     /// Score a model on a test bag: RE, EE and ME over time (table, JSON, PNG).
     Evaluate(evaluate::Args),
     /// The embedded default: simulate, train GNODE and MCGNODE, evaluate on 5/20/50 springs.
@@ -79,6 +83,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Simulate(a) => simulate::run(a),
         Command::Train(a) => train::run(a),
         Command::Rollout(a) => rollout::run(a),
+        Command::Plan(a) => plan::run(a),
         Command::Evaluate(a) => evaluate::run(a),
         Command::Demo(a) => demo::run(a),
         Command::Bench(a) => bench::run(a),

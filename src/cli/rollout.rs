@@ -1,11 +1,10 @@
 //! `mcgnode rollout`.
 
-use crate::data::bag::{read_bags, write_trajectories_with_field, ReadOptions};
-use crate::data::field::bag_system;
+use crate::data::bag::write_trajectories_with_field;
 use crate::models::{load_any_model, ModelRef};
-use crate::physics::{SystemConfig, SystemKind};
+use crate::physics::SystemKind;
 use crate::system::{Sample, Trajectory};
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use std::path::PathBuf;
 
 /// Options of `rollout`.
@@ -55,32 +54,18 @@ pub fn run(a: Args) -> Result<()> {
     let reference = ModelRef::from_path(&a.model)?;
     let model = load_any_model(&reference)?.dynamics;
     let trained = crate::models::trained_for(&reference)?;
-    let (graph, start, system, mut cfg, field, stamp_dt) = if let Some(paths) = &a.initial {
-        let bag = read_bags(
-            paths,
-            &ReadOptions {
-                topic: a.topic.clone(),
-            },
-        )
-        .context("reading --initial")?;
-        let cfg = bag_system(&bag)?;
-        let field = bag.field.clone().or(cfg.as_ref().map(|c| c.field.clone()));
-        let tr = bag
-            .trajectories
-            .into_iter()
-            .find(|t| t.id == a.trajectory)
-            .with_context(|| format!("--initial has no trajectory {}", a.trajectory))?;
-        let stamp_dt = tr.samples.get(1).map(|s| s.t - tr.samples[0].t);
-        let s0 = tr.samples[0].state.clone();
-        (tr.graph, s0, tr.system, cfg, field, stamp_dt)
-    } else {
-        let cfg = SystemConfig::new(a.system, a.particles);
-        cfg.validate()?;
-        let g = cfg.graph();
-        let s0 = cfg.start_for(&g, a.seed, 0);
-        let field = Some(cfg.field.clone());
-        (g, s0, a.system.name().to_string(), Some(cfg), field, None)
+    let from = match &a.initial {
+        Some(paths) => super::start::from_bag(paths, a.topic.clone(), a.trajectory)?,
+        None => super::start::drawn(a.system, a.particles, a.seed)?,
     };
+    let super::start::Start {
+        graph,
+        state: start,
+        system,
+        mut cfg,
+        field,
+        stamp_dt,
+    } = from;
     trained.check(&graph, field.as_ref())?;
     if let Some(o) = trained
         .range

@@ -7,6 +7,7 @@
 
 pub mod experiments;
 pub mod lab;
+pub mod mpc;
 pub mod report;
 pub mod scale;
 

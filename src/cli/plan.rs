@@ -1,0 +1,208 @@
+//! `mcgnode plan`: the motion of the kinematic particles (a gripper) that
+//! brings chosen particles to targets, searched through a model.
+
+use super::choices::{CostArg, SamplerArg};
+use super::{parse_vector, Vector};
+use crate::models::{load_any_model, ModelRef};
+use crate::physics::SystemKind;
+use crate::plan::{plan, Controls, Cost, Problem, Sampler, Timing};
+use anyhow::{bail, Result};
+use serde_json::json;
+use std::path::PathBuf;
+
+/// Options of `plan`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct Args {
+    /// The model that predicts the free particles: a model file, `still`, or
+    /// `truth:<system>` (the ground truth as planner).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Plan from the first state of this bag (its trajectory `--trajectory`).
+    #[arg(long, num_args = 1..)]
+    pub initial: Option<Vec<PathBuf>>,
+    /// The ParticleState topic of `--initial`, when it holds several.
+    #[arg(long)]
+    pub topic: Option<String>,
+    /// Trajectory id within `--initial`.
+    #[arg(long, default_value_t = 0)]
+    pub trajectory: u32,
+    /// Without --initial: the system whose start to draw, as `simulate` does.
+    #[arg(long, default_value = "held-chain")]
+    pub system: SystemKind,
+    /// Without --initial: free particles of the drawn system.
+    #[arg(long, default_value_t = 5)]
+    pub particles: usize,
+    /// Without --initial: seed of the drawn start.
+    #[arg(long, default_value_t = 7)]
+    pub seed: u64,
+    /// The particle to bring to the target (default: the last free one, the
+    /// held chain's free end).
+    #[arg(long)]
+    pub particle: Option<usize>,
+    /// Its target, "x,y[,z]".
+    #[arg(long, value_parser = parse_vector)]
+    pub target: Vector,
+    /// When the distance counts: at the end of the horizon, or along it.
+    #[arg(long, value_enum, default_value_t = CostArg::Final)]
+    pub cost: CostArg,
+    /// Weight of the control effort Σ|u|²·T.
+    #[arg(long, default_value_t = 1e-3)]
+    pub effort: f64,
+    /// Weight of the particle's squared speed, counted where its distance
+    /// is (bring it there at rest).
+    #[arg(long, default_value_t = 0.0)]
+    pub speed: f64,
+    /// Control steps ahead.
+    #[arg(long, default_value_t = 10)]
+    pub horizon: usize,
+    /// Integration step of the planner's rollouts [s] (default: the bag's or
+    /// the system's).
+    #[arg(long)]
+    pub dt: Option<f64>,
+    /// Integration steps per control step (the driven particles' velocity
+    /// ramps to each control's value over dt·substeps).
+    #[arg(long, default_value_t = 10)]
+    pub substeps: usize,
+    /// How candidates are drawn.
+    #[arg(long, value_enum, default_value_t = SamplerArg::Cem)]
+    pub sampler: SamplerArg,
+    /// Candidate sequences per round.
+    #[arg(long, default_value_t = 256)]
+    pub candidates: usize,
+    /// Rounds (CEM, MPPI).
+    #[arg(long, default_value_t = 4)]
+    pub iterations: usize,
+    /// CEM: sequences refitted to.
+    #[arg(long, default_value_t = 16)]
+    pub elites: usize,
+    /// Spread of the sampled velocities [m/s] (CEM: the first round's).
+    #[arg(long, default_value_t = 0.5)]
+    pub sigma: f64,
+    /// MPPI temperature λ, in cost units.
+    #[arg(long, default_value_t = 0.1)]
+    pub temperature: f64,
+    /// Largest speed of a driven particle along each axis [m/s].
+    #[arg(long, default_value_t = 2.0)]
+    pub max_speed: f64,
+    /// Seed of the sampling.
+    #[arg(long, default_value_t = 1)]
+    pub sample_seed: u64,
+    /// Print one JSON document: the cost, the best sequence, its predicted
+    /// trajectory, every candidate's cost of the last round, the rounds.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `plan`.
+pub fn run(a: Args) -> Result<()> {
+    let reference = ModelRef::from_path(&a.model)?;
+    let model = load_any_model(&reference)?.dynamics;
+    let from = match &a.initial {
+        Some(paths) => super::start::from_bag(paths, a.topic.clone(), a.trajectory)?,
+        None => super::start::drawn(a.system, a.particles, a.seed)?,
+    };
+    let (g, d) = (&from.graph, from.graph.dim);
+    let dt = match (a.dt, &from.cfg, from.stamp_dt) {
+        (Some(dt), _, _) => dt,
+        (None, Some(c), _) => c.dt,
+        (None, None, Some(s)) => s,
+        (None, None, None) => bail!("the start does not say its step: pass --dt"),
+    };
+    let particle = match a.particle {
+        Some(p) => p,
+        None => (0..g.n())
+            .rev()
+            .find(|&i| !g.is_kinematic(i))
+            .ok_or_else(|| {
+                anyhow::anyhow!("every particle is kinematic: nothing to bring anywhere")
+            })?,
+    };
+    if a.target.0.len() != d {
+        bail!(
+            "--target has {} numbers for a {d}D system",
+            a.target.0.len()
+        );
+    }
+    let sampler = match a.sampler {
+        SamplerArg::Random => Sampler::Random {
+            candidates: a.candidates,
+            sigma: a.sigma,
+        },
+        SamplerArg::Cem => Sampler::Cem {
+            candidates: a.candidates,
+            iterations: a.iterations,
+            elites: a.elites,
+            sigma: a.sigma,
+        },
+        SamplerArg::Mppi => Sampler::Mppi {
+            candidates: a.candidates,
+            iterations: a.iterations,
+            sigma: a.sigma,
+            temperature: a.temperature,
+        },
+    };
+    let problem = Problem {
+        model: model.as_ref(),
+        graph: g,
+        start: &from.state,
+        timing: Timing {
+            dt,
+            substeps: a.substeps,
+        },
+        horizon: a.horizon,
+        cost: Cost {
+            kind: a.cost.into(),
+            particles: vec![particle],
+            targets: a.target.0.clone(),
+            effort: a.effort,
+            speed: a.speed,
+        },
+        max_speed: a.max_speed,
+    };
+    let quiet = a.json;
+    let p = plan(&problem, sampler, None, a.sample_seed, |it| {
+        if !quiet {
+            eprintln!(
+                "round {}: best cost {:.4e}, mean {:.4e}, {} diverged",
+                it.iteration, it.best, it.mean, it.diverged
+            );
+        }
+        true
+    })?;
+    let still = problem.cost_of(&Controls::zeros(a.horizon, problem.width()))?;
+    let rows: Vec<&[f64]> = (0..p.best.steps).map(|k| p.best.row(k)).collect();
+    if a.json {
+        let doc = json!({
+            "model": model.describe(),
+            "particle": particle,
+            "target": a.target.0,
+            "driven": problem.driven(),
+            "dt": dt,
+            "substeps": a.substeps,
+            "control_step": problem.timing.control_step(),
+            "cost": p.cost,
+            "hold_still_cost": still,
+            "best": rows,
+            "predicted": p.predicted.iter().map(|s| &s.q).collect::<Vec<_>>(),
+            "predicted_velocities": p.predicted.iter().map(|s| &s.v).collect::<Vec<_>>(),
+            "costs": p.costs,
+            "iterations": p.iterations,
+            "evaluated": p.evaluated,
+            "seconds": p.seconds,
+        });
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else {
+        let end = p
+            .predicted
+            .last()
+            .map(|s| s.q[particle * d..(particle + 1) * d].to_vec());
+        println!(
+            "{} candidates in {:.3} s: best cost {:.4e} (holding still: {:.4e}); particle {particle} predicted at {:?}, target {:?}",
+            p.evaluated, p.seconds, p.cost, still, end.unwrap_or_default(), a.target.0
+        );
+        for (k, r) in rows.iter().enumerate() {
+            println!("  step {k}: velocity {r:?}");
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,118 @@
+//! A candidate action: the velocity every driven (kinematic) particle
+//! reaches at the end of each control step, and the smooth motion it gives
+//! them (velocity ramped linearly between those knots).
+
+use crate::physics::Drive;
+use crate::system::State;
+use serde::{Deserialize, Serialize};
+
+/// How control steps map onto integration steps.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Timing {
+    /// Integration step of the rollouts, seconds.
+    pub dt: f64,
+    /// Integration steps per control step.
+    pub substeps: usize,
+}
+
+impl Timing {
+    /// Length of one control step, seconds.
+    pub fn control_step(&self) -> f64 {
+        self.dt * self.substeps as f64
+    }
+}
+
+/// A control sequence: `u[k·width..(k+1)·width]` is the velocity the
+/// driven particles (`dim` per particle, in their order) reach at the end of
+/// control step `k`, for `steps` steps (see [`Controls::drive`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Controls {
+    /// Control steps.
+    pub steps: usize,
+    /// Numbers per step: driven particles × dimension.
+    pub width: usize,
+    /// The velocities, step-major.
+    pub u: Vec<f64>,
+}
+
+impl Controls {
+    /// Holding still: every velocity 0.
+    pub fn zeros(steps: usize, width: usize) -> Self {
+        Controls {
+            steps,
+            width,
+            u: vec![0.0; steps * width],
+        }
+    }
+
+    /// The velocities of control step `k`.
+    pub fn row(&self, k: usize) -> &[f64] {
+        &self.u[k * self.width..(k + 1) * self.width]
+    }
+
+    /// The sequence one step on: its steps 1.. then its last step again (the
+    /// warm start of the next control step's plan).
+    pub fn shifted(&self) -> Self {
+        let mut u = self.u[self.width.min(self.u.len())..].to_vec();
+        if self.steps > 0 {
+            u.extend_from_slice(self.row(self.steps - 1));
+        }
+        Controls { u, ..self.clone() }
+    }
+
+    /// Σ_k |u_k|² · T: the control effort, in (m/s)²·s.
+    pub fn effort(&self, timing: Timing) -> f64 {
+        self.u.iter().map(|x| x * x).sum::<f64>() * timing.control_step()
+    }
+
+    /// The motion of `particles` (driven, `dim` each) from where and how
+    /// fast `start` has them: their velocity ramps linearly over control
+    /// step k from the previous step's value (the start's for step 0) to
+    /// u_k, and their position is its exact integral. The motion is smooth
+    /// (no jump in velocity), as the motions a model learns from are. One
+    /// row per integration step, `steps × substeps` steps.
+    pub fn drive(&self, particles: &[usize], dim: usize, start: &State, timing: Timing) -> Drive {
+        let sub = timing.substeps.max(1);
+        let total = self.steps * sub;
+        let pick = |x: &[f64]| -> Vec<f64> {
+            particles
+                .iter()
+                .flat_map(|&i| x[i * dim..(i + 1) * dim].iter().copied())
+                .collect()
+        };
+        let (mut q, v0) = (pick(&start.q), pick(&start.v));
+        // Velocity at integration step j.
+        let vel = |j: usize| -> Vec<f64> {
+            if j == 0 {
+                return v0.clone();
+            }
+            let k = (j - 1) / sub;
+            let s = ((j - 1) % sub + 1) as f64 / sub as f64;
+            let from = if k == 0 { &v0[..] } else { self.row(k - 1) };
+            from.iter()
+                .zip(self.row(k))
+                .map(|(a, b)| a + (b - a) * s)
+                .collect()
+        };
+        let (mut rows_q, mut rows_v) =
+            (Vec::with_capacity(total + 1), Vec::with_capacity(total + 1));
+        let mut prev = vel(0);
+        rows_q.push(q.clone());
+        rows_v.push(prev.clone());
+        for j in 1..=total {
+            let next = vel(j);
+            for ((x, a), b) in q.iter_mut().zip(&prev).zip(&next) {
+                *x += 0.5 * (a + b) * timing.dt;
+            }
+            rows_q.push(q.clone());
+            rows_v.push(next.clone());
+            prev = next;
+        }
+        Drive {
+            particles: particles.to_vec(),
+            dim,
+            q: rows_q,
+            v: rows_v,
+        }
+    }
+}

@@ -1,0 +1,387 @@
+//! The search over candidate actions: sample control sequences, roll each
+//! out through the model in parallel, keep the cheapest. Random shooting,
+//! the cross-entropy method (CEM) and model-predictive path integral (MPPI),
+//! as sampling-based planners on learned particle dynamics use them.
+
+use super::controls::{Controls, Timing};
+use super::cost::Cost;
+use crate::dynamics::{Dynamics, DynamicsError};
+use crate::system::{Graph, State};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+use thiserror::Error;
+
+/// How candidates are drawn and refined. Every sampler draws around a mean
+/// sequence (the warm start, else holding still), evaluates that mean too,
+/// and keeps the cheapest sequence it evaluated.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase", tag = "kind")]
+pub enum Sampler {
+    /// One round of `candidates` sequences, each velocity N(mean, σ²).
+    Random {
+        /// Sequences drawn.
+        candidates: usize,
+        /// Spread of each velocity, m/s.
+        sigma: f64,
+    },
+    /// `iterations` rounds; each refits mean and spread to the `elites`
+    /// cheapest.
+    Cem {
+        /// Sequences per round.
+        candidates: usize,
+        /// Rounds.
+        iterations: usize,
+        /// Sequences refitted to.
+        elites: usize,
+        /// Initial spread, m/s.
+        sigma: f64,
+    },
+    /// `iterations` rounds; each moves the mean to the candidates' average
+    /// weighted by exp(−(cost − min)/temperature), the spread fixed.
+    Mppi {
+        /// Sequences per round.
+        candidates: usize,
+        /// Rounds.
+        iterations: usize,
+        /// Spread, m/s.
+        sigma: f64,
+        /// Temperature λ, in cost units.
+        temperature: f64,
+    },
+}
+
+impl Sampler {
+    fn candidates(self) -> usize {
+        match self {
+            Sampler::Random { candidates, .. }
+            | Sampler::Cem { candidates, .. }
+            | Sampler::Mppi { candidates, .. } => candidates,
+        }
+    }
+
+    fn iterations(self) -> usize {
+        match self {
+            Sampler::Random { .. } => 1,
+            Sampler::Cem { iterations, .. } | Sampler::Mppi { iterations, .. } => iterations,
+        }
+    }
+
+    fn sigma(self) -> f64 {
+        match self {
+            Sampler::Random { sigma, .. }
+            | Sampler::Cem { sigma, .. }
+            | Sampler::Mppi { sigma, .. } => sigma,
+        }
+    }
+}
+
+/// A planning problem: a model, the system and its state now, the horizon,
+/// the cost, and the bound on the driven particles' speed.
+pub struct Problem<'a> {
+    /// What predicts the free particles.
+    pub model: &'a dyn Dynamics,
+    /// The system; its kinematic particles are the ones driven.
+    pub graph: &'a Graph,
+    /// The state to plan from.
+    pub start: &'a State,
+    /// Integration step and steps per control step.
+    pub timing: Timing,
+    /// Control steps ahead.
+    pub horizon: usize,
+    /// What to minimise.
+    pub cost: Cost,
+    /// Largest speed of a driven particle along each axis, m/s.
+    pub max_speed: f64,
+}
+
+/// Why planning failed.
+#[derive(Debug, Error)]
+pub enum PlanError {
+    /// The problem is ill-posed; the message names the fix.
+    #[error("{0}")]
+    Problem(String),
+    /// The model cannot predict this system (not a divergence: that costs +∞).
+    #[error(transparent)]
+    Model(#[from] DynamicsError),
+}
+
+crate::error::typed_errors!(PlanError);
+
+/// One round of a search.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Iteration {
+    /// Round number, from 1.
+    pub iteration: usize,
+    /// Cheapest cost so far.
+    pub best: f64,
+    /// Mean cost of this round's finite candidates.
+    pub mean: f64,
+    /// Candidates whose rollout diverged (cost +∞).
+    pub diverged: usize,
+}
+
+/// A search's result.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    /// The cheapest sequence evaluated.
+    pub best: Controls,
+    /// Its cost.
+    pub cost: f64,
+    /// Its predicted trajectory: the start, then one state per control step.
+    pub predicted: Vec<State>,
+    /// Every candidate's cost in the last round, in the order drawn (the
+    /// round's mean first).
+    pub costs: Vec<f64>,
+    /// The rounds.
+    pub iterations: Vec<Iteration>,
+    /// Rollouts evaluated in all.
+    pub evaluated: usize,
+    /// Wall time, seconds.
+    pub seconds: f64,
+}
+
+impl Problem<'_> {
+    /// The driven particles: the graph's kinematic ones.
+    pub fn driven(&self) -> Vec<usize> {
+        (0..self.graph.n())
+            .filter(|&i| self.graph.is_kinematic(i))
+            .collect()
+    }
+
+    /// Numbers per control step.
+    pub fn width(&self) -> usize {
+        self.driven().len() * self.graph.dim
+    }
+
+    /// Checks the problem; the message names what to change.
+    pub fn check(&self) -> Result<(), PlanError> {
+        let bad = |m: String| Err(PlanError::Problem(m));
+        if self.driven().is_empty() {
+            return bad("the system has no kinematic particle to move: planning drives kinematic particles (mark a gripper or pusher kinematic)".into());
+        }
+        if self.horizon == 0 || self.timing.substeps == 0 {
+            return bad("horizon and substeps must be at least 1".into());
+        }
+        if !(self.timing.dt.is_finite() && self.timing.dt > 0.0) {
+            return bad(format!(
+                "dt must be positive and finite, got {}",
+                self.timing.dt
+            ));
+        }
+        if !(self.max_speed.is_finite() && self.max_speed > 0.0) {
+            return bad(format!(
+                "max speed must be positive, got {}",
+                self.max_speed
+            ));
+        }
+        let (n, d) = (self.graph.n(), self.graph.dim);
+        if let Some(&p) = self.cost.particles.iter().find(|&&p| p >= n) {
+            return bad(format!(
+                "target particle {p} does not exist ({n} particles)"
+            ));
+        }
+        if self.cost.particles.is_empty()
+            || self.cost.targets.len() != self.cost.particles.len() * d
+        {
+            return bad(format!(
+                "{} target numbers for {} particles in {d}D: give one {d}-vector per target particle",
+                self.cost.targets.len(),
+                self.cost.particles.len()
+            ));
+        }
+        if self.cost.targets.iter().any(|x| !x.is_finite()) || !(self.cost.effort >= 0.0) {
+            return bad("targets must be finite and the effort weight ≥ 0".into());
+        }
+        self.start
+            .validate(self.graph)
+            .map_err(DynamicsError::from)?;
+        Ok(())
+    }
+
+    /// The predicted trajectory under `controls` (start, then one state per
+    /// control step).
+    pub fn rollout(&self, controls: &Controls) -> Result<Vec<State>, DynamicsError> {
+        let drive = controls.drive(&self.driven(), self.graph.dim, self.start, self.timing);
+        let steps = controls.steps * self.timing.substeps;
+        self.model.rollout_driven(
+            self.graph,
+            self.start,
+            self.timing.dt,
+            steps,
+            self.timing.substeps,
+            &drive,
+        )
+    }
+
+    /// The cost of `controls`: +∞ when its rollout diverges.
+    pub fn cost_of(&self, controls: &Controls) -> Result<f64, PlanError> {
+        match self.rollout(controls) {
+            Ok(states) => Ok(self.cost.of(&states, self.graph.dim, controls, self.timing)),
+            Err(DynamicsError::Diverged(_)) => Ok(f64::INFINITY),
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    /// The costs of many candidates, spread over the cores (each candidate's
+    /// cost does not depend on which thread computes it).
+    pub fn costs(&self, candidates: &[Controls]) -> Result<Vec<f64>, PlanError> {
+        let threads = crate::engine::all_cores().min(candidates.len()).max(1);
+        let per = candidates.len().div_ceil(threads).max(1);
+        let parts: Vec<Result<Vec<f64>, PlanError>> = std::thread::scope(|s| {
+            let handles: Vec<_> = candidates
+                .chunks(per)
+                .map(|part| s.spawn(move || part.iter().map(|c| self.cost_of(c)).collect()))
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join()
+                        .unwrap_or_else(|_| Err(DynamicsError::ThreadPanicked.into()))
+                })
+                .collect()
+        });
+        let mut out = Vec::with_capacity(candidates.len());
+        for p in parts {
+            out.extend(p?);
+        }
+        Ok(out)
+    }
+}
+
+/// Searches for the cheapest control sequence: `sampler`'s rounds around
+/// `init` (the warm start; holding still when `None`), seeded by `seed`.
+/// `on_iteration` sees each round and returns false to stop early (cancel),
+/// keeping the best so far.
+pub fn plan(
+    problem: &Problem,
+    sampler: Sampler,
+    init: Option<&Controls>,
+    seed: u64,
+    mut on_iteration: impl FnMut(&Iteration) -> bool,
+) -> Result<Plan, PlanError> {
+    problem.check()?;
+    let t0 = Instant::now();
+    let (h, w) = (problem.horizon, problem.width());
+    let n = sampler.candidates().max(1);
+    if let Sampler::Cem { elites, .. } = sampler {
+        if elites == 0 || elites > n {
+            return Err(PlanError::Problem(format!(
+                "CEM needs 1 to {n} elites, got {elites}"
+            )));
+        }
+    }
+    if !(sampler.sigma().is_finite() && sampler.sigma() >= 0.0) {
+        return Err(PlanError::Problem("sigma must be finite and ≥ 0".into()));
+    }
+    let mut mean = match init {
+        Some(c) if c.steps == h && c.width == w => c.u.clone(),
+        Some(c) => {
+            return Err(PlanError::Problem(format!(
+                "the warm start has {} steps of {} numbers, the problem {h} of {w}",
+                c.steps, c.width
+            )))
+        }
+        None => vec![0.0; h * w],
+    };
+    let mut sigma = vec![sampler.sigma(); h * w];
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let clip = |x: f64| x.clamp(-problem.max_speed, problem.max_speed);
+    let mut best: Option<(f64, Controls)> = None;
+    let (mut iterations, mut costs, mut evaluated) = (vec![], vec![], 0);
+    for it in 1..=sampler.iterations().max(1) {
+        let candidates: Vec<Controls> = (0..n)
+            .map(|k| {
+                let u = mean
+                    .iter()
+                    .zip(&sigma)
+                    .map(|(m, s)| {
+                        let z: f64 = if k == 0 {
+                            0.0
+                        } else {
+                            StandardNormal.sample(&mut rng)
+                        };
+                        clip(m + s * z)
+                    })
+                    .collect();
+                Controls {
+                    steps: h,
+                    width: w,
+                    u,
+                }
+            })
+            .collect();
+        costs = problem.costs(&candidates)?;
+        evaluated += candidates.len();
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]));
+        let top = order[0];
+        if best.as_ref().is_none_or(|(c, _)| costs[top] < *c) {
+            best = Some((costs[top], candidates[top].clone()));
+        }
+        let finite: Vec<f64> = costs.iter().copied().filter(|c| c.is_finite()).collect();
+        let report = Iteration {
+            iteration: it,
+            best: best.as_ref().map_or(f64::INFINITY, |b| b.0),
+            mean: finite.iter().sum::<f64>() / finite.len().max(1) as f64,
+            diverged: n - finite.len(),
+        };
+        let go_on = on_iteration(&report);
+        iterations.push(report);
+        match sampler {
+            Sampler::Random { .. } => {}
+            Sampler::Cem { elites, .. } => {
+                let elite: Vec<&Controls> = order[..elites]
+                    .iter()
+                    .filter(|&&k| costs[k].is_finite())
+                    .map(|&k| &candidates[k])
+                    .collect();
+                if !elite.is_empty() {
+                    let m = elite.len() as f64;
+                    for f in 0..h * w {
+                        let mu = elite.iter().map(|c| c.u[f]).sum::<f64>() / m;
+                        let var = elite.iter().map(|c| (c.u[f] - mu).powi(2)).sum::<f64>() / m;
+                        mean[f] = mu;
+                        sigma[f] = var.sqrt();
+                    }
+                }
+            }
+            Sampler::Mppi { temperature, .. } => {
+                let lo = costs[top];
+                if lo.is_finite() {
+                    let lambda = temperature.max(1e-12);
+                    let wts: Vec<f64> = costs.iter().map(|c| (-(c - lo) / lambda).exp()).collect();
+                    let total: f64 = wts.iter().sum();
+                    for (f, m) in mean.iter_mut().enumerate() {
+                        *m = candidates
+                            .iter()
+                            .zip(&wts)
+                            .map(|(c, wt)| wt * c.u[f])
+                            .sum::<f64>()
+                            / total;
+                    }
+                }
+            }
+        }
+        if !go_on {
+            break;
+        }
+    }
+    let (cost, best) = best.expect("at least one round ran");
+    let predicted = if cost.is_finite() {
+        problem.rollout(&best)?
+    } else {
+        vec![problem.start.clone()]
+    };
+    Ok(Plan {
+        best,
+        cost,
+        predicted,
+        costs,
+        iterations,
+        evaluated,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
