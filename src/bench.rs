@@ -140,6 +140,46 @@ pub fn contact_packing(side: usize) -> (Graph, State) {
     (g, State { q, v })
 }
 
+/// Median time of one round of `candidates` random candidates, each 5
+/// control steps of 10 integration steps (50 steps), through a random MCGNODE
+/// on a chain of 19 links and its gripper (20 particles), on every core.
+pub fn plan_seconds(candidates: usize, repeats: usize) -> Result<f64> {
+    use crate::plan::{plan, Cost, CostKind, Problem, Sampler, Timing};
+    let cfg = SystemConfig::new(SystemKind::HeldChain, 19);
+    let g = cfg.graph();
+    let start = cfg.start_for(&g, 5, 0);
+    let (_, m) = random_model(Variant::Mcgnode, &g, 0)?;
+    let problem = Problem {
+        model: &m,
+        graph: &g,
+        start: &start,
+        timing: Timing {
+            dt: cfg.dt,
+            substeps: 10,
+        },
+        horizon: 5,
+        cost: Cost {
+            kind: CostKind::Final,
+            particles: vec![18],
+            targets: vec![1.0, -20.0],
+            effort: 1e-3,
+            speed: 0.0,
+        },
+        max_speed: 1.0,
+    };
+    let sampler = Sampler::Random {
+        candidates,
+        sigma: 0.5,
+    };
+    let mut times = vec![];
+    for k in 0..repeats {
+        let t = Instant::now();
+        plan(&problem, sampler, None, k as u64, |_| true).map_err(crate::error::Error::msg)?;
+        times.push(t.elapsed().as_secs_f64());
+    }
+    Ok(median(times))
+}
+
 /// Median time of a kernel rollout of `steps` steps of `variant` (random
 /// weights) on `g` from `s0`.
 pub fn graph_rollout_seconds(
@@ -270,6 +310,16 @@ pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
             name,
             value: steps as f64 / s,
             unit: "steps/s".into(),
+            jax: None,
+            repeats: r.min(5),
+        });
+    }
+    let name = "plan: 256 candidates x 50 steps of a 20-particle held chain (MCGNODE, one round)";
+    if want(name) {
+        out.push(Figure {
+            name: name.into(),
+            value: plan_seconds(256, r.min(5))?,
+            unit: "s".into(),
             jax: None,
             repeats: r.min(5),
         });

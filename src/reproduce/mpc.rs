@@ -148,6 +148,13 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
         targets: episodes.iter().map(|e| e.1.clone()).collect(),
         settings,
     };
+    // The picture shows the episode whose target is farthest from the start.
+    let far = |(s, t): &(crate::system::State, Vec<f64>)| {
+        (s.q[end * 2] - t[0]).hypot(s.q[end * 2 + 1] - t[1])
+    };
+    let shown = (0..episodes.len())
+        .max_by(|&a, &b| far(&episodes[a]).total_cmp(&far(&episodes[b])))
+        .unwrap_or(0);
     let mut first: Vec<(String, EpisodeReport)> = vec![];
     for (name, model) in &planners {
         let mut results = vec![];
@@ -173,7 +180,7 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
                 seed: seed + 100 * i as u64,
             };
             let r = mpc::run(&ep).with_context(|| format!("{name}, target {i}"))?;
-            if i == 0 {
+            if i == shown {
                 first.push(((*name).to_string(), r.clone()));
             }
             results.push(r);
@@ -197,12 +204,13 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
     let json = lab.dir.join("mpc.json");
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("writing {}", json.display()))?;
-    picture(lab, &episodes[0], &first)?;
+    picture(lab, &episodes[shown], &first)?;
     Ok(report)
 }
 
-/// `mpc.png`: the first episode's target, each planner's executed path of the
-/// free end, and MCGNODE's first predicted path.
+/// `mpc.png`: one episode's target, each planner's executed path of the free
+/// end, and MCGNODE's first predicted path; widths a fraction of the picture's
+/// span.
 fn picture(
     lab: &Lab,
     episode: &(crate::system::State, Vec<f64>),
@@ -216,6 +224,16 @@ fn picture(
         _ => RGBColor(120, 120, 120),
     };
     let p3 = |p: &[f64]| [p[0], p[1], 0.0];
+    let (lo, hi) = runs.iter().flat_map(|(_, r)| r.executed.iter()).fold(
+        ([f64::MAX; 2], [f64::MIN; 2]),
+        |(lo, hi), p| {
+            (
+                [lo[0].min(p[0]), lo[1].min(p[1])],
+                [hi[0].max(p[0]), hi[1].max(p[1])],
+            )
+        },
+    );
+    let w = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.5) / 200.0;
     let mut scene = crate::plot::Scene {
         title: "free end: executed paths (mcgnode orange, gnode blue, truth green, none grey), \
                 mcgnode's first plan (light), target (square)"
@@ -223,31 +241,33 @@ fn picture(
         ..Default::default()
     };
     for (name, r) in runs {
-        for w in r.executed.windows(2) {
+        for seg in r.executed.windows(2) {
             scene
                 .segments
-                .push((p3(&w[0]), p3(&w[1]), colour(name), 0.03));
+                .push((p3(&seg[0]), p3(&seg[1]), colour(name), w));
         }
         if let Some(last) = r.executed.last() {
-            scene.discs.push((p3(last), colour(name), 0.12));
+            scene.discs.push((p3(last), colour(name), 5.0 * w));
         }
         if name == "mcgnode" {
             let mut prev = r.executed[0].clone();
             for q in &r.predicted {
                 scene
                     .segments
-                    .push((p3(&prev), p3(q), RGBColor(250, 190, 150), 0.02));
+                    .push((p3(&prev), p3(q), RGBColor(250, 190, 150), 0.7 * w));
                 prev.clone_from(q);
             }
         }
     }
     let (start, target) = episode;
     let end = LINKS - 1;
-    scene
-        .discs
-        .push((p3(&start.q[end * 2..end * 2 + 2]), RGBColor(0, 0, 0), 0.1));
+    scene.discs.push((
+        p3(&start.q[end * 2..end * 2 + 2]),
+        RGBColor(0, 0, 0),
+        4.0 * w,
+    ));
     scene
         .squares
-        .push((p3(target), RGBColor(200, 30, 30), 0.15));
+        .push((p3(target), RGBColor(200, 30, 30), 6.0 * w));
     crate::plot::draw_scene(&lab.dir.join("mpc.png"), &scene)
 }

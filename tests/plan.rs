@@ -1,0 +1,223 @@
+//! Planning through a model (issue 22): the search against holding still and
+//! against its own replay, the samplers, the CLI's JSON, and the closed loop
+//! (`demo --mpc --quick`). Run with `cargo test --release --test plan`.
+
+use mcgnode::dynamics::Dynamics;
+use mcgnode::models::truth::truth;
+use mcgnode::physics::{SystemConfig, SystemKind};
+use mcgnode::plan::{plan, Controls, Cost, CostKind, Problem, Sampler, Timing};
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn problem<'a>(
+    model: &'a dyn Dynamics,
+    cfg: &SystemConfig,
+    g: &'a mcgnode::Graph,
+    start: &'a mcgnode::State,
+) -> Problem<'a> {
+    let end = cfg.particles - 1;
+    Problem {
+        model,
+        graph: g,
+        start,
+        timing: Timing {
+            dt: 0.005,
+            substeps: 20,
+        },
+        // 3 s: the chain's free end follows its gripper slowly (its swing
+        // takes about 4.7 s).
+        horizon: 30,
+        cost: Cost {
+            kind: CostKind::Final,
+            particles: vec![end],
+            targets: vec![start.q[2 * end] + 0.4, start.q[2 * end + 1] + 0.1],
+            effort: 1e-3,
+            speed: 0.0,
+        },
+        max_speed: 1.0,
+    }
+}
+
+/// CEM with the true physics finds a sequence far cheaper than holding
+/// still; its predicted trajectory is the rollout of its best sequence, bit
+/// for bit; the same seed gives the same plan; the gripper moves as the
+/// controls say and nothing else is driven.
+#[test]
+fn planning_beats_holding_still_and_replays_bit_for_bit() {
+    let cfg = SystemConfig::new(SystemKind::HeldChain, 5);
+    let g = cfg.graph();
+    let start = cfg.start_for(&g, 3, 0);
+    let model = truth(SystemKind::HeldChain);
+    let p = problem(model.as_ref(), &cfg, &g, &start);
+    let sampler = Sampler::Cem {
+        candidates: 64,
+        iterations: 3,
+        elites: 8,
+        sigma: 0.5,
+    };
+    let mut rounds = 0;
+    let a = plan(&p, sampler, None, 5, |_| {
+        rounds += 1;
+        true
+    })
+    .unwrap();
+    assert_eq!((rounds, a.evaluated, a.costs.len()), (3, 192, 64));
+    let still = p.cost_of(&Controls::zeros(30, 2)).unwrap();
+    assert!(a.cost < 0.1 * still, "plan {} vs still {still}", a.cost);
+    assert!(a.iterations.windows(2).all(|w| w[1].best <= w[0].best));
+    assert_eq!(a.predicted, p.rollout(&a.best).unwrap());
+    assert_eq!(a.predicted.len(), 31);
+    let b = plan(&p, sampler, None, 5, |_| true).unwrap();
+    assert_eq!((a.best.clone(), a.cost), (b.best, b.cost));
+    // The gripper's path is the controls' (velocity ramps to each knot).
+    let drive = a.best.drive(&[5], 2, &start, p.timing);
+    let last = a.predicted.last().unwrap();
+    assert_eq!(&last.q[10..12], &drive.q[600][..]);
+    assert_eq!(&last.v[10..12], a.best.row(29));
+    // A cancelled search keeps its best so far.
+    let one = plan(&p, sampler, None, 5, |_| false).unwrap();
+    assert_eq!(one.iterations.len(), 1);
+    // Random shooting and MPPI run and never end worse than their mean (the
+    // warm start, holding still, is their first candidate).
+    for s in [
+        Sampler::Random {
+            candidates: 32,
+            sigma: 0.5,
+        },
+        Sampler::Mppi {
+            candidates: 32,
+            iterations: 2,
+            sigma: 0.5,
+            temperature: 0.1,
+        },
+    ] {
+        let r = plan(&p, s, None, 1, |_| true).unwrap();
+        assert!(r.cost <= still, "{s:?}: {} vs {still}", r.cost);
+    }
+}
+
+/// Problems that cannot be planned are refused, saying what to change.
+#[test]
+fn ill_posed_problems_are_refused() {
+    let cfg = SystemConfig::new(SystemKind::HeldChain, 4);
+    let g = cfg.graph();
+    let start = cfg.start_for(&g, 1, 0);
+    let model = truth(SystemKind::HeldChain);
+    let mut p = problem(model.as_ref(), &cfg, &g, &start);
+    p.cost.targets.push(1.0);
+    let s = Sampler::Random {
+        candidates: 4,
+        sigma: 0.1,
+    };
+    let e = plan(&p, s, None, 1, |_| true).unwrap_err().to_string();
+    assert!(e.contains("one 2-vector per target particle"), "{e}");
+    let spring = SystemConfig::new(SystemKind::Spring, 5);
+    let gs = spring.graph();
+    let ss = spring.start_for(&gs, 1, 0);
+    let m = truth(SystemKind::Spring);
+    let mut p = problem(m.as_ref(), &spring, &gs, &ss);
+    p.cost.targets.truncate(2);
+    let e = plan(&p, s, None, 1, |_| true).unwrap_err().to_string();
+    assert!(e.contains("no kinematic particle"), "{e}");
+}
+
+fn mcgnode(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mcgnode"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run mcgnode")
+}
+
+fn ok(o: &Output) -> serde_json::Value {
+    assert!(
+        o.status.success(),
+        "mcgnode failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null)
+}
+
+/// `mcgnode plan --json` prints the costs, the best sequence and its
+/// predicted trajectory, in the shapes its options ask for.
+#[test]
+fn the_plan_command_prints_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let j = ok(&mcgnode(
+        d,
+        &[
+            "plan",
+            "--model",
+            "truth:held-chain",
+            "--target",
+            "0.8,-5.5",
+            "--horizon",
+            "6",
+            "--dt",
+            "0.01",
+            "--substeps",
+            "10",
+            "--candidates",
+            "24",
+            "--iterations",
+            "2",
+            "--elites",
+            "4",
+            "--json",
+        ],
+    ));
+    let best = j["best"].as_array().unwrap();
+    assert_eq!(best.len(), 6);
+    assert!(best.iter().all(|r| r.as_array().unwrap().len() == 2));
+    assert_eq!(j["predicted"].as_array().unwrap().len(), 7);
+    assert_eq!(j["costs"].as_array().unwrap().len(), 24);
+    assert_eq!(j["iterations"].as_array().unwrap().len(), 2);
+    assert_eq!(j["driven"], serde_json::json!([5]));
+    assert_eq!(j["particle"], 4);
+    let (cost, still) = (
+        j["cost"].as_f64().unwrap(),
+        j["hold_still_cost"].as_f64().unwrap(),
+    );
+    assert!(cost <= still, "{cost} > {still}");
+    let o = mcgnode(
+        d,
+        &[
+            "plan",
+            "--model",
+            "truth:spring",
+            "--system",
+            "spring",
+            "--target",
+            "1,1",
+        ],
+    );
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("no kinematic particle"), "{e}");
+}
+
+/// `demo --mpc --quick` writes mpc.json with each planner's success rate,
+/// final distance and planning time, and mpc.png; the true physics as
+/// planner ends nearer its targets than doing nothing.
+#[test]
+fn demo_mpc_writes_its_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let o = mcgnode(d, &["demo", "--mpc", "--quick", "--out", "out"]);
+    ok(&o);
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("out/mpc.json")).unwrap()).unwrap();
+    for name in ["mcgnode", "gnode", "truth", "none"] {
+        let p = &r["planners"][name];
+        let rate = p["success_rate"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&rate), "{name}: {rate}");
+        assert!(p["final_distance"].as_f64().unwrap() >= 0.0);
+        assert!(p["seconds_per_step"].as_f64().unwrap() >= 0.0);
+        assert_eq!(p["distances"].as_array().unwrap().len(), 4);
+    }
+    let dist = |n: &str| r["planners"][n]["final_distance"].as_f64().unwrap();
+    assert!(dist("truth") < dist("none"), "{r}");
+    assert_eq!(r["planners"]["none"]["seconds_per_step"], 0.0);
+    assert!(d.join("out/mpc.png").metadata().unwrap().len() > 1000);
+}
