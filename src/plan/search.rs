@@ -192,8 +192,13 @@ impl Problem<'_> {
                 self.cost.particles.len()
             ));
         }
-        if self.cost.targets.iter().any(|x| !x.is_finite()) || !(self.cost.effort >= 0.0) {
-            return bad("targets must be finite and the effort weight ≥ 0".into());
+        let weights_ok = [self.cost.effort, self.cost.speed]
+            .iter()
+            .all(|w| w.is_finite() && *w >= 0.0);
+        if self.cost.targets.iter().any(|x| !x.is_finite()) || !weights_ok {
+            return bad(
+                "targets must be finite and the effort and speed weights finite and ≥ 0".into(),
+            );
         }
         self.start
             .validate(self.graph)

@@ -109,7 +109,7 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
     ];
     let graph = cfg.graph();
     let end = LINKS - 1;
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6d70_63);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x006d_7063);
     let episodes: Vec<(crate::system::State, Vec<f64>)> = (0..n_targets)
         .map(|i| {
             let start = cfg.start_for(&graph, seed + 7000, i);
