@@ -7,35 +7,14 @@
 //! (engine against candle and finite differences on contact graphs) are in
 //! tests/engine.rs. Run with `cargo test --release --test contact_models`.
 
-use std::path::Path;
-use std::process::{Command, Output};
+mod common;
 
-fn mcgnode(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mcgnode"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run mcgnode")
-}
-
-fn ok(o: &Output) -> String {
-    assert!(
-        o.status.success(),
-        "mcgnode failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::cli::{evaluate_json, log_ok, run_in};
+use std::process::Output;
 
 fn refused(o: &Output) -> String {
     assert!(!o.status.success(), "mcgnode should have refused");
     String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn evaluate(dir: &Path, model: &str, bag: &str) -> serde_json::Value {
-    let o = mcgnode(dir, &["evaluate", "--model", model, "--bag", bag, "--json"]);
-    ok(&o);
-    serde_json::from_slice(&o.stdout).expect("evaluate --json prints JSON")
 }
 
 /// Two 4×4 spring lattices thrown at each other: 10 training trajectories,
@@ -49,7 +28,7 @@ fn mcgnode_learns_colliding_lattices_and_conserves_momentum() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     for (out, seed, n) in [("train.mcap", "1", "10"), ("test.mcap", "2", "2")] {
-        ok(&mcgnode(
+        log_ok(&run_in(
             d,
             &[
                 "simulate",
@@ -66,7 +45,7 @@ fn mcgnode_learns_colliding_lattices_and_conserves_momentum() {
             ],
         ));
     }
-    let log = ok(&mcgnode(
+    let log = log_ok(&run_in(
         d,
         &[
             "train",
@@ -89,7 +68,7 @@ fn mcgnode_learns_colliding_lattices_and_conserves_momentum() {
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("m.json")).unwrap()).unwrap();
     assert_eq!(m["hyper"]["interaction_radius"], 1.0);
-    let e = evaluate(d, "m.json", "test.mcap");
+    let e = evaluate_json(d, &["--model", "m.json", "--bag", "test.mcap"]);
     let (re, still) = (
         e["averages"]["re"].as_f64().unwrap(),
         e["still"]["re_mean"].as_f64().unwrap(),
@@ -102,7 +81,7 @@ fn mcgnode_learns_colliding_lattices_and_conserves_momentum() {
     assert!(me.iter().all(|x| x.as_f64().unwrap() < 1e-12), "{me:?}");
     // The same model refuses the data with contacts taken away, and a model
     // trained without them refuses the data with them, each naming the fix.
-    let log = ok(&mcgnode(
+    let log = log_ok(&run_in(
         d,
         &[
             "train",
@@ -119,13 +98,13 @@ fn mcgnode_learns_colliding_lattices_and_conserves_momentum() {
         ],
     ));
     assert!(!log.contains("contacts within"), "{log}");
-    let o = mcgnode(
+    let o = run_in(
         d,
         &["evaluate", "--model", "plain.json", "--bag", "test.mcap"],
     );
     let e = refused(&o);
     assert!(e.contains("train --radius 1"), "{e}");
-    let e = refused(&mcgnode(
+    let e = refused(&run_in(
         d,
         &[
             "train",
@@ -148,7 +127,7 @@ fn mcgnode_learns_colliding_lattices_and_conserves_momentum() {
 fn soft_sphere_rollouts_hold_the_walls() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    ok(&mcgnode(
+    log_ok(&run_in(
         d,
         &[
             "simulate",
@@ -164,7 +143,7 @@ fn soft_sphere_rollouts_hold_the_walls() {
             "box.mcap",
         ],
     ));
-    let log = ok(&mcgnode(
+    let log = log_ok(&run_in(
         d,
         &[
             "train", "--model", "mcgnode", "--data", "box.mcap", "--epochs", "5", "--out", "m.json",
@@ -174,7 +153,7 @@ fn soft_sphere_rollouts_hold_the_walls() {
         log.contains("kinematic particles, left out of the loss"),
         "{log}"
     );
-    ok(&mcgnode(
+    log_ok(&run_in(
         d,
         &[
             "rollout",

@@ -4,12 +4,13 @@
 //! interpolation accuracy from a recording), and `evaluate` following a
 //! bag's recorded gripper. Run with `cargo test --release --test driven`.
 
+mod common;
+
+use common::cli::{evaluate_json, log_ok, run_in};
 use mcgnode::dynamics::{Dynamics, Still};
 use mcgnode::models::truth::load_truth;
 use mcgnode::physics::{hamiltonian, Drive, Integrator, SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State};
-use std::path::Path;
-use std::process::{Command, Output};
 
 fn held(links: usize, states: usize, save_every: usize) -> (SystemConfig, Graph) {
     let mut cfg = SystemConfig::new(SystemKind::HeldChain, links);
@@ -132,23 +133,6 @@ fn rollouts_follow_the_given_motion() {
     );
 }
 
-fn mcgnode(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mcgnode"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run mcgnode")
-}
-
-fn ok(o: &Output) -> String {
-    assert!(
-        o.status.success(),
-        "mcgnode failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
 /// `evaluate` follows a bag's recorded gripper: the truth scores near zero,
 /// a learned MCGNODE (briefly trained) beats standing still, and standing
 /// still moves the gripper too.
@@ -157,7 +141,7 @@ fn evaluate_follows_the_recorded_gripper() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     for (out, seed, n) in [("train.mcap", "1", "20"), ("test.mcap", "2", "3")] {
-        ok(&mcgnode(
+        log_ok(&run_in(
             d,
             &[
                 "simulate",
@@ -176,14 +160,7 @@ fn evaluate_follows_the_recorded_gripper() {
             ],
         ));
     }
-    let eval = |model: &str| {
-        let o = mcgnode(
-            d,
-            &["evaluate", "--model", model, "--bag", "test.mcap", "--json"],
-        );
-        ok(&o);
-        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
-    };
+    let eval = |model: &str| evaluate_json(d, &["--model", model, "--bag", "test.mcap"]);
     let t = eval("truth:held-chain");
     let re_truth = t["averages"]["re"].as_f64().unwrap();
     let re_still = t["still"]["re_mean"].as_f64().unwrap();
@@ -191,7 +168,7 @@ fn evaluate_follows_the_recorded_gripper() {
         re_truth < 1e-4 * re_still,
         "truth {re_truth:.3e}, still {re_still:.3e}"
     );
-    let log = ok(&mcgnode(
+    let log = log_ok(&run_in(
         d,
         &[
             "train",

@@ -2,12 +2,14 @@
 //! against its own replay, the samplers, the CLI's JSON, and the closed loop
 //! (`demo --mpc --quick`). Run with `cargo test --release --test plan`.
 
+mod common;
+
+use common::cli::{log_ok, ok, run_in};
 use mcgnode::dynamics::Dynamics;
 use mcgnode::models::truth::truth;
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::plan::{plan, Controls, Cost, CostKind, Problem, Sampler, Timing};
-use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 fn problem<'a>(
     model: &'a dyn Dynamics,
@@ -121,30 +123,13 @@ fn ill_posed_problems_are_refused() {
     assert!(e.contains("no kinematic particle"), "{e}");
 }
 
-fn mcgnode(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mcgnode"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run mcgnode")
-}
-
-fn ok(o: &Output) -> serde_json::Value {
-    assert!(
-        o.status.success(),
-        "mcgnode failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null)
-}
-
 /// `mcgnode plan --json` prints the costs, the best sequence and its
 /// predicted trajectory, in the shapes its options ask for.
 #[test]
 fn the_plan_command_prints_json() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let j = ok(&mcgnode(
+    let j = json_ok(&run_in(
         d,
         &[
             "plan",
@@ -180,7 +165,7 @@ fn the_plan_command_prints_json() {
         j["hold_still_cost"].as_f64().unwrap(),
     );
     assert!(cost <= still, "{cost} > {still}");
-    let o = mcgnode(
+    let o = run_in(
         d,
         &[
             "plan",
@@ -204,8 +189,8 @@ fn the_plan_command_prints_json() {
 fn demo_mpc_writes_its_report() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let o = mcgnode(d, &["demo", "--mpc", "--quick", "--out", "out"]);
-    ok(&o);
+    let o = run_in(d, &["demo", "--mpc", "--quick", "--out", "out"]);
+    log_ok(&o);
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("out/mpc.json")).unwrap()).unwrap();
     for name in ["mcgnode", "gnode", "truth", "none"] {
@@ -220,4 +205,9 @@ fn demo_mpc_writes_its_report() {
     assert!(dist("truth") < dist("none"), "{r}");
     assert_eq!(r["planners"]["none"]["seconds_per_step"], 0.0);
     assert!(d.join("out/mpc.png").metadata().unwrap().len() > 1000);
+}
+
+/// The JSON `mcgnode` printed, after checking it succeeded.
+fn json_ok(o: &Output) -> serde_json::Value {
+    serde_json::from_str(&ok(o)).expect("mcgnode printed JSON")
 }

@@ -17,24 +17,12 @@ pub struct Args {
     /// `truth:<system>` (the ground truth as planner).
     #[arg(long)]
     pub model: PathBuf,
-    /// Plan from the first state of this bag (its trajectory `--trajectory`).
-    #[arg(long, num_args = 1..)]
-    pub initial: Option<Vec<PathBuf>>,
-    /// The ParticleState topic of `--initial`, when it holds several.
-    #[arg(long)]
-    pub topic: Option<String>,
-    /// Trajectory id within `--initial`.
-    #[arg(long, default_value_t = 0)]
-    pub trajectory: u32,
     /// Without --initial: the system whose start to draw, as `simulate` does.
     #[arg(long, default_value = "held-chain")]
     pub system: SystemKind,
-    /// Without --initial: free particles of the drawn system.
-    #[arg(long, default_value_t = 5)]
-    pub particles: usize,
-    /// Without --initial: seed of the drawn start.
-    #[arg(long, default_value_t = 7)]
-    pub seed: u64,
+    /// Where to start.
+    #[command(flatten)]
+    pub start: super::start::StartArgs,
     /// The particle to bring to the target (default: the last free one, the
     /// held chain's free end).
     #[arg(long)]
@@ -97,10 +85,7 @@ pub struct Args {
 pub fn run(a: Args) -> Result<()> {
     let reference = ModelRef::from_path(&a.model)?;
     let model = load_any_model(&reference)?.dynamics;
-    let from = match &a.initial {
-        Some(paths) => super::start::from_bag(paths, a.topic.clone(), a.trajectory)?,
-        None => super::start::drawn(a.system, a.particles, a.seed)?,
-    };
+    let from = a.start.start(a.system)?;
     let (g, d) = (&from.graph, from.graph.dim);
     let dt = match (a.dt, &from.cfg, from.stamp_dt) {
         (Some(dt), _, _) => dt,

@@ -16,23 +16,9 @@ pub struct Args {
     /// System whose initial state to draw (as `simulate` draws them).
     #[arg(long, default_value = "spring")]
     pub system: SystemKind,
-    /// Number of particles (any: graph models are inductive).
-    #[arg(long, default_value_t = 5)]
-    pub particles: usize,
-    /// Seed of the drawn initial state.
-    #[arg(long, default_value_t = 7)]
-    pub seed: u64,
-    /// Start from the first state of this bag instead (its trajectory
-    /// `--trajectory`): an MCAP file, a rosbag2 directory or a .db3 file
-    /// (several: the first trajectory with that id).
-    #[arg(long, num_args = 1..)]
-    pub initial: Option<Vec<PathBuf>>,
-    /// The ParticleState topic of `--initial`, when it holds several.
-    #[arg(long)]
-    pub topic: Option<String>,
-    /// Trajectory id within `--initial`.
-    #[arg(long, default_value_t = 0)]
-    pub trajectory: u32,
+    /// Where to start.
+    #[command(flatten)]
+    pub start: super::start::StartArgs,
     /// Simulated time [s].
     #[arg(long, default_value_t = 20.0)]
     pub duration: f64,
@@ -54,10 +40,7 @@ pub fn run(a: Args) -> Result<()> {
     let reference = ModelRef::from_path(&a.model)?;
     let model = load_any_model(&reference)?.dynamics;
     let trained = crate::models::trained_for(&reference)?;
-    let from = match &a.initial {
-        Some(paths) => super::start::from_bag(paths, a.topic.clone(), a.trajectory)?,
-        None => super::start::drawn(a.system, a.particles, a.seed)?,
-    };
+    let from = a.start.start(a.system)?;
     let super::start::Start {
         graph,
         state: start,

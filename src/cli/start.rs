@@ -8,6 +8,38 @@ use crate::system::{Graph, State};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 
+/// Where to start, as `rollout` and `plan` take it.
+#[derive(clap::Args, Debug, Clone)]
+pub(crate) struct StartArgs {
+    /// Free particles of the drawn start (any: graph models are inductive).
+    #[arg(long, default_value_t = 5)]
+    pub particles: usize,
+    /// Seed of the drawn start.
+    #[arg(long, default_value_t = 7)]
+    pub seed: u64,
+    /// Start from the first state of this bag instead (its trajectory
+    /// `--trajectory`): an MCAP file, a rosbag2 directory or a .db3 file
+    /// (several: the first trajectory with that id).
+    #[arg(long, num_args = 1..)]
+    pub initial: Option<Vec<PathBuf>>,
+    /// The ParticleState topic of `--initial`, when it holds several.
+    #[arg(long)]
+    pub topic: Option<String>,
+    /// Trajectory id within `--initial`.
+    #[arg(long, default_value_t = 0)]
+    pub trajectory: u32,
+}
+
+impl StartArgs {
+    /// The start: `--initial`'s, else one of `system` drawn as `simulate` does.
+    pub fn start(&self, system: SystemKind) -> Result<Start> {
+        match &self.initial {
+            Some(paths) => from_bag(paths, self.topic.clone(), self.trajectory),
+            None => drawn(system, self.particles, self.seed),
+        }
+    }
+}
+
 /// A start and what is known about its system.
 pub(crate) struct Start {
     /// The system.
@@ -25,7 +57,7 @@ pub(crate) struct Start {
 }
 
 /// The first state of trajectory `trajectory` of the bags `paths`.
-pub(crate) fn from_bag(paths: &[PathBuf], topic: Option<String>, trajectory: u32) -> Result<Start> {
+fn from_bag(paths: &[PathBuf], topic: Option<String>, trajectory: u32) -> Result<Start> {
     let bag = read_bags(paths, &ReadOptions { topic }).context("reading --initial")?;
     let cfg = bag_system(&bag)?;
     let field = bag.field.clone().or(cfg.as_ref().map(|c| c.field.clone()));
@@ -46,7 +78,7 @@ pub(crate) fn from_bag(paths: &[PathBuf], topic: Option<String>, trajectory: u32
 }
 
 /// A start of `system` with `particles` particles drawn with `seed`.
-pub(crate) fn drawn(system: SystemKind, particles: usize, seed: u64) -> Result<Start> {
+fn drawn(system: SystemKind, particles: usize, seed: u64) -> Result<Start> {
     let cfg = SystemConfig::new(system, particles);
     cfg.validate()?;
     let graph = cfg.graph();

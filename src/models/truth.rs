@@ -130,20 +130,8 @@ impl Dynamics for Truth {
         every: usize,
     ) -> Result<Vec<State>, DynamicsError> {
         self.supports(graph)?;
-        let every = every.max(1);
-        let mut it = Integrator::new(graph, &self.field, dt, start.clone())?;
-        let mut out = Vec::with_capacity(steps / every + 1);
-        out.push(start.clone());
-        for step in 1..=steps {
-            it.step();
-            if it.state().validate(graph).is_err() {
-                return Err(DynamicsError::Diverged(step));
-            }
-            if step % every == 0 {
-                out.push(it.state().clone());
-            }
-        }
-        Ok(out)
+        let it = Integrator::new(graph, &self.field, dt, start.clone())?;
+        integrate(it, graph, steps, every)
     }
 
     /// The simulator's integrator with the kinematic particles on `drive`.
@@ -158,20 +146,8 @@ impl Dynamics for Truth {
     ) -> Result<Vec<State>, DynamicsError> {
         self.supports(graph)?;
         drive.check(graph, steps)?;
-        let every = every.max(1);
-        let mut it = Integrator::driven(graph, &self.field, 0.0, dt, start.clone(), drive.clone())?;
-        let mut out = Vec::with_capacity(steps / every + 1);
-        out.push(it.state().clone());
-        for step in 1..=steps {
-            it.step();
-            if it.state().validate(graph).is_err() {
-                return Err(DynamicsError::Diverged(step));
-            }
-            if step % every == 0 {
-                out.push(it.state().clone());
-            }
-        }
-        Ok(out)
+        let it = Integrator::driven(graph, &self.field, 0.0, dt, start.clone(), drive.clone())?;
+        integrate(it, graph, steps, every)
     }
 
     /// [`Dynamics::rollout_every`] (RATTLE) per start; the truth does not diverge.
@@ -185,6 +161,28 @@ impl Dynamics for Truth {
     ) -> Result<Vec<Rollout>, DynamicsError> {
         crate::dynamics::rollout_each(self, graph, starts, dt, steps, every)
     }
+}
+
+/// `steps` steps of `it`: its start, then every `every`-th state.
+fn integrate(
+    mut it: Integrator,
+    graph: &Graph,
+    steps: usize,
+    every: usize,
+) -> Result<Vec<State>, DynamicsError> {
+    let every = every.max(1);
+    let mut out = Vec::with_capacity(steps / every + 1);
+    out.push(it.state().clone());
+    for step in 1..=steps {
+        it.step();
+        if it.state().validate(graph).is_err() {
+            return Err(DynamicsError::Diverged(step));
+        }
+        if step % every == 0 {
+            out.push(it.state().clone());
+        }
+    }
+    Ok(out)
 }
 
 /// Prefix of model names that select the ground-truth physics.

@@ -50,3 +50,16 @@ pub fn evaluate_json(d: &Path, args: &[&str]) -> serde_json::Value {
 pub fn read(path: &Path) -> Bag {
     read_trajectories(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
 }
+
+/// `mcgnode ARGS` in `dir`, the directory first (as the contact, driven and
+/// planning tests write their calls).
+pub fn run_in(dir: &Path, args: &[&str]) -> Output {
+    mcgnode(args, dir)
+}
+
+/// Fails with what `mcgnode` printed unless it succeeded; its stderr (the
+/// log: training's choices and figures).
+pub fn log_ok(o: &Output) -> String {
+    ok(o);
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
