@@ -44,6 +44,7 @@ pub mod markers;
 pub mod names;
 pub mod node;
 pub mod params;
+pub mod plan;
 pub mod predict;
 pub mod qos;
 pub mod record;

@@ -34,13 +34,15 @@ use super::predict::{self, Prediction};
 use super::qos::{clock_qos, publisher, reliable_qos, server, subscription, topic_qos};
 use super::record::Recorder;
 use super::service::{self, OnFailure::Warn};
-use super::topics::{CLOCK_TOPIC, LIVE_ACCURACY_TOPIC, REPLAY_SERVICE, STANDARD_DIAGNOSTICS_TOPIC};
+use super::topics::{
+    CLOCK_TOPIC, LIVE_ACCURACY_TOPIC, PLAN_SERVICE, REPLAY_SERVICE, STANDARD_DIAGNOSTICS_TOPIC,
+};
 use super::training::{self, Trainer, TrainerHandles, TrainingServers};
-use super::wire::{ClockMsg, LoadModel, MarkerArray, Replay, Rollout, RosService, Train};
+use super::wire::{ClockMsg, LoadModel, MarkerArray, Plan, Replay, Rollout, RosService, Train};
 use super::wire::{
     DiagnosticArray, DiagnosticStatus, KeyValue, LiveAccuracy, NodeDiagnostics, ParticleForces,
-    PredictedTrajectory, ReplayRequest, ReplayResponse, RolloutRequest, RolloutResponse,
-    DIAGNOSTIC_OK, DIAGNOSTIC_WARN,
+    PlanRequest, PlanResponse, PredictedTrajectory, ReplayRequest, ReplayResponse, RolloutRequest,
+    RolloutResponse, DIAGNOSTIC_OK, DIAGNOSTIC_WARN,
 };
 use super::yaml::Scalar;
 use crate::data::stream::Reset;
@@ -286,6 +288,7 @@ struct Endpoints {
     standard_diagnostics: Publisher<DiagnosticArray>,
     rollout: Server<RolloutRequest, RolloutResponse>,
     replay: Server<ReplayRequest, ReplayResponse>,
+    plan: Server<PlanRequest, PlanResponse>,
     /// With `use_sim_time` only.
     clock: Option<Subscription<ClockMsg>>,
 }
@@ -313,6 +316,7 @@ impl Endpoints {
             )?,
             rollout: server::<Rollout>(node, names, &params.rollout_service)?,
             replay: server::<Replay>(node, names, REPLAY_SERVICE)?,
+            plan: server::<Plan>(node, names, PLAN_SERVICE)?,
             clock: if params.use_sim_time {
                 Some(subscription(node, names, CLOCK_TOPIC, &clock_qos())?)
             } else {
@@ -353,11 +357,19 @@ impl Endpoints {
         tokio::spawn(rollout);
         tokio::spawn(service::serve(
             h.clone(),
-            d,
+            d.clone(),
             self.replay,
             Replay::NAME,
             Warn,
             replay_call,
+        ));
+        tokio::spawn(service::serve(
+            h.clone(),
+            d,
+            self.plan,
+            Plan::NAME,
+            Warn,
+            plan_call,
         ));
     }
 }
@@ -735,6 +747,25 @@ fn rollout_call(h: &Handles, req: RolloutRequest) -> RolloutResponse {
     rollout_response(h.model.get().as_ref(), &req, &limits)
 }
 
+/// The Plan service's work with the node's current parameters and model.
+fn plan_call(h: &Handles, req: PlanRequest) -> PlanResponse {
+    if let Some(why) = h.lifecycle.refusal() {
+        return PlanResponse {
+            message: why,
+            ..PlanResponse::default()
+        };
+    }
+    let p = h.params.get();
+    let settings = super::plan::PlanSettings {
+        dt: p.dt,
+        substeps: p.substeps,
+        horizon: p.horizon,
+        max_steps: p.max_rollout_steps,
+        max_particles: p.max_particles,
+    };
+    super::plan::plan_response(h.model.get().as_ref(), &req, &settings)
+}
+
 /// What the Rollout service accepts and how it integrates, from the node's
 /// parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -787,7 +818,31 @@ pub fn rollout_response(
     } else {
         1
     };
-    match predict::trajectory(model, &req.initial, &graph, &start, dt, req.steps, substeps) {
+    let rows = req.steps as usize * substeps as usize + 1;
+    let given = super::plan::requested_drive(
+        &graph,
+        &req.kinematic_positions,
+        &req.kinematic_velocities,
+        rows,
+        dt / f64::from(substeps),
+    );
+    let predicted = match given {
+        Err(e) => return fail(e.0),
+        Ok(None) => {
+            predict::trajectory(model, &req.initial, &graph, &start, dt, req.steps, substeps)
+        }
+        Ok(Some(drive)) => predict::trajectory_driven(
+            model,
+            &req.initial,
+            &graph,
+            &start,
+            dt,
+            req.steps,
+            substeps,
+            &drive,
+        ),
+    };
+    match predicted {
         Ok(trajectory) => RolloutResponse {
             success: true,
             message: format!("{} states, dt = {dt}", trajectory.steps),

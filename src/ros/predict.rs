@@ -115,6 +115,35 @@ pub fn trajectory(
     Ok(trajectory_msg(input, graph, dt, &states[1..]))
 }
 
+/// [`trajectory`] with the kinematic particles moved along `drive` (one row
+/// per integration step of `dt / substeps`).
+#[allow(clippy::too_many_arguments)]
+pub fn trajectory_driven(
+    model: &dyn Dynamics,
+    input: &ParticleState,
+    graph: &Graph,
+    start: &State,
+    dt: f64,
+    steps: u32,
+    substeps: u32,
+    drive: &crate::physics::Drive,
+) -> Result<PredictedTrajectory, PredictError> {
+    let (states, ()) = integrate(dt, steps, substeps, |h, n, every| {
+        Ok((model.rollout_driven(graph, start, h, n, every, drive)?, ()))
+    })?;
+    Ok(trajectory_msg(input, graph, dt, &states[1..]))
+}
+
+/// The wire message of `states` predicted after `input`, `dt` apart.
+pub fn trajectory_of(
+    input: &ParticleState,
+    graph: &Graph,
+    dt: f64,
+    states: &[State],
+) -> PredictedTrajectory {
+    trajectory_msg(input, graph, dt, states)
+}
+
 /// [`rollout`] and the forces at `start`, from one call (one evaluation of
 /// the start for models with a forward pass).
 fn rollout_and_forces(

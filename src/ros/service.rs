@@ -14,7 +14,9 @@ use ros2_client::log::LogLevel;
 use ros2_client::{Message, Server};
 
 use super::handles::{Diagnostics, Warning};
-use super::wire::{LoadModelResponse, ReplayResponse, RolloutResponse, TrainResponse};
+use super::wire::{
+    LoadModelResponse, PlanResponse, ReplayResponse, RolloutResponse, TrainResponse,
+};
 
 /// A service reply that can say it failed.
 pub trait Reply: Message + Send + Sync + 'static {
@@ -42,7 +44,8 @@ reply!(
     RolloutResponse,
     ReplayResponse,
     TrainResponse,
-    LoadModelResponse
+    LoadModelResponse,
+    PlanResponse
 );
 
 /// How a service's failures are reported besides the reply itself.

@@ -23,6 +23,8 @@ pub const STANDARD_DIAGNOSTICS_TOPIC: &str = "/diagnostics";
 pub const CLOCK_TOPIC: &str = "/clock";
 /// The Replay service.
 pub const REPLAY_SERVICE: &str = "~/replay";
+/// The Plan service.
+pub const PLAN_SERVICE: &str = "~/plan";
 /// The Train service.
 pub const TRAIN_SERVICE: &str = "~/train";
 /// The LoadModel service.

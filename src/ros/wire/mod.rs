@@ -158,6 +158,7 @@ pub use lifecycle::{
 pub use markers::{marker_array_schema, ColorRgba, Marker, MarkerArray};
 pub use mcgnode::{LiveAccuracy, ModelSwap, NodeDiagnostics, ParticleForces, PredictedTrajectory};
 pub use services::{
-    LoadModel, LoadModelRequest, LoadModelResponse, Replay, ReplayRequest, ReplayResponse, Rollout,
-    RolloutRequest, RolloutResponse, Train, TrainRequest, TrainResponse,
+    LoadModel, LoadModelRequest, LoadModelResponse, Plan, PlanRequest, PlanResponse, Replay,
+    ReplayRequest, ReplayResponse, Rollout, RolloutRequest, RolloutResponse, Train, TrainRequest,
+    TrainResponse,
 };

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::data::msg::ParticleState;
+use crate::data::msg::{ParticleState, Point, Vector3};
 
 use super::mcgnode::PredictedTrajectory;
 
@@ -16,6 +16,9 @@ ros_services!("mcgnode_msgs":
     LoadModel(LoadModelRequest, LoadModelResponse) = "LoadModel",
     /// `mcgnode_msgs/srv/Replay`: a bag replayed through the served model.
     Replay(ReplayRequest, ReplayResponse) = "Replay",
+    /// `mcgnode_msgs/srv/Plan`: the kinematic particles' motion planned
+    /// through the served model.
+    Plan(PlanRequest, PlanResponse) = "Plan",
 );
 
 /// Request of `mcgnode_msgs/srv/Rollout`.
@@ -27,6 +30,12 @@ pub struct RolloutRequest {
     pub steps: u32,
     /// Time step; 0 = the node's `dt` parameter.
     pub dt: f64,
+    /// The kinematic particles' given positions at every integration step
+    /// (steps × substeps + 1 rows of one point per kinematic particle);
+    /// empty: they are held.
+    pub kinematic_positions: Vec<Point>,
+    /// Their velocities, the same shape; empty: derived from the positions.
+    pub kinematic_velocities: Vec<Vector3>,
 }
 
 /// Response of `mcgnode_msgs/srv/Rollout`.
@@ -143,4 +152,66 @@ mod tests {
         let back: RolloutResponse = decode_cdr(&encode_cdr(&resp).unwrap()).unwrap();
         assert_eq!(back, resp);
     }
+}
+
+/// Request of `mcgnode_msgs/srv/Plan` (msg/Plan.srv says what each field means).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PlanRequest {
+    /// Where to plan from.
+    pub initial: ParticleState,
+    /// Particles with targets.
+    pub particles: Vec<u32>,
+    /// Their targets.
+    pub targets: Vec<Point>,
+    /// "final", "along" (empty: final).
+    pub cost: String,
+    /// Weight of the control effort.
+    pub effort: f64,
+    /// Weight of the chosen particles' squared speed.
+    pub speed: f64,
+    /// Control steps of the node's dt (0: its horizon).
+    pub horizon: u32,
+    /// "random", "cem", "mppi" (empty: cem).
+    pub sampler: String,
+    /// Candidates per round (0: 256).
+    pub candidates: u32,
+    /// Rounds (0: 4).
+    pub iterations: u32,
+    /// CEM elites (0: 16).
+    pub elites: u32,
+    /// Spread of sampled velocities, m/s (0: 0.5).
+    pub sigma: f64,
+    /// MPPI temperature (0: 0.1).
+    pub temperature: f64,
+    /// Speed bound, m/s (0: 2).
+    pub max_speed: f64,
+    /// Seed of the sampling.
+    pub seed: u64,
+}
+
+/// Response of `mcgnode_msgs/srv/Plan`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PlanResponse {
+    /// Whether a plan was made.
+    pub success: bool,
+    /// Details, or why it failed.
+    pub message: String,
+    /// The best sequence's cost.
+    pub cost: f64,
+    /// Holding the kinematic particles still's cost.
+    pub hold_still_cost: f64,
+    /// The driven (kinematic) particles.
+    pub driven: Vec<u32>,
+    /// The best sequence, step-major, one vector per driven particle.
+    pub best: Vec<Vector3>,
+    /// The driven particles' positions at every integration step.
+    pub kinematic_positions: Vec<Point>,
+    /// Their velocities.
+    pub kinematic_velocities: Vec<Vector3>,
+    /// The best sequence's predicted trajectory.
+    pub trajectory: PredictedTrajectory,
+    /// The last round's candidate costs.
+    pub costs: Vec<f64>,
+    /// Planning wall time, seconds.
+    pub seconds: f64,
 }

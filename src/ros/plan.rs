@@ -1,0 +1,250 @@
+//! The Plan service: [`crate::plan`] on the served model from a received
+//! state, at the node's own step (control steps of `dt`, integration steps
+//! of `dt / substeps`), so that a Rollout given the plan's kinematic motion
+//! replays its prediction exactly.
+
+use super::predict;
+use super::wire::{PlanRequest, PlanResponse};
+use crate::data::msg::{Point, Vector3};
+use crate::dynamics::Dynamics;
+use crate::physics::Drive;
+use crate::plan::{plan, Controls, Cost, CostKind, Problem, Sampler, Timing};
+
+/// Why a Plan or Rollout request is refused: the message names the fix.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct Refused(pub String);
+
+/// What the node lends a plan: its step, substeps, horizon and limits.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanSettings {
+    /// Control step: the node's `dt`.
+    pub dt: f64,
+    /// Integration steps per control step: the node's `substeps`.
+    pub substeps: u32,
+    /// Control steps when the request gives 0: the node's `horizon`.
+    pub horizon: u32,
+    /// `max_rollout_steps`: the longest horizon accepted.
+    pub max_steps: u32,
+    /// `max_particles`.
+    pub max_particles: u32,
+}
+
+/// `(x, y, z)` of the first `dim` numbers of `x` (z = 0 in 2D).
+fn xyz(x: &[f64], dim: usize) -> [f64; 3] {
+    std::array::from_fn(|c| if c < dim { x[c] } else { 0.0 })
+}
+
+/// The flat rows of a drive as Points and Vector3s, step-major.
+fn motion(drive: &Drive) -> (Vec<Point>, Vec<Vector3>) {
+    let d = drive.dim;
+    let points = drive
+        .q
+        .iter()
+        .flat_map(|r| r.chunks(d).map(move |p| xyz(p, d)))
+        .map(|[x, y, z]| Point { x, y, z })
+        .collect();
+    let vectors = drive
+        .v
+        .iter()
+        .flat_map(|r| r.chunks(d).map(move |p| xyz(p, d)))
+        .map(|[x, y, z]| Vector3 { x, y, z })
+        .collect();
+    (points, vectors)
+}
+
+/// The sampler a request asks for, with the defaults of `mcgnode plan`.
+fn sampler(req: &PlanRequest) -> Result<Sampler, Refused> {
+    let or = |x: u32, d: usize| if x == 0 { d } else { x as usize };
+    let orf = |x: f64, d: f64| if x == 0.0 { d } else { x };
+    let (candidates, sigma) = (or(req.candidates, 256), orf(req.sigma, 0.5));
+    Ok(match req.sampler.as_str() {
+        "" | "cem" => Sampler::Cem {
+            candidates,
+            iterations: or(req.iterations, 4),
+            elites: or(req.elites, 16),
+            sigma,
+        },
+        "random" => Sampler::Random { candidates, sigma },
+        "mppi" => Sampler::Mppi {
+            candidates,
+            iterations: or(req.iterations, 4),
+            sigma,
+            temperature: orf(req.temperature, 0.1),
+        },
+        other => {
+            return Err(Refused(format!(
+                "sampler {other:?} is unknown: use random, cem or mppi (empty: cem)"
+            )))
+        }
+    })
+}
+
+/// The Plan service's work: checks the request, plans, and answers with the
+/// best sequence, its kinematic motion and its predicted trajectory.
+pub fn plan_response(model: &dyn Dynamics, req: &PlanRequest, s: &PlanSettings) -> PlanResponse {
+    match answer(model, req, s) {
+        Ok(r) => r,
+        Err(Refused(message)) => PlanResponse {
+            success: false,
+            message,
+            ..PlanResponse::default()
+        },
+    }
+}
+
+fn answer(
+    model: &dyn Dynamics,
+    req: &PlanRequest,
+    s: &PlanSettings,
+) -> Result<PlanResponse, Refused> {
+    let no = |e: &dyn std::fmt::Display| Refused(e.to_string());
+    predict::check_size(&req.initial, s.max_particles).map_err(|e| no(&e))?;
+    let (graph, start) = predict::accept(model, &req.initial).map_err(|e| no(&e))?;
+    let d = graph.dim;
+    let horizon = if req.horizon == 0 {
+        s.horizon
+    } else {
+        req.horizon
+    };
+    if horizon > s.max_steps {
+        return Err(Refused(format!(
+            "horizon = {horizon} exceeds max_rollout_steps = {}",
+            s.max_steps
+        )));
+    }
+    if req.particles.len() != req.targets.len() {
+        return Err(Refused(format!(
+            "{} particles but {} targets: give one target per particle",
+            req.particles.len(),
+            req.targets.len()
+        )));
+    }
+    let kind = match req.cost.as_str() {
+        "" | "final" => CostKind::Final,
+        "along" => CostKind::Along,
+        other => {
+            return Err(Refused(format!(
+                "cost {other:?} is unknown: use final or along"
+            )))
+        }
+    };
+    let sub = s.substeps.max(1);
+    let problem = Problem {
+        model,
+        graph: &graph,
+        start: &start,
+        timing: Timing {
+            dt: s.dt / f64::from(sub),
+            substeps: sub as usize,
+        },
+        horizon: horizon as usize,
+        cost: Cost {
+            kind,
+            particles: req.particles.iter().map(|&p| p as usize).collect(),
+            targets: req
+                .targets
+                .iter()
+                .flat_map(|p| [p.x, p.y, p.z].into_iter().take(d))
+                .collect(),
+            effort: req.effort,
+            speed: req.speed,
+        },
+        max_speed: if req.max_speed == 0.0 {
+            2.0
+        } else {
+            req.max_speed
+        },
+    };
+    let p = plan(&problem, sampler(req)?, None, req.seed, |_| true).map_err(|e| no(&e))?;
+    let still = problem
+        .cost_of(&Controls::zeros(problem.horizon, problem.width()))
+        .map_err(|e| no(&e))?;
+    let driven = problem.driven();
+    let drive = p.best.drive(&driven, d, &start, problem.timing);
+    let (kinematic_positions, kinematic_velocities) = motion(&drive);
+    let best = p
+        .best
+        .u
+        .chunks(d)
+        .map(|u| {
+            let [x, y, z] = xyz(u, d);
+            Vector3 { x, y, z }
+        })
+        .collect();
+    Ok(PlanResponse {
+        success: true,
+        message: format!(
+            "{} candidates in {:.3} s: cost {:.4e} (holding still {still:.4e})",
+            p.evaluated, p.seconds, p.cost
+        ),
+        cost: p.cost,
+        hold_still_cost: still,
+        driven: driven.iter().map(|&i| i as u32).collect(),
+        best,
+        kinematic_positions,
+        kinematic_velocities,
+        trajectory: predict::trajectory_of(&req.initial, &graph, s.dt, &p.predicted[1..]),
+        costs: p.costs,
+        seconds: p.seconds,
+    })
+}
+
+/// The kinematic motion a Rollout request gives: `rows` rows (integration
+/// steps + 1) of every kinematic particle of `graph`, velocities derived
+/// when absent; `None` when the request gives none.
+pub fn requested_drive(
+    graph: &crate::system::Graph,
+    positions: &[Point],
+    velocities: &[Vector3],
+    rows: usize,
+    fine_dt: f64,
+) -> Result<Option<Drive>, Refused> {
+    if positions.is_empty() {
+        if !velocities.is_empty() {
+            return Err(Refused(
+                "kinematic_velocities given without kinematic_positions".into(),
+            ));
+        }
+        return Ok(None);
+    }
+    let d = graph.dim;
+    let driven: Vec<usize> = (0..graph.n()).filter(|&i| graph.is_kinematic(i)).collect();
+    let need = rows * driven.len();
+    if driven.is_empty() || positions.len() != need {
+        return Err(Refused(format!(
+            "kinematic_positions has {} points; the system's {} kinematic particles over \
+             steps x substeps + 1 = {rows} integration steps need {need}",
+            positions.len(),
+            driven.len()
+        )));
+    }
+    if !velocities.is_empty() && velocities.len() != need {
+        return Err(Refused(format!(
+            "kinematic_velocities has {} vectors, {need} needed (or none: derived from the positions)",
+            velocities.len()
+        )));
+    }
+    let width = driven.len() * d;
+    let flat = |x: f64, y: f64, z: f64| [x, y, z].into_iter().take(d);
+    let q: Vec<Vec<f64>> = positions
+        .chunks(driven.len())
+        .map(|r| r.iter().flat_map(|p| flat(p.x, p.y, p.z)).collect())
+        .collect();
+    let drive = if velocities.is_empty() {
+        Drive::from_positions(driven, d, fine_dt, q)
+    } else {
+        let v = velocities
+            .chunks(driven.len())
+            .map(|r| r.iter().flat_map(|p| flat(p.x, p.y, p.z)).collect())
+            .collect();
+        Drive {
+            particles: driven,
+            dim: d,
+            q,
+            v,
+        }
+    };
+    debug_assert!(drive.q.iter().all(|r| r.len() == width));
+    Ok(Some(drive))
+}

@@ -1,0 +1,142 @@
+//! The node's Plan service against real rclpy (issue 22): `mcgnode serve`
+//! with the true physics of a held chain as its model, and
+//! `scripts/ros/call.py` calling Plan from a simulated held-chain state, then
+//! Rollout with the plan's kinematic motion, inside a private network
+//! namespace (scripts/netns.sh). The replay must reproduce the plan's
+//! predicted trajectory bit for bit, and the plan must beat holding still.
+//!
+//! Needs the rclpy venv (`scripts/setup_venv.sh`); the interface package is
+//! (re)built with `scripts/build_msgs.sh`.
+
+use std::fs;
+use std::process::Command;
+use std::time::Duration;
+
+use mcgnode::data::msg::Point;
+use mcgnode::physics::{SystemConfig, SystemKind};
+use mcgnode::ros::wire::PlanRequest;
+use mcgnode::system::Sample;
+
+mod common;
+
+use common::{ros_env, run_bounded, BIN};
+
+#[test]
+fn plan_then_rollout_replays_the_prediction_bit_for_bit() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    // A held chain of 5 links below its gripper; the target 0.4 to the side
+    // of its free end and 0.1 up, at the end of 3 s.
+    let cfg = SystemConfig::new(SystemKind::HeldChain, 5);
+    let g = cfg.graph();
+    let state = cfg.start_for(&g, 11, 0);
+    let sample = Sample {
+        t: 0.0,
+        state: state.clone(),
+        acc: None,
+    };
+    let initial = mcgnode::ParticleState::from_sample(0, 0, "held-chain", &g, &sample);
+    let req = PlanRequest {
+        initial,
+        particles: vec![4],
+        targets: vec![Point {
+            x: state.q[8] + 0.4,
+            y: state.q[9] + 0.1,
+            z: 0.0,
+        }],
+        cost: "final".into(),
+        effort: 1e-3,
+        horizon: 30,
+        sampler: "cem".into(),
+        candidates: 64,
+        iterations: 3,
+        elites: 8,
+        max_speed: 1.0,
+        seed: 3,
+        ..PlanRequest::default()
+    };
+    fs::write(d.join("plan.json"), serde_json::to_string(&req).unwrap()).unwrap();
+    // dt 0.1 with 20 substeps: the plan's control step and integration step.
+    fs::write(
+        d.join("params.yaml"),
+        "mcgnode:\n  ros__parameters:\n    model: truth:held-chain\n    dt: 0.1\n    substeps: 20\n    horizon: 10\n",
+    )
+    .unwrap();
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$DIR/params.yaml" 2>"$DIR/node.log" &
+        node=$!
+        for _ in $(seq 200); do grep -q serving "$DIR/node.log" && break; sleep 0.05; done
+        grep -q serving "$DIR/node.log" || { echo "node did not start"; kill -KILL $node; exit 2; }
+        python3 scripts/ros/call.py /mcgnode/plan mcgnode_msgs/srv/Plan --file "$DIR/plan.json" \
+            --json --timeout 60 >"$DIR/plan.out" || rc=3
+        python3 - "$DIR" <<'PY' || rc=4
+import json, sys
+d = sys.argv[1]
+plan = json.load(open(f"{d}/plan.out"))
+req = json.load(open(f"{d}/plan.json"))
+json.dump({
+    "initial": req["initial"],
+    "steps": req["horizon"],
+    "dt": 0.0,
+    "kinematic_positions": plan["kinematic_positions"],
+    "kinematic_velocities": plan["kinematic_velocities"],
+}, open(f"{d}/rollout.json", "w"))
+PY
+        python3 scripts/ros/call.py /mcgnode/rollout mcgnode_msgs/srv/Rollout --file "$DIR/rollout.json" \
+            --json --timeout 60 >"$DIR/rollout.out" || rc=5
+        kill -INT $node
+        for _ in $(seq 100); do kill -0 $node 2>/dev/null || break; sleep 0.1; done
+        if kill -0 $node 2>/dev/null; then echo "node ignored SIGINT"; kill -KILL $node; exit 6; fi
+        wait $node
+        exit ${rc:-0}
+    "#;
+    let mut cmd = Command::new("bash");
+    cmd.arg("scripts/netns.sh")
+        .args(["bash", "-c", script])
+        .env("BIN", BIN)
+        .env("ENV", &env_sh)
+        .env("DIR", d)
+        .env_remove("ROS_DOMAIN_ID");
+    let o = run_bounded(&mut cmd, Duration::from_secs(150), d);
+    let read = |name: &str| fs::read_to_string(d.join(name)).unwrap_or_default();
+    let report = format!(
+        "status {}\n--- stdout\n{}\n--- stderr\n{}\n--- node log\n{}\n--- plan\n{}",
+        o.status,
+        o.stdout,
+        o.stderr,
+        read("node.log"),
+        read("plan.out").chars().take(2000).collect::<String>()
+    );
+    assert!(o.status.success(), "{report}");
+    assert!(!read("node.log").contains("panicked"), "{report}");
+    let plan: serde_json::Value = serde_json::from_str(read("plan.out").trim()).expect("plan");
+    let roll: serde_json::Value =
+        serde_json::from_str(read("rollout.out").trim()).expect("rollout");
+    assert_eq!(plan["success"], true, "{plan}");
+    assert_eq!(roll["success"], true, "{roll}");
+    let (cost, still) = (
+        plan["cost"].as_f64().unwrap(),
+        plan["hold_still_cost"].as_f64().unwrap(),
+    );
+    assert!(
+        cost < 0.1 * still,
+        "plan {cost} against holding still {still}"
+    );
+    assert_eq!(plan["driven"], serde_json::json!([5]));
+    assert_eq!(plan["best"].as_array().unwrap().len(), 30);
+    assert_eq!(plan["costs"].as_array().unwrap().len(), 64);
+    // 30 control steps of 20 integration steps, and the start.
+    assert_eq!(plan["kinematic_positions"].as_array().unwrap().len(), 601);
+    let (p, r) = (&plan["trajectory"], &roll["trajectory"]);
+    assert_eq!(p["steps"], 30);
+    assert_eq!(r["steps"], 30);
+    // Bit for bit: the same numbers, printed and parsed exactly.
+    assert_eq!(p["positions"], r["positions"], "positions differ");
+    assert_eq!(p["velocities"], r["velocities"], "velocities differ");
+    let last = &r["positions"].as_array().unwrap()[30 * 6 - 6 + 5];
+    let grip = plan["kinematic_positions"].as_array().unwrap()[600].clone();
+    assert_eq!(last, &grip, "the gripper ends where the plan moved it");
+}
