@@ -168,6 +168,50 @@ fn evaluate_follows_the_recorded_gripper() {
         re_truth < 1e-4 * re_still,
         "truth {re_truth:.3e}, still {re_still:.3e}"
     );
+    // `rollout --initial` follows the recorded gripper too, for as long as
+    // it was recorded.
+    log_ok(&run_in(
+        d,
+        &[
+            "rollout",
+            "--model",
+            "truth:held-chain",
+            "--initial",
+            "test.mcap",
+            "--duration",
+            "3",
+            "--out",
+            "r.mcap",
+        ],
+    ));
+    let read = |p: &str| mcgnode::read_trajectories(d.join(p)).unwrap().trajectories;
+    let (rec, roll) = (read("test.mcap"), read("r.mcap"));
+    let (a, b) = (&rec[0].samples[30].state.q, &roll[0].samples[30].state.q);
+    let worst = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0_f64, f64::max);
+    assert!(worst < 1e-4, "rollout vs recording after 3 s: {worst}");
+    let o = run_in(
+        d,
+        &[
+            "rollout",
+            "--model",
+            "truth:held-chain",
+            "--initial",
+            "test.mcap",
+            "--duration",
+            "4",
+            "--out",
+            "r4.mcap",
+        ],
+    );
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && e.contains("give --duration 3 or less"),
+        "{e}"
+    );
     let log = log_ok(&run_in(
         d,
         &[

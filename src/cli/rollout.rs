@@ -48,6 +48,7 @@ pub fn run(a: Args) -> Result<()> {
         mut cfg,
         field,
         stamp_dt,
+        recorded,
     } = from;
     trained.check(&graph, field.as_ref())?;
     if let Some(o) = trained
@@ -75,7 +76,30 @@ pub fn run(a: Args) -> Result<()> {
     let steps = (a.duration / dt).round() as usize;
     let t0 = std::time::Instant::now();
     // The GNODE family integrates on the allocation-free kernel, baselines on candle.
-    let states = model.rollout_every(&graph, &start, dt, steps, every)?;
+    // Kinematic particles that move in the recording follow it (cubic
+    // Hermite between its states); otherwise they are held.
+    let moving = Trajectory {
+        id: a.start.trajectory,
+        system: system.clone(),
+        graph: graph.clone(),
+        samples: recorded,
+    };
+    let states = if crate::evaluate::kinematic_moves(&moving) {
+        let drive = crate::physics::Drive::from_samples(&graph, &moving.samples, dt, steps)?;
+        let have = moving
+            .samples
+            .last()
+            .map_or(0.0, |s| s.t - moving.samples[0].t);
+        if have + 0.5 * dt < steps as f64 * dt {
+            bail!(
+                "--initial records its kinematic particles' motion for {have} s only: give \
+                 --duration {have} or less"
+            );
+        }
+        model.rollout_driven(&graph, &start, dt, steps, every, &drive)?
+    } else {
+        model.rollout_every(&graph, &start, dt, steps, every)?
+    };
     let secs = t0.elapsed().as_secs_f64();
     let mut acc = vec![0.0; graph.ndof()];
     let mut samples = Vec::with_capacity(states.len());

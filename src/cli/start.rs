@@ -54,6 +54,9 @@ pub(crate) struct Start {
     pub field: Option<Field>,
     /// The bag's first recorded interval, when read from a bag.
     pub stamp_dt: Option<f64>,
+    /// The recorded samples, when read from a bag (what its kinematic
+    /// particles did, for rollouts that follow them).
+    pub recorded: Vec<crate::system::Sample>,
 }
 
 /// The first state of trajectory `trajectory` of the bags `paths`.
@@ -74,6 +77,7 @@ fn from_bag(paths: &[PathBuf], topic: Option<String>, trajectory: u32) -> Result
         cfg,
         field,
         stamp_dt,
+        recorded: tr.samples,
     })
 }
 
@@ -90,5 +94,6 @@ fn drawn(system: SystemKind, particles: usize, seed: u64) -> Result<Start> {
         field: Some(cfg.field.clone()),
         cfg: Some(cfg),
         stamp_dt: None,
+        recorded: vec![],
     })
 }
