@@ -1,9 +1,10 @@
 //! Learned models of systems that touch (issue 21), end to end through the
 //! CLI: MCGNODE learns the closed colliding lattices from contact edges found
 //! at every state, beats standing still and conserves momentum exactly;
-//! rollouts of the soft-sphere box hold its kinematic walls; a model serves
-//! only the interaction radius it was trained with, and the baselines refuse
-//! contacts instead of learning them wrongly. The executors themselves
+//! rollouts of the soft-sphere box, by MCGNODE and by GNS on its radius
+//! graph, hold its kinematic walls; a model serves only the interaction
+//! radius it was trained with, and LGN and HGN refuse contacts instead of
+//! learning them wrongly. The executors themselves
 //! (engine against candle and finite differences on contact graphs) are in
 //! tests/engine.rs. Run with `cargo test --release --test contact_models`.
 
@@ -109,16 +110,16 @@ fn mcgnode_learns_colliding_lattices_and_conserves_momentum() {
         &[
             "train",
             "--model",
-            "gns",
+            "lgn",
             "--data",
             "train.mcap",
             "--epochs",
             "1",
             "--out",
-            "g.json",
+            "l.json",
         ],
     ));
-    assert!(e.contains("do not model contacts"), "{e}");
+    assert!(e.contains("LGN and HGN do not model contacts"), "{e}");
 }
 
 /// A box of 9 soft spheres: a model trained briefly rolls it out with its
@@ -143,30 +144,40 @@ fn soft_sphere_rollouts_hold_the_walls() {
             "box.mcap",
         ],
     ));
-    let log = log_ok(&run_in(
-        d,
-        &[
-            "train", "--model", "mcgnode", "--data", "box.mcap", "--epochs", "5", "--out", "m.json",
-        ],
-    ));
-    assert!(
-        log.contains("kinematic particles, left out of the loss"),
-        "{log}"
-    );
-    log_ok(&run_in(
-        d,
-        &[
-            "rollout",
-            "--model",
-            "m.json",
-            "--initial",
-            "box.mcap",
-            "--duration",
-            "0.5",
-            "--out",
-            "roll.mcap",
-        ],
-    ));
+    // MCGNODE, and GNS in its defining setting: a radius graph with the
+    // walls as particles.
+    for model in ["mcgnode", "gns"] {
+        let log = log_ok(&run_in(
+            d,
+            &[
+                "train", "--model", model, "--data", "box.mcap", "--epochs", "5", "--out", "m.json",
+            ],
+        ));
+        assert!(
+            log.contains("kinematic particles, left out of the loss"),
+            "{model}: {log}"
+        );
+        log_ok(&run_in(
+            d,
+            &[
+                "rollout",
+                "--model",
+                "m.json",
+                "--initial",
+                "box.mcap",
+                "--duration",
+                "0.5",
+                "--out",
+                "roll.mcap",
+            ],
+        ));
+        walls_held(d, model);
+    }
+}
+
+/// The rollout in `d`/roll.mcap kept its walls where box.mcap starts them,
+/// and moved its balls.
+fn walls_held(d: &std::path::Path, model: &str) {
     let read = |p: &str| {
         mcgnode::data::bag::read_bags(&[d.join(p)], &Default::default())
             .unwrap()
@@ -181,15 +192,53 @@ fn soft_sphere_rollouts_hold_the_walls() {
     let q0 = &start.samples[0].state.q;
     let last = &roll.samples.last().unwrap().state;
     let dim = g.dim;
-    assert!(last.q.iter().chain(&last.v).all(|x| x.is_finite()));
+    assert!(
+        last.q.iter().chain(&last.v).all(|x| x.is_finite()),
+        "{model}"
+    );
     let mut moved = 0.0_f64;
     for i in 0..g.n() {
         let (a, b) = (&q0[i * dim..(i + 1) * dim], &last.q[i * dim..(i + 1) * dim]);
         if g.is_kinematic(i) {
-            assert_eq!(a, b, "wall particle {i} moved");
+            assert_eq!(a, b, "{model}: wall particle {i} moved");
         } else {
             moved = moved.max(a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum());
         }
     }
-    assert!(moved > 1e-3, "the balls did not move ({moved})");
+    assert!(moved > 1e-3, "{model}: the balls did not move ({moved})");
+}
+
+/// GNS's loss, like the GNODE family's, leaves kinematic particles out: their
+/// targets change nothing; its radius graph reaches the walls.
+#[test]
+fn gns_loss_leaves_kinematic_particles_out() {
+    use mcgnode::baselines::{BaselineHyper, BaselineNet, Kind};
+    use mcgnode::model::batch::Batch;
+    use mcgnode::model::plan::GraphPlan;
+    use mcgnode::physics::{SystemConfig, SystemKind};
+    use rand::SeedableRng;
+    let cfg = SystemConfig::new(SystemKind::SoftSpheres, 4);
+    let tr = cfg.simulate(1, 3).remove(0);
+    let g = &tr.graph;
+    let states: Vec<&mcgnode::State> = tr.samples.iter().map(|s| &s.state).collect();
+    let mut targets: Vec<Vec<f64>> = tr.samples.iter().map(|s| s.acc.clone().unwrap()).collect();
+    let mut hyper = BaselineHyper::new(Kind::Gns, 2, 2);
+    hyper.interaction_radius = 1.0;
+    let net = BaselineNet::new(hyper, &mut rand_chacha::ChaCha8Rng::seed_from_u64(1)).unwrap();
+    let plan = GraphPlan::new(g);
+    let loss = |t: &[Vec<f64>]| {
+        let tr: Vec<&[f64]> = t.iter().map(Vec::as_slice).collect();
+        let b = Batch::new(&plan, &states, Some(&tr), 2).unwrap();
+        assert!(b.n_directed > 0, "the radius graph has edges");
+        net.loss(&b, &g.masses).unwrap().to_scalar::<f64>().unwrap()
+    };
+    let before = loss(&targets);
+    for t in &mut targets {
+        for (f, x) in t.iter_mut().enumerate() {
+            if g.is_kinematic(f / 2) {
+                *x += 50.0;
+            }
+        }
+    }
+    assert_eq!(loss(&targets), before);
 }

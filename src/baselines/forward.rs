@@ -4,7 +4,7 @@
 
 use super::net::{BaselineNet, Kind};
 use super::{gns, hgn, lgn};
-use crate::error::{bail, Result};
+use crate::error::Result;
 use crate::model::batch::Batch;
 use candle_core::Tensor;
 
@@ -24,12 +24,9 @@ impl BaselineNet {
     /// true `masses`, one per particle).
     pub fn loss(&self, b: &Batch, masses: &[f64]) -> Result<Tensor> {
         self.check(b)?;
-        let Some(t) = &b.target else {
-            bail!("batch has no targets");
-        };
         match self.hyper.kind {
             Kind::Hgn => hgn::loss(self, b, masses),
-            _ => Ok((self.acceleration(b)? - t)?.sqr()?.mean_all()?),
+            _ => b.mse(&self.acceleration(b)?),
         }
     }
 }

@@ -63,6 +63,17 @@ pub struct BaselineHyper {
     pub latent: usize,
     /// Message-passing rounds (paper, LGN/HGN: 1; GNS processor steps).
     pub rounds: usize,
+    /// GNS: pairs closer than this interact through edges found at each
+    /// state (its radius graph); 0 (and absent from older files): fixed
+    /// edges only. A model serves only graphs of its radius.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub interaction_radius: f64,
+}
+
+/// Serde's test for leaving a radius of 0 out (files as before it existed).
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde passes a reference
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 impl BaselineHyper {
@@ -81,6 +92,7 @@ impl BaselineHyper {
             hidden: 16,
             latent,
             rounds,
+            interaction_radius: 0.0,
         }
     }
 

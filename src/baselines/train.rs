@@ -30,7 +30,7 @@ pub fn train_baseline(
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainedBaseline> {
     check_data(graph, states, acc, cfg)?;
-    if let Some(why) = super::trained::without_contacts(graph) {
+    if let Some(why) = super::trained::without_contacts(&hyper, graph) {
         bail!("{why}");
     }
     crate::alloc::prepare_for_candle();
@@ -56,7 +56,9 @@ pub fn train_baseline(
     // HGN's loss is on (q̇, ṗ): its trivial predictor says zero for both.
     let trivial = match net.hyper.kind {
         super::net::Kind::Hgn => super::hgn::trivial_loss(states, acc, masses, &sp.validation),
-        _ => crate::train::trivial_loss(acc, &sp.validation),
+        _ => crate::train::trivial_loss_free(acc, &sp.validation, |f| {
+            !graph.is_kinematic(f / graph.dim)
+        }),
     };
     let training =
         fit(&mut theta, sp, cfg, &mut rng, &mut obj, &mut adam, on_epoch)?.with_trivial(trivial);
@@ -79,12 +81,14 @@ pub(crate) fn train_baseline_from_bags(
     kind: super::net::Kind,
     bags: &[std::path::PathBuf],
     topic: Option<&str>,
+    radius: Option<f64>,
     cfg: &TrainConfig,
     mut log: impl FnMut(&str),
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<BaselineFile> {
     log(&format!("training {kind}"));
     let mut data = crate::train::load_training_data_from(bags, topic, &mut log)?;
+    crate::train::set_radius(&mut data.dataset.graph, radius, &mut log)?;
     crate::train::apply_data_options(&mut data.dataset, cfg, &mut log)?;
     data.trained_on.states = data.dataset.len();
     let ds = &data.dataset;
@@ -100,7 +104,8 @@ pub(crate) fn train_baseline_from_bags(
         .map(|&t| t as usize + 1)
         .max()
         .unwrap_or(1);
-    let hyper = BaselineHyper::new(kind, ds.graph.dim, types);
+    let mut hyper = BaselineHyper::new(kind, ds.graph.dim, types);
+    hyper.interaction_radius = ds.graph.interaction_radius;
     let trained = train_baseline(hyper, &ds.graph, &ds.states, &ds.acc, cfg, on_epoch)?;
     let mut file = trained.file;
     file.trained_on = Some(data.trained_on);

@@ -2,7 +2,7 @@
 //! HGN differentiate at inference too; they are baselines, speed is secondary).
 
 use super::file::BaselineFile;
-use super::net::BaselineNet;
+use super::net::{BaselineHyper, BaselineNet, Kind};
 use crate::dynamics::{Dynamics, DynamicsError, Forces};
 use crate::error::{bail, Result};
 use crate::model::arch::ArchError;
@@ -53,7 +53,9 @@ impl TrainedBaseline {
             let b = Batch::new(&plan, &[state], None, self.net.hyper.types)?;
             Ok(self.net.acceleration(&b)?.flatten_all()?.to_vec1::<f64>()?)
         };
-        run().map_err(|e| DynamicsError::Model(format!("{e:#}")))
+        let mut acc = run().map_err(|e| DynamicsError::Model(format!("{e:#}")))?;
+        hold_kinematic(graph, &mut acc);
+        Ok(acc)
     }
 }
 
@@ -68,7 +70,7 @@ impl Dynamics for TrainedBaseline {
 
     fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
         graph.validate()?;
-        if let Some(why) = without_contacts(graph) {
+        if let Some(why) = without_contacts(&self.file.hyper, graph) {
             return Err(DynamicsError::Model(why));
         }
         let h = &self.file.hyper;
@@ -124,7 +126,8 @@ impl Dynamics for TrainedBaseline {
             let b = Batch::new(&plan, &refs, None, self.net.hyper.types)?;
             Ok(self.net.acceleration(&b)?.flatten_all()?.to_vec1::<f64>()?)
         };
-        let flat = run().map_err(|e| DynamicsError::Model(format!("{e:#}")))?;
+        let mut flat = run().map_err(|e| DynamicsError::Model(format!("{e:#}")))?;
+        hold_kinematic(graph, &mut flat);
         for (o, chunk) in out.iter_mut().zip(flat.chunks(nd)) {
             o.copy_from_slice(chunk);
         }
@@ -147,15 +150,43 @@ impl Dynamics for TrainedBaseline {
     }
 }
 
-/// Why a baseline cannot model `graph`, if it cannot: LGN, HGN and GNS do not
-/// yet see contact edges or leave kinematic particles out of their loss, so
-/// they refuse such systems rather than learn them wrongly.
-pub(crate) fn without_contacts(graph: &Graph) -> Option<String> {
-    (graph.has_contacts() || graph.n_kinematic() > 0).then(|| {
-        "LGN, HGN and GNS do not model contacts or kinematic particles yet: \
-         train a GNODE-family model (--model mcgnode, gnode, cgnode or cdgnode) on these data"
-            .to_string()
-    })
+/// Why a baseline cannot model `graph`, if it cannot: LGN and HGN (energies
+/// of a closed set of particles) do not model contacts or kinematic particles
+/// and refuse them rather than learn them wrongly; GNS, whose defining
+/// setting is a radius graph with walls as particles, does, for the radius it
+/// was trained with.
+pub(crate) fn without_contacts(hyper: &BaselineHyper, graph: &Graph) -> Option<String> {
+    let touches = graph.has_contacts() || graph.n_kinematic() > 0;
+    match hyper.kind {
+        Kind::Gns if graph.interaction_radius != hyper.interaction_radius => Some(format!(
+            "the GNS model finds contacts within radius {}, the system's radius is {}: \
+             train one on these data (train --model gns{})",
+            hyper.interaction_radius,
+            graph.interaction_radius,
+            if graph.has_contacts() {
+                format!(" --radius {}", graph.interaction_radius)
+            } else {
+                String::new()
+            }
+        )),
+        Kind::Lgn | Kind::Hgn if touches => Some(
+            "LGN and HGN do not model contacts or kinematic particles: train GNS or a \
+             GNODE-family model (--model gns, mcgnode, gnode, cgnode or cdgnode) on these data"
+                .to_string(),
+        ),
+        _ => None,
+    }
+}
+
+/// Zeroes the accelerations of `graph`'s kinematic particles in `acc` (one
+/// state or several, flat): their motion is given.
+fn hold_kinematic(graph: &Graph, acc: &mut [f64]) {
+    let (n, d) = (graph.n(), graph.dim);
+    for (k, a) in acc.iter_mut().enumerate() {
+        if graph.is_kinematic((k / d) % n) {
+            *a = 0.0;
+        }
+    }
 }
 
 #[cfg(test)]
@@ -184,6 +215,7 @@ mod tests {
                     hidden,
                     latent,
                     rounds,
+                    interaction_radius: 0.0,
                 };
                 assert_eq!(h.param_count(), Some(net(h.clone()).store.count()), "{h:?}");
             }

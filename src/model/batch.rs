@@ -42,6 +42,23 @@ pub struct Batch {
 }
 
 impl Batch {
+    /// Mean squared error of `pred` against the targets over the free
+    /// particles (kinematic ones are given, not predicted): the training
+    /// loss of every model that predicts accelerations.
+    pub fn mse(&self, pred: &Tensor) -> Result<Tensor> {
+        let Some(t) = &self.target else {
+            bail!("batch has no targets");
+        };
+        let err = (pred - t)?.sqr()?;
+        Ok(match &self.free {
+            None => err.mean_all()?,
+            Some(free) => {
+                let count = free.sum_all()?.to_scalar::<f64>()?.max(1.0);
+                ((err * free)?.sum_all()? / count)?
+            }
+        })
+    }
+
     /// Builds a batch; `types` is the model's one-hot width.
     pub fn new(
         plan: &GraphPlan,

@@ -228,17 +228,7 @@ impl Net {
     /// Mean squared error of predicted accelerations against the batch
     /// targets, over the free particles (kinematic ones are given).
     pub fn loss(&self, b: &Batch) -> Result<Tensor> {
-        let Some(t) = &b.target else {
-            bail!("batch has no targets");
-        };
-        let err = (self.forward(b)?.acc - t)?.sqr()?;
-        Ok(match &b.free {
-            None => err.mean_all()?,
-            Some(free) => {
-                let count = free.sum_all()?.to_scalar::<f64>()?.max(1.0);
-                ((err * free)?.sum_all()? / count)?
-            }
-        })
+        b.mse(&self.forward(b)?.acc)
     }
 
     /// The variant.

@@ -63,6 +63,7 @@ pub fn train_from_bags(
                 k,
                 bags,
                 opts.topic.as_deref(),
+                opts.radius,
                 cfg,
                 log,
                 on_epoch,

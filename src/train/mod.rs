@@ -1040,6 +1040,25 @@ fn bag_digest(p: &std::path::Path) -> Result<String> {
         .join("+"))
 }
 
+/// Applies `--radius` (when given) to the training graph and says what the
+/// models will see of contacts and kinematic particles.
+pub fn set_radius(graph: &mut Graph, radius: Option<f64>, mut log: impl FnMut(&str)) -> Result<()> {
+    if let Some(r) = radius {
+        if !(r.is_finite() && r >= 0.0) {
+            bail!("--radius {r} must be a finite number ≥ 0 (0: fixed edges only)");
+        }
+        graph.interaction_radius = r;
+    }
+    if graph.has_contacts() || graph.n_kinematic() > 0 {
+        log(&format!(
+            "contacts within radius {} (found at every state); {} kinematic particles, left out of the loss",
+            graph.interaction_radius,
+            graph.n_kinematic()
+        ));
+    }
+    Ok(())
+}
+
 /// Trains a model from trajectory bags and returns the model file (not yet saved).
 pub(crate) fn train_from_bags(
     variant: crate::model::Variant,
@@ -1051,20 +1070,7 @@ pub(crate) fn train_from_bags(
 ) -> Result<crate::model::ModelFile> {
     log(&format!("training {variant}"));
     let mut data = load_training_data_from(bags, opts.topic.as_deref(), &mut log)?;
-    if let Some(r) = opts.radius {
-        if !(r.is_finite() && r >= 0.0) {
-            bail!("--radius {r} must be a finite number ≥ 0 (0: fixed edges only)");
-        }
-        data.dataset.graph.interaction_radius = r;
-    }
-    let g = &data.dataset.graph;
-    if g.has_contacts() || g.n_kinematic() > 0 {
-        log(&format!(
-            "contacts within radius {} (found at every state); {} kinematic particles, left out of the loss",
-            g.interaction_radius,
-            g.n_kinematic()
-        ));
-    }
+    set_radius(&mut data.dataset.graph, opts.radius, &mut log)?;
     apply_data_options(&mut data.dataset, cfg, &mut log)?;
     data.trained_on.states = data.dataset.len();
     let ds = &data.dataset;
