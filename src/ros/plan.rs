@@ -53,8 +53,21 @@ fn motion(drive: &Drive) -> (Vec<Point>, Vec<Vector3>) {
     (points, vectors)
 }
 
+/// The most candidates per round and rounds a request may ask for: a
+/// client's typo must not make the node allocate or search for ever.
+pub const MAX_CANDIDATES: u32 = 65_536;
+/// See [`MAX_CANDIDATES`].
+pub const MAX_ITERATIONS: u32 = 100;
+
 /// The sampler a request asks for, with the defaults of `mcgnode plan`.
 fn sampler(req: &PlanRequest) -> Result<Sampler, Refused> {
+    if req.candidates > MAX_CANDIDATES || req.iterations > MAX_ITERATIONS {
+        return Err(Refused(format!(
+            "{} candidates x {} rounds: at most {MAX_CANDIDATES} candidates and \
+             {MAX_ITERATIONS} rounds per request",
+            req.candidates, req.iterations
+        )));
+    }
     let or = |x: u32, d: usize| if x == 0 { d } else { x as usize };
     let orf = |x: f64, d: f64| if x == 0.0 { d } else { x };
     let (candidates, sigma) = (or(req.candidates, 256), orf(req.sigma, 0.5));
@@ -247,4 +260,66 @@ pub fn requested_drive(
     };
     debug_assert!(drive.q.iter().all(|r| r.len() == width));
     Ok(Some(drive))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Requests a node must not try to serve are refused with the reason;
+    /// a good one plans.
+    #[test]
+    fn requests_are_checked_before_planning() {
+        let cfg = crate::physics::SystemConfig::new(crate::physics::SystemKind::HeldChain, 3);
+        let g = cfg.graph();
+        let sample = crate::system::Sample {
+            t: 0.0,
+            state: cfg.start_for(&g, 1, 0),
+            acc: None,
+        };
+        let initial = crate::data::msg::ParticleState::from_sample(0, 0, "", &g, &sample);
+        let model = crate::models::truth::truth(crate::physics::SystemKind::HeldChain);
+        let s = PlanSettings {
+            dt: 0.1,
+            substeps: 10,
+            horizon: 5,
+            max_steps: 50,
+            max_particles: 100,
+        };
+        let good = PlanRequest {
+            initial,
+            particles: vec![2],
+            targets: vec![Point {
+                x: 0.5,
+                y: -3.0,
+                z: 0.0,
+            }],
+            candidates: 8,
+            iterations: 2,
+            elites: 2,
+            ..PlanRequest::default()
+        };
+        let r = plan_response(model.as_ref(), &good, &s);
+        assert!(r.success, "{}", r.message);
+        assert_eq!((r.best.len(), r.kinematic_positions.len()), (5, 51));
+        let refused = |edit: fn(&mut PlanRequest), want: &str| {
+            let mut req = good.clone();
+            edit(&mut req);
+            let r = plan_response(model.as_ref(), &req, &s);
+            assert!(
+                !r.success && r.message.contains(want),
+                "{want}: {}",
+                r.message
+            );
+        };
+        refused(|r| r.candidates = u32::MAX, "at most 65536 candidates");
+        refused(|r| r.horizon = 51, "exceeds max_rollout_steps = 50");
+        refused(|r| r.targets.clear(), "give one target per particle");
+        refused(|r| r.sampler = "grid".into(), "use random, cem or mppi");
+        refused(|r| r.cost = "best".into(), "use final or along");
+        refused(
+            |r| r.particles = vec![9],
+            "target particle 9 does not exist",
+        );
+    }
 }
