@@ -2,7 +2,8 @@
 """Large predictions through a running `mcgnode serve`, measured from rclpy.
 
 Run by scripts/ros_bench_large.sh (inside scripts/netns.sh next to the node),
-or by tests/ros_large.rs. Publishes spring-ring states of --particles particles,
+or by tests/ros_large.rs. Publishes spring-ring states (with --contacts:
+triangular packings touching within radius 1) of --particles particles,
 one at a time, each followed by --small 5-particle states, and measures
 publish -> receipt of the node's PredictedTrajectory at a subscriber with
 rclpy's default QoS (reliable, keep-last 10, default Fast DDS socket buffers).
@@ -59,6 +60,27 @@ def ring(rng, n):
     return m
 
 
+def packing(rng, n):
+    """n free unit masses on a triangular lattice 0.8 apart (jittered 2 %),
+    touching within radius 1: six contacts each inside, no fixed edge (a
+    granular packing, for models trained with --radius 1)."""
+    side = max(1, math.ceil(math.sqrt(n)))
+    h = 0.8 * math.sqrt(3) / 2
+    m = ParticleState()
+    m.system = "packing"
+    m.dimension = 2
+    m.types = [0] * n
+    m.masses = [1.0] * n
+    m.positions = [
+        Vector3(x=(k % side) * 0.8 + (0.4 if (k // side) % 2 else 0.0) + rng.uniform(-0.016, 0.016),
+                y=(k // side) * h + rng.uniform(-0.016, 0.016), z=0.0)
+        for k in range(n)
+    ]
+    m.velocities = [Vector3(x=rng.uniform(-0.05, 0.05), y=rng.uniform(-0.05, 0.05), z=0.0) for _ in range(n)]
+    m.interaction_radius = 1.0
+    return m
+
+
 def percentile(xs, p):
     s = sorted(xs)
     return s[min(len(s) - 1, max(0, math.ceil(p / 100 * len(s)) - 1))] if s else None
@@ -83,6 +105,9 @@ def main():
                          "and report the node's diagnostics")
     ap.add_argument("--timeout", type=float, default=20.0, help="bound of each wait, seconds")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--contacts", action="store_true",
+                    help="states are triangular packings touching within radius 1 (serve a model trained "
+                         "with --radius 1) instead of spring rings")
     a = ap.parse_args()
 
     rclpy.init()
@@ -110,7 +135,8 @@ def main():
         return 1
     time.sleep(1.0)  # let both directions of the match settle
     rng = random.Random(a.seed)
-    big, small = ring(rng, a.particles), ring(rng, 5)
+    shape = packing if a.contacts else ring
+    big, small = shape(rng, a.particles), shape(rng, 5)
     stamp = [1_800_000_000 * NS]
 
     def send(m, timeout=None):
@@ -140,7 +166,8 @@ def main():
                 ms = a.timeout * 1000
             if i > 0:
                 small_ms.append(ms)
-    result = {"particles": a.particles, "prediction_bytes": big_bytes, "large": summary(large_ms),
+    result = {"particles": a.particles, "contacts": a.contacts, "prediction_bytes": big_bytes,
+              "large": summary(large_ms),
               "small_after_large": summary(small_ms), "lost": lost}
 
     if a.rollout:
