@@ -88,12 +88,18 @@ class Model:
         steps: int,
         dt: Optional[float] = None,
         every: int = 1,
+        *,
+        kinematic_positions: Optional[ArrayLike] = None,
     ) -> RolloutResult:
         """Rolls out from the first state of ``trajectory`` (a read_bag dict)
         for ``steps`` steps of ``dt`` (default: the trajectory's ``dt``),
         keeping every ``every``-th state: ``mcgnode rollout --initial``, bit
-        for bit. Checks the graph and field against what the model was
-        trained on; a start out of its training range warns (RuntimeWarning)."""
+        for bit. Contacts (``interaction_radius``) and kinematic particles
+        come from the dict; ``kinematic_positions`` (steps + 1, kinematic
+        particles, dim) moves the kinematic particles along it (velocities by
+        central differences), else they are held. Checks the graph and field
+        against what the model was trained on; a start out of its training
+        range warns (RuntimeWarning)."""
     def rollout_arrays(
         self,
         positions: ArrayLike,
@@ -106,10 +112,15 @@ class Model:
         dt: float,
         types: Optional[ArrayLike] = None,
         every: int = 1,
+        interaction_radius: float = 0.0,
+        kinematic: Optional[ArrayLike] = None,
+        kinematic_positions: Optional[ArrayLike] = None,
     ) -> RolloutResult:
         """rollout from arrays: positions, velocities (particles, dim), masses
         (particles,), edges (edges, 5), anchors (anchors, dim), types
-        (particles,; default 0)."""
+        (particles,; default 0), the interaction radius, kinematic flags
+        (particles,) and the kinematic particles' given positions
+        (steps + 1, kinematic particles, dim) as in ``rollout``."""
     def accelerations(
         self,
         positions: ArrayLike,

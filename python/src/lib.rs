@@ -104,6 +104,10 @@ struct Parts<'a, 'py> {
     edges: &'a Bound<'py, PyAny>,
     anchors: Option<&'a Bound<'py, PyAny>>,
     types: Option<&'a Bound<'py, PyAny>>,
+    /// Contacts: the interaction radius (0: none) and the kinematic flags
+    /// (particles,) (None: none kinematic).
+    radius: f64,
+    kinematic: Option<&'a Bound<'py, PyAny>>,
 }
 
 impl Parts<'_, '_> {
@@ -195,14 +199,23 @@ impl Parts<'_, '_> {
                     .collect::<PyResult<Vec<_>>>()?
             }
         };
+        let kinematic = match self.kinematic.filter(|k| !k.is_none()) {
+            None => vec![],
+            Some(k) => {
+                let flags: Vec<bool> = k.call_method0("tolist")?.extract().map_err(|_| {
+                    PyTypeError::new_err("kinematic must be a sequence of bools, one per particle")
+                })?;
+                flags
+            }
+        };
         let graph = Graph {
             dim,
             types,
             masses,
             edges,
             anchors,
-            interaction_radius: 0.0,
-            kinematic: vec![],
+            interaction_radius: self.radius,
+            kinematic,
         };
         graph.validate().map_err(lib_err)?;
         let state = State {
@@ -212,6 +225,36 @@ impl Parts<'_, '_> {
         state.validate(&graph).map_err(lib_err)?;
         Ok((graph, state))
     }
+}
+
+/// The kinematic particles' given positions over a rollout of `steps` steps
+/// of `dt`: an array (steps + 1, kinematic particles, dim), velocities by
+/// central differences; `None` when not given (they are held).
+fn given_motion(
+    graph: &Graph,
+    positions: Option<&Bound<'_, PyAny>>,
+    steps: usize,
+    dt: f64,
+) -> PyResult<Option<mcgnode::physics::Drive>> {
+    let Some(p) = positions.filter(|p| !p.is_none()) else {
+        return Ok(None);
+    };
+    let driven: Vec<usize> = (0..graph.n()).filter(|&i| graph.is_kinematic(i)).collect();
+    let (shape, v) = array(p, "kinematic_positions")?;
+    let want = [steps + 1, driven.len(), graph.dim];
+    if driven.is_empty() || shape != want {
+        return Err(PyValueError::new_err(format!(
+            "kinematic_positions must have shape (steps + 1, kinematic particles, dim) = \
+             {want:?}, got {shape:?}"
+        )));
+    }
+    let rows = v
+        .chunks(driven.len() * graph.dim)
+        .map(<[f64]>::to_vec)
+        .collect();
+    Ok(Some(mcgnode::physics::Drive::from_positions(
+        driven, graph.dim, dt, rows,
+    )))
 }
 
 /// A float64 numpy array of `shape` holding `v` (no copy).
@@ -436,9 +479,8 @@ impl Model {
         graph: &Graph,
         start: &State,
         field: Option<&Field>,
-        steps: usize,
-        dt: f64,
-        every: usize,
+        (steps, dt, every): (usize, f64, usize),
+        drive: Option<&mcgnode::physics::Drive>,
     ) -> PyResult<Bound<'py, PyDict>> {
         self.check(graph, field)?;
         if let Some(o) = self
@@ -461,7 +503,12 @@ impl Model {
         }
         let every = every.max(1);
         let states = py
-            .detach(|| self.dynamics.rollout_every(graph, start, dt, steps, every))
+            .detach(|| match drive {
+                Some(d) => self
+                    .dynamics
+                    .rollout_driven(graph, start, dt, steps, every, d),
+                None => self.dynamics.rollout_every(graph, start, dt, steps, every),
+            })
             .map_err(lib_err)?;
         let (n, d) = (graph.n(), graph.dim);
         let shape = [states.len(), n, d];
@@ -509,6 +556,8 @@ impl Model {
         };
         let len = per[0] * per[1];
         let (graph, s0) = Parts {
+            radius: 0.0,
+            kinematic: None,
             positions: (per.clone(), q[..len].to_vec()),
             velocities: (per, v[..len].to_vec()),
             masses,
@@ -572,7 +621,7 @@ impl Model {
     ///
     /// Returns {"positions", "velocities"}: float64 arrays
     /// (steps // every + 1, particles, dim), and "stamps" (seconds).
-    #[pyo3(signature = (trajectory, steps, dt=None, every=1))]
+    #[pyo3(signature = (trajectory, steps, dt=None, every=1, *, kinematic_positions=None))]
     fn rollout<'py>(
         &self,
         py: Python<'py>,
@@ -580,6 +629,7 @@ impl Model {
         steps: usize,
         dt: Option<f64>,
         every: usize,
+        kinematic_positions: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let get = |k: &str| -> PyResult<Option<Bound<'py, PyAny>>> {
             let v = trajectory.call_method1("get", (k,)).map_err(|_| {
@@ -598,6 +648,11 @@ impl Model {
             get("anchors")?,
             get("types")?,
         );
+        let radius = get("interaction_radius")?
+            .map(|r| r.extract::<f64>())
+            .transpose()?
+            .unwrap_or(0.0);
+        let kinematic = get("kinematic")?;
         let (graph, start) = Parts {
             positions,
             velocities,
@@ -605,6 +660,8 @@ impl Model {
             edges: &edges,
             anchors: anchors.as_ref(),
             types: types.as_ref(),
+            radius,
+            kinematic: kinematic.as_ref(),
         }
         .build()?;
         let field = field_from(get("field")?)?;
@@ -620,7 +677,15 @@ impl Model {
                     )
                 })?,
         };
-        self.roll(py, &graph, &start, field.as_ref(), steps, dt, every)
+        let drive = given_motion(&graph, kinematic_positions, steps, dt)?;
+        self.roll(
+            py,
+            &graph,
+            &start,
+            field.as_ref(),
+            (steps, dt, every),
+            drive.as_ref(),
+        )
     }
 
     /// `rollout` from arrays: positions and velocities (particles, dim),
@@ -628,7 +693,8 @@ impl Model {
     /// (anchors, dim), types (particles,; default all 0). The graph is
     /// checked against what the model was trained on (the field is not
     /// known here, so it is not).
-    #[pyo3(signature = (positions, velocities, masses, edges, anchors=None, *, steps, dt, types=None, every=1))]
+    #[pyo3(signature = (positions, velocities, masses, edges, anchors=None, *, steps, dt, types=None, every=1, interaction_radius=0.0, kinematic=None, kinematic_positions=None))]
+    #[allow(clippy::too_many_arguments)] // the Python keywords
     fn rollout_arrays<'py>(
         &self,
         py: Python<'py>,
@@ -641,6 +707,9 @@ impl Model {
         dt: f64,
         types: Option<&Bound<'py, PyAny>>,
         every: usize,
+        interaction_radius: f64,
+        kinematic: Option<&Bound<'py, PyAny>>,
+        kinematic_positions: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let (graph, start) = Parts {
             positions: array(positions, "positions")?,
@@ -649,9 +718,12 @@ impl Model {
             edges,
             anchors,
             types,
+            radius: interaction_radius,
+            kinematic,
         }
         .build()?;
-        self.roll(py, &graph, &start, None, steps, dt, every)
+        let drive = given_motion(&graph, kinematic_positions, steps, dt)?;
+        self.roll(py, &graph, &start, None, (steps, dt, every), drive.as_ref())
     }
 
     /// The model's accelerations q̈ at one state (positions and velocities

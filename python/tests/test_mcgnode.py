@@ -251,6 +251,45 @@ def test_the_truth_rollout_reproduces_the_simulated_bag(bags):
     assert same_bits(out["positions"], tr["positions"])
 
 
+def test_contact_models_roll_out_as_the_cli_and_kinematic_motion_is_followed(bags, tmp_path):
+    # A model trained on soft spheres (contacts within radius 1, walls
+    # kinematic) rolls out from Python as from the CLI, walls held.
+    spheres = tmp_path / "box.mcap"
+    cli("simulate", "--system", "soft-spheres", "--particles", 9, "--trajectories", 2,
+        "--states", 6, "--out", spheres)
+    model = tmp_path / "contact.json"
+    cli("train", "--model", "mcgnode", "--data", spheres, "--epochs", 3, "--out", model)
+    tr = mcgnode.read_bag(spheres)[0]
+    m = mcgnode.load_model(model)
+    got = m.rollout(tr, 200, 1e-3)
+    want = cli_rollout(model, spheres, tr["id"], 200, 1e-3, 1, tmp_path)
+    assert same_bits(got["positions"], want["positions"])
+    walls = tr["kinematic"]
+    assert (got["positions"][-1][walls] == tr["positions"][0][walls]).all()
+    # The held chain's gripper moved along given positions: exactly there,
+    # and the chain answers (it ends elsewhere than with the gripper held).
+    held = tmp_path / "held.mcap"
+    cli("simulate", "--system", "held-chain", "--particles", 4, "--trajectories", 1,
+        "--states", 2, "--out", held)
+    (h,) = mcgnode.read_bag(held)
+    truth = mcgnode.load_model("truth:held-chain")
+    steps, dt = 400, 1e-3
+    t = np.arange(steps + 1) * dt
+    path = np.stack([0.3 * (1 - np.cos(2 * t)), 0.1 * np.sin(3 * t)], axis=1)[:, None, :]
+    moved = truth.rollout(h, steps, dt, kinematic_positions=path)
+    still = truth.rollout(h, steps, dt)
+    g = np.flatnonzero(h["kinematic"])
+    assert g.tolist() == [4]
+    assert same_bits(moved["positions"][:, g, :], path)
+    assert np.abs(moved["positions"][-1, :4] - still["positions"][-1, :4]).max() > 1e-3
+    arrays = truth.rollout_arrays(
+        h["positions"][0], h["velocities"][0], h["masses"], h["edges"], steps=steps, dt=dt,
+        types=h["types"], kinematic=h["kinematic"], kinematic_positions=path)
+    assert same_bits(arrays["positions"], moved["positions"])
+    with pytest.raises(ValueError, match=r"kinematic_positions must have shape \(steps \+ 1"):
+        truth.rollout(h, steps, dt, kinematic_positions=path[:-1])
+
+
 # -- forces -----------------------------------------------------------------
 
 
