@@ -35,6 +35,7 @@
 
 pub mod accuracy;
 pub mod action;
+pub mod calls;
 pub mod clock;
 pub mod handles;
 pub mod input;
