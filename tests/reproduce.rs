@@ -41,6 +41,7 @@ fn quick_reproduce_writes_a_complete_report() {
         "## Drag and external force",
         "## Robustness to noise",
         "## Data efficiency",
+        "## Systems that touch (not in the paper)",
         "## Settings",
     ] {
         assert!(report.contains(heading), "report lacks {heading:?}");
@@ -98,6 +99,10 @@ fn quick_reproduce_writes_a_complete_report() {
         ("noise", "hgn"),
         ("points", "hgn"),
         ("points", "node"),
+        ("contacts", "mcgnode"),
+        ("contacts", "gnode"),
+        ("contacts", "gns"),
+        ("contacts", "gns-equal-time"),
     ] {
         assert!(has(exp, m), "no {exp} row for {m}");
     }
@@ -119,8 +124,8 @@ fn quick_reproduce_writes_a_complete_report() {
         .collect();
     assert_eq!(
         budgeted.len(),
-        7,
-        "LGN, HGN, GNS per system; GNS on the cube"
+        9,
+        "LGN, HGN, GNS per system; GNS on the cube and on each contact system"
     );
     assert!(budgeted
         .iter()
@@ -137,6 +142,24 @@ fn quick_reproduce_writes_a_complete_report() {
     assert_eq!(
         seconds("gns-peridynamic").1,
         seconds("mcgnode-peridynamic").0
+    );
+    assert_eq!(
+        seconds("gns-equal-time-soft-spheres").1,
+        seconds("mcgnode-soft-spheres").0
+    );
+    // MCGNODE conserves the closed colliding lattices' momentum, contacts
+    // and all.
+    let lat = evals
+        .iter()
+        .find(|e| {
+            e["experiment"] == "contacts"
+                && e["model"] == "mcgnode"
+                && e["system"] == "colliding-lattices"
+        })
+        .unwrap();
+    assert!(
+        lat["averages"]["me_scaled"].as_f64().unwrap() < 1e-12,
+        "{lat}"
     );
     // MCGNODE without body forces conserves the peridynamic cube's momentum.
     let peri = evals

@@ -23,7 +23,7 @@ pub struct Args {
     /// Epochs of the peridynamic cube's models, after --epochs (a cube epoch of MCGNODE costs about 0.4 s on 2 cores, 50x a 5-spring epoch; GNS trains for the seconds MCGNODE took).
     #[arg(long)]
     pub peridynamic_epochs: Option<usize>,
-    /// Parts to run, comma-separated, in this order (default: all): springs, pendulums, peridynamic, drag-force, noise, data-efficiency.
+    /// Parts to run, comma-separated, in this order (default: all): springs, pendulums, peridynamic, drag-force, noise, data-efficiency, contacts.
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<Part>,
     /// Go on with a run stopped part-way in the same --out folder, with the

@@ -60,6 +60,9 @@ pub enum Part {
     Noise,
     /// Training-set size.
     DataEfficiency,
+    /// Systems that touch (not in the paper): MCGNODE, GNODE and GNS on
+    /// contact edges.
+    Contacts,
 }
 
 impl crate::names::Named for Part {
@@ -70,6 +73,7 @@ impl crate::names::Named for Part {
         Part::DragForce,
         Part::Noise,
         Part::DataEfficiency,
+        Part::Contacts,
     ];
     const WHAT: &'static str = "reproduce part";
 
@@ -81,6 +85,7 @@ impl crate::names::Named for Part {
             Part::DragForce => "drag-force",
             Part::Noise => "noise",
             Part::DataEfficiency => "data-efficiency",
+            Part::Contacts => "contacts",
         }
     }
 }
@@ -98,6 +103,7 @@ impl Part {
             Part::DragForce => experiments::drag_and_force(lab, sc),
             Part::Noise => experiments::noise(lab, sc),
             Part::DataEfficiency => experiments::data_efficiency(lab, sc),
+            Part::Contacts => experiments::contacts(lab, sc),
         }
     }
 }

@@ -26,6 +26,8 @@ pub enum Experiment {
     Noise,
     /// Training-set size sweep (data efficiency).
     Points,
+    /// Systems that touch: MCGNODE, GNODE and GNS on contacts.
+    Contacts,
 }
 
 impl crate::names::Named for Experiment {
@@ -39,6 +41,7 @@ impl crate::names::Named for Experiment {
         Experiment::DragForce,
         Experiment::Noise,
         Experiment::Points,
+        Experiment::Contacts,
     ];
     const WHAT: &'static str = "experiment";
 
@@ -53,6 +56,7 @@ impl crate::names::Named for Experiment {
             Experiment::DragForce => "drag-force",
             Experiment::Noise => "noise",
             Experiment::Points => "points",
+            Experiment::Contacts => "contacts",
         }
     }
 }

@@ -46,6 +46,16 @@ pub struct Scale {
     pub peri_states: usize,
     /// Epochs of the peridynamic models.
     pub peri_epochs: usize,
+    /// Free particles of the contact experiment's soft-sphere box (its
+    /// zero-shot test has 4x as many).
+    pub contact_balls: usize,
+    /// Training and test trajectories of the contact experiment (31 states,
+    /// 0.1 s apart).
+    pub contact_train_trajectories: usize,
+    /// See [`Scale::contact_train_trajectories`].
+    pub contact_test_trajectories: usize,
+    /// Epochs of MCGNODE, GNODE and GNS (equal epochs) on contacts.
+    pub contact_epochs: usize,
     /// Epochs of the drag/force, noise and data-efficiency models.
     pub sweep_epochs: usize,
     /// Training trajectories of the drag/force and noise experiments.
@@ -84,6 +94,10 @@ impl Scale {
             peri_test_trajectories: 4,
             peri_states: 100,
             peri_epochs: 300,
+            contact_balls: 100,
+            contact_train_trajectories: 20,
+            contact_test_trajectories: 4,
+            contact_epochs: 1000,
             sweep_epochs: 200,
             sweep_train_trajectories: 20,
             sweep_test_trajectories: 4,
@@ -115,6 +129,10 @@ impl Scale {
             peri_test_trajectories: 1,
             peri_states: 11,
             peri_epochs: 5,
+            contact_balls: 9,
+            contact_train_trajectories: 2,
+            contact_test_trajectories: 1,
+            contact_epochs: 5,
             sweep_epochs: 5,
             sweep_train_trajectories: 3,
             sweep_test_trajectories: 1,
@@ -129,6 +147,7 @@ impl Scale {
         self.epochs = epochs;
         self.family_epochs = epochs;
         self.peri_epochs = epochs;
+        self.contact_epochs = epochs;
         self.sweep_epochs = epochs;
         self
     }

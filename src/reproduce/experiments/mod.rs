@@ -4,6 +4,7 @@
 
 mod common;
 mod comparison;
+mod contacts;
 mod data_efficiency;
 mod drag_force;
 mod noise;
@@ -12,6 +13,7 @@ mod sweep;
 
 pub use common::Section;
 pub use comparison::main_comparison;
+pub use contacts::contacts;
 pub use data_efficiency::data_efficiency;
 pub use drag_force::drag_and_force;
 pub use noise::noise;
