@@ -134,6 +134,20 @@ pub(super) fn figure(
     }
 }
 
+/// One table row per model that trained, `cells(spec, report)`; failed
+/// trainings are left out (the section lists them).
+pub(super) fn training_rows(
+    specs: &[TrainSpec],
+    trained: &[crate::error::Result<Trained>],
+    cells: impl Fn(&TrainSpec, &crate::model::file::TrainingReport) -> Vec<String>,
+) -> Vec<Vec<String>> {
+    specs
+        .iter()
+        .zip(trained)
+        .filter_map(|(s, t)| Some(cells(s, &t.as_ref().ok()?.report)))
+        .collect()
+}
+
 /// A table of rows: one column per (header, cell) pair.
 type Column = (&'static str, fn(&Row) -> String);
 

@@ -5,7 +5,8 @@
 //! and zero-shot on a box of 4x the balls.
 
 use super::common::{
-    diverged, rows_table, run_evals, section, EvalJob, Section, TEST_SEED, TRAIN_SEED,
+    diverged, rows_table, run_evals, section, training_rows, EvalJob, Section, TEST_SEED,
+    TRAIN_SEED,
 };
 use crate::baselines::Kind;
 use crate::error::Result;
@@ -147,20 +148,15 @@ pub fn contacts(lab: &Lab, sc: &Scale) -> Result<Section> {
 
 /// Epochs and seconds each model trained.
 fn training_table(specs: &[TrainSpec], trained: &[Result<Trained>]) -> String {
-    let body: Vec<Vec<String>> = specs
-        .iter()
-        .zip(trained)
-        .filter_map(|(s, t)| {
-            let r = &t.as_ref().ok()?.report;
-            Some(vec![
-                s.label.clone(),
-                r.epochs_run.to_string(),
-                format!("{:.1}", r.seconds),
-                r.explained
-                    .map_or_else(|| "-".into(), |x| format!("{:.2} %", 100.0 * x)),
-            ])
-        })
-        .collect();
+    let body = training_rows(specs, trained, |s, r| {
+        vec![
+            s.label.clone(),
+            r.epochs_run.to_string(),
+            format!("{:.1}", r.seconds),
+            r.explained
+                .map_or_else(|| "-".into(), |x| format!("{:.2} %", 100.0 * x)),
+        ]
+    });
     table(&["model", "epochs", "training s", "explained"], &body)
 }
 

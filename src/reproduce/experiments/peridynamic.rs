@@ -1,8 +1,8 @@
 //! The 3D peridynamic solid.
 
 use super::common::{
-    cfg, diverged, figure, panels, rows_table, run_evals, section, EvalJob, Section, TEST_SEED,
-    TRAIN_SEED,
+    cfg, diverged, figure, panels, rows_table, run_evals, section, training_rows, EvalJob, Section,
+    TEST_SEED, TRAIN_SEED,
 };
 use crate::baselines::Kind;
 use crate::error::Result;
@@ -153,22 +153,17 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
 
 /// What each cube model's training ran: epochs, seconds, validation MSE.
 fn peridynamic_training(specs: &[TrainSpec], trained: &[Result<Trained>]) -> String {
-    let body: Vec<Vec<String>> = specs
-        .iter()
-        .zip(trained)
-        .filter_map(|(s, t)| {
-            let r = &t.as_ref().ok()?.report;
-            Some(vec![
-                s.kind.name().to_string(),
-                r.epochs_run.to_string(),
-                format!("{:.1}", r.seconds),
-                s.cfg
-                    .time_budget
-                    .map_or_else(|| "-".into(), |b| format!("{b:.1}")),
-                num(r.validation_loss),
-            ])
-        })
-        .collect();
+    let body = training_rows(specs, trained, |s, r| {
+        vec![
+            s.kind.name().to_string(),
+            r.epochs_run.to_string(),
+            format!("{:.1}", r.seconds),
+            s.cfg
+                .time_budget
+                .map_or_else(|| "-".into(), |b| format!("{b:.1}")),
+            num(r.validation_loss),
+        ]
+    });
     let mut md = "\nTraining (GNS after the GNODE family, for at most the seconds MCGNODE \
                   took; validation MSE of GNS on unscaled accelerations):\n\n"
         .to_string();
