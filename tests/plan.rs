@@ -204,6 +204,9 @@ fn demo_mpc_writes_its_report() {
     let dist = |n: &str| r["planners"][n]["final_distance"].as_f64().unwrap();
     assert!(dist("truth") < dist("none"), "{r}");
     assert_eq!(r["planners"]["none"]["seconds_per_step"], 0.0);
+    // The learned planners say how much of their targets they explain.
+    assert!(r["planners"]["mcgnode"]["explained"].as_f64().is_some());
+    assert!(r["planners"]["truth"]["explained"].is_null());
     assert!(d.join("out/mpc.png").metadata().unwrap().len() > 1000);
 }
 

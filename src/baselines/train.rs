@@ -30,7 +30,7 @@ pub fn train_baseline(
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainedBaseline> {
     check_data(graph, states, acc, cfg)?;
-    if let Some(why) = super::trained::without_contacts(&hyper, graph) {
+    if let Some(why) = super::trained::contact_refusal(&hyper, graph) {
         bail!("{why}");
     }
     crate::alloc::prepare_for_candle();

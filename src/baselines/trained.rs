@@ -70,7 +70,7 @@ impl Dynamics for TrainedBaseline {
 
     fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
         graph.validate()?;
-        if let Some(why) = without_contacts(&self.file.hyper, graph) {
+        if let Some(why) = contact_refusal(&self.file.hyper, graph) {
             return Err(DynamicsError::Model(why));
         }
         let h = &self.file.hyper;
@@ -155,7 +155,7 @@ impl Dynamics for TrainedBaseline {
 /// and refuse them rather than learn them wrongly; GNS, whose defining
 /// setting is a radius graph with walls as particles, does, for the radius it
 /// was trained with.
-pub(crate) fn without_contacts(hyper: &BaselineHyper, graph: &Graph) -> Option<String> {
+pub(crate) fn contact_refusal(hyper: &BaselineHyper, graph: &Graph) -> Option<String> {
     let touches = graph.has_contacts() || graph.n_kinematic() > 0;
     match hyper.kind {
         Kind::Gns if graph.interaction_radius != hyper.interaction_radius => Some(format!(

@@ -304,8 +304,7 @@ impl Chunk {
         };
         let (recv, send, w_in) = (&mut self.recv, &mut self.send, &mut self.w_in);
         let (physics, flag) = (a.dim, a.contact_feature());
-        let contact_physics = m.plan.contact_physics();
-        let scale = a.edge_physics_scale();
+        let contact_physics = a.scaled_physics(m.plan.contact_physics());
         let (pairs, starts) = if contacts {
             (&self.contacts.pairs[..], &self.contacts.starts[..])
         } else {
@@ -317,7 +316,7 @@ impl Chunk {
             if a.edge_physics {
                 let x = match e.fixed {
                     Some(j) => a.edge_physics_of(&m.plan, j),
-                    None => std::array::from_fn(|f| contact_physics[f] / scale[f]),
+                    None => contact_physics,
                 };
                 for (f, x) in x.iter().enumerate() {
                     w_in[(physics + f) * edges + k] = *x;
@@ -361,11 +360,11 @@ impl Chunk {
         let len = self.rows_out(m, bs);
         let mut sse = 0.0;
         let (n, d) = (m.plan.n, m.plan.dim);
-        let graph = m.arch.biases.graph;
+        let (graph, masked) = (m.arch.biases.graph, !m.plan.kinematic.is_empty());
         for i in 0..len {
             // Kinematic particles' motion is given: no loss, no gradient.
             let particle = if graph { i % n } else { i / bs / d };
-            if m.plan.is_kinematic(particle) {
+            if masked && m.plan.is_kinematic(particle) {
                 if scale.is_some() {
                     self.gacc[i] = 0.0;
                 }

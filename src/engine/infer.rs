@@ -38,9 +38,11 @@ impl Forward {
         self.chunk.forward_one(&self.model, theta, q, v);
         self.chunk.acceleration(self.model.shape(), 1, 0, acc);
         let plan = &self.model.plan;
-        for (i, a) in acc.chunks_mut(plan.dim).enumerate() {
-            if plan.is_kinematic(i) {
-                a.fill(0.0);
+        if !plan.kinematic.is_empty() {
+            for (i, a) in acc.chunks_mut(plan.dim).enumerate() {
+                if plan.is_kinematic(i) {
+                    a.fill(0.0);
+                }
             }
         }
     }

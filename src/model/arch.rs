@@ -319,7 +319,13 @@ impl Arch {
     /// The scaled edge-physics features (rest length, stiffness) of directed
     /// edge `e` of a plan.
     pub fn edge_physics_of(&self, plan: &super::plan::GraphPlan, e: usize) -> [f64; EDGE_PHYSICS] {
-        let (raw, scale) = (plan.edge_physics(e), self.edge_physics_scale());
+        self.scaled_physics(plan.edge_physics(e))
+    }
+
+    /// Raw edge-physics inputs (rest length, stiffness) divided by their
+    /// scales: a fixed edge's ([`Arch::edge_physics_of`]) or a contact's.
+    pub fn scaled_physics(&self, raw: [f64; EDGE_PHYSICS]) -> [f64; EDGE_PHYSICS] {
+        let scale = self.edge_physics_scale();
         std::array::from_fn(|f| raw[f] / scale[f])
     }
 

@@ -91,11 +91,14 @@ impl Batch {
             v.extend_from_slice(&st.v);
         }
         // Contacts at each state, then every directed edge in the plan's order.
-        let (mut pairs, mut starts) = (vec![], vec![0]);
-        let mut search = plan.contact_search();
-        for st in states {
-            plan.contacts(&mut search, &st.q, &mut pairs);
-            starts.push(pairs.len());
+        let (mut pairs, mut starts) = (vec![], vec![]);
+        if plan.has_contacts() {
+            let mut search = plan.contact_search();
+            starts.push(0);
+            for st in states {
+                plan.contacts(&mut search, &st.q, &mut pairs);
+                starts.push(pairs.len());
+            }
         }
         let (mut recv, mut send, mut params, mut contact) = (vec![], vec![], vec![], vec![]);
         plan.directed_edges(b, &pairs, &starts, |_, e| {

@@ -45,6 +45,9 @@ pub struct PlannerResult {
     pub seconds_per_step: f64,
     /// Each target's final distance.
     pub distances: Vec<f64>,
+    /// A learned planner's fraction of its validation targets explained
+    /// (1 − MSE / MSE of predicting zero acceleration); none for the others.
+    pub explained: Option<f64>,
 }
 
 /// What `demo --mpc` measured.
@@ -96,7 +99,14 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
         .train_all(&specs)
         .into_iter()
         .collect::<Result<Vec<_>>>()?;
-    lab.say(&format!("trained MCGNODE and GNODE ({epochs} epochs each)"));
+    let explained = |k: usize| trained[k].report.explained;
+    let pct = |x: Option<f64>| x.map_or_else(|| "?".into(), |x| format!("{:.2} %", 100.0 * x));
+    lab.say(&format!(
+        "trained MCGNODE and GNODE ({epochs} epochs each; they explain {} and {} of their \
+         validation targets)",
+        pct(explained(0)),
+        pct(explained(1))
+    ));
     let load = |p: &std::path::Path| -> Result<Arc<dyn Dynamics>> {
         Ok(load_any_model(&ModelRef::File(p.to_path_buf()))?.dynamics)
     };
@@ -192,6 +202,11 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
             final_distance: distances.iter().sum::<f64>() / m,
             seconds_per_step: results.iter().map(|r| r.seconds_per_step).sum::<f64>() / m,
             distances,
+            explained: match *name {
+                "mcgnode" => explained(0),
+                "gnode" => explained(1),
+                _ => None,
+            },
         };
         lab.say(&format!(
             "{name}: success {:.0} %, mean final distance {:.3}, {:.1} ms per control step",

@@ -238,7 +238,6 @@ pub fn requested_drive(
             velocities.len()
         )));
     }
-    let width = driven.len() * d;
     let flat = |x: f64, y: f64, z: f64| [x, y, z].into_iter().take(d);
     let q: Vec<Vec<f64>> = positions
         .chunks(driven.len())
@@ -258,7 +257,6 @@ pub fn requested_drive(
             v,
         }
     };
-    debug_assert!(drive.q.iter().all(|r| r.len() == width));
     Ok(Some(drive))
 }
 
