@@ -17,6 +17,31 @@ pub struct Forces {
     pub edges: Vec<EdgeForce>,
 }
 
+/// A model's accelerations on one graph with reverse mode through them:
+/// what a planning gradient chains through a rollout
+/// ([`crate::plan::gradient`]). Holds its own buffers.
+pub trait StateGradient: Send {
+    /// q̈ at (q, q̇) into `acc` (`n·d`), as the model's rollouts evaluate it.
+    fn acceleration(&mut self, q: &[f64], v: &[f64], acc: &mut [f64]);
+
+    /// q̈ at (q, q̇) into `acc`, and, with L = Σ ḡ·q̈ for ḡ = `gacc`, ∂L/∂q
+    /// into `gq` and ∂L/∂q̇ into `gv`; all `n·d`.
+    #[allow(clippy::too_many_arguments)]
+    fn vjp(
+        &mut self,
+        q: &[f64],
+        v: &[f64],
+        gacc: &[f64],
+        acc: &mut [f64],
+        gq: &mut [f64],
+        gv: &mut [f64],
+    );
+
+    /// The projection onto the bars the model's rollouts apply after each
+    /// drift and kick (SHAKE/RATTLE with its masses), if any.
+    fn projector(&self) -> Option<crate::physics::Projector>;
+}
+
 /// The force on particle `a` due to particle `b`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EdgeForce {
@@ -210,6 +235,16 @@ pub trait Dynamics: Send + Sync {
             }
         }
         Ok(out)
+    }
+
+    /// Reverse mode through this model's accelerations on `graph`, when it
+    /// has one (the GNODE family, on the engine); `None` for the others.
+    fn state_gradient(
+        &self,
+        graph: &Graph,
+    ) -> Result<Option<Box<dyn StateGradient>>, DynamicsError> {
+        let _ = graph;
+        Ok(None)
     }
 
     /// [`Dynamics::rollout_every`] with the kinematic particles moved along

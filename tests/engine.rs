@@ -481,3 +481,150 @@ fn a_model_serves_only_its_radius() {
     h.interaction_radius = 1.5;
     assert!(Engine::new(&h, &g, 1).is_ok());
 }
+
+/// The bar constraint of a one-state batch built from the Vars q, q̇ by
+/// candle ops (Batch::new computes it from numbers), so that candle's
+/// autodiff reaches positions and velocities through A(q) and Ȧq̇.
+fn constraint_from(
+    plan: &GraphPlan,
+    q: &candle_core::Tensor,
+    v: &candle_core::Tensor,
+) -> (
+    candle_core::Tensor,
+    candle_core::Tensor,
+    candle_core::Tensor,
+) {
+    use candle_core::{Device, Tensor};
+    use mcgnode::model::plan::BarEnd;
+    let (n, d, k) = (plan.n, plan.dim, plan.bars.len());
+    let (mut inc, mut fixed) = (vec![0.0; k * n], vec![0.0; k * d]);
+    for (r, bar) in plan.bars.iter().enumerate() {
+        inc[r * n + bar.a] = 1.0;
+        match &bar.b {
+            BarEnd::Particle(b) => inc[r * n + b] = -1.0,
+            BarEnd::Fixed(p) => fixed[r * d..(r + 1) * d].copy_from_slice(p),
+        }
+    }
+    let inc = Tensor::from_vec(inc, (k, n), &Device::Cpu).unwrap();
+    let fixed = Tensor::from_vec(fixed, (k, d), &Device::Cpu).unwrap();
+    let dq = (inc.matmul(q).unwrap() - fixed).unwrap();
+    let dv = inc.matmul(v).unwrap();
+    let a = inc
+        .unsqueeze(2)
+        .unwrap()
+        .broadcast_mul(&dq.unsqueeze(1).unwrap())
+        .unwrap()
+        .reshape((1, k, n * d))
+        .unwrap();
+    let at = a.transpose(1, 2).unwrap().contiguous().unwrap();
+    let adq = dv
+        .sqr()
+        .unwrap()
+        .sum_keepdim(1)
+        .unwrap()
+        .reshape((1, k, 1))
+        .unwrap();
+    (a, at, adq)
+}
+
+/// Planning gradients chain the engine's reverse pass down to a state:
+/// ∂(ḡ·q̈)/∂q and ∂(ḡ·q̈)/∂q̇ equal candle's autodiff (through the edge
+/// inputs, node inputs and the constraint's A(q), Ȧq̇) to 1e-10 and central
+/// finite differences of the kernel's accelerations, for every case.
+#[test]
+fn state_gradients_equal_candle_and_finite_differences() {
+    use mcgnode::dynamics::StateGradient;
+    for (ci, case) in cases().into_iter().enumerate() {
+        let (g, name) = (&case.graph, &case.name);
+        let net = Net::new(
+            case.hyper.clone(),
+            &mut ChaCha8Rng::seed_from_u64(ci as u64),
+        )
+        .unwrap();
+        let file = mcgnode::testing::random_model(case.hyper.variant, g, 0)
+            .map(|(_, m)| m.file)
+            .unwrap();
+        let file = mcgnode::model::ModelFile {
+            hyper: case.hyper.clone(),
+            weights: net.store.weights().unwrap(),
+            ..file
+        };
+        let model = TrainedModel::from_file(file).unwrap();
+        let mut sg = model.kernel.gradient(g).unwrap();
+        let (states, _) = data(g, 1, 500 + ci as u64);
+        let st = &states[0];
+        let nd = g.ndof();
+        let mut rng = ChaCha8Rng::seed_from_u64(900 + ci as u64);
+        let gacc: Vec<f64> = (0..nd)
+            .map(|f| {
+                if g.is_kinematic(f / g.dim) {
+                    0.0
+                } else {
+                    rng.random_range(-1.0..1.0)
+                }
+            })
+            .collect();
+        let (mut acc, mut gq, mut gv) = (vec![0.0; nd], vec![0.0; nd], vec![0.0; nd]);
+        sg.vjp(&st.q, &st.v, &gacc, &mut acc, &mut gq, &mut gv);
+        let mut a0 = vec![0.0; nd];
+        sg.acceleration(&st.q, &st.v, &mut a0);
+        assert!(
+            rel(&acc, &a0) <= 1e-12,
+            "{name}: the reverse pass's q̈ differs"
+        );
+        // Candle, with q and q̇ as variables.
+        let plan = GraphPlan::new(g);
+        let mut batch = Batch::new(&plan, &[st], None, case.hyper.types).unwrap();
+        let dev = candle_core::Device::Cpu;
+        let qv = candle_core::Var::from_slice(&st.q, (g.n(), g.dim), &dev).unwrap();
+        let vv = candle_core::Var::from_slice(&st.v, (g.n(), g.dim), &dev).unwrap();
+        batch.q = qv.as_tensor().clone();
+        batch.v = vv.as_tensor().clone();
+        if !plan.bars.is_empty() {
+            batch.constraint = Some(constraint_from(&plan, qv.as_tensor(), vv.as_tensor()));
+        }
+        let out = net.forward(&batch).unwrap().acc;
+        let w = candle_core::Tensor::from_slice(&gacc, (g.n(), g.dim), &dev).unwrap();
+        let grads = (out * w).unwrap().sum_all().unwrap().backward().unwrap();
+        let flat = |v: &candle_core::Var| {
+            grads
+                .get(v)
+                .map(|t| t.flatten_all().unwrap().to_vec1::<f64>().unwrap())
+                .unwrap_or_else(|| vec![0.0; nd])
+        };
+        let (cq, cv) = (flat(&qv), flat(&vv));
+        assert!(cq.iter().any(|x| *x != 0.0), "{name}: zero ∂/∂q");
+        let (rq, rv) = (rel(&gq, &cq), rel(&gv, &cv));
+        assert!(
+            rq <= 1e-10 && rv <= 1e-10,
+            "{name}: engine vs candle ∂/∂q {rq:.2e}, ∂/∂q̇ {rv:.2e}"
+        );
+        // Central differences of L = ḡ·q̈ on the kernel.
+        let mut l_at = |q: &[f64], v: &[f64]| {
+            let mut a = vec![0.0; nd];
+            sg.acceleration(q, v, &mut a);
+            a.iter().zip(&gacc).map(|(x, y)| x * y).sum::<f64>()
+        };
+        let scale = gq.iter().chain(&gv).fold(0.0f64, |m, x| m.max(x.abs()));
+        let h = 1e-6;
+        for f in 0..nd {
+            for (which, an) in [(0, gq[f]), (1, gv[f])] {
+                let (mut qp, mut vp) = (st.q.clone(), st.v.clone());
+                let (mut qm, mut vm) = (st.q.clone(), st.v.clone());
+                if which == 0 {
+                    qp[f] += h;
+                    qm[f] -= h;
+                } else {
+                    vp[f] += h;
+                    vm[f] -= h;
+                }
+                let fd = (l_at(&qp, &vp) - l_at(&qm, &vm)) / (2.0 * h);
+                assert!(
+                    (fd - an).abs() <= 1e-6 * scale + 1e-6 * an.abs(),
+                    "{name}: ∂L/∂{}[{f}] finite difference {fd} vs engine {an}",
+                    ["q", "q̇"][which]
+                );
+            }
+        }
+    }
+}

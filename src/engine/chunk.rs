@@ -134,6 +134,17 @@ pub(crate) struct Chunk {
     gglob: Vec<f64>,
     gf_edge: Vec<f64>,
     gminv: Vec<f64>,
+    /// Whether the reverse pass also computes ∂L/∂(q, q̇) of the inputs
+    /// ([`Chunk::input_vjp`]; planning gradients), not only ∂L/∂θ.
+    inputs: bool,
+    /// ∂L/∂(scaled node inputs) (graph models) or ∂L/∂x (NODE), like `xn`/`x`.
+    gxn: Vec<f64>,
+    /// ∂L/∂(edge inputs), like `w_in`.
+    gw: Vec<f64>,
+    /// ∂L/∂(raw q, q̇) through the constraint, feature-major `2d × nodes`.
+    gqv: Vec<f64>,
+    /// ∂L/∂(q_a − q_b) of each bar, `bs × bars × d`.
+    gdq: Vec<f64>,
     /// Inverse masses per particle type (constrained variants).
     inv_m: Vec<f64>,
     /// The one-hot rows of every type, feature-major `types × types`, and
@@ -272,6 +283,15 @@ impl Chunk {
             gglob: g(em * nodes),
             gf_edge: g(d * edges),
             gminv: g(nodes),
+            inputs: false,
+            gxn: g(if a.biases.graph {
+                a.node_features() * nodes
+            } else {
+                2 * n * d * bs
+            }),
+            gw: g(a.edge_features() * edges),
+            gqv: g(2 * d * nodes),
+            gdq: g(bs * m.plan.bars.len() * d),
             inv_m: z(types),
             eye: (0..types * types)
                 .map(|k| if k / types == k % types { 1.0 } else { 0.0 })
@@ -460,6 +480,11 @@ impl Chunk {
         let nd = m.plan.n * m.plan.dim;
         let k = m.arch.norm.out_scale;
         self.gacc[..nd * bs].iter_mut().for_each(|g| *g *= k);
+        let gx = self.inputs.then(|| {
+            let gx = &mut self.gxn[..2 * nd * bs];
+            gx.fill(0.0);
+            (gx, &mut [][..])
+        });
         m.mlp(i).backward(
             th,
             &mut self.grad,
@@ -468,7 +493,7 @@ impl Chunk {
             bs,
             &self.tapes[i],
             &self.gacc[..nd * bs],
-            None,
+            gx,
             &mut self.s1,
             &mut self.s2,
         );
@@ -548,6 +573,90 @@ impl Chunk {
         } else {
             self.put_flat_state(m, 0, 1, q, v);
             self.forward_flat(m, th, 1);
+        }
+    }
+
+    /// Reverse mode through one state, for planning gradients: with
+    /// L = Σ ḡ·q̈ (ḡ = `gacc`, node-major), ∂L/∂q into `gq` and ∂L/∂q̇ into
+    /// `gv` (node-major), and q̈ itself into `acc`. Positions reach q̈ through
+    /// the node inputs, the edge inputs w_ij = q_i − q_j and the constraint;
+    /// velocities through the node inputs and Ȧq̇. Contact edges are those
+    /// of this state (the set is piecewise constant in q). Kinematic
+    /// particles' q̈ is 0 (their motion is given), so their rows of `gacc`
+    /// count for nothing, as in [`Chunk::forward_one`]'s callers.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn input_vjp(
+        &mut self,
+        m: &Model,
+        th: &[f64],
+        q: &[f64],
+        v: &[f64],
+        gacc: &[f64],
+        acc: &mut [f64],
+        gq: &mut [f64],
+        gv: &mut [f64],
+    ) {
+        let edges = if m.plan.has_contacts() {
+            self.contacts.find(&m.plan, std::iter::once(q))
+        } else {
+            m.plan.recv.len()
+        };
+        self.reserve(m, 1, edges, true);
+        self.lay_out(m, 1);
+        let (n, d, graph) = m.shape();
+        if graph {
+            self.clear_one_hot(m, n);
+            self.put_graph_state(m, 0, n, q, v);
+            self.forward_graph(m, th);
+        } else {
+            self.put_flat_state(m, 0, 1, q, v);
+            self.forward_flat(m, th, 1);
+        }
+        self.acceleration((n, d, graph), 1, 0, acc);
+        for i in 0..n {
+            let held = m.plan.is_kinematic(i);
+            for c in 0..d {
+                // Feature-major either way: graph rows are particles, NODE's
+                // features are (i, c) over one state.
+                let at = if graph { c * n + i } else { i * d + c };
+                self.gacc[at] = if held { 0.0 } else { gacc[i * d + c] };
+                if held {
+                    acc[i * d + c] = 0.0;
+                }
+            }
+        }
+        self.inputs = true;
+        self.grad.fill(0.0);
+        if graph {
+            self.backward_graph(m, th, 1);
+        } else {
+            self.backward_flat(m, th, 1);
+        }
+        self.inputs = false;
+        let nm = &m.arch.norm;
+        if !graph {
+            let nd = n * d;
+            for f in 0..nd {
+                gq[f] = self.gxn[f] / nm.q_scale;
+                gv[f] = self.gxn[nd + f] / nm.v_scale;
+            }
+            return;
+        }
+        let t = m.arch.types;
+        for i in 0..n {
+            for c in 0..d {
+                gq[i * d + c] = self.gxn[(t + c) * n + i] / nm.q_scale + self.gqv[c * n + i];
+                gv[i * d + c] =
+                    self.gxn[(t + d + c) * n + i] / nm.v_scale + self.gqv[(d + c) * n + i];
+            }
+        }
+        let ne = self.edges;
+        for c in 0..d {
+            let gw = &self.gw[c * ne..(c + 1) * ne];
+            for ((g, &r), &s) in gw.iter().zip(&self.recv).zip(&self.send) {
+                gq[r * d + c] += g / nm.w_scale;
+                gq[s * d + c] -= g / nm.w_scale;
+            }
         }
     }
 
@@ -896,12 +1005,28 @@ impl Chunk {
                             gg -= self.gout[c * nodes + base + b];
                         }
                         x -= dq[r * d + c] * gg;
+                        if self.inputs {
+                            // G = N − Aᵀλ: ∂/∂(q_a − q_b) = −λ_r ḡ_G.
+                            self.gdq[(s * k + r) * d + c] = -lam[r] * gg;
+                        }
                     }
                     rbar[r] = x;
                 }
                 self.lu[..k * k].copy_from_slice(&self.kmat[s * k * k..(s + 1) * k * k]);
                 if lu_solve_in_place(&mut self.lu[..k * k], rbar, k, 1).is_err() {
                     rbar.fill(f64::NAN);
+                }
+                if self.inputs {
+                    let into = (&mut self.gdq[s * k * d..(s + 1) * k * d], &mut self.gqv[..]);
+                    constraint_input_grads(
+                        m,
+                        s,
+                        nodes,
+                        inv_m,
+                        (dq, lam, rbar),
+                        (&self.x, &self.out),
+                        into,
+                    );
                 }
                 for p in 0..n {
                     let (mi, row) = (minv(p), base + p);
@@ -935,6 +1060,11 @@ impl Chunk {
         let nodes = bs * m.plan.n;
         let edges = self.edges;
         let nf = a.node_features();
+        if self.inputs {
+            self.gxn[..nf * nodes].fill(0.0);
+            self.gw[..a.edge_features() * edges].fill(0.0);
+            self.gqv[..2 * d * nodes].fill(0.0);
+        }
         if a.constrained {
             self.constrain_backward(m, th, bs);
         } else {
@@ -1025,8 +1155,21 @@ impl Chunk {
         if let Some(i) = m.ix(Block::GlobalEmbed) {
             times_squareplus_grad(gglob, glob);
             let x = &self.xn[..nf * nodes];
-            m.mlp(i)
-                .backward_params(th, &mut self.grad, x, nodes, &self.tapes[i], gglob, s1, s2);
+            let gx = self
+                .inputs
+                .then(|| (&mut self.gxn[..nf * nodes], &mut [][..]));
+            m.mlp(i).backward(
+                th,
+                &mut self.grad,
+                x,
+                &[],
+                nodes,
+                &self.tapes[i],
+                gglob,
+                gx,
+                s1,
+                s2,
+            );
         }
         // Message passing, last round first.
         for l in (0..a.rounds).rev() {
@@ -1135,13 +1278,94 @@ impl Chunk {
         times_squareplus_grad(gh, &self.h[0][..em * nodes]);
         let i = m.ix(Block::NodeEmbed).expect("graph model");
         let x = &self.xn[..node_in * nodes];
-        m.mlp(i)
-            .backward_params(th, &mut self.grad, x, nodes, &self.tapes[i], gh, s1, s2);
+        // Type-only inputs carry no q or q̇: nothing to pass down.
+        let gx = (self.inputs && matches!(a.node_input, NodeInput::Full))
+            .then(|| (&mut self.gxn[..node_in * nodes], &mut [][..]));
+        m.mlp(i).backward(
+            th,
+            &mut self.grad,
+            x,
+            &[],
+            nodes,
+            &self.tapes[i],
+            gh,
+            gx,
+            s1,
+            s2,
+        );
         let ghe = &mut self.ghe[..em * edges];
         times_squareplus_grad(ghe, &self.he[0][..em * edges]);
         let i = m.ix(Block::EdgeEmbed).expect("graph model");
-        let w = &self.w_in[..a.edge_features() * edges];
-        m.mlp(i)
-            .backward_params(th, &mut self.grad, w, edges, &self.tapes[i], ghe, s1, s2);
+        let ef = a.edge_features();
+        let w = &self.w_in[..ef * edges];
+        let gx = self
+            .inputs
+            .then(|| (&mut self.gw[..ef * edges], &mut [][..]));
+        m.mlp(i).backward(
+            th,
+            &mut self.grad,
+            w,
+            &[],
+            edges,
+            &self.tapes[i],
+            ghe,
+            gx,
+            s1,
+            s2,
+        );
+    }
+}
+
+/// The constraint's part of ∂L/∂(q, q̇) for state `s`, once `rbar` holds
+/// r̄hs = K⁻¹λ̄ and `gdq` the G term: through rhs = A M⁻¹N + Ȧq̇ and
+/// K = A M⁻¹Aᵀ (K̄ = −r̄hs λᵀ), then each bar's q_a − q_b and q̇_a − q̇_b
+/// onto its ends, into `gqv` (feature-major `2d × nodes`).
+fn constraint_input_grads(
+    m: &Model,
+    s: usize,
+    nodes: usize,
+    inv_m: &[f64],
+    (dq, lam, rbar): (&[f64], &[f64], &[f64]),
+    (x, out): (&[f64], &[f64]),
+    (gdq, gqv): (&mut [f64], &mut [f64]),
+) {
+    let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
+    let base = s * n;
+    let minv = |p: usize| inv_m[m.plan.types[p]];
+    let v = |row: usize, c: usize| x[(t + d + c) * nodes + row];
+    for (r, bar) in m.plan.bars.iter().enumerate() {
+        let a = base + bar.a;
+        for c in 0..d {
+            let (fb, vb) = match bar.b {
+                BarEnd::Particle(b) => (minv(b) * out[c * nodes + base + b], v(base + b, c)),
+                BarEnd::Fixed(_) => (0.0, 0.0),
+            };
+            gdq[r * d + c] += rbar[r] * (minv(bar.a) * out[c * nodes + a] - fb);
+            let gdv = 2.0 * rbar[r] * (v(a, c) - vb);
+            gqv[(d + c) * nodes + a] += gdv;
+            if let BarEnd::Particle(b) = bar.b {
+                gqv[(d + c) * nodes + base + b] -= gdv;
+            }
+        }
+    }
+    for p in 0..n {
+        let mi = minv(p);
+        for &(r, sr) in &m.incid[p] {
+            for &(r2, s2) in &m.incid[p] {
+                let coef = -mi * sr * s2 * rbar[r] * lam[r2];
+                for c in 0..d {
+                    gdq[r * d + c] += coef * dq[r2 * d + c];
+                    gdq[r2 * d + c] += coef * dq[r * d + c];
+                }
+            }
+        }
+    }
+    for (r, bar) in m.plan.bars.iter().enumerate() {
+        for c in 0..d {
+            gqv[c * nodes + base + bar.a] += gdq[r * d + c];
+            if let BarEnd::Particle(b) = bar.b {
+                gqv[c * nodes + base + b] -= gdq[r * d + c];
+            }
+        }
     }
 }

@@ -387,22 +387,6 @@ impl Mlp {
         }
     }
 
-    /// [`Mlp::backward`] of an MLP applied to `x` alone, for its parameters only.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn backward_params(
-        &self,
-        th: &[f64],
-        g: &mut [f64],
-        x: &[f64],
-        r: usize,
-        tape: &Tape,
-        gy: &[f64],
-        s1: &mut [f64],
-        s2: &mut [f64],
-    ) {
-        self.backward(th, g, x, &[], r, tape, gy, None, s1, s2);
-    }
-
     /// Reverse pass of [`Mlp::forward`]: `gy` (`out × r`) is ∂L/∂y; accumulates
     /// parameter gradients into `g` and, when `gx` is given, ∂L/∂[a; c] into its
     /// two parts. `s1`, `s2` are scratch of at least `width() · r`.

@@ -1,7 +1,8 @@
 //! The one f64 executor of the GNODE family: the forward pass on the
 //! feature-major layout, for inference ([`Forward`], one state, no loss) and
 //! for training, with hand-written reverse-mode gradients (squared error on
-//! accelerations → every weight and log-mass) over all cores.
+//! accelerations → every weight and log-mass) over all cores, and
+//! ([`Reverse`]) down to a state's positions and velocities for planning.
 //!
 //! A batch is cut into chunks by a rule that depends only on the batch size
 //! and the graph, never on the thread count; each chunk's gradient is
@@ -14,9 +15,11 @@ mod chunk;
 mod dense;
 mod infer;
 mod layout;
+mod reverse;
 
 pub use infer::Forward;
 pub use layout::{Layout, LayoutError};
+pub use reverse::Reverse;
 
 use crate::model::arch::Arch;
 use crate::model::plan::GraphPlan;

@@ -4,6 +4,7 @@
 //! [`Workspace`]. Rollouts and the ROS node run on this; candle is the
 //! reference it is tested against (to 1e-12).
 
+pub mod gradient;
 pub mod trained;
 
 use crate::engine::{Forward, Layout};
@@ -14,6 +15,7 @@ use crate::model::plan::GraphPlan;
 use crate::model::variant::Hyper;
 use crate::physics::Projector;
 use crate::system::Graph;
+pub use gradient::KernelGradient;
 use rand::SeedableRng;
 pub use trained::TrainedModel;
 

@@ -247,6 +247,13 @@ impl Dynamics for TrainedModel {
         Ok(self.kernel.supports(graph)?)
     }
 
+    fn state_gradient(
+        &self,
+        graph: &Graph,
+    ) -> Result<Option<Box<dyn crate::dynamics::StateGradient>>, DynamicsError> {
+        Ok(Some(Box::new(self.kernel.gradient(graph)?)))
+    }
+
     fn acceleration(
         &self,
         graph: &Graph,

@@ -75,6 +75,14 @@ impl Dynamics for Checked {
         self.inner.rollout_every(graph, start, dt, steps, every)
     }
 
+    fn state_gradient(
+        &self,
+        graph: &Graph,
+    ) -> Result<Option<Box<dyn crate::dynamics::StateGradient>>, DynamicsError> {
+        self.trained.check(graph, None)?;
+        self.inner.state_gradient(graph)
+    }
+
     fn rollout_driven(
         &self,
         graph: &Graph,

@@ -5,6 +5,7 @@
 
 use super::constraints::Bars;
 use crate::system::Graph;
+use nalgebra::{DMatrix, DVector};
 
 /// Bars of one graph, their masses and scratch buffers: steps do not allocate
 /// (except for redundant bars, which fall back to SVD).
@@ -106,6 +107,117 @@ impl Projector {
         }
     }
 
+    /// The bar Jacobian A(q), `k × n·d`: bar j's row holds d_j = q_a − q_b
+    /// at a and −d_j at b (an anchored bar only at a).
+    fn jacobian(&self, q: &[f64]) -> DMatrix<f64> {
+        let (g, k) = (&self.graph, self.bars.k());
+        let d = g.dim;
+        let mut dirs = vec![0.0; k * d];
+        self.bars.dirs(g, q, &mut dirs);
+        let mut a = DMatrix::zeros(k, g.ndof());
+        for j in 0..k {
+            for c in 0..d {
+                a[(j, self.bars.a[j] * d + c)] = dirs[j * d + c];
+                if let Some(b) = self.bars.b[j] {
+                    a[(j, b * d + c)] = -dirs[j * d + c];
+                }
+            }
+        }
+        a
+    }
+
+    /// M⁻¹ per coordinate.
+    fn inv_mass(&self) -> DVector<f64> {
+        let g = &self.graph;
+        DVector::from_fn(g.ndof(), |i, _| 1.0 / g.masses[i / g.dim])
+    }
+
+    /// ∂L/∂q of L through a Jacobian's entries: Ā (`k × n·d`) onto each
+    /// bar's direction d_j = q_a − q_b, then onto its ends, added to `gq`.
+    fn scatter(&self, abar: &DMatrix<f64>, gq: &mut [f64]) {
+        let d = self.graph.dim;
+        for j in 0..self.bars.k() {
+            let a = self.bars.a[j];
+            for c in 0..d {
+                let mut gd = abar[(j, a * d + c)];
+                if let Some(b) = self.bars.b[j] {
+                    gd -= abar[(j, b * d + c)];
+                }
+                gq[a * d + c] += gd;
+                if let Some(b) = self.bars.b[j] {
+                    gq[b * d + c] -= gd;
+                }
+            }
+        }
+    }
+
+    /// Reverse mode through [`Projector::shake`], by the implicit function
+    /// theorem at its converged solution: of the positions, `q0` those
+    /// [`Projector::begin`] saw, `drifted` those before and `shaken` those
+    /// after the projection (q' = q̃ + M⁻¹A(q0)ᵀγ with φ(q') = 0; the
+    /// half-step velocity moved by the same ÷ dt). On entry `gq` holds ∂L/∂q'
+    /// and `gv` ∂L/∂q̇'; on return `gq` holds ∂L/∂q̃ (∂L/∂ṽ is `gv`
+    /// unchanged), and ∂L/∂q0 is added to `gq0`.
+    pub fn shake_vjp(
+        &self,
+        (q0, drifted, shaken): (&[f64], &[f64], &[f64]),
+        dt: f64,
+        gq: &mut [f64],
+        gv: &[f64],
+        gq0: &mut [f64],
+    ) {
+        if !self.has_bars() {
+            return;
+        }
+        let (b, c, minv) = (self.jacobian(q0), self.jacobian(shaken), self.inv_mass());
+        let delta =
+            DVector::from_iterator(shaken.len(), shaken.iter().zip(drifted).map(|(s, d)| s - d));
+        let bmb = &b * DMatrix::from_diagonal(&minv) * b.transpose();
+        let gamma = pinv_solve(&bmb, &(&b * &delta));
+        let gdelta = DVector::from_iterator(gq.len(), gq.iter().zip(gv).map(|(q, v)| q + v / dt));
+        let ggamma = &b * minv.component_mul(&gdelta);
+        let s = &c * DMatrix::from_diagonal(&minv) * b.transpose();
+        let mu = -pinv_solve(&s.transpose(), &ggamma);
+        let ctmu = c.transpose() * &mu;
+        for (g, x) in gq.iter_mut().zip(ctmu.iter()) {
+            *g += x;
+        }
+        let bbar = &gamma * minv.component_mul(&(gdelta + ctmu)).transpose();
+        self.scatter(&bbar, gq0);
+    }
+
+    /// Reverse mode through [`Projector::rattle`] at positions `q`, which
+    /// took `v_in` to `v_out` (v' = v − M⁻¹A(q)ᵀμ, A(q)v' = 0): on entry `gv`
+    /// holds ∂L/∂v', on return ∂L/∂v; ∂L/∂q is added to `gq`.
+    pub fn rattle_vjp(
+        &self,
+        q: &[f64],
+        v_in: &[f64],
+        v_out: &[f64],
+        gv: &mut [f64],
+        gq: &mut [f64],
+    ) {
+        if !self.has_bars() {
+            return;
+        }
+        let (a, minv) = (self.jacobian(q), self.inv_mass());
+        let k = &a * DMatrix::from_diagonal(&minv) * a.transpose();
+        let (vin, vout) = (
+            DVector::from_column_slice(v_in),
+            DVector::from_column_slice(v_out),
+        );
+        let mu = pinv_solve(&k, &(&a * (&vin - &vout)));
+        let w = minv.component_mul(&DVector::from_column_slice(gv));
+        let nu = pinv_solve(&k, &(&a * &w));
+        let atnu = a.transpose() * &nu;
+        for (g, x) in gv.iter_mut().zip(atnu.iter()) {
+            *g -= x;
+        }
+        let abar = -(&mu * w.transpose()) - &nu * vout.transpose()
+            + &mu * minv.component_mul(&atnu).transpose();
+        self.scatter(&abar, gq);
+    }
+
     /// Newton iterations SHAKE has taken in total (a cost diagnostic).
     pub fn iterations(&self) -> u64 {
         self.iterations
@@ -116,4 +228,16 @@ impl Projector {
     pub fn failures(&self) -> u64 {
         self.failures
     }
+}
+
+/// x = K⁻¹ b, by LU, or the minimum-norm least-squares solution for
+/// redundant bars (as [`Projector::shake`]'s solve falls back to).
+fn pinv_solve(k: &DMatrix<f64>, b: &DVector<f64>) -> DVector<f64> {
+    if let Some(x) = k.clone().lu().solve(b) {
+        return x;
+    }
+    k.clone()
+        .svd(true, true)
+        .solve(b, 1e-12)
+        .unwrap_or_else(|_| DVector::from_element(b.len(), f64::NAN))
 }

@@ -115,4 +115,35 @@ impl Controls {
             v: rows_v,
         }
     }
+
+    /// Reverse mode through [`Controls::drive`]: given ∂L/∂ of the driven
+    /// particles' positions and velocities at every integration step
+    /// (`gq[j]`, `gv[j]`, `width` numbers each, steps 0..=steps·substeps),
+    /// ∂L/∂u, laid out as `u`. The map is linear in u: the velocity at step
+    /// j ≥ 1 of control step k is (1 − s)·u_{k−1} + s·u_k (u_{−1} the
+    /// start's), and q_j = q_{j−1} + ½(q̇_{j−1} + q̇_j)·dt.
+    pub fn drive_vjp(&self, timing: Timing, gq: &[Vec<f64>], gv: &[Vec<f64>]) -> Vec<f64> {
+        let sub = timing.substeps.max(1);
+        let total = self.steps * sub;
+        let w = self.width;
+        let mut gu = vec![0.0; self.u.len()];
+        // S_i = Σ_{j ≥ i} ∂L/∂q_j, carried from the end.
+        let (mut s_next, mut s) = (vec![0.0; w], vec![0.0; w]);
+        for j in (1..=total).rev() {
+            for f in 0..w {
+                s[f] = s_next[f] + gq[j][f];
+            }
+            let k = (j - 1) / sub;
+            let frac = ((j - 1) % sub + 1) as f64 / sub as f64;
+            for f in 0..w {
+                let gvel = gv[j][f] + 0.5 * timing.dt * (s[f] + s_next[f]);
+                gu[k * w + f] += frac * gvel;
+                if k > 0 {
+                    gu[(k - 1) * w + f] += (1.0 - frac) * gvel;
+                }
+            }
+            std::mem::swap(&mut s, &mut s_next);
+        }
+        gu
+    }
 }

@@ -10,14 +10,18 @@
 //! * [`cost`]: distance of chosen particles to targets, at the end or along
 //!   the horizon, plus control effort;
 //! * [`search`]: the samplers and the parallel evaluation of candidates;
+//! * [`gradient`]: ∂cost/∂controls by reverse mode through the rollout, and
+//!   gradient steps that refine a search's best candidate;
 //! * [`mpc`]: closed-loop episodes (plan, execute the first control, repeat).
 
 pub mod controls;
 pub mod cost;
+pub mod gradient;
 pub mod mpc;
 pub mod search;
 
 pub use controls::{Controls, Timing};
 pub use cost::{Cost, CostKind};
+pub use gradient::{refine, Gradient, RefineStep, Refined};
 pub use mpc::{Episode, EpisodeReport};
 pub use search::{plan, Iteration, Plan, PlanError, Problem, Sampler};
