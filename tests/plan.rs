@@ -193,7 +193,7 @@ fn demo_mpc_writes_its_report() {
     log_ok(&o);
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("out/mpc.json")).unwrap()).unwrap();
-    for name in ["mcgnode", "gnode", "truth", "none"] {
+    for name in ["mcgnode", "mcgnode_refined", "gnode", "truth", "none"] {
         let p = &r["planners"][name];
         let rate = p["success_rate"].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&rate), "{name}: {rate}");

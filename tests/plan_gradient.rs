@@ -197,3 +197,94 @@ fn refining_lowers_the_cost_and_models_without_gradients_are_refused() {
     let e = p.gradient(&init).unwrap_err().to_string();
     assert!(e.contains("no gradient") && e.contains("GNODE"), "{e}");
 }
+
+/// `plan --refine N --json` refines the search's best sequence by gradient
+/// steps through a model file and prints the refined plan, the search's
+/// cost and the final gradient; the true physics has no reverse pass and
+/// is refused with the reason.
+#[test]
+fn the_plan_command_refines() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let run = |args: &[&str]| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_mcgnode"))
+            .current_dir(d)
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    // A model that responds to its gripper (a random one hardly does).
+    run(&[
+        "simulate",
+        "--system",
+        "held-chain",
+        "--particles",
+        "5",
+        "--trajectories",
+        "10",
+        "--states",
+        "31",
+        "--out",
+        "hc.mcap",
+    ]);
+    run(&[
+        "train", "--model", "mcgnode", "--data", "hc.mcap", "--epochs", "100", "--out", "m.json",
+    ]);
+    let args = |m: &str| -> Vec<String> {
+        [
+            "plan",
+            "--model",
+            m,
+            "--target",
+            "0.8,-5.5",
+            "--horizon",
+            "5",
+            "--dt",
+            "0.05",
+            "--substeps",
+            "10",
+            "--candidates",
+            "8",
+            "--iterations",
+            "1",
+            "--elites",
+            "2",
+            "--refine",
+            "10",
+            "--json",
+        ]
+        .iter()
+        .map(|s| (*s).to_string())
+        .collect()
+    };
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mcgnode"))
+        .current_dir(d)
+        .args(args("m.json"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (cost, search) = (
+        j["cost"].as_f64().unwrap(),
+        j["search_cost"].as_f64().unwrap(),
+    );
+    assert!(cost <= search, "{cost} > {search}");
+    let r = &j["refine"];
+    assert_eq!(r["start_cost"].as_f64().unwrap(), search);
+    assert_eq!(r["gradient"].as_array().unwrap().len(), 10);
+    let steps = r["steps"].as_array().unwrap();
+    assert!(!steps.is_empty(), "{j}");
+    assert_eq!(steps.last().unwrap()["cost"].as_f64().unwrap(), cost);
+    assert!(cost < search, "{cost} = {search}: nothing refined");
+    assert_eq!(j["best"].as_array().unwrap().len(), 5);
+    assert_eq!(j["predicted"].as_array().unwrap().len(), 6);
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mcgnode"))
+        .current_dir(d)
+        .args(args("truth:held-chain"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("no gradient"), "{e}");
+}

@@ -52,12 +52,12 @@ pub fn run(a: Args) -> Result<()> {
     if a.mpc {
         let r = crate::reproduce::mpc::run(&lab, a.quick, a.seed)?;
         println!(
-            "{:<10} {:>8} {:>15} {:>18}",
+            "{:<16} {:>8} {:>15} {:>18}",
             "planner", "success", "final distance", "ms per step"
         );
         for (name, p) in &r.planners {
             println!(
-                "{name:<10} {:>7.0}% {:>15.3} {:>18.1}",
+                "{name:<16} {:>7.0}% {:>15.3} {:>18.1}",
                 100.0 * p.success_rate,
                 p.final_distance,
                 1e3 * p.seconds_per_step

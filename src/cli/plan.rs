@@ -5,7 +5,7 @@ use super::choices::{CostArg, SamplerArg};
 use super::{parse_vector, Vector};
 use crate::models::{load_any_model, ModelRef};
 use crate::physics::SystemKind;
-use crate::plan::{plan, Controls, Cost, Problem, Sampler, Timing};
+use crate::plan::{plan, refine, Controls, Cost, Problem, Sampler, Timing};
 use anyhow::{bail, Result};
 use serde_json::json;
 use std::path::PathBuf;
@@ -75,6 +75,11 @@ pub struct Args {
     /// Seed of the sampling.
     #[arg(long, default_value_t = 1)]
     pub sample_seed: u64,
+    /// Gradient steps after the search: ∂cost/∂controls by reverse mode
+    /// through the model's rollout refines the best candidate (model files
+    /// of the GNODE family). The plan printed is the refined one.
+    #[arg(long, default_value_t = 0)]
+    pub refine: usize,
     /// Print one JSON document: the cost, the best sequence, its predicted
     /// trajectory, every candidate's cost of the last round, the rounds.
     #[arg(long)]
@@ -154,8 +159,27 @@ pub fn run(a: Args) -> Result<()> {
         }
         true
     })?;
+    let search_cost = p.cost;
+    let refined = if a.refine > 0 {
+        let r = refine(&problem, &p.best, a.refine)?;
+        if !quiet {
+            eprintln!(
+                "refined by {} gradient steps: cost {:.4e} → {:.4e}",
+                r.steps.len(),
+                r.start_cost,
+                r.cost
+            );
+        }
+        Some(r)
+    } else {
+        None
+    };
+    let (best, cost, predicted) = match &refined {
+        Some(r) => (&r.best, r.cost, &r.predicted),
+        None => (&p.best, p.cost, &p.predicted),
+    };
     let still = problem.cost_of(&Controls::zeros(a.horizon, problem.width()))?;
-    let rows: Vec<&[f64]> = (0..p.best.steps).map(|k| p.best.row(k)).collect();
+    let rows: Vec<&[f64]> = (0..best.steps).map(|k| best.row(k)).collect();
     if a.json {
         let doc = json!({
             "model": model.describe(),
@@ -165,11 +189,17 @@ pub fn run(a: Args) -> Result<()> {
             "dt": dt,
             "substeps": a.substeps,
             "control_step": problem.timing.control_step(),
-            "cost": p.cost,
+            "cost": cost,
+            "search_cost": search_cost,
             "hold_still_cost": still,
             "best": rows,
-            "predicted": p.predicted.iter().map(|s| &s.q).collect::<Vec<_>>(),
-            "predicted_velocities": p.predicted.iter().map(|s| &s.v).collect::<Vec<_>>(),
+            "predicted": predicted.iter().map(|s| &s.q).collect::<Vec<_>>(),
+            "predicted_velocities": predicted.iter().map(|s| &s.v).collect::<Vec<_>>(),
+            "refine": refined.as_ref().map(|r| json!({
+                "start_cost": r.start_cost,
+                "steps": r.steps,
+                "gradient": r.grad,
+            })),
             "costs": p.costs,
             "iterations": p.iterations,
             "evaluated": p.evaluated,
@@ -177,13 +207,12 @@ pub fn run(a: Args) -> Result<()> {
         });
         println!("{}", serde_json::to_string_pretty(&doc)?);
     } else {
-        let end = p
-            .predicted
+        let end = predicted
             .last()
             .map(|s| s.q[particle * d..(particle + 1) * d].to_vec());
         println!(
             "{} candidates in {:.3} s: best cost {:.4e} (holding still: {:.4e}); particle {particle} predicted at {:?}, target {:?}",
-            p.evaluated, p.seconds, p.cost, still, end.unwrap_or_default(), a.target.0
+            p.evaluated, p.seconds, cost, still, end.unwrap_or_default(), a.target.0
         );
         for (k, r) in rows.iter().enumerate() {
             println!("  step {k}: velocity {r:?}");

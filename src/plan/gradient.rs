@@ -250,6 +250,8 @@ pub struct Refined {
     pub start_cost: f64,
     /// The steps taken.
     pub steps: Vec<RefineStep>,
+    /// ∂cost/∂u at the refined sequence (near 0 at a stationary point).
+    pub grad: Vec<f64>,
     /// Its predicted trajectory (start, then one state per control step).
     pub predicted: Vec<State>,
 }
@@ -305,6 +307,7 @@ pub fn refine(problem: &Problem, init: &Controls, iterations: usize) -> Result<R
         cost: at.cost,
         start_cost,
         steps,
+        grad: at.grad,
         predicted: at.predicted,
     })
 }

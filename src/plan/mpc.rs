@@ -5,6 +5,7 @@
 
 use super::controls::{Controls, Timing};
 use super::cost::Cost;
+use super::gradient::refine;
 use super::search::{plan, PlanError, Problem, Sampler};
 use crate::dynamics::Dynamics;
 use crate::physics::{Field, Integrator};
@@ -38,6 +39,9 @@ pub struct Episode<'a> {
     pub max_speed: f64,
     /// Seed of the planner's sampling (control step k uses seed + k).
     pub seed: u64,
+    /// Gradient steps refining each search's best sequence
+    /// ([`super::gradient::refine`]; planners with a reverse pass only).
+    pub refine: usize,
 }
 
 /// What an episode did.
@@ -101,19 +105,22 @@ pub fn run(ep: &Episode) -> Result<EpisodeReport, PlanError> {
                     ep.seed + k as u64,
                     |_| true,
                 )?;
+                let (best, path) = if ep.refine > 0 && p.cost.is_finite() {
+                    let r = refine(&problem, &p.best, ep.refine)?;
+                    (r.best, r.predicted)
+                } else {
+                    (p.best, p.predicted)
+                };
                 planning += t0.elapsed().as_secs_f64();
                 if k == 0 {
-                    predicted = p.predicted[1..]
-                        .iter()
-                        .map(|s| picked(&ep.cost, s, d))
-                        .collect();
+                    predicted = path[1..].iter().map(|s| picked(&ep.cost, s, d)).collect();
                 }
                 let first = Controls {
                     steps: 1,
                     width,
-                    u: p.best.row(0).to_vec(),
+                    u: best.row(0).to_vec(),
                 };
-                warm = Some(p.best.shifted());
+                warm = Some(best.shifted());
                 first
             }
         };

@@ -33,6 +33,8 @@ const MAX_SPEED: f64 = 1.0;
 /// shorter than the chain's swing (about 4.7 s), distance alone drives the
 /// end through the target and leaves it swinging.
 const SPEED_WEIGHT: f64 = 0.1;
+/// Gradient steps after each of `mcgnode_refined`'s searches.
+const REFINE_STEPS: usize = 5;
 
 /// One planner's results over every target.
 #[derive(Clone, Debug, Serialize)]
@@ -53,7 +55,8 @@ pub struct PlannerResult {
 /// What `demo --mpc` measured.
 #[derive(Clone, Debug, Serialize)]
 pub struct MpcReport {
-    /// Per planner: `mcgnode`, `gnode`, `truth`, `none`.
+    /// Per planner: `mcgnode`, `mcgnode_refined` (its searches refined by
+    /// gradient steps), `gnode`, `truth`, `none`.
     pub planners: std::collections::BTreeMap<String, PlannerResult>,
     /// The targets (x, y), one per episode.
     pub targets: Vec<Vec<f64>>,
@@ -111,11 +114,14 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
         Ok(load_any_model(&ModelRef::File(p.to_path_buf()))?.dynamics)
     };
     let truth = crate::models::truth::truth(SystemKind::HeldChain);
-    let planners: Vec<(&str, Option<Arc<dyn Dynamics>>)> = vec![
-        ("mcgnode", Some(load(&trained[0].path)?)),
-        ("gnode", Some(load(&trained[1].path)?)),
-        ("truth", Some(truth)),
-        ("none", None),
+    let mcgnode = load(&trained[0].path)?;
+    // (name, model, gradient steps after each search)
+    let planners: Vec<(&str, Option<Arc<dyn Dynamics>>, usize)> = vec![
+        ("mcgnode", Some(mcgnode.clone()), 0),
+        ("mcgnode_refined", Some(mcgnode), REFINE_STEPS),
+        ("gnode", Some(load(&trained[1].path)?), 0),
+        ("truth", Some(truth), 0),
+        ("none", None, 0),
     ];
     let graph = cfg.graph();
     let end = LINKS - 1;
@@ -166,7 +172,7 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
         .max_by(|&a, &b| far(&episodes[a]).total_cmp(&far(&episodes[b])))
         .unwrap_or(0);
     let mut first: Vec<(String, EpisodeReport)> = vec![];
-    for (name, model) in &planners {
+    for (name, model, refine) in &planners {
         let mut results = vec![];
         for (i, (start, target)) in episodes.iter().enumerate() {
             let ep = mpc::Episode {
@@ -188,6 +194,7 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
                 },
                 max_speed: MAX_SPEED,
                 seed: seed + 100 * i as u64,
+                refine: *refine,
             };
             let r = mpc::run(&ep).with_context(|| format!("{name}, target {i}"))?;
             if i == shown {
