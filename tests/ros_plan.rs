@@ -4,6 +4,8 @@
 //! Rollout with the plan's kinematic motion, inside a private network
 //! namespace (scripts/netns.sh). The replay must reproduce the plan's
 //! predicted trajectory bit for bit, and the plan must beat holding still.
+//! The Plan action (`tests/ros/plan_drive.py`) must give the service's plan
+//! with a feedback per round, and stop a long goal on cancel.
 //!
 //! Needs the rclpy venv (`scripts/setup_venv.sh`); the interface package is
 //! (re)built with `scripts/build_msgs.sh`.
@@ -57,6 +59,16 @@ fn plan_then_rollout_replays_the_prediction_bit_for_bit() {
         ..PlanRequest::default()
     };
     fs::write(d.join("plan.json"), serde_json::to_string(&req).unwrap()).unwrap();
+    // Refining needs a reverse pass, which the true physics has not.
+    let refine = PlanRequest {
+        refine: 5,
+        ..req.clone()
+    };
+    fs::write(
+        d.join("refine.json"),
+        serde_json::to_string(&refine).unwrap(),
+    )
+    .unwrap();
     // dt 0.1 with 20 substeps: the plan's control step and integration step.
     fs::write(
         d.join("params.yaml"),
@@ -87,6 +99,9 @@ json.dump({
 PY
         python3 scripts/ros/call.py /mcgnode/rollout mcgnode_msgs/srv/Rollout --file "$DIR/rollout.json" \
             --json --timeout 60 >"$DIR/rollout.out" || rc=5
+        python3 tests/ros/plan_drive.py --goal "$DIR/plan.json" >"$DIR/action.out" 2>&1 || rc=7
+        python3 scripts/ros/call.py /mcgnode/plan mcgnode_msgs/srv/Plan --file "$DIR/refine.json" \
+            --json --timeout 60 >"$DIR/refine.out" || rc=8
         kill -INT $node
         for _ in $(seq 100); do kill -0 $node 2>/dev/null || break; sleep 0.1; done
         if kill -0 $node 2>/dev/null; then echo "node ignored SIGINT"; kill -KILL $node; exit 6; fi
@@ -109,7 +124,7 @@ PY
         o.stderr,
         read("node.log"),
         read("plan.out").chars().take(2000).collect::<String>()
-    );
+    ) + &format!("\n--- action\n{}", read("action.out"));
     assert!(o.status.success(), "{report}");
     assert!(!read("node.log").contains("panicked"), "{report}");
     let plan: serde_json::Value = serde_json::from_str(read("plan.out").trim()).expect("plan");
@@ -139,4 +154,23 @@ PY
     let last = &r["positions"].as_array().unwrap()[30 * 6 - 6 + 5];
     let grip = plan["kinematic_positions"].as_array().unwrap()[600].clone();
     assert_eq!(last, &grip, "the gripper ends where the plan moved it");
+    // The Plan action: the same request gives the service's plan, bit for
+    // bit, with a feedback per round; a cancel ends a long goal early.
+    let action = read("action.out");
+    let summary = action
+        .lines()
+        .find_map(|l| l.strip_prefix("PLAN_ACTION_SUMMARY "))
+        .unwrap_or_else(|| panic!("no action summary: {action}"));
+    let a: serde_json::Value = serde_json::from_str(summary).unwrap();
+    assert_eq!(a["feedback"], 3, "{a}");
+    assert_eq!(a["result"]["cost"], plan["cost"], "action vs service");
+    assert_eq!(a["result"]["best"], plan["best"], "action vs service");
+    assert!(a["cancelled_after"].as_u64().unwrap() < 100, "{a}");
+    let refined: serde_json::Value =
+        serde_json::from_str(read("refine.out").trim()).expect("refine");
+    assert_eq!(refined["success"], false, "{refined}");
+    assert!(
+        refined["message"].as_str().unwrap().contains("no gradient"),
+        "{refined}"
+    );
 }

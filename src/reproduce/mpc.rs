@@ -36,6 +36,10 @@ const SPEED_WEIGHT: f64 = 0.1;
 /// Gradient steps after each of `mcgnode_refined`'s searches.
 const REFINE_STEPS: usize = 5;
 
+/// A planner: its name, its model (none: hold still) and the gradient
+/// steps after each of its searches.
+type Planner<'a> = (&'a str, Option<Arc<dyn Dynamics>>, usize);
+
 /// One planner's results over every target.
 #[derive(Clone, Debug, Serialize)]
 pub struct PlannerResult {
@@ -115,8 +119,7 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
     };
     let truth = crate::models::truth::truth(SystemKind::HeldChain);
     let mcgnode = load(&trained[0].path)?;
-    // (name, model, gradient steps after each search)
-    let planners: Vec<(&str, Option<Arc<dyn Dynamics>>, usize)> = vec![
+    let planners: Vec<Planner> = vec![
         ("mcgnode", Some(mcgnode.clone()), 0),
         ("mcgnode_refined", Some(mcgnode), REFINE_STEPS),
         ("gnode", Some(load(&trained[1].path)?), 0),

@@ -167,6 +167,10 @@ async fn execute(
             done = &mut job => break done,
         }
     };
+    // Epochs the job reported just before it ended: a feedback per epoch.
+    while let Ok(fb) = rx.try_recv() {
+        let _ = server.publish_feedback(handle.clone(), fb).await;
+    }
     let resp = resp.unwrap_or_else(|join| TrainResponse {
         success: false,
         message: format!("training task failed: {join}"),

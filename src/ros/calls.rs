@@ -30,6 +30,16 @@ pub(crate) fn rollout_call(h: &Handles, req: RolloutRequest) -> RolloutResponse 
 
 /// The Plan service's work with the node's current parameters and model.
 pub(crate) fn plan_call(h: &Handles, req: PlanRequest) -> PlanResponse {
+    plan_call_with(h, &req, &mut |_| true)
+}
+
+/// [`plan_call`] telling `on_round` each round of the search (the Plan
+/// action's feedback); false from it stops the search (cancel).
+pub(crate) fn plan_call_with(
+    h: &Handles,
+    req: &PlanRequest,
+    on_round: &mut dyn FnMut(&crate::plan::Iteration) -> bool,
+) -> PlanResponse {
     if let Some(why) = h.lifecycle.refusal() {
         return PlanResponse {
             message: why,
@@ -44,7 +54,7 @@ pub(crate) fn plan_call(h: &Handles, req: PlanRequest) -> PlanResponse {
         max_steps: p.max_rollout_steps,
         max_particles: p.max_particles,
     };
-    super::plan::plan_response(h.model.get().as_ref(), &req, &settings)
+    super::plan::plan_response_with(h.model.get().as_ref(), req, &settings, on_round)
 }
 
 /// What the Rollout service accepts and how it integrates, from the node's

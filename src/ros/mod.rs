@@ -25,6 +25,9 @@
 //!   background and atomic model swaps announced on `/mcgnode/model_swap`;
 //! - [`action`]: the Train action (per-epoch feedback, cancel), on top of
 //!   [`training`];
+//! - [`plan`]: the Plan service's work (search, refine, the plan's kinematic
+//!   motion; no DDS), [`calls`]: every service's work on the node's handles,
+//!   and [`plan_action`]: the Plan action (per-round feedback, cancel);
 //! - [`topics`]: every topic, service and action name;
 //! - [`clock`]: system or simulated (`/clock`) time;
 //! - [`service`]: the one loop serving every service;
@@ -46,6 +49,7 @@ pub mod names;
 pub mod node;
 pub mod params;
 pub mod plan;
+pub mod plan_action;
 pub mod predict;
 pub mod qos;
 pub mod record;

@@ -438,6 +438,7 @@ pub fn serve(
     let h = handles(&node, (&params, &names, ros.log_level), live, model)?;
     let (trainer, servers) = training::create(&mut node, &params, &names, trainer_handles(&h))?;
     let action_server = action::create(&mut node, &names)?;
+    let plan_action = super::plan_action::create(&mut node, &names)?;
     let lifecycle = super::lifecycle_services::create(&mut node, &names)?;
     let spinner = node
         .spinner()
@@ -450,6 +451,7 @@ pub fn serve(
             }
         });
         endpoints.spawn(&h, &trainer);
+        super::plan_action::spawn(h.clone(), plan_action);
         spawn_training(trainer, servers, action_server);
         super::lifecycle_services::spawn(
             h.lifecycle.clone(),

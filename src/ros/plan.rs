@@ -8,7 +8,7 @@ use super::wire::{PlanRequest, PlanResponse};
 use crate::data::msg::{Point, Vector3};
 use crate::dynamics::Dynamics;
 use crate::physics::Drive;
-use crate::plan::{plan, Controls, Cost, CostKind, Problem, Sampler, Timing};
+use crate::plan::{plan, refine, Controls, Cost, CostKind, Iteration, Problem, Sampler, Timing};
 
 /// Why a Plan or Rollout request is refused: the message names the fix.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -93,10 +93,25 @@ fn sampler(req: &PlanRequest) -> Result<Sampler, Refused> {
     })
 }
 
+/// The most gradient steps a request may ask for (see [`MAX_CANDIDATES`]).
+pub const MAX_REFINE: u32 = 1_000;
+
 /// The Plan service's work: checks the request, plans, and answers with the
 /// best sequence, its kinematic motion and its predicted trajectory.
 pub fn plan_response(model: &dyn Dynamics, req: &PlanRequest, s: &PlanSettings) -> PlanResponse {
-    match answer(model, req, s) {
+    plan_response_with(model, req, s, &mut |_| true)
+}
+
+/// [`plan_response`] with `on_round` told each round of the search
+/// (feedback); it returns false to stop the search there (cancel), which
+/// keeps the best sequence so far.
+pub fn plan_response_with(
+    model: &dyn Dynamics,
+    req: &PlanRequest,
+    s: &PlanSettings,
+    on_round: &mut dyn FnMut(&Iteration) -> bool,
+) -> PlanResponse {
+    match answer(model, req, s, on_round) {
         Ok(r) => r,
         Err(Refused(message)) => PlanResponse {
             success: false,
@@ -110,8 +125,15 @@ fn answer(
     model: &dyn Dynamics,
     req: &PlanRequest,
     s: &PlanSettings,
+    on_round: &mut dyn FnMut(&Iteration) -> bool,
 ) -> Result<PlanResponse, Refused> {
     let no = |e: &dyn std::fmt::Display| Refused(e.to_string());
+    if req.refine > MAX_REFINE {
+        return Err(Refused(format!(
+            "refine = {}: at most {MAX_REFINE} gradient steps per request",
+            req.refine
+        )));
+    }
     predict::check_size(&req.initial, s.max_particles).map_err(|e| no(&e))?;
     let (graph, start) = predict::accept(model, &req.initial).map_err(|e| no(&e))?;
     let d = graph.dim;
@@ -143,6 +165,7 @@ fn answer(
         }
     };
     let sub = s.substeps.max(1);
+    let started = std::time::Instant::now();
     let problem = Problem {
         model,
         graph: &graph,
@@ -169,7 +192,22 @@ fn answer(
             req.max_speed
         },
     };
-    let p = plan(&problem, sampler(req)?, None, req.seed, |_| true).map_err(|e| no(&e))?;
+    let mut p = plan(&problem, sampler(req)?, None, req.seed, on_round).map_err(|e| no(&e))?;
+    let mut refined = String::new();
+    if req.refine > 0 && p.cost.is_finite() {
+        let r = refine(&problem, &p.best, req.refine as usize).map_err(|e| no(&e))?;
+        refined = format!(
+            "; refined by {} gradient steps from {:.4e}",
+            r.steps.len(),
+            r.start_cost
+        );
+        (p.best, p.cost, p.predicted) = (r.best, r.cost, r.predicted);
+    }
+    let seconds = if refined.is_empty() {
+        p.seconds
+    } else {
+        started.elapsed().as_secs_f64()
+    };
     let still = problem
         .cost_of(&Controls::zeros(problem.horizon, problem.width()))
         .map_err(|e| no(&e))?;
@@ -188,8 +226,8 @@ fn answer(
     Ok(PlanResponse {
         success: true,
         message: format!(
-            "{} candidates in {:.3} s: cost {:.4e} (holding still {still:.4e})",
-            p.evaluated, p.seconds, p.cost
+            "{} candidates in {seconds:.3} s: cost {:.4e} (holding still {still:.4e}){refined}",
+            p.evaluated, p.cost
         ),
         cost: p.cost,
         hold_still_cost: still,
@@ -199,7 +237,7 @@ fn answer(
         kinematic_velocities,
         trajectory: predict::trajectory_of(&req.initial, &graph, s.dt, &p.predicted[1..]),
         costs: p.costs,
-        seconds: p.seconds,
+        seconds,
     })
 }
 
@@ -319,5 +357,28 @@ mod tests {
             |r| r.particles = vec![9],
             "target particle 9 does not exist",
         );
+        refused(|r| r.refine = 1_001, "at most 1000 gradient steps");
+        refused(|r| r.refine = 3, "has no gradient");
+        // A model file of the GNODE family refines; a cancel after the first
+        // round keeps that round's best.
+        let (_, learned) =
+            crate::testing::random_model(crate::model::Variant::Mcgnode, &g, 1).unwrap();
+        let req = PlanRequest {
+            refine: 3,
+            ..good.clone()
+        };
+        let r = plan_response(&learned, &req, &s);
+        assert!(
+            r.success && r.message.contains("refined by"),
+            "{}",
+            r.message
+        );
+        let mut rounds = 0;
+        let r = plan_response_with(&learned, &good, &s, &mut |_| {
+            rounds += 1;
+            false
+        });
+        assert!(r.success, "{}", r.message);
+        assert_eq!((rounds, r.best.len()), (1, 5));
     }
 }

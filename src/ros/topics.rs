@@ -33,6 +33,8 @@ pub const LOAD_MODEL_SERVICE: &str = "~/load_model";
 pub const MODEL_SWAP_TOPIC: &str = "~/model_swap";
 /// The Train action.
 pub const TRAIN_ACTION: &str = "~/train_action";
+/// The Plan action.
+pub const PLAN_ACTION: &str = "~/plan_action";
 
 /// The managed-node services and topic, named as rclcpp names them.
 pub mod lifecycle {

@@ -1,11 +1,12 @@
-//! Our Train action (msg/Train.action): goal, result and feedback, and
-//! conversions from the Train service's and the trainer's types.
+//! Our actions (msg/Train.action, msg/Plan.action): goal, result and
+//! feedback, and conversions from the services' and the trainer's types.
 
 use serde::{Deserialize, Serialize};
 
 use crate::train::EpochReport;
 
-use super::services::TrainResponse;
+use super::services::{PlanRequest, PlanResponse, TrainResponse};
+use crate::plan::Iteration;
 
 ros_action!("mcgnode_msgs":
     /// `mcgnode_msgs/action/Train`: training with per-epoch feedback and cancel.
@@ -112,5 +113,50 @@ mod tests {
         });
         assert!(res.success && res.model_path == "/x.json" && res.validation_loss == 2.0);
         assert_eq!(res.explained, 0.5);
+    }
+}
+
+ros_action!("mcgnode_msgs":
+    /// `mcgnode_msgs/action/Plan`: planning with per-round feedback and cancel.
+    PlanAction(PlanGoal, PlanResult, PlanFeedback) = "Plan"
+);
+
+/// Goal of `mcgnode_msgs/action/Plan`: the Plan service's request, field for
+/// field (the same bytes on the wire).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct PlanGoal(pub PlanRequest);
+
+/// Result of `mcgnode_msgs/action/Plan`: the Plan service's response.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct PlanResult(pub PlanResponse);
+
+/// Feedback of `mcgnode_msgs/action/Plan`, one per round of the search.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PlanFeedback {
+    /// Round just finished, from 1.
+    pub iteration: u32,
+    /// Rounds asked for.
+    pub iterations: u32,
+    /// Cheapest cost so far.
+    pub best_cost: f64,
+    /// Mean cost of this round's finite candidates.
+    pub mean_cost: f64,
+    /// Candidates of this round whose rollout diverged.
+    pub diverged: u32,
+}
+
+impl PlanFeedback {
+    /// The feedback of round `it` of `iterations`.
+    pub fn of(it: &Iteration, iterations: usize) -> Self {
+        let n = |x: usize| u32::try_from(x).unwrap_or(u32::MAX);
+        PlanFeedback {
+            iteration: n(it.iteration),
+            iterations: n(iterations),
+            best_cost: it.best,
+            mean_cost: it.mean,
+            diverged: n(it.diverged),
+        }
     }
 }

@@ -1,12 +1,12 @@
 //! The wire types of every interface the node speaks, one file per family:
 //! plain serde structs with the fields in .msg order (what CDR needs), each
-//! carrying its ROS type name ([`RosType`]), and the services and the action
+//! carrying its ROS type name ([`RosType`]), and the services and the actions
 //! that pair them ([`RosService`], [`RosAction`]). Type names are spelled
 //! here only.
 //!
 //! - [`mcgnode`], our messages (msg/*.msg);
 //! - [`services`], our services (msg/*.srv);
-//! - [`action`], our Train action;
+//! - [`action`], our Train and Plan actions;
 //! - [`diagnostics`], `diagnostic_msgs`;
 //! - [`lifecycle`], `lifecycle_msgs`;
 //! - [`markers`], `visualization_msgs/MarkerArray` and its parts;
@@ -143,7 +143,10 @@ pub mod mcgnode;
 pub mod services;
 pub mod state;
 
-pub use action::{TrainAction, TrainFeedback, TrainGoal, TrainResult};
+pub use action::{
+    PlanAction, PlanFeedback, PlanGoal, PlanResult, TrainAction, TrainFeedback, TrainGoal,
+    TrainResult,
+};
 pub use clock::ClockMsg;
 pub use diagnostics::{
     DiagnosticArray, DiagnosticStatus, KeyValue, DIAGNOSTIC_ERROR, DIAGNOSTIC_OK, DIAGNOSTIC_STALE,

@@ -187,6 +187,8 @@ pub struct PlanRequest {
     pub max_speed: f64,
     /// Seed of the sampling.
     pub seed: u64,
+    /// Gradient steps refining the search's best sequence (0: none).
+    pub refine: u32,
 }
 
 /// Response of `mcgnode_msgs/srv/Plan`.
