@@ -3,9 +3,11 @@
 //! GNODE family on a held chain of springs and on a held chain of bars
 //! (constrained variants with SHAKE/RATTLE in their rollouts), with every
 //! term of the cost; and refining a plan by gradient steps. The state-level
-//! reverse pass is checked against candle in tests/engine.rs. Run with
+//! reverse pass is checked against candle in tests/engine.rs, the whole
+//! sweep against candle's autodiff of the rollout written in candle ops. Run with
 //! `cargo test --release --test plan_gradient`.
 
+use candle_core::{Device, Tensor, Var};
 use mcgnode::dynamics::Dynamics;
 use mcgnode::model::Variant;
 use mcgnode::models::truth::truth;
@@ -287,4 +289,187 @@ fn the_plan_command_refines() {
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains("no gradient"), "{e}");
+}
+
+/// The bar constraint of a one-state batch from the tensors q, q̇ by candle
+/// ops, so that autodiff reaches them through A(q) and Ȧq̇ (as in
+/// tests/engine.rs).
+fn constraint_from(
+    plan: &mcgnode::model::plan::GraphPlan,
+    q: &Tensor,
+    v: &Tensor,
+) -> (Tensor, Tensor, Tensor) {
+    use mcgnode::model::plan::BarEnd;
+    let (n, d, k) = (plan.n, plan.dim, plan.bars.len());
+    let (mut inc, mut fixed) = (vec![0.0; k * n], vec![0.0; k * d]);
+    for (r, bar) in plan.bars.iter().enumerate() {
+        inc[r * n + bar.a] = 1.0;
+        match &bar.b {
+            BarEnd::Particle(b) => inc[r * n + b] = -1.0,
+            BarEnd::Fixed(p) => fixed[r * d..(r + 1) * d].copy_from_slice(p),
+        }
+    }
+    let inc = Tensor::from_vec(inc, (k, n), &Device::Cpu).unwrap();
+    let fixed = Tensor::from_vec(fixed, (k, d), &Device::Cpu).unwrap();
+    let dq = (inc.matmul(q).unwrap() - fixed).unwrap();
+    let dv = inc.matmul(v).unwrap();
+    let a = inc
+        .unsqueeze(2)
+        .unwrap()
+        .broadcast_mul(&dq.unsqueeze(1).unwrap())
+        .unwrap()
+        .reshape((1, k, n * d))
+        .unwrap();
+    let at = a.transpose(1, 2).unwrap().contiguous().unwrap();
+    let adq = dv
+        .sqr()
+        .unwrap()
+        .sum_keepdim(1)
+        .unwrap()
+        .reshape((1, k, 1))
+        .unwrap();
+    (a, at, adq)
+}
+
+/// ∂cost/∂u by candle's autodiff through the whole rollout, written out in
+/// candle ops: the drive from the velocity knots, velocity Verlet, the
+/// driven particles placed, q̈ from the candle model (with A(q), Ȧq̇ from
+/// the tensors), the cost. No projection onto bars: candle has no SHAKE.
+fn candle_gradient(net: &mcgnode::model::Net, p: &Problem, u: &Controls) -> (f64, Vec<f64>) {
+    let dev = Device::Cpu;
+    let g = p.graph;
+    let (n, d) = (g.n(), g.dim);
+    let nd = n * d;
+    let plan = mcgnode::model::plan::GraphPlan::new(g);
+    let (dt, sub) = (p.timing.dt, p.timing.substeps);
+    let driven = p.driven();
+    let w = driven.len() * d;
+    let uv = Var::from_slice(&u.u, u.u.len(), &dev).unwrap();
+    let knot = |k: usize| uv.as_tensor().narrow(0, k * w, w).unwrap();
+    let pick = |x: &[f64]| -> Vec<f64> {
+        driven
+            .iter()
+            .flat_map(|&i| x[i * d..(i + 1) * d].to_vec())
+            .collect()
+    };
+    let v0 = Tensor::from_vec(pick(&p.start.v), w, &dev).unwrap();
+    // Driven coordinates: a 0/1 mask, and the map from drive rows onto them.
+    let mut mask = vec![0.0; nd];
+    let mut put = vec![0.0; nd * w];
+    for (j, &i) in driven.iter().enumerate() {
+        for c in 0..d {
+            mask[i * d + c] = 1.0;
+            put[(i * d + c) * w + j * d + c] = 1.0;
+        }
+    }
+    let keep = Tensor::from_vec(mask.iter().map(|m| 1.0 - m).collect(), nd, &dev).unwrap();
+    let put = Tensor::from_vec(put, (nd, w), &dev).unwrap();
+    let place = |x: &Tensor, row: &Tensor| -> Tensor {
+        let driven = put
+            .matmul(&row.unsqueeze(1).unwrap())
+            .unwrap()
+            .squeeze(1)
+            .unwrap();
+        ((x * &keep).unwrap() + driven).unwrap()
+    };
+    let accel = |q: &Tensor, v: &Tensor| -> Tensor {
+        let mut b =
+            mcgnode::model::batch::Batch::new(&plan, &[p.start], None, net.hyper.types).unwrap();
+        b.q = q.reshape((n, d)).unwrap();
+        b.v = v.reshape((n, d)).unwrap();
+        if !plan.bars.is_empty() {
+            b.constraint = Some(constraint_from(&plan, &b.q, &b.v));
+        }
+        let a = net.forward(&b).unwrap().acc.reshape(nd).unwrap();
+        (a * &keep).unwrap()
+    };
+    let scalar = |x: f64| Tensor::new(x, &dev).unwrap();
+    let mut q = Tensor::from_vec(p.start.q.clone(), nd, &dev).unwrap();
+    let mut v = Tensor::from_vec(p.start.v.clone(), nd, &dev).unwrap();
+    let mut a = accel(&q, &v);
+    let (mut dq_prev, mut vel_prev) = (
+        Tensor::from_vec(pick(&p.start.q), w, &dev).unwrap(),
+        v0.clone(),
+    );
+    let mut cost = scalar(0.0);
+    let c = &p.cost;
+    for j in 1..=u.steps * sub {
+        let (k, s) = ((j - 1) / sub, ((j - 1) % sub + 1) as f64 / sub as f64);
+        let from = if k == 0 { v0.clone() } else { knot(k - 1) };
+        let vel = ((from * (1.0 - s)).unwrap() + (knot(k) * s).unwrap()).unwrap();
+        let dqj = (&dq_prev + ((&vel_prev + &vel).unwrap() * (0.5 * dt)).unwrap()).unwrap();
+        q = ((&q + (&v * dt).unwrap()).unwrap() + (&a * (0.5 * dt * dt)).unwrap()).unwrap();
+        v = (&v + (&a * (0.5 * dt)).unwrap()).unwrap();
+        q = place(&q, &dqj);
+        v = place(&v, &vel);
+        a = accel(&q, &v);
+        v = (&v + (&a * (0.5 * dt)).unwrap()).unwrap();
+        (dq_prev, vel_prev) = (dqj, vel);
+        if j % sub == 0 {
+            for (t, &pi) in c.particles.iter().enumerate() {
+                let qi = q.narrow(0, pi * d, d).unwrap();
+                let vi = v.narrow(0, pi * d, d).unwrap();
+                let tgt =
+                    Tensor::from_vec(c.targets[t * d..(t + 1) * d].to_vec(), d, &dev).unwrap();
+                let term = ((qi - tgt).unwrap().sqr().unwrap().sum_all().unwrap()
+                    + (vi.sqr().unwrap().sum_all().unwrap() * c.speed).unwrap())
+                .unwrap();
+                cost = (cost + (term / p.horizon as f64).unwrap()).unwrap();
+            }
+        }
+    }
+    let effort = (uv.as_tensor().sqr().unwrap().sum_all().unwrap()
+        * (c.effort * p.timing.control_step()))
+    .unwrap();
+    let cost = (cost + effort).unwrap();
+    let grads = cost.backward().unwrap();
+    let gu = grads.get(&uv).unwrap().to_vec1::<f64>().unwrap();
+    (cost.to_scalar::<f64>().unwrap(), gu)
+}
+
+/// The reverse sweep equals candle's autodiff of the same rollout to 1e-8
+/// relative, for every variant on the held chain of springs, and on the
+/// chain of bars for the models whose rollouts it projects on nothing
+/// (NODE, GNODE: no learned masses; MCGNODE with projection off).
+#[test]
+fn gradients_equal_candle_autodiff_through_the_rollout() {
+    let cfg = SystemConfig::new(SystemKind::HeldChain, 5);
+    let springs = cfg.graph();
+    let spring_start = cfg.start_for(&springs, 2, 0);
+    let (bars, bar_start) = bar_chain(4);
+    let mut cases = vec![];
+    for v in Variant::ALL {
+        cases.push((v, &springs, &spring_start, true));
+    }
+    for v in [Variant::Node, Variant::Gnode, Variant::Mcgnode] {
+        cases.push((v, &bars, &bar_start, v != Variant::Mcgnode));
+    }
+    for (k, (v, g, start, project)) in cases.into_iter().enumerate() {
+        let (net, mut model) = random_model(v, g, 20 + k as u64).unwrap();
+        model.kernel.set_project_bars(project);
+        let p = problem(&model, g, start);
+        let mut rng = ChaCha8Rng::seed_from_u64(k as u64);
+        let u = Controls {
+            steps: p.horizon,
+            width: p.width(),
+            u: (0..p.horizon * p.width())
+                .map(|_| rng.random_range(-0.6..0.6))
+                .collect(),
+        };
+        let ours = p.gradient(&u).unwrap();
+        let (cost, theirs) = candle_gradient(&net, &p, &u);
+        let name = format!("{v} on {} particles", g.n());
+        assert!(
+            (cost - ours.cost).abs() <= 1e-12 * cost.abs(),
+            "{name}: cost {} vs candle {cost}",
+            ours.cost
+        );
+        let r = rel(&ours.grad, &theirs);
+        assert!(
+            r <= 1e-8,
+            "{name}: {:?} vs candle {theirs:?}: {r:.2e}",
+            ours.grad
+        );
+        eprintln!("{name}: gradient vs candle {r:.1e}");
+    }
 }
