@@ -1,6 +1,10 @@
 //! The `mcgnode` binary end to end: simulate → train → rollout → evaluate, and
 //! clear errors (never a panic) on bad input.
 
+// A test is one scenario read top to bottom; splitting it would hide the
+// order its checks depend on.
+#![allow(clippy::too_many_lines)]
+
 use std::path::Path;
 use std::process::{Command, Output};
 

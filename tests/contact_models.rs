@@ -8,6 +8,10 @@
 //! (engine against candle and finite differences on contact graphs) are in
 //! tests/engine.rs. Run with `cargo test --release --test contact_models`.
 
+// A test is one scenario read top to bottom; splitting it would hide the
+// order its checks depend on.
+#![allow(clippy::too_many_lines)]
+
 mod common;
 
 use common::cli::{evaluate_json, log_ok, run_in};

@@ -4,6 +4,10 @@
 //! interpolation accuracy from a recording), and `evaluate` following a
 //! bag's recorded gripper. Run with `cargo test --release --test driven`.
 
+// A test is one scenario read top to bottom; splitting it would hide the
+// order its checks depend on.
+#![allow(clippy::too_many_lines)]
+
 mod common;
 
 use common::cli::{evaluate_json, log_ok, run_in};

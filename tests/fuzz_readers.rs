@@ -13,6 +13,10 @@
 //! `MCGNODE_FUZZ_SCALE=<factor>` scales every case count (a longer soak, or a
 //! quick look).
 
+// A test is one scenario read top to bottom; splitting it would hide the
+// order its checks depend on.
+#![allow(clippy::too_many_lines)]
+
 use std::collections::BTreeMap;
 use std::io::Cursor;
 use std::panic::{catch_unwind, AssertUnwindSafe};

@@ -2,6 +2,10 @@
 //! `replay --positions-only / --smoother / --reference`, and
 //! scripts/noise.sh, which makes the README's noise table.
 
+// A test is one scenario read top to bottom; splitting it would hide the
+// order its checks depend on.
+#![allow(clippy::too_many_lines)]
+
 use std::path::Path;
 use std::process::Command;
 

@@ -10,6 +10,10 @@
 //! Needs the venv with maturin and pytest (`scripts/setup_venv.sh`); fails,
 //! never skips, without them.
 
+// A test is one scenario read top to bottom; splitting it would hide the
+// order its checks depend on.
+#![allow(clippy::too_many_lines)]
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};

@@ -1,6 +1,10 @@
 //! `mcgnode replay` and `mcgnode::replay::replay`: recorded states fed through
 //! a model and scored against what was recorded after them.
 
+// A test is one scenario read top to bottom; splitting it would hide the
+// order its checks depend on.
+#![allow(clippy::too_many_lines)]
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -5,6 +5,10 @@
 //! cut by a crash after `mcgnode bag repair`; bags with contacts (radius,
 //! kinematic particles) and bags of the layout before them.
 
+// A test is one scenario read top to bottom; splitting it would hide the
+// order its checks depend on.
+#![allow(clippy::too_many_lines)]
+
 mod common;
 
 use std::collections::BTreeMap;

@@ -1,5 +1,9 @@
 //! Training: reproducible, learns, conserves momentum exactly (MCGNODE), inductive.
 
+// A test is one scenario read top to bottom; splitting it would hide the
+// order its checks depend on.
+#![allow(clippy::too_many_lines)]
+
 use mcgnode::dynamics::Dynamics;
 use mcgnode::kernel::TrainedModel;
 use mcgnode::model::{Hyper, ModelFile, Variant};

@@ -188,6 +188,7 @@ impl Chunk {
     /// Makes room for `bs` states with `edges` directed edges in all
     /// (allocates only when growing; contact counts grow with headroom, so a
     /// rollout whose contacts vary a little stops allocating).
+    #[allow(clippy::too_many_lines)] // one line per buffer, sized in one place
     fn reserve(&mut self, m: &Model, bs: usize, edges: usize, record: bool) {
         if bs <= self.cap && edges <= self.edge_cap && record == self.record {
             return;
@@ -709,7 +710,11 @@ impl Chunk {
     }
 
     #[inline(always)]
-    #[allow(clippy::inline_always)] // to be compiled into the vector copies
+    #[allow(clippy::inline_always)]
+    // to be compiled into the vector copies
+    // The paper's forward pass stage by stage, as one loop nest: helpers would
+    // each need #[inline(always)] to stay inside the vector copies above.
+    #[allow(clippy::too_many_lines)]
     fn forward_graph_any(&mut self, m: &Model, th: &[f64]) {
         let a = &m.arch;
         let (d, t, em) = (m.plan.dim, a.types, a.embed);
@@ -1054,6 +1059,9 @@ impl Chunk {
         }
     }
 
+    // The reverse of forward_graph_any stage by stage, in one place so that
+    // the two read side by side.
+    #[allow(clippy::too_many_lines)]
     fn backward_graph(&mut self, m: &Model, th: &[f64], bs: usize) {
         let a = &m.arch;
         let (d, t, em) = (m.plan.dim, a.types, a.embed);

@@ -236,6 +236,7 @@ mod tests {
     /// allocated terabytes (an abort), panicked on a capacity overflow or an
     /// index out of bounds, or never finished loading.
     #[test]
+    #[allow(clippy::too_many_lines)] // a table of cases
     fn corrupt_sizes_are_errors_not_aborts() {
         type Edit = fn(&mut ModelFile);
         let cases: [(Variant, Edit, &str); 12] = [

@@ -146,9 +146,8 @@ impl Arch {
     }
 
     fn build(h: &Hyper, max_layers: usize) -> Option<Self> {
-        let (d, t, hid, em) = (h.dim, h.types.max(1), h.hidden, h.embed);
+        let d = h.dim;
         let b = h.variant.biases();
-        let mut mlps = vec![];
         let body = b.decoupled && (!b.pairwise || h.body_force);
         let node_input = if b.decoupled {
             NodeInput::TypeOnly
@@ -161,84 +160,20 @@ impl Arch {
             Decoder::Node { global: body }
         };
         let rounds = if b.graph { h.rounds } else { 0 };
-        let mut layers = 0usize;
-        let mut count = |n: usize| -> Option<()> {
-            layers = layers.checked_add(n)?;
-            (layers <= max_layers).then_some(())
+        let mut sizer = Sizer {
+            h,
+            max_layers,
+            layers: 0,
         };
-        // Layer sizes of a block: its override, or `hidden` × `hidden_layers`.
-        let mut mlp = |block: Block, inp: usize, out: usize, hidden: bool| {
-            let over = h.block_hidden.get(&block.prefix());
-            count(match over {
-                Some(hs) => hs.len().checked_add(1)?,
-                None if hidden => h.hidden_layers.checked_add(1)?,
-                None => 1,
-            })?;
-            let mut sizes = vec![inp];
-            match over {
-                Some(hs) => sizes.extend(hs),
-                None if hidden => sizes.extend(std::iter::repeat_n(hid, h.hidden_layers)),
-                None => {}
-            }
-            sizes.push(out);
-            Some((block, sizes))
-        };
-        let d2 = d.saturating_mul(2);
-        let msg_hidden = h.message == MessageFn::Mlp;
-        let edge_extra =
-            if h.edge_physics { EDGE_PHYSICS } else { 0 } + usize::from(h.interaction_radius > 0.0);
-        let edge_in = match h.edge_input {
-            EdgeInput::Concat => em.saturating_mul(2),
-            EdgeInput::Product => em,
-        };
-        if b.graph {
-            let node_in = match node_input {
-                NodeInput::TypeOnly => t,
-                NodeInput::Full => t.saturating_add(d2),
-            };
-            mlps.push(mlp(Block::NodeEmbed, node_in, em, true)?);
-            mlps.push(mlp(
-                Block::EdgeEmbed,
-                d.saturating_add(edge_extra),
-                em,
-                true,
-            )?);
-            for l in 0..rounds {
-                mlps.push(mlp(
-                    Block::Message(l),
-                    em.saturating_mul(2),
-                    em,
-                    msg_hidden,
-                )?);
-                mlps.push(mlp(Block::EdgeUpdate(l), edge_in, em, msg_hidden)?);
-            }
-            if body {
-                mlps.push(mlp(Block::GlobalEmbed, t.saturating_add(d2), em, true)?);
-            }
-            match decoder {
-                Decoder::Pairwise { body } => {
-                    mlps.push(mlp(Block::EdgeDecoder, em, d, true)?);
-                    if body {
-                        mlps.push(mlp(Block::BodyDecoder, em, d, true)?);
-                    }
-                }
-                Decoder::Node { global } => {
-                    let inp = if global { em.saturating_mul(2) } else { em };
-                    mlps.push(mlp(Block::NodeDecoder, inp, d, true)?);
-                }
-            }
+        let mlps = if b.graph {
+            sizer.graph_mlps(node_input, decoder, body, rounds)?
         } else {
-            count(h.node_layers.checked_add(1)?)?;
-            let io = h.particles.saturating_mul(d);
-            let mut sizes = vec![io.saturating_mul(2)];
-            sizes.extend(std::iter::repeat_n(h.node_hidden, h.node_layers));
-            sizes.push(io);
-            mlps.push((Block::Flat, sizes));
-        }
+            vec![sizer.flat_mlp()?]
+        };
         Some(Self {
             dim: d,
-            types: t,
-            embed: em,
+            types: h.types.max(1),
+            embed: h.embed,
             rounds,
             mlps,
             node_input,
@@ -440,5 +375,105 @@ fn radius_mismatch(model: f64, system: f64) -> String {
             "the model was trained with interaction radius {model}, the system has {system}: \
              train one for this radius (train --radius {system})"
         )
+    }
+}
+
+/// Layer sizes of the blocks of one [`Hyper`], counting layers so that a
+/// corrupt file's sizes stop at `max_layers` instead of allocating.
+struct Sizer<'a> {
+    h: &'a Hyper,
+    max_layers: usize,
+    layers: usize,
+}
+
+impl Sizer<'_> {
+    fn count(&mut self, n: usize) -> Option<()> {
+        self.layers = self.layers.checked_add(n)?;
+        (self.layers <= self.max_layers).then_some(())
+    }
+
+    /// Layer sizes of a block: its override, or `hidden` × `hidden_layers`
+    /// (`hidden` false: one linear layer).
+    fn mlp(
+        &mut self,
+        block: Block,
+        inp: usize,
+        out: usize,
+        hidden: bool,
+    ) -> Option<(Block, Vec<usize>)> {
+        let h = self.h;
+        let over = h.block_hidden.get(&block.prefix());
+        self.count(match over {
+            Some(hs) => hs.len().checked_add(1)?,
+            None if hidden => h.hidden_layers.checked_add(1)?,
+            None => 1,
+        })?;
+        let mut sizes = vec![inp];
+        match over {
+            Some(hs) => sizes.extend(hs),
+            None if hidden => sizes.extend(std::iter::repeat_n(h.hidden, h.hidden_layers)),
+            None => {}
+        }
+        sizes.push(out);
+        Some((block, sizes))
+    }
+
+    /// The graph models' blocks: embeddings, rounds, body, decoder.
+    fn graph_mlps(
+        &mut self,
+        node_input: NodeInput,
+        decoder: Decoder,
+        body: bool,
+        rounds: usize,
+    ) -> Option<Vec<(Block, Vec<usize>)>> {
+        let h = self.h;
+        let (d, t, em) = (h.dim, h.types.max(1), h.embed);
+        let d2 = d.saturating_mul(2);
+        let msg_hidden = h.message == MessageFn::Mlp;
+        let edge_extra =
+            if h.edge_physics { EDGE_PHYSICS } else { 0 } + usize::from(h.interaction_radius > 0.0);
+        let edge_in = match h.edge_input {
+            EdgeInput::Concat => em.saturating_mul(2),
+            EdgeInput::Product => em,
+        };
+        let node_in = match node_input {
+            NodeInput::TypeOnly => t,
+            NodeInput::Full => t.saturating_add(d2),
+        };
+        let mut mlps = vec![
+            self.mlp(Block::NodeEmbed, node_in, em, true)?,
+            self.mlp(Block::EdgeEmbed, d.saturating_add(edge_extra), em, true)?,
+        ];
+        for l in 0..rounds {
+            mlps.push(self.mlp(Block::Message(l), em.saturating_mul(2), em, msg_hidden)?);
+            mlps.push(self.mlp(Block::EdgeUpdate(l), edge_in, em, msg_hidden)?);
+        }
+        if body {
+            mlps.push(self.mlp(Block::GlobalEmbed, t.saturating_add(d2), em, true)?);
+        }
+        match decoder {
+            Decoder::Pairwise { body } => {
+                mlps.push(self.mlp(Block::EdgeDecoder, em, d, true)?);
+                if body {
+                    mlps.push(self.mlp(Block::BodyDecoder, em, d, true)?);
+                }
+            }
+            Decoder::Node { global } => {
+                let inp = if global { em.saturating_mul(2) } else { em };
+                mlps.push(self.mlp(Block::NodeDecoder, inp, d, true)?);
+            }
+        }
+        Some(mlps)
+    }
+
+    /// NODE's one MLP over the whole state.
+    fn flat_mlp(&mut self) -> Option<(Block, Vec<usize>)> {
+        let h = self.h;
+        self.count(h.node_layers.checked_add(1)?)?;
+        let io = h.particles.saturating_mul(h.dim);
+        let mut sizes = vec![io.saturating_mul(2)];
+        sizes.extend(std::iter::repeat_n(h.node_hidden, h.node_layers));
+        sizes.push(io);
+        Some((Block::Flat, sizes))
     }
 }

@@ -90,77 +90,16 @@ impl Batch {
             q.extend_from_slice(&st.q);
             v.extend_from_slice(&st.v);
         }
-        // Contacts at each state, then every directed edge in the plan's order.
-        let (mut pairs, mut starts) = (vec![], vec![]);
-        if plan.has_contacts() {
-            let mut search = plan.contact_search();
-            starts.push(0);
-            for st in states {
-                plan.contacts(&mut search, &st.q, &mut pairs);
-                starts.push(pairs.len());
-            }
-        }
-        let (mut recv, mut send, mut params, mut contact) = (vec![], vec![], vec![], vec![]);
-        plan.directed_edges(b, &pairs, &starts, |_, e| {
-            recv.push(e.recv as u32);
-            send.push(e.send as u32);
-            match e.fixed {
-                Some(k) => params.extend(plan.edge_physics(k)),
-                None => params.extend(plan.contact_physics()),
-            }
-            contact.push(if e.fixed.is_some() { 0.0 } else { 1.0 });
-        });
-        let free = if plan.kinematic.iter().any(|k| *k) {
-            let one = (0..b * n)
-                .flat_map(|r| {
-                    let x = if plan.is_kinematic(r % n) { 0.0 } else { 1.0 };
-                    std::iter::repeat_n(x, d)
-                })
-                .collect();
-            Some(Tensor::from_vec(one, (b * n, d), dev)?)
-        } else {
-            None
-        };
-        let k = plan.bars.len();
-        let constraint = if k > 0 {
-            let mut a = vec![0.0; b * k * nd];
-            let mut at = vec![0.0; b * nd * k];
-            let mut adq = vec![0.0; b * k];
-            for (s, st) in states.iter().enumerate() {
-                plan.constraint_rows(
-                    &st.q,
-                    &st.v,
-                    &mut a[s * k * nd..(s + 1) * k * nd],
-                    &mut adq[s * k..(s + 1) * k],
-                );
-                for r in 0..k {
-                    for c in 0..nd {
-                        at[s * nd * k + c * k + r] = a[s * k * nd + r * nd + c];
-                    }
-                }
-            }
-            Some((
-                Tensor::from_vec(a, (b, k, nd), dev)?,
-                Tensor::from_vec(at, (b, nd, k), dev)?,
-                Tensor::from_vec(adq, (b, k, 1), dev)?,
-            ))
-        } else {
-            None
-        };
+        let Edges {
+            recv,
+            send,
+            params,
+            contact,
+        } = Edges::of(plan, states);
+        let free = free_mask(plan, b)?;
+        let constraint = constraint(plan, states)?;
         let target = match targets {
-            Some(ts) => {
-                if ts.len() != b {
-                    bail!("{} targets for {b} states", ts.len());
-                }
-                let mut t = Vec::with_capacity(b * nd);
-                for x in ts {
-                    if x.len() != nd {
-                        bail!("target accelerations have the wrong size");
-                    }
-                    t.extend_from_slice(x);
-                }
-                Some(Tensor::from_vec(t, (b * n, d), dev)?)
-            }
+            Some(ts) => Some(target_tensor(ts, b, n, d)?),
             None => None,
         };
         let n_directed = recv.len();
@@ -182,4 +121,106 @@ impl Batch {
             target,
         })
     }
+}
+
+/// Every directed edge of a batch in the plan's order (each state's contacts
+/// found at its positions): receivers, senders, rest length and stiffness,
+/// and the contact flag.
+struct Edges {
+    recv: Vec<u32>,
+    send: Vec<u32>,
+    params: Vec<f64>,
+    contact: Vec<f64>,
+}
+
+impl Edges {
+    fn of(plan: &GraphPlan, states: &[&State]) -> Self {
+        let (mut pairs, mut starts) = (vec![], vec![]);
+        if plan.has_contacts() {
+            let mut search = plan.contact_search();
+            starts.push(0);
+            for st in states {
+                plan.contacts(&mut search, &st.q, &mut pairs);
+                starts.push(pairs.len());
+            }
+        }
+        let mut e = Edges {
+            recv: vec![],
+            send: vec![],
+            params: vec![],
+            contact: vec![],
+        };
+        plan.directed_edges(states.len(), &pairs, &starts, |_, d| {
+            e.recv.push(d.recv as u32);
+            e.send.push(d.send as u32);
+            match d.fixed {
+                Some(k) => e.params.extend(plan.edge_physics(k)),
+                None => e.params.extend(plan.contact_physics()),
+            }
+            e.contact.push(if d.fixed.is_some() { 0.0 } else { 1.0 });
+        });
+        e
+    }
+}
+
+/// With kinematic particles: 1 for a free particle's coordinates, 0 for a
+/// kinematic one's, `(B·n, d)`.
+fn free_mask(plan: &GraphPlan, b: usize) -> Result<Option<Tensor>> {
+    if !plan.kinematic.iter().any(|k| *k) {
+        return Ok(None);
+    }
+    let (n, d) = (plan.n, plan.dim);
+    let one = (0..b * n)
+        .flat_map(|r| {
+            let x = if plan.is_kinematic(r % n) { 0.0 } else { 1.0 };
+            std::iter::repeat_n(x, d)
+        })
+        .collect();
+    Ok(Some(Tensor::from_vec(one, (b * n, d), &Device::Cpu)?))
+}
+
+/// The bar constraint's rows of each state: A `(B, k, D)`, Aᵀ `(B, D, k)`,
+/// Ȧq̇ `(B, k, 1)`; `None` without bars.
+fn constraint(plan: &GraphPlan, states: &[&State]) -> Result<Option<(Tensor, Tensor, Tensor)>> {
+    let (b, k, nd) = (states.len(), plan.bars.len(), plan.n * plan.dim);
+    if k == 0 {
+        return Ok(None);
+    }
+    let dev = &Device::Cpu;
+    let mut a = vec![0.0; b * k * nd];
+    let mut at = vec![0.0; b * nd * k];
+    let mut adq = vec![0.0; b * k];
+    for (s, st) in states.iter().enumerate() {
+        plan.constraint_rows(
+            &st.q,
+            &st.v,
+            &mut a[s * k * nd..(s + 1) * k * nd],
+            &mut adq[s * k..(s + 1) * k],
+        );
+        for r in 0..k {
+            for c in 0..nd {
+                at[s * nd * k + c * k + r] = a[s * k * nd + r * nd + c];
+            }
+        }
+    }
+    Ok(Some((
+        Tensor::from_vec(a, (b, k, nd), dev)?,
+        Tensor::from_vec(at, (b, nd, k), dev)?,
+        Tensor::from_vec(adq, (b, k, 1), dev)?,
+    )))
+}
+
+/// Target accelerations of `b` states as one `(B·n, d)` tensor.
+fn target_tensor(ts: &[&[f64]], b: usize, n: usize, d: usize) -> Result<Tensor> {
+    if ts.len() != b {
+        bail!("{} targets for {b} states", ts.len());
+    }
+    let mut t = Vec::with_capacity(b * n * d);
+    for x in ts {
+        if x.len() != n * d {
+            bail!("target accelerations have the wrong size");
+        }
+        t.extend_from_slice(x);
+    }
+    Ok(Tensor::from_vec(t, (b * n, d), &Device::Cpu)?)
 }

@@ -91,96 +91,19 @@ impl Net {
     /// Forward pass on a batch: the paper's equations, stage by stage as the
     /// architecture describes them.
     pub fn forward(&self, b: &Batch) -> Result<Output> {
-        let s = &self.store;
-        let p = &self.parts;
-        let arch = &p.arch;
-        if let Some(mlp) = p.mlp(Block::Flat) {
-            if b.n != arch.particles {
-                bail!(
-                    "NODE was built for {} particles, got {} (NODE is not inductive)",
-                    arch.particles,
-                    b.n
-                );
-            }
-            let nd = b.n * b.dim;
-            let (q, v) = self.scaled_state(b)?;
-            let x = Tensor::cat(&[q.reshape((b.b, nd))?, v.reshape((b.b, nd))?], 1)?;
-            let acc = (mlp.forward(s, &x)?.reshape((b.b * b.n, b.dim))? * arch.norm.out_scale)?;
-            return Ok(Output { acc, force: None });
+        if let Some(mlp) = self.parts.mlp(Block::Flat) {
+            return self.forward_flat(mlp, b);
         }
-        // Encode.
+        let arch = &self.parts.arch;
         let (q, v) = self.scaled_state(b)?;
         let full = Tensor::cat(&[&b.onehot, &q, &v], 1)?;
-        let node_in = match arch.node_input {
-            NodeInput::TypeOnly => b.onehot.clone(),
-            NodeInput::Full => full.clone(),
-        };
-        let mut h = squareplus(&p.need(Block::NodeEmbed)?.forward(s, &node_in)?)?;
-        let nodes = b.b * b.n;
-        let mut he = if b.n_directed > 0 {
-            let mut w = ((gather(&b.q, &b.recv)? - gather(&b.q, &b.send)?)? / arch.norm.w_scale)?;
-            if arch.edge_physics {
-                let scale = arch.edge_physics_scale().map(|s| 1.0 / s);
-                let scale = Tensor::from_slice(&scale, (1, EDGE_PHYSICS), &Device::Cpu)?;
-                w = Tensor::cat(&[&w, &b.edge_params.broadcast_mul(&scale)?], 1)?;
-            }
-            if arch.contacts() {
-                w = Tensor::cat(&[&w, &b.contact], 1)?;
-            }
-            Some(squareplus(&p.need(Block::EdgeEmbed)?.forward(s, &w)?)?)
-        } else {
-            None
-        };
-        // Message passing.
-        for l in 0..arch.rounds {
-            let (wv, we) = (p.need(Block::Message(l))?, p.need(Block::EdgeUpdate(l))?);
-            if let Some(e) = &he {
-                let hs = gather(&h, &b.send)?;
-                let hr = gather(&h, &b.recv)?;
-                let msg = wv.forward(s, &Tensor::cat(&[&hs, e], 1)?)?;
-                let agg = Tensor::zeros((nodes, arch.embed), DType::F64, &Device::Cpu)?
-                    .index_add(&b.recv, &msg, 0)?;
-                let ends = match arch.edge_input {
-                    EdgeInput::Concat => Tensor::cat(&[&hr, &hs], 1)?,
-                    EdgeInput::Product => (&hr * &hs)?,
-                };
-                let e_new = squareplus(&(e + we.forward(s, &ends)?)?)?;
-                h = squareplus(&(h + agg)?)?;
-                he = Some(e_new);
-            } else {
-                h = squareplus(&h)?;
-            }
-        }
-        let glob = match p.mlp(Block::GlobalEmbed) {
-            Some(g) => Some(squareplus(&g.forward(s, &full)?)?),
+        let (h, he) = self.encode(b, &full)?;
+        let (h, he) = self.message_passing(b, h, he)?;
+        let glob = match self.parts.mlp(Block::GlobalEmbed) {
+            Some(g) => Some(squareplus(&g.forward(&self.store, &full)?)?),
             None => None,
         };
-        // Decode.
-        let out = match arch.decoder {
-            Decoder::Pairwise { .. } => {
-                // Newton's third law: F_ab = (f_ab − f_ba)/2 on a, −F_ab on b.
-                let mut n_int = Tensor::zeros((nodes, b.dim), DType::F64, &Device::Cpu)?;
-                if let Some(e) = &he {
-                    let f = p.need(Block::EdgeDecoder)?.forward(s, e)?;
-                    let half = b.n_directed / 2;
-                    let fa = ((f.narrow(0, 0, half)? - f.narrow(0, half, half)?)? * 0.5)?;
-                    let full_f = Tensor::cat(&[&fa, &fa.neg()?], 0)?;
-                    n_int = n_int.index_add(&b.recv, &full_f, 0)?;
-                }
-                match (p.mlp(Block::BodyDecoder), &glob) {
-                    (Some(bo), Some(g)) => (n_int + bo.forward(s, g)?)?,
-                    _ => n_int,
-                }
-            }
-            Decoder::Node { .. } => {
-                let inp = match &glob {
-                    Some(g) => Tensor::cat(&[&h, g], 1)?,
-                    None => h,
-                };
-                p.need(Block::NodeDecoder)?.forward(s, &inp)?
-            }
-        };
-        let out = (out * arch.norm.out_scale)?;
+        let out = (self.decode(b, h, he.as_ref(), glob.as_ref())? * arch.norm.out_scale)?;
         // Constrain.
         if !arch.constrained {
             return Ok(Output {
@@ -193,6 +116,117 @@ impl Net {
             acc,
             force: Some(out),
         })
+    }
+
+    /// NODE: one MLP from the whole scaled state to every acceleration.
+    fn forward_flat(&self, mlp: &Mlp, b: &Batch) -> Result<Output> {
+        let arch = &self.parts.arch;
+        if b.n != arch.particles {
+            bail!(
+                "NODE was built for {} particles, got {} (NODE is not inductive)",
+                arch.particles,
+                b.n
+            );
+        }
+        let nd = b.n * b.dim;
+        let (q, v) = self.scaled_state(b)?;
+        let x = Tensor::cat(&[q.reshape((b.b, nd))?, v.reshape((b.b, nd))?], 1)?;
+        let acc =
+            (mlp.forward(&self.store, &x)?.reshape((b.b * b.n, b.dim))? * arch.norm.out_scale)?;
+        Ok(Output { acc, force: None })
+    }
+
+    /// Encode: node states from (one-hot[, q, q̇]), edge states from
+    /// w_ij = q_i − q_j (and the edge's physics, the contact flag).
+    fn encode(&self, b: &Batch, full: &Tensor) -> Result<(Tensor, Option<Tensor>)> {
+        let (s, p) = (&self.store, &self.parts);
+        let arch = &p.arch;
+        let node_in = match arch.node_input {
+            NodeInput::TypeOnly => &b.onehot,
+            NodeInput::Full => full,
+        };
+        let h = squareplus(&p.need(Block::NodeEmbed)?.forward(s, node_in)?)?;
+        if b.n_directed == 0 {
+            return Ok((h, None));
+        }
+        let mut w = ((gather(&b.q, &b.recv)? - gather(&b.q, &b.send)?)? / arch.norm.w_scale)?;
+        if arch.edge_physics {
+            let scale = arch.edge_physics_scale().map(|s| 1.0 / s);
+            let scale = Tensor::from_slice(&scale, (1, EDGE_PHYSICS), &Device::Cpu)?;
+            w = Tensor::cat(&[&w, &b.edge_params.broadcast_mul(&scale)?], 1)?;
+        }
+        if arch.contacts() {
+            w = Tensor::cat(&[&w, &b.contact], 1)?;
+        }
+        let he = squareplus(&p.need(Block::EdgeEmbed)?.forward(s, &w)?)?;
+        Ok((h, Some(he)))
+    }
+
+    /// The rounds of message passing: h_i ← sqp(h_i + Σ_j W_V(h_j ‖ h_ij)),
+    /// h_ij ← sqp(h_ij + W_E(h_i, h_j)) from the node states before the round.
+    fn message_passing(
+        &self,
+        b: &Batch,
+        mut h: Tensor,
+        mut he: Option<Tensor>,
+    ) -> Result<(Tensor, Option<Tensor>)> {
+        let (s, p) = (&self.store, &self.parts);
+        let arch = &p.arch;
+        for l in 0..arch.rounds {
+            let (wv, we) = (p.need(Block::Message(l))?, p.need(Block::EdgeUpdate(l))?);
+            let Some(e) = &he else {
+                h = squareplus(&h)?;
+                continue;
+            };
+            let hs = gather(&h, &b.send)?;
+            let hr = gather(&h, &b.recv)?;
+            let msg = wv.forward(s, &Tensor::cat(&[&hs, e], 1)?)?;
+            let agg = Tensor::zeros((b.b * b.n, arch.embed), DType::F64, &Device::Cpu)?
+                .index_add(&b.recv, &msg, 0)?;
+            let ends = match arch.edge_input {
+                EdgeInput::Concat => Tensor::cat(&[&hr, &hs], 1)?,
+                EdgeInput::Product => (&hr * &hs)?,
+            };
+            let e_new = squareplus(&(e + we.forward(s, &ends)?)?)?;
+            h = squareplus(&(h + agg)?)?;
+            he = Some(e_new);
+        }
+        Ok((h, he))
+    }
+
+    /// Decode: pairwise forces F_ab = (f_ab − f_ba)/2 on a and −F_ab on b
+    /// (Newton's third law) plus body forces, or a per-node output.
+    fn decode(
+        &self,
+        b: &Batch,
+        h: Tensor,
+        he: Option<&Tensor>,
+        glob: Option<&Tensor>,
+    ) -> Result<Tensor> {
+        let (s, p) = (&self.store, &self.parts);
+        match p.arch.decoder {
+            Decoder::Pairwise { .. } => {
+                let mut n_int = Tensor::zeros((b.b * b.n, b.dim), DType::F64, &Device::Cpu)?;
+                if let Some(e) = he {
+                    let f = p.need(Block::EdgeDecoder)?.forward(s, e)?;
+                    let half = b.n_directed / 2;
+                    let fa = ((f.narrow(0, 0, half)? - f.narrow(0, half, half)?)? * 0.5)?;
+                    let full_f = Tensor::cat(&[&fa, &fa.neg()?], 0)?;
+                    n_int = n_int.index_add(&b.recv, &full_f, 0)?;
+                }
+                Ok(match (p.mlp(Block::BodyDecoder), glob) {
+                    (Some(bo), Some(g)) => (n_int + bo.forward(s, g)?)?,
+                    _ => n_int,
+                })
+            }
+            Decoder::Node { .. } => {
+                let inp = match glob {
+                    Some(g) => Tensor::cat(&[&h, g], 1)?,
+                    None => h,
+                };
+                p.need(Block::NodeDecoder)?.forward(s, &inp)
+            }
+        }
     }
 
     /// Scaled node inputs ((q − μ_q)/σ_q, q̇/σ_v).

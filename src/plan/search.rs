@@ -269,112 +269,21 @@ pub fn plan(
 ) -> Result<Plan, PlanError> {
     problem.check()?;
     let t0 = Instant::now();
-    let (h, w) = (problem.horizon, problem.width());
-    let n = sampler.candidates().max(1);
-    if let Sampler::Cem { elites, .. } = sampler {
-        if elites == 0 || elites > n {
-            return Err(PlanError::Problem(format!(
-                "CEM needs 1 to {n} elites, got {elites}"
-            )));
-        }
-    }
-    if !(sampler.sigma().is_finite() && sampler.sigma() >= 0.0) {
-        return Err(PlanError::Problem("sigma must be finite and ≥ 0".into()));
-    }
-    let mut mean = match init {
-        Some(c) if c.steps == h && c.width == w => c.u.clone(),
-        Some(c) => {
-            return Err(PlanError::Problem(format!(
-                "the warm start has {} steps of {} numbers, the problem {h} of {w}",
-                c.steps, c.width
-            )))
-        }
-        None => vec![0.0; h * w],
-    };
-    let mut sigma = vec![sampler.sigma(); h * w];
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let clip = |x: f64| x.clamp(-problem.max_speed, problem.max_speed);
-    let mut best: Option<(f64, Controls)> = None;
+    let mut search = Search::new(problem, sampler, init, seed)?;
     let (mut iterations, mut costs, mut evaluated) = (vec![], vec![], 0);
     for it in 1..=sampler.iterations().max(1) {
-        let candidates: Vec<Controls> = (0..n)
-            .map(|k| {
-                let u = mean
-                    .iter()
-                    .zip(&sigma)
-                    .map(|(m, s)| {
-                        let z: f64 = if k == 0 {
-                            0.0
-                        } else {
-                            StandardNormal.sample(&mut rng)
-                        };
-                        clip(m + s * z)
-                    })
-                    .collect();
-                Controls {
-                    steps: h,
-                    width: w,
-                    u,
-                }
-            })
-            .collect();
+        let candidates = search.draw();
         costs = problem.costs(&candidates)?;
         evaluated += candidates.len();
-        let mut order: Vec<usize> = (0..n).collect();
-        order.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]));
-        let top = order[0];
-        if best.as_ref().is_none_or(|(c, _)| costs[top] < *c) {
-            best = Some((costs[top], candidates[top].clone()));
-        }
-        let finite: Vec<f64> = costs.iter().copied().filter(|c| c.is_finite()).collect();
-        let report = Iteration {
-            iteration: it,
-            best: best.as_ref().map_or(f64::INFINITY, |b| b.0),
-            mean: finite.iter().sum::<f64>() / finite.len().max(1) as f64,
-            diverged: n - finite.len(),
-        };
+        let report = search.keep(it, &candidates, &costs);
         let go_on = on_iteration(&report);
         iterations.push(report);
-        match sampler {
-            Sampler::Random { .. } => {}
-            Sampler::Cem { elites, .. } => {
-                let elite: Vec<&Controls> = order[..elites]
-                    .iter()
-                    .filter(|&&k| costs[k].is_finite())
-                    .map(|&k| &candidates[k])
-                    .collect();
-                if !elite.is_empty() {
-                    let m = elite.len() as f64;
-                    for f in 0..h * w {
-                        let mu = elite.iter().map(|c| c.u[f]).sum::<f64>() / m;
-                        let var = elite.iter().map(|c| (c.u[f] - mu).powi(2)).sum::<f64>() / m;
-                        mean[f] = mu;
-                        sigma[f] = var.sqrt();
-                    }
-                }
-            }
-            Sampler::Mppi { temperature, .. } => {
-                let lo = costs[top];
-                if lo.is_finite() {
-                    let lambda = temperature.max(1e-12);
-                    let wts: Vec<f64> = costs.iter().map(|c| (-(c - lo) / lambda).exp()).collect();
-                    let total: f64 = wts.iter().sum();
-                    for (f, m) in mean.iter_mut().enumerate() {
-                        *m = candidates
-                            .iter()
-                            .zip(&wts)
-                            .map(|(c, wt)| wt * c.u[f])
-                            .sum::<f64>()
-                            / total;
-                    }
-                }
-            }
-        }
+        search.refit(&candidates, &costs);
         if !go_on {
             break;
         }
     }
-    let (cost, best) = best.expect("at least one round ran");
+    let (cost, best) = search.best.expect("at least one round ran");
     let predicted = if cost.is_finite() {
         problem.rollout(&best)?
     } else {
@@ -389,4 +298,151 @@ pub fn plan(
         evaluated,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// A search's state between rounds: the sampling distribution (mean and
+/// spread per velocity), its random stream, and the cheapest sequence so far.
+struct Search<'a> {
+    problem: &'a Problem<'a>,
+    sampler: Sampler,
+    mean: Vec<f64>,
+    sigma: Vec<f64>,
+    rng: ChaCha8Rng,
+    best: Option<(f64, Controls)>,
+    /// Candidates by cost, cheapest first, of the last round.
+    order: Vec<usize>,
+}
+
+impl<'a> Search<'a> {
+    /// Checks the sampler and the warm start, and starts from them.
+    fn new(
+        problem: &'a Problem<'a>,
+        sampler: Sampler,
+        init: Option<&Controls>,
+        seed: u64,
+    ) -> Result<Self, PlanError> {
+        let (h, w) = (problem.horizon, problem.width());
+        let n = sampler.candidates().max(1);
+        if let Sampler::Cem { elites, .. } = sampler {
+            if elites == 0 || elites > n {
+                return Err(PlanError::Problem(format!(
+                    "CEM needs 1 to {n} elites, got {elites}"
+                )));
+            }
+        }
+        if !(sampler.sigma().is_finite() && sampler.sigma() >= 0.0) {
+            return Err(PlanError::Problem("sigma must be finite and ≥ 0".into()));
+        }
+        let mean = match init {
+            Some(c) if c.steps == h && c.width == w => c.u.clone(),
+            Some(c) => {
+                return Err(PlanError::Problem(format!(
+                    "the warm start has {} steps of {} numbers, the problem {h} of {w}",
+                    c.steps, c.width
+                )))
+            }
+            None => vec![0.0; h * w],
+        };
+        Ok(Search {
+            problem,
+            sampler,
+            sigma: vec![sampler.sigma(); h * w],
+            mean,
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            best: None,
+            order: vec![],
+        })
+    }
+
+    /// One round's candidates: the mean first, then N(mean, σ²) draws, each
+    /// velocity clipped to the speed bound.
+    fn draw(&mut self) -> Vec<Controls> {
+        let p = self.problem;
+        let (h, w) = (p.horizon, p.width());
+        let clip = |x: f64| x.clamp(-p.max_speed, p.max_speed);
+        let (mean, sigma, rng) = (&self.mean, &self.sigma, &mut self.rng);
+        (0..self.sampler.candidates().max(1))
+            .map(|k| {
+                let u = mean
+                    .iter()
+                    .zip(sigma)
+                    .map(|(m, s)| {
+                        let z: f64 = if k == 0 {
+                            0.0
+                        } else {
+                            StandardNormal.sample(rng)
+                        };
+                        clip(m + s * z)
+                    })
+                    .collect();
+                Controls {
+                    steps: h,
+                    width: w,
+                    u,
+                }
+            })
+            .collect()
+    }
+
+    /// Ranks the round, keeps its cheapest if it beats the best so far, and
+    /// reports the round.
+    fn keep(&mut self, it: usize, candidates: &[Controls], costs: &[f64]) -> Iteration {
+        let mut order: Vec<usize> = (0..candidates.len()).collect();
+        order.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]));
+        let top = order[0];
+        if self.best.as_ref().is_none_or(|(c, _)| costs[top] < *c) {
+            self.best = Some((costs[top], candidates[top].clone()));
+        }
+        self.order = order;
+        let finite: Vec<f64> = costs.iter().copied().filter(|c| c.is_finite()).collect();
+        Iteration {
+            iteration: it,
+            best: self.best.as_ref().map_or(f64::INFINITY, |b| b.0),
+            mean: finite.iter().sum::<f64>() / finite.len().max(1) as f64,
+            diverged: candidates.len() - finite.len(),
+        }
+    }
+
+    /// Moves the sampling distribution as the sampler says: CEM refits mean
+    /// and spread to the elites, MPPI moves the mean to the cost-weighted
+    /// average, random shooting stays.
+    fn refit(&mut self, candidates: &[Controls], costs: &[f64]) {
+        match self.sampler {
+            Sampler::Random { .. } => {}
+            Sampler::Cem { elites, .. } => {
+                let elite: Vec<&Controls> = self.order[..elites]
+                    .iter()
+                    .filter(|&&k| costs[k].is_finite())
+                    .map(|&k| &candidates[k])
+                    .collect();
+                if elite.is_empty() {
+                    return;
+                }
+                let m = elite.len() as f64;
+                for f in 0..self.mean.len() {
+                    let mu = elite.iter().map(|c| c.u[f]).sum::<f64>() / m;
+                    let var = elite.iter().map(|c| (c.u[f] - mu).powi(2)).sum::<f64>() / m;
+                    self.mean[f] = mu;
+                    self.sigma[f] = var.sqrt();
+                }
+            }
+            Sampler::Mppi { temperature, .. } => {
+                let lo = costs[self.order[0]];
+                if !lo.is_finite() {
+                    return;
+                }
+                let lambda = temperature.max(1e-12);
+                let wts: Vec<f64> = costs.iter().map(|c| (-(c - lo) / lambda).exp()).collect();
+                let total: f64 = wts.iter().sum();
+                for (f, m) in self.mean.iter_mut().enumerate() {
+                    *m = candidates
+                        .iter()
+                        .zip(&wts)
+                        .map(|(c, wt)| wt * c.u[f])
+                        .sum::<f64>()
+                        / total;
+                }
+            }
+        }
+    }
 }
