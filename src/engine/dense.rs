@@ -151,7 +151,7 @@ impl Linear {
 /// 500-spring rollout ran at half the speed (4.6–6.3k against 9.0–11.9k
 /// steps/s, interleaved, 2026-12-02).
 #[inline(always)]
-fn dense_tile(l: &Linear, th: &[f64], x: &[f64], y: &mut [f64]) {
+fn dense_tile<const TILE: usize>(l: &Linear, th: &[f64], x: &[f64], y: &mut [f64]) {
     let w = &th[l.w..l.w + l.inp * l.out];
     let b = &th[l.b..l.b + l.out];
     let lane = |x: &[f64], i: usize| -> [f64; TILE] {
@@ -206,6 +206,17 @@ pub(crate) struct Tape {
 
 /// Rows an inference pass keeps in registers at once: two 8-lane vectors.
 const TILE: usize = 16;
+
+/// The tile for the `rest` rows left: full tiles while they last, then 8 or
+/// 4 rows, so that a 5-body graph's nodes fill 8 lanes and not 16 (a third
+/// of a 16-row tile's square roots were spent on padding).
+fn tile_for(rest: usize) -> usize {
+    match rest {
+        13.. => TILE,
+        5..=12 => 8,
+        _ => 4,
+    }
+}
 /// Outputs computed together, so that each input tile loaded serves four
 /// independent accumulator chains (a chain alone waits on its adds).
 const OUTS: usize = 4;
@@ -311,46 +322,66 @@ impl Mlp {
         tape: &mut Tape,
         y: &mut [f64],
     ) {
-        let (Some(first), Some(last)) = (self.layers.first(), self.layers.last()) else {
-            return;
-        };
-        if r == 0 {
+        if self.layers.is_empty() || r == 0 {
             return;
         }
         let na = a.len() / r;
+        let mut t0 = 0;
+        while t0 < r {
+            let len = match tile_for(r - t0) {
+                TILE => self.tile::<TILE>(th, (a, c, na), r, t0, tape, y),
+                8 => self.tile::<8>(th, (a, c, na), r, t0, tape, y),
+                _ => self.tile::<4>(th, (a, c, na), r, t0, tape, y),
+            };
+            t0 += len;
+        }
+    }
+
+    /// One tile of up to `T` rows from row `t0` through every layer (see
+    /// [`Mlp::forward_any`]); returns the rows done.
+    #[inline(always)]
+    fn tile<const T: usize>(
+        &self,
+        th: &[f64],
+        (a, c, na): (&[f64], &[f64], usize),
+        r: usize,
+        t0: usize,
+        tape: &mut Tape,
+        y: &mut [f64],
+    ) -> usize {
+        let len = T.min(r - t0);
         let record = !tape.hidden.is_empty();
         let half = tape.tile.len() / 2;
         let (mut x, mut h) = tape.tile.split_at_mut(half);
-        for t0 in (0..r).step_by(TILE) {
-            let len = TILE.min(r - t0);
-            for i in 0..first.inp {
-                let src = if i < na {
-                    &a[i * r + t0..i * r + t0 + len]
-                } else {
-                    &c[(i - na) * r + t0..(i - na) * r + t0 + len]
-                };
-                let dst = &mut x[i * TILE..(i + 1) * TILE];
-                dst[..len].copy_from_slice(src);
-                dst[len..].fill(0.0);
-            }
-            for (li, l) in self.layers.iter().enumerate() {
-                dense_tile(l, th, x, h);
-                if li + 1 < self.layers.len() {
-                    squareplus_in_place(&mut h[..l.out * TILE]);
-                    if record {
-                        let kept = &mut tape.hidden[li];
-                        for j in 0..l.out {
-                            kept[j * r + t0..j * r + t0 + len]
-                                .copy_from_slice(&h[j * TILE..j * TILE + len]);
-                        }
+        let first = &self.layers[0];
+        for i in 0..first.inp {
+            let src = if i < na {
+                &a[i * r + t0..i * r + t0 + len]
+            } else {
+                &c[(i - na) * r + t0..(i - na) * r + t0 + len]
+            };
+            let dst = &mut x[i * T..(i + 1) * T];
+            dst[..len].copy_from_slice(src);
+            dst[len..].fill(0.0);
+        }
+        for (li, l) in self.layers.iter().enumerate() {
+            dense_tile::<T>(l, th, x, h);
+            if li + 1 < self.layers.len() {
+                squareplus_in_place(&mut h[..l.out * T]);
+                if record {
+                    let kept = &mut tape.hidden[li];
+                    for j in 0..l.out {
+                        kept[j * r + t0..j * r + t0 + len].copy_from_slice(&h[j * T..j * T + len]);
                     }
                 }
-                std::mem::swap(&mut x, &mut h);
             }
-            for j in 0..last.out {
-                y[j * r + t0..j * r + t0 + len].copy_from_slice(&x[j * TILE..j * TILE + len]);
-            }
+            std::mem::swap(&mut x, &mut h);
         }
+        let last = &self.layers[self.layers.len() - 1];
+        for j in 0..last.out {
+            y[j * r + t0..j * r + t0 + len].copy_from_slice(&x[j * T..j * T + len]);
+        }
+        len
     }
 
     /// The layer-by-layer pass over all rows: the reference the tiled pass
@@ -535,7 +566,22 @@ mod tests {
         // The tiled pass against the layer-by-layer one: the same outputs
         // and tapes, recording or not, at row counts below, at and around a
         // tile.
-        for r in [1, 5, TILE - 1, TILE, TILE + 1, 203] {
+        let rows = [
+            1,
+            4,
+            5,
+            8,
+            9,
+            10,
+            12,
+            13,
+            TILE - 1,
+            TILE,
+            TILE + 1,
+            TILE + 5,
+            203,
+        ];
+        for r in rows {
             let (a, c) = (wave(4 * r, 0.11), wave(3 * r, 0.23));
             let (mut want_tape, mut want) = (mlp.tape(r), vec![0.0; 3 * r]);
             mlp.layerwise(&th, &a, &c, r, &mut want_tape, &mut want);
