@@ -309,8 +309,8 @@ impl Chunk {
     /// ([`GraphPlan::directed_edges`]): first every state's edges one way
     /// (fixed, then its contacts), then all reversed, so edge `e` and
     /// `e + half` are the two directions of one bar, spring or contact. The
-    /// constant edge inputs after q_i − q_j (rest length and stiffness, the
-    /// contact flag) are written with them. Without contacts the layout
+    /// constant edge inputs after q_i − q_j
+    /// ([`crate::model::arch::EdgeConst`]) are written with them. Without contacts the layout
     /// depends on `bs` alone and is kept.
     fn lay_out(&mut self, m: &Model, bs: usize) {
         let contacts = m.plan.has_contacts();
@@ -324,27 +324,23 @@ impl Chunk {
             bs * m.plan.recv.len()
         };
         let (recv, send, w_in) = (&mut self.recv, &mut self.send, &mut self.w_in);
-        let (physics, flag) = (a.dim, a.contact_feature());
-        let contact_physics = a.scaled_physics(m.plan.contact_physics());
         let (pairs, starts) = if contacts {
             (&self.contacts.pairs[..], &self.contacts.starts[..])
         } else {
             (&[][..], &[][..])
         };
+        let mut x = [0.0; crate::model::arch::EdgeConst::MAX_WIDTH];
         m.plan.directed_edges(bs, pairs, starts, |k, e| {
             recv[k] = e.recv;
             send[k] = e.send;
-            if a.edge_physics {
-                let x = match e.fixed {
-                    Some(j) => a.edge_physics_of(&m.plan, j),
-                    None => contact_physics,
-                };
-                for (f, x) in x.iter().enumerate() {
-                    w_in[(physics + f) * edges + k] = *x;
+            let mut f = a.dim;
+            for c in a.edge_consts() {
+                let x = &mut x[..c.width()];
+                c.values(a, &m.plan, e.fixed, x);
+                for v in x.iter() {
+                    w_in[f * edges + k] = *v;
+                    f += 1;
                 }
-            }
-            if a.contacts() {
-                w_in[flag * edges + k] = if e.fixed.is_some() { 0.0 } else { 1.0 };
             }
         });
         self.edges = edges;

@@ -9,6 +9,7 @@
 use super::variant::{Biases, EdgeInput, Hyper, MessageFn, Norm};
 use std::fmt;
 
+use super::plan::GraphPlan;
 pub use super::plan::EDGE_PHYSICS;
 
 /// The parameter holding learnable log-masses, one per particle type.
@@ -235,10 +236,10 @@ impl Arch {
         Ok(())
     }
 
-    /// Edge input features: q_i − q_j, then (rest, stiffness) with edge
-    /// physics, then the contact flag (1 for a contact edge) with contacts.
+    /// Edge input features: q_i − q_j, then the constant inputs
+    /// ([`EdgeConst`]).
     pub fn edge_features(&self) -> usize {
-        self.dim + if self.edge_physics { EDGE_PHYSICS } else { 0 } + usize::from(self.contacts())
+        self.dim + EdgeConst::width_of(self.edge_consts())
     }
 
     /// Whether the model finds contact edges and reads the contact flag.
@@ -246,19 +247,13 @@ impl Arch {
         self.radius > 0.0
     }
 
-    /// Index of the contact flag among the edge inputs.
-    pub fn contact_feature(&self) -> usize {
-        self.dim + if self.edge_physics { EDGE_PHYSICS } else { 0 }
-    }
-
-    /// The scaled edge-physics features (rest length, stiffness) of directed
-    /// edge `e` of a plan.
-    pub fn edge_physics_of(&self, plan: &super::plan::GraphPlan, e: usize) -> [f64; EDGE_PHYSICS] {
-        self.scaled_physics(plan.edge_physics(e))
+    /// The constant inputs this model's edges read after w_ij, in order.
+    pub fn edge_consts(&self) -> impl Iterator<Item = EdgeConst> {
+        EdgeConst::read_by(self.edge_physics, self.radius)
     }
 
     /// Raw edge-physics inputs (rest length, stiffness) divided by their
-    /// scales: a fixed edge's ([`Arch::edge_physics_of`]) or a contact's.
+    /// scales: a fixed edge's or a contact's.
     pub fn scaled_physics(&self, raw: [f64; EDGE_PHYSICS]) -> [f64; EDGE_PHYSICS] {
         let scale = self.edge_physics_scale();
         std::array::from_fn(|f| raw[f] / scale[f])
@@ -431,7 +426,7 @@ impl Sizer<'_> {
         let d2 = d.saturating_mul(2);
         let msg_hidden = h.message == MessageFn::Mlp;
         let edge_extra =
-            if h.edge_physics { EDGE_PHYSICS } else { 0 } + usize::from(h.interaction_radius > 0.0);
+            EdgeConst::width_of(EdgeConst::read_by(h.edge_physics, h.interaction_radius));
         let edge_in = match h.edge_input {
             EdgeInput::Concat => em.saturating_mul(2),
             EdgeInput::Product => em,
@@ -475,5 +470,85 @@ impl Sizer<'_> {
         sizes.extend(std::iter::repeat_n(h.node_hidden, h.node_layers));
         sizes.push(io);
         Some((Block::Flat, sizes))
+    }
+}
+
+/// The constant inputs an edge reads after w_ij = (q_i − q_j)/w_scale,
+/// declared once: which a model reads ([`EdgeConst::read_by`]), how many
+/// numbers each is and what they are for an edge ([`EdgeConst::values`]).
+/// The MLP's width, the executor's edge inputs and the sizes of a model file
+/// follow from here; adding an edge input is a variant here (candle, the
+/// reference, builds its own).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EdgeConst {
+    /// Rest length and stiffness, scaled (`--edge-physics`); a contact's are
+    /// the interaction radius and 0.
+    Physics,
+    /// 1 for a contact edge, 0 for a bond (models trained with a radius).
+    ContactFlag,
+}
+
+impl EdgeConst {
+    /// Every kind.
+    pub const ALL: [EdgeConst; 2] = [EdgeConst::Physics, EdgeConst::ContactFlag];
+    /// The widest kind's width (what a caller's scratch must hold).
+    pub const MAX_WIDTH: usize = 8;
+
+    /// The inputs a model with these settings reads, in order.
+    pub fn read_by(edge_physics: bool, radius: f64) -> impl Iterator<Item = EdgeConst> {
+        [
+            edge_physics.then_some(EdgeConst::Physics),
+            (radius > 0.0).then_some(EdgeConst::ContactFlag),
+        ]
+        .into_iter()
+        .flatten()
+    }
+
+    /// Numbers of this input per edge.
+    pub fn width(self) -> usize {
+        match self {
+            EdgeConst::Physics => EDGE_PHYSICS,
+            EdgeConst::ContactFlag => 1,
+        }
+    }
+
+    /// Numbers of all of `inputs` per edge.
+    pub fn width_of(inputs: impl Iterator<Item = EdgeConst>) -> usize {
+        inputs.map(EdgeConst::width).sum()
+    }
+
+    /// This input's numbers for fixed edge `fixed` of `plan` (`None`: a
+    /// contact), as `arch` scales them, into `out` (`width()` long).
+    pub fn values(self, arch: &Arch, plan: &GraphPlan, fixed: Option<usize>, out: &mut [f64]) {
+        match self {
+            EdgeConst::Physics => {
+                let raw = match fixed {
+                    Some(j) => plan.edge_physics(j),
+                    None => plan.contact_physics(),
+                };
+                out.copy_from_slice(&arch.scaled_physics(raw));
+            }
+            EdgeConst::ContactFlag => out[0] = if fixed.is_some() { 0.0 } else { 1.0 },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Callers hold an input's numbers in a scratch of `MAX_WIDTH`, and the
+    /// edge embedding's width is the inputs' (a new kind must fit both).
+    #[test]
+    fn edge_inputs_fit_and_size_the_embedding() {
+        for c in EdgeConst::ALL {
+            assert!(c.width() <= EdgeConst::MAX_WIDTH, "{c:?}");
+        }
+        let mut h = Hyper::new(super::super::Variant::Mcgnode, 3, 2, 5);
+        h.edge_physics = true;
+        h.interaction_radius = 1.5;
+        let a = Arch::new(&h);
+        assert_eq!(a.edge_features(), 3 + EDGE_PHYSICS + 1);
+        assert_eq!(a.sizes(Block::EdgeEmbed).unwrap()[0], a.edge_features());
     }
 }
