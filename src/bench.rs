@@ -223,9 +223,37 @@ fn epoch_figure(
 /// baselines and the candle engine on the cube.
 pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
     let want = |name: &str| only.is_none_or(|o| name.to_lowercase().contains(&o.to_lowercase()));
-    use crate::baselines::Kind;
-    let r = if quick { 5 } else { 21 };
-    let ep = if quick { 2 } else { 7 };
+    let mut out = family_epoch_figures(quick, &want)?;
+    out.extend(baseline_epoch_figures(quick, &want)?);
+    out.extend(rollout_figures(quick, &want)?);
+    out.extend(plan_figure(quick, &want)?);
+    out.extend(contact_figures(quick, &want)?);
+    Ok(out)
+}
+
+/// Repeats of the timed runs: fewer with `quick`.
+fn repeats(quick: bool) -> usize {
+    if quick {
+        5
+    } else {
+        21
+    }
+}
+
+/// Timed epochs per training figure: fewer with `quick`.
+fn epochs(quick: bool) -> usize {
+    if quick {
+        2
+    } else {
+        7
+    }
+}
+
+/// MCGNODE epochs on the paper's data sets (100 trajectories of 100 states,
+/// 75 % trained on) and on the 5×5×5 peridynamic cube (10 trajectories),
+/// with each engine.
+fn family_epoch_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figure>> {
+    let ep = epochs(quick);
     let cores = crate::engine::all_cores();
     let mut out = vec![];
     // The paper's data sets: 100 trajectories of 100 states (75 % trained on).
@@ -262,7 +290,14 @@ pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
             out.push(epoch_figure(name, t, &cube, ep.min(3), None)?);
         }
     }
-    // Baselines on the 5-spring set (a tenth of it with --quick).
+    Ok(out)
+}
+
+/// Baselines' epochs on the 5-spring set (a tenth of it with `quick`).
+fn baseline_epoch_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figure>> {
+    use crate::baselines::Kind;
+    let ep = epochs(quick);
+    let mut out = vec![];
     let data = training_set(SystemKind::Spring, 5, if quick { 10 } else { 100 });
     let states = data.1.len();
     for (kind, jax) in [(Kind::Lgn, "960"), (Kind::Hgn, "320-410"), (Kind::Gns, "-")] {
@@ -279,6 +314,14 @@ pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
             jax,
         )?);
     }
+    Ok(out)
+}
+
+/// MCGNODE rollouts: the paper's spring and pendulum horizons, and steps per
+/// second on rings of 5, 50 and 500 springs.
+fn rollout_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figure>> {
+    let r = repeats(quick);
+    let mut out = vec![];
     let name = "5-spring MCGNODE rollout, 20 s (20,000 steps)";
     if want(name) {
         out.push(Figure {
@@ -314,16 +357,30 @@ pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
             repeats: r.min(5),
         });
     }
+    Ok(out)
+}
+
+/// One round of planning on a held chain.
+fn plan_figure(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Option<Figure>> {
+    let r = repeats(quick);
     let name = "plan: 256 candidates x 50 steps of a 20-particle held chain (MCGNODE, one round)";
-    if want(name) {
-        out.push(Figure {
-            name: name.into(),
-            value: plan_seconds(256, r.min(5))?,
-            unit: "s".into(),
-            jax: None,
-            repeats: r.min(5),
-        });
+    if !want(name) {
+        return Ok(None);
     }
+    Ok(Some(Figure {
+        name: name.into(),
+        value: plan_seconds(256, r.min(5))?,
+        unit: "s".into(),
+        jax: None,
+        repeats: r.min(5),
+    }))
+}
+
+/// Steps per second of a rollout with contact edges, and the share of a
+/// step the neighbour search takes.
+fn contact_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figure>> {
+    let r = repeats(quick);
+    let mut out = vec![];
     let (g, s0) = contact_packing(32);
     let name = format!(
         "{}-particle contact MCGNODE rollout speed (6 neighbours each)",

@@ -6,8 +6,8 @@ use crate::data::field::{bag_field, bag_system, stamp_interval, unknown_field_er
 use crate::dynamics::Dynamics;
 use crate::error::{bail, Result};
 use crate::metrics::{error_curves, summarize, ErrorCurves, StillReference, Summary};
-use crate::physics::Field;
-use crate::system::{fingerprint, State};
+use crate::physics::{Field, SystemConfig};
+use crate::system::{fingerprint, State, Trajectory};
 use serde::Serialize;
 use std::time::Instant;
 
@@ -73,17 +73,7 @@ pub fn evaluate(
     opts: &EvalOptions,
 ) -> Result<Evaluation> {
     let sys = bag_system(bag)?;
-    let (dt, dt_source) = match (opts.dt, &sys) {
-        (Some(dt), _) => (dt, "--dt"),
-        (None, Some(s)) => (s.dt, "the bag's system_config"),
-        (None, None) => match stamp_interval(bag) {
-            Some(d) => (d, "the header stamps"),
-            None => bail!(
-                "the bag does not say its integration step and its stamps are not evenly \
-                 spaced; pass --dt"
-            ),
-        },
-    };
+    let (dt, dt_source) = step(bag, opts, sys.as_ref())?;
     if !(dt.is_finite() && dt > 0.0) {
         bail!("time step must be positive, got {dt}");
     }
@@ -99,45 +89,9 @@ pub fn evaluate(
         bail!("the bag has no trajectories");
     }
     if !opts.allow_overlap {
-        let train: std::collections::HashSet<&String> = train_starts.iter().collect();
-        let overlap = trajs
-            .iter()
-            .filter(|t| train.contains(&fingerprint(&t.samples[0].state)))
-            .count();
-        if overlap > 0 {
-            bail!(
-                "{overlap} of {} test trajectories start where training trajectories did; \
-                 evaluate on a bag simulated with another seed (or pass --allow-overlap)",
-                trajs.len()
-            );
-        }
+        refuse_overlap(&trajs, train_starts)?;
     }
-    // Trajectories on the same graph with the same sampling are rolled out
-    // together (the candle baselines batch them; see Dynamics::rollout_many).
-    let mut groups: Vec<Group> = vec![];
-    for (i, tr) in trajs.iter().enumerate() {
-        let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
-        let interval = if times.len() > 1 {
-            times[1] - times[0]
-        } else {
-            dt
-        };
-        let every = ((interval / dt).round() as usize).max(1);
-        if ((every as f64 * dt - interval) / interval).abs() > 1e-6 {
-            bail!(
-                "trajectory {}: saved interval {interval} s is not a multiple of dt {dt}",
-                tr.id
-            );
-        }
-        let steps = every * (times.len() - 1);
-        match groups
-            .iter_mut()
-            .find(|(e, st, m)| *e == every && *st == steps && trajs[m[0]].graph == tr.graph)
-        {
-            Some(g) => g.2.push(i),
-            None => groups.push((every, steps, vec![i])),
-        }
-    }
+    let groups = group(&trajs, dt)?;
     let start = Instant::now();
     let (curves, diverged, steps_total) = score(model, &trajs, &groups, dt, &field)?;
     let rollout_seconds = start.elapsed().as_secs_f64();
@@ -215,6 +169,72 @@ fn driven_rollout(
 
 /// One rollout group: (save every, steps, members of `trajs`).
 type Group = (usize, usize, Vec<usize>);
+
+/// The integration step and where it comes from: `--dt`, the bag's
+/// system_config, or its evenly spaced header stamps.
+fn step(bag: &Bag, opts: &EvalOptions, sys: Option<&SystemConfig>) -> Result<(f64, &'static str)> {
+    Ok(match (opts.dt, sys) {
+        (Some(dt), _) => (dt, "--dt"),
+        (None, Some(s)) => (s.dt, "the bag's system_config"),
+        (None, None) => match stamp_interval(bag) {
+            Some(d) => (d, "the header stamps"),
+            None => bail!(
+                "the bag does not say its integration step and its stamps are not evenly \
+                 spaced; pass --dt"
+            ),
+        },
+    })
+}
+
+/// Refuses test trajectories that start where training trajectories did
+/// (`train_starts`: their fingerprints).
+fn refuse_overlap(trajs: &[&Trajectory], train_starts: &[String]) -> Result<()> {
+    let train: std::collections::HashSet<&String> = train_starts.iter().collect();
+    let overlap = trajs
+        .iter()
+        .filter(|t| train.contains(&fingerprint(&t.samples[0].state)))
+        .count();
+    if overlap > 0 {
+        bail!(
+            "{overlap} of {} test trajectories start where training trajectories did; \
+             evaluate on a bag simulated with another seed (or pass --allow-overlap)",
+            trajs.len()
+        );
+    }
+    Ok(())
+}
+
+/// Groups the trajectories on the same graph with the same sampling, to be
+/// rolled out together (the candle baselines batch them; see
+/// Dynamics::rollout_many). Refuses a saved interval that is not a multiple
+/// of `dt`.
+fn group(trajs: &[&Trajectory], dt: f64) -> Result<Vec<Group>> {
+    let mut groups: Vec<Group> = vec![];
+    for (i, tr) in trajs.iter().enumerate() {
+        let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
+        let interval = if times.len() > 1 {
+            times[1] - times[0]
+        } else {
+            dt
+        };
+        let every = ((interval / dt).round() as usize).max(1);
+        if ((every as f64 * dt - interval) / interval).abs() > 1e-6 {
+            bail!(
+                "trajectory {}: saved interval {interval} s is not a multiple of dt {dt}",
+                tr.id
+            );
+        }
+        let steps = every * (times.len() - 1);
+        match groups
+            .iter_mut()
+            .find(|(e, st, m)| *e == every && *st == steps && trajs[m[0]].graph == tr.graph)
+        {
+            Some(g) => g.2.push(i),
+            None => groups.push((every, steps, vec![i])),
+        }
+    }
+    Ok(groups)
+}
 
 /// Rolls `model` out over every group and scores each trajectory: the
 /// curves in trajectory order, how many diverged, and the steps of the last

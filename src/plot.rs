@@ -330,31 +330,8 @@ fn draw_sweep(
     log_x: bool,
     lines: &[SweepLine],
 ) -> crate::error::Result<()> {
-    let pts = || lines.iter().flat_map(|l| l.1.iter());
-    let usable = |y: f64| y.is_finite() && y > LOG_FLOOR * 10.0 && y < DIVERGED / 10.0;
-    let (mut ylo, mut yhi) = (f64::INFINITY, 0.0_f64);
-    for p in pts() {
-        for y in [p.1, p.2, p.3] {
-            if usable(y) {
-                ylo = ylo.min(y);
-                yhi = yhi.max(y);
-            }
-        }
-    }
-    if !ylo.is_finite() {
-        (ylo, yhi) = (1e-16, 1.0);
-    }
-    let ylo = 10f64.powf(ylo.max(yhi * 1e-20).log10().floor());
-    let mut yhi = 10f64.powf(yhi.log10().ceil());
-    if yhi <= ylo {
-        yhi = ylo * 10.0;
-    }
-    let xs = || pts().map(|p| if log_x { p.0.max(1e-300).log10() } else { p.0 });
-    let x0 = xs().fold(f64::INFINITY, f64::min);
-    let mut x1 = xs().fold(f64::NEG_INFINITY, f64::max);
-    if x1 <= x0 {
-        x1 = x0 + 1.0;
-    }
+    let (ylo, yhi) = sweep_y_range(lines);
+    let (x0, x1) = sweep_x_range(lines, log_x);
     let pad = 0.05 * (x1 - x0);
     let tx = move |x: f64| if log_x { x.max(1e-300).log10() } else { x };
     let clamp = |y: f64| y.clamp(ylo, yhi);
@@ -364,15 +341,7 @@ fn draw_sweep(
         .x_label_area_size(40)
         .y_label_area_size(62)
         .build_cartesian_2d((x0 - pad)..(x1 + pad), (ylo..yhi).log_scale())?;
-    let x_ticks = |v: &f64| {
-        if !log_x {
-            tick(*v)
-        } else if (v - v.round()).abs() < 1e-6 {
-            format!("{}", 10f64.powf(v.round()))
-        } else {
-            String::new()
-        }
-    };
+    let x_ticks = |v: &f64| sweep_x_tick(*v, log_x);
     let mut mesh = chart.configure_mesh();
     mesh.y_desc(y_label)
         .x_desc(x_label)
@@ -424,6 +393,59 @@ fn draw_sweep(
     Ok(())
 }
 
+/// The log y axis of a sweep panel: whole decades around every usable
+/// value (finite, above the floor, below divergence) of its points and
+/// bands; 1e-16..1 when there is none.
+fn sweep_y_range(lines: &[SweepLine]) -> (f64, f64) {
+    let usable = |y: f64| y.is_finite() && y > LOG_FLOOR * 10.0 && y < DIVERGED / 10.0;
+    let (mut ylo, mut yhi) = (f64::INFINITY, 0.0_f64);
+    for p in lines.iter().flat_map(|l| l.1.iter()) {
+        for y in [p.1, p.2, p.3] {
+            if usable(y) {
+                ylo = ylo.min(y);
+                yhi = yhi.max(y);
+            }
+        }
+    }
+    if !ylo.is_finite() {
+        (ylo, yhi) = (1e-16, 1.0);
+    }
+    let ylo = 10f64.powf(ylo.max(yhi * 1e-20).log10().floor());
+    let mut yhi = 10f64.powf(yhi.log10().ceil());
+    if yhi <= ylo {
+        yhi = ylo * 10.0;
+    }
+    (ylo, yhi)
+}
+
+/// The x extent of a sweep panel's points (log10 x when `log_x`), at least
+/// 1 wide.
+fn sweep_x_range(lines: &[SweepLine], log_x: bool) -> (f64, f64) {
+    let xs = || {
+        lines
+            .iter()
+            .flat_map(|l| l.1.iter())
+            .map(|p| if log_x { p.0.max(1e-300).log10() } else { p.0 })
+    };
+    let x0 = xs().fold(f64::INFINITY, f64::min);
+    let mut x1 = xs().fold(f64::NEG_INFINITY, f64::max);
+    if x1 <= x0 {
+        x1 = x0 + 1.0;
+    }
+    (x0, x1)
+}
+
+/// The label of the x tick at `v`: on a log axis, only whole decades.
+fn sweep_x_tick(v: f64, log_x: bool) -> String {
+    if !log_x {
+        tick(v)
+    } else if (v - v.round()).abs() < 1e-6 {
+        format!("{}", 10f64.powf(v.round()))
+    } else {
+        String::new()
+    }
+}
+
 /// A 3D scene of coloured primitives (what a `visualization_msgs/MarkerArray`
 /// draws), for [`draw_scene`]. Sizes are in scene units.
 #[derive(Clone, Debug, Default)]
@@ -445,51 +467,9 @@ pub struct Scene {
 /// axes; segments first, then squares, discs and arrows on top.
 pub fn draw_scene(path: &Path, scene: &Scene) -> crate::error::Result<()> {
     ensure_font()?;
-    let flat = scene
-        .segments
-        .iter()
-        .flat_map(|s| [s.0, s.1])
-        .chain(scene.discs.iter().map(|d| d.0))
-        .all(|p| p[2] == 0.0);
-    let (cz, sz, cx, sx) = if flat {
-        (1.0, 0.0, 1.0, 0.0)
-    } else {
-        let (a, b) = (35f64.to_radians(), 60f64.to_radians());
-        (a.cos(), a.sin(), b.cos(), b.sin())
-    };
-    // Rotate about z, then about x; keep (x, y) of the result.
-    let project = |p: [f64; 3]| {
-        let (x, y) = (cz * p[0] - sz * p[1], sz * p[0] + cz * p[1]);
-        (x, cx * y - sx * p[2])
-    };
-    let pts: Vec<(f64, f64)> = scene
-        .segments
-        .iter()
-        .flat_map(|s| [s.0, s.1])
-        .chain(scene.discs.iter().map(|d| d.0))
-        .chain(scene.squares.iter().map(|d| d.0))
-        .chain(scene.arrows.iter().flat_map(|a| [a.0, a.1]))
-        .map(project)
-        .collect();
-    if pts.is_empty() {
-        bail!("nothing to draw: the markers hold no points");
-    }
-    let (mut lo, mut hi) = ((f64::MAX, f64::MAX), (f64::MIN, f64::MIN));
-    for &(x, y) in &pts {
-        lo = (lo.0.min(x), lo.1.min(y));
-        hi = (hi.0.max(x), hi.1.max(y));
-    }
-    let (w, h, margin, top) = (900u32, 800u32, 40.0, 50.0);
-    let span = (hi.0 - lo.0).max(hi.1 - lo.1).max(1e-12);
-    let k = ((f64::from(w) - 2.0 * margin).min(f64::from(h) - margin - top)) / span;
-    let to_px = |p: [f64; 3]| {
-        let (x, y) = project(p);
-        let cx = f64::from(w) / 2.0 + k * (x - f64::midpoint(lo.0, hi.0));
-        let cy = top + (f64::from(h) - margin - top) / 2.0 - k * (y - f64::midpoint(lo.1, hi.1));
-        (cx.round() as i32, cy.round() as i32)
-    };
-    let px = |len: f64| ((k * len).round() as u32).max(1);
-    let root = BitMapBackend::new(path, (w, h)).into_drawing_area();
+    let frame = Frame::fit(scene)?;
+    let (to_px, px) = (|p| frame.to_px(p), |len| frame.px(len));
+    let root = BitMapBackend::new(path, (frame.w, frame.h)).into_drawing_area();
     let err = |e: &dyn std::fmt::Display| err!("drawing {}: {e}", path.display());
     root.fill(&WHITE).map_err(|e| err(&e))?;
     root.draw(&Text::new(
@@ -523,28 +503,135 @@ pub fn draw_scene(path: &Path, scene: &Scene) -> crate::error::Result<()> {
         .map_err(|e| err(&e))?;
     }
     for (a, b, c, width) in &scene.arrows {
-        let ((x0, y0), (x1, y1)) = (to_px(*a), to_px(*b));
-        let style = c.stroke_width(px(*width).max(2));
-        root.draw(&PathElement::new(vec![(x0, y0), (x1, y1)], style))
-            .map_err(|e| err(&e))?;
-        let (dx, dy) = (f64::from(x1 - x0), f64::from(y1 - y0));
-        let len = dx.hypot(dy);
-        if len >= 4.0 {
-            let (ux, uy) = (dx / len, dy / len);
-            let head = (0.3 * len).min(12.0);
-            let wing = |s: f64| {
-                (
-                    (f64::from(x1) - head * ux + s * 0.5 * head * uy).round() as i32,
-                    (f64::from(y1) - head * uy - s * 0.5 * head * ux).round() as i32,
-                )
-            };
-            root.draw(&Polygon::new(
-                vec![(x1, y1), wing(1.0), wing(-1.0)],
-                c.filled(),
-            ))
-            .map_err(|e| err(&e))?;
-        }
+        draw_arrow(&root, to_px(*a), to_px(*b), *c, px(*width).max(2)).map_err(|e| err(&e))?;
     }
     root.present().map_err(|e| err(&e))?;
+    Ok(())
+}
+
+/// Where a [`Scene`] lands on the picture: the view (rotation about z, then
+/// about x) and the scale and offset that fit it with equal axes.
+struct Frame {
+    /// cos and sin of the rotation about z, then about x.
+    cz: f64,
+    sz: f64,
+    cx: f64,
+    sx: f64,
+    /// Projected bounds of the scene's points.
+    lo: (f64, f64),
+    hi: (f64, f64),
+    /// Pixels per scene unit.
+    k: f64,
+    /// Picture size, side and top margins in pixels.
+    w: u32,
+    h: u32,
+    margin: f64,
+    top: f64,
+}
+
+impl Frame {
+    /// The frame of `scene`: seen along z when it is flat, else rotated 35°
+    /// about z and tilted 30°; refuses a scene without points.
+    fn fit(scene: &Scene) -> crate::error::Result<Frame> {
+        let flat = scene
+            .segments
+            .iter()
+            .flat_map(|s| [s.0, s.1])
+            .chain(scene.discs.iter().map(|d| d.0))
+            .all(|p| p[2] == 0.0);
+        let (cz, sz, cx, sx) = if flat {
+            (1.0, 0.0, 1.0, 0.0)
+        } else {
+            let (a, b) = (35f64.to_radians(), 60f64.to_radians());
+            (a.cos(), a.sin(), b.cos(), b.sin())
+        };
+        let (w, h, margin, top) = (900u32, 800u32, 40.0, 50.0);
+        let mut frame = Frame {
+            cz,
+            sz,
+            cx,
+            sx,
+            lo: (f64::MAX, f64::MAX),
+            hi: (f64::MIN, f64::MIN),
+            k: 0.0,
+            w,
+            h,
+            margin,
+            top,
+        };
+        let pts: Vec<(f64, f64)> = scene
+            .segments
+            .iter()
+            .flat_map(|s| [s.0, s.1])
+            .chain(scene.discs.iter().map(|d| d.0))
+            .chain(scene.squares.iter().map(|d| d.0))
+            .chain(scene.arrows.iter().flat_map(|a| [a.0, a.1]))
+            .map(|p| frame.project(p))
+            .collect();
+        if pts.is_empty() {
+            bail!("nothing to draw: the markers hold no points");
+        }
+        for &(x, y) in &pts {
+            frame.lo = (frame.lo.0.min(x), frame.lo.1.min(y));
+            frame.hi = (frame.hi.0.max(x), frame.hi.1.max(y));
+        }
+        let (lo, hi) = (frame.lo, frame.hi);
+        let span = (hi.0 - lo.0).max(hi.1 - lo.1).max(1e-12);
+        frame.k = ((f64::from(w) - 2.0 * margin).min(f64::from(h) - margin - top)) / span;
+        Ok(frame)
+    }
+
+    /// Rotates `p` about z, then about x; keeps (x, y) of the result.
+    fn project(&self, p: [f64; 3]) -> (f64, f64) {
+        let (x, y) = (
+            self.cz * p[0] - self.sz * p[1],
+            self.sz * p[0] + self.cz * p[1],
+        );
+        (x, self.cx * y - self.sx * p[2])
+    }
+
+    /// The pixel of the scene point `p`.
+    fn to_px(&self, p: [f64; 3]) -> (i32, i32) {
+        let (x, y) = self.project(p);
+        let (lo, hi, k) = (self.lo, self.hi, self.k);
+        let (w, h, margin, top) = (self.w, self.h, self.margin, self.top);
+        let cx = f64::from(w) / 2.0 + k * (x - f64::midpoint(lo.0, hi.0));
+        let cy = top + (f64::from(h) - margin - top) / 2.0 - k * (y - f64::midpoint(lo.1, hi.1));
+        (cx.round() as i32, cy.round() as i32)
+    }
+
+    /// A length in scene units as whole pixels, at least 1.
+    fn px(&self, len: f64) -> u32 {
+        ((self.k * len).round() as u32).max(1)
+    }
+}
+
+/// Draws an arrow from pixel `(x0, y0)` to `(x1, y1)`: a shaft `width`
+/// pixels wide, and a filled head when it is at least 4 pixels long.
+fn draw_arrow(
+    root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    (x0, y0): (i32, i32),
+    (x1, y1): (i32, i32),
+    c: RGBColor,
+    width: u32,
+) -> Result<(), DrawError> {
+    let style = c.stroke_width(width);
+    root.draw(&PathElement::new(vec![(x0, y0), (x1, y1)], style))?;
+    let (dx, dy) = (f64::from(x1 - x0), f64::from(y1 - y0));
+    let len = dx.hypot(dy);
+    if len >= 4.0 {
+        let (ux, uy) = (dx / len, dy / len);
+        let head = (0.3 * len).min(12.0);
+        let wing = |s: f64| {
+            (
+                (f64::from(x1) - head * ux + s * 0.5 * head * uy).round() as i32,
+                (f64::from(y1) - head * uy - s * 0.5 * head * ux).round() as i32,
+            )
+        };
+        root.draw(&Polygon::new(
+            vec![(x1, y1), wing(1.0), wing(-1.0)],
+            c.filled(),
+        ))?;
+    }
     Ok(())
 }

@@ -13,7 +13,7 @@ use std::path::Path;
 pub const RK4_MAX_BAR_RESIDUAL: f64 = 1e-6;
 
 /// How ground-truth trajectories are integrated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DataIntegrator {
     /// Velocity Verlet (+ SHAKE/RATTLE for bars): symplectic, bars exact.
     Verlet,
@@ -31,6 +31,17 @@ impl DataIntegrator {
         }
     }
 }
+
+impl crate::names::Named for DataIntegrator {
+    const ALL: &'static [Self] = &[DataIntegrator::Verlet, DataIntegrator::Rk4];
+    const WHAT: &'static str = "integrator";
+
+    fn name(self) -> &'static str {
+        DataIntegrator::name(self)
+    }
+}
+
+crate::impl_named!(DataIntegrator);
 
 /// Simulates with velocity Verlet and writes a bag
 /// ([`simulate_with`] with [`DataIntegrator::Verlet`]).

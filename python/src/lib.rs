@@ -22,7 +22,7 @@
 #![allow(clippy::too_many_arguments)]
 
 use std::ffi::CString;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use mcgnode::compat::TrainedFor;
@@ -131,83 +131,10 @@ impl Parts<'_, '_> {
                 "masses must have shape ({n},), one per particle, got {mshape:?}"
             )));
         }
-        let (eshape, e) = array(self.edges, "edges")?;
-        let m = match eshape[..] {
-            [0] => 0,
-            [m, 5] => m,
-            _ => {
-                return Err(PyValueError::new_err(format!(
-                    "edges must have shape (edges, 5): rows (a, b, kind, rest_length, \
-                     stiffness), got {eshape:?}"
-                )))
-            }
-        };
-        let edges = (0..m)
-            .map(|k| {
-                let r = &e[5 * k..5 * k + 5];
-                let a = index(r[0], || format!("edges[{k}, 0] (a)"))?;
-                let b = index(r[1], || format!("edges[{k}, 1] (b)"))?;
-                let kind = match r[2] {
-                    0.0 => EdgeKind::Spring,
-                    1.0 => EdgeKind::Bar,
-                    x => {
-                        return Err(PyValueError::new_err(format!(
-                            "edges[{k}, 2] (kind) must be 0 (spring) or 1 (bar), got {x}"
-                        )))
-                    }
-                };
-                Ok(Edge {
-                    a,
-                    b: if b < n {
-                        Endpoint::Particle(b)
-                    } else {
-                        Endpoint::Anchor(b - n)
-                    },
-                    kind,
-                    rest_length: r[3],
-                    stiffness: r[4],
-                })
-            })
-            .collect::<PyResult<Vec<_>>>()?;
-        let anchors = match self.anchors.filter(|a| !a.is_none()) {
-            None => vec![],
-            Some(a) => {
-                let (ashape, v) = array(a, "anchors")?;
-                match ashape[..] {
-                    [0] => vec![],
-                    [_, d] if d == dim => v.chunks(dim).map(<[f64]>::to_vec).collect(),
-                    _ => {
-                        return Err(PyValueError::new_err(format!(
-                            "anchors must have shape (anchors, {dim}), got {ashape:?}"
-                        )))
-                    }
-                }
-            }
-        };
-        let types = match self.types.filter(|t| !t.is_none()) {
-            None => vec![0; n],
-            Some(t) => {
-                let (tshape, v) = array(t, "types")?;
-                if tshape != [n] {
-                    return Err(PyValueError::new_err(format!(
-                        "types must have shape ({n},), one per particle, got {tshape:?}"
-                    )));
-                }
-                v.iter()
-                    .enumerate()
-                    .map(|(i, x)| index(*x, || format!("types[{i}]")).map(|t| t as u32))
-                    .collect::<PyResult<Vec<_>>>()?
-            }
-        };
-        let kinematic = match self.kinematic.filter(|k| !k.is_none()) {
-            None => vec![],
-            Some(k) => {
-                let flags: Vec<bool> = k.call_method0("tolist")?.extract().map_err(|_| {
-                    PyTypeError::new_err("kinematic must be a sequence of bools, one per particle")
-                })?;
-                flags
-            }
-        };
+        let edges = edges(self.edges, n)?;
+        let anchors = anchors(self.anchors, dim)?;
+        let types = types(self.types, n)?;
+        let kinematic = kinematic(self.kinematic)?;
         let graph = Graph {
             dim,
             types,
@@ -225,6 +152,102 @@ impl Parts<'_, '_> {
         state.validate(&graph).map_err(lib_err)?;
         Ok((graph, state))
     }
+}
+
+/// The edges of `n` particles from an array (edges, 5) of rows (a, b,
+/// kind, rest_length, stiffness); b ≥ n names anchor b − n.
+fn edges(obj: &Bound<'_, PyAny>, n: usize) -> PyResult<Vec<Edge>> {
+    let (eshape, e) = array(obj, "edges")?;
+    let m = match eshape[..] {
+        [0] => 0,
+        [m, 5] => m,
+        _ => {
+            return Err(PyValueError::new_err(format!(
+                "edges must have shape (edges, 5): rows (a, b, kind, rest_length, \
+                 stiffness), got {eshape:?}"
+            )))
+        }
+    };
+    (0..m)
+        .map(|k| {
+            let r = &e[5 * k..5 * k + 5];
+            let a = index(r[0], || format!("edges[{k}, 0] (a)"))?;
+            let b = index(r[1], || format!("edges[{k}, 1] (b)"))?;
+            let kind = match r[2] {
+                0.0 => EdgeKind::Spring,
+                1.0 => EdgeKind::Bar,
+                x => {
+                    return Err(PyValueError::new_err(format!(
+                        "edges[{k}, 2] (kind) must be 0 (spring) or 1 (bar), got {x}"
+                    )))
+                }
+            };
+            Ok(Edge {
+                a,
+                b: if b < n {
+                    Endpoint::Particle(b)
+                } else {
+                    Endpoint::Anchor(b - n)
+                },
+                kind,
+                rest_length: r[3],
+                stiffness: r[4],
+            })
+        })
+        .collect()
+}
+
+/// The anchors from an array (anchors, dim) (none when absent or None).
+fn anchors(obj: Option<&Bound<'_, PyAny>>, dim: usize) -> PyResult<Vec<Vec<f64>>> {
+    Ok(match obj.filter(|a| !a.is_none()) {
+        None => vec![],
+        Some(a) => {
+            let (ashape, v) = array(a, "anchors")?;
+            match ashape[..] {
+                [0] => vec![],
+                [_, d] if d == dim => v.chunks(dim).map(<[f64]>::to_vec).collect(),
+                _ => {
+                    return Err(PyValueError::new_err(format!(
+                        "anchors must have shape (anchors, {dim}), got {ashape:?}"
+                    )))
+                }
+            }
+        }
+    })
+}
+
+/// The type ids of `n` particles from an array (particles,) (all 0 when
+/// absent or None).
+fn types(obj: Option<&Bound<'_, PyAny>>, n: usize) -> PyResult<Vec<u32>> {
+    Ok(match obj.filter(|t| !t.is_none()) {
+        None => vec![0; n],
+        Some(t) => {
+            let (tshape, v) = array(t, "types")?;
+            if tshape != [n] {
+                return Err(PyValueError::new_err(format!(
+                    "types must have shape ({n},), one per particle, got {tshape:?}"
+                )));
+            }
+            v.iter()
+                .enumerate()
+                .map(|(i, x)| index(*x, || format!("types[{i}]")).map(|t| t as u32))
+                .collect::<PyResult<Vec<_>>>()?
+        }
+    })
+}
+
+/// The kinematic flags from a sequence of bools (none kinematic when absent
+/// or None).
+fn kinematic(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Vec<bool>> {
+    Ok(match obj.filter(|k| !k.is_none()) {
+        None => vec![],
+        Some(k) => {
+            let flags: Vec<bool> = k.call_method0("tolist")?.extract().map_err(|_| {
+                PyTypeError::new_err("kinematic must be a sequence of bools, one per particle")
+            })?;
+            flags
+        }
+    })
 }
 
 /// The kinematic particles' given positions over a rollout of `steps` steps
@@ -297,6 +320,26 @@ fn paths(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<PathBuf>> {
         .map_err(|_| PyTypeError::new_err(format!("{what} must be a path or a list of paths")))
 }
 
+/// The edges of `g` as rows (a, b, kind, rest_length, stiffness), b ≥
+/// particles naming anchor b − particles, kind 0 spring, 1 bar, 2 contact.
+fn edge_rows(g: &Graph) -> Vec<f64> {
+    let np = g.n();
+    let mut edges = Vec::with_capacity(5 * g.edges.len());
+    for e in &g.edges {
+        let b = match e.b {
+            Endpoint::Particle(b) => b,
+            Endpoint::Anchor(k) => np + k,
+        };
+        let kind = match e.kind {
+            EdgeKind::Spring => 0.0,
+            EdgeKind::Bar => 1.0,
+            EdgeKind::Contact => 2.0,
+        };
+        edges.extend_from_slice(&[e.a as f64, b as f64, kind, e.rest_length, e.stiffness]);
+    }
+    edges
+}
+
 /// The ParticleState trajectories of a bag, read as `mcgnode` reads them:
 /// an MCAP file, a rosbag2 directory (MCAP or sqlite3 storage, any
 /// compression), a `.db3` file, or a list of such paths (trajectories of
@@ -363,20 +406,7 @@ fn read_bag<'py>(
             }
         }
         let stamps: Vec<f64> = tr.samples.iter().map(|x| x.t).collect();
-        let np = g.n();
-        let mut edges = Vec::with_capacity(5 * g.edges.len());
-        for e in &g.edges {
-            let b = match e.b {
-                Endpoint::Particle(b) => b,
-                Endpoint::Anchor(k) => np + k,
-            };
-            let kind = match e.kind {
-                EdgeKind::Spring => 0.0,
-                EdgeKind::Bar => 1.0,
-                EdgeKind::Contact => 2.0,
-            };
-            edges.extend_from_slice(&[e.a as f64, b as f64, kind, e.rest_length, e.stiffness]);
-        }
+        let edges = edge_rows(g);
         let anchors: Vec<f64> = g.anchors.iter().flatten().copied().collect();
         let stamp_dt = tr.samples.get(1).map(|x| x.t - tr.samples[0].t);
         let (dt, every) = match (&cfg, stamp_dt) {
@@ -843,33 +873,18 @@ fn arg_value(id: &str, v: &Bound<'_, PyAny>) -> PyResult<String> {
     }
 }
 
-/// Trains a model on `bags` (a path or a list of paths, each a bag as
-/// `read_bag` takes it) and writes its model file to `out`: `mcgnode train
-/// --data BAGS --out OUT --model VARIANT [options]`, with the CLI's parser,
-/// defaults and checks. `variant` is the CLI's `--model` (node, gnode,
-/// cgnode, cdgnode, mcgnode, lgn, hgn, gns); every other `train` option is a
-/// keyword of the same name with underscores (`epochs=300`, `seed=1`,
-/// `recipe="paper"`, `edge_physics=True`, `lr_drop=[(300, 1e-3)]`,
-/// `block_hidden={"edge_out": [16, 16]}`, `quiet=True`, ...). Progress goes
-/// to stderr as the CLI prints it (unless quiet); a model that explains
-/// little of its targets warns (UserWarning).
-///
-/// Returns the model file's training report as a dict (seed, epochs_run,
-/// best_epoch, train_loss, validation_loss, explained, seconds, ...), with
-/// "out", "summary" (the line the CLI prints at the end) and
-/// "explained_line". Raises mcgnode.Error with the CLI's message.
-#[pyfunction]
-#[pyo3(signature = (bags, out, *, variant, **options))]
-fn train<'py>(
-    py: Python<'py>,
-    bags: &Bound<'py, PyAny>,
-    out: PathBuf,
+/// The command line of `mcgnode train` that `train()`'s arguments stand
+/// for: `--model VARIANT`, `--data` per bag, `--out OUT`, then each keyword
+/// option as its flag (a bool flag when true; a dict, or a list for a
+/// repeated option, one flag per item). An unknown keyword is refused with
+/// the list of known ones.
+fn train_argv(
+    cmd: &clap::Command,
+    bags: &Bound<'_, PyAny>,
+    out: &Path,
     variant: String,
-    options: Option<&Bound<'py, PyDict>>,
-) -> PyResult<Bound<'py, PyDict>> {
-    use clap::{Args as _, FromArgMatches as _};
-    use mcgnode::cli::train::Args;
-    let cmd = Args::augment_args(clap::Command::new("mcgnode train")).no_binary_name(true);
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<Vec<String>> {
     let mut argv: Vec<String> = vec!["--model".into(), variant];
     for b in paths(bags, "bags")? {
         argv.push("--data".into());
@@ -904,27 +919,69 @@ fn train<'py>(
             continue;
         }
         let repeated = matches!(arg.get_action(), clap::ArgAction::Append);
-        let items: Vec<Bound<'_, PyAny>> = if let Ok(d) = v.cast::<PyDict>() {
-            d.items().iter().collect()
-        } else if repeated && (v.cast::<PyList>().is_ok() || v.cast::<PyTuple>().is_ok()) {
-            // A list of items; for lr_drop a lone (epoch, lr) pair is one item.
-            let t = v.cast::<PyTuple>();
-            if key == "lr_drop"
-                && t.is_ok_and(|t| {
-                    t.len() == 2 && t.get_item(0).is_ok_and(|x| x.extract::<usize>().is_ok())
-                })
-            {
-                vec![v.clone()]
-            } else {
-                v.try_iter()?.collect::<PyResult<_>>()?
-            }
-        } else {
-            vec![v.clone()]
-        };
+        let items = option_items(&key, &v, repeated)?;
         for item in items {
             argv.push(format!("{flag}={}", arg_value(&key, &item)?));
         }
     }
+    Ok(argv)
+}
+
+/// The items a keyword option's value `v` gives: a dict's (key, value)
+/// pairs; a list's entries when the option repeats (for lr_drop a lone
+/// (epoch, lr) pair is one item); else the value itself.
+fn option_items<'py>(
+    key: &str,
+    v: &Bound<'py, PyAny>,
+    repeated: bool,
+) -> PyResult<Vec<Bound<'py, PyAny>>> {
+    Ok(if let Ok(d) = v.cast::<PyDict>() {
+        d.items().iter().collect()
+    } else if repeated && (v.cast::<PyList>().is_ok() || v.cast::<PyTuple>().is_ok()) {
+        // A list of items; for lr_drop a lone (epoch, lr) pair is one item.
+        let t = v.cast::<PyTuple>();
+        if key == "lr_drop"
+            && t.is_ok_and(|t| {
+                t.len() == 2 && t.get_item(0).is_ok_and(|x| x.extract::<usize>().is_ok())
+            })
+        {
+            vec![v.clone()]
+        } else {
+            v.try_iter()?.collect::<PyResult<_>>()?
+        }
+    } else {
+        vec![v.clone()]
+    })
+}
+
+/// Trains a model on `bags` (a path or a list of paths, each a bag as
+/// `read_bag` takes it) and writes its model file to `out`: `mcgnode train
+/// --data BAGS --out OUT --model VARIANT [options]`, with the CLI's parser,
+/// defaults and checks. `variant` is the CLI's `--model` (node, gnode,
+/// cgnode, cdgnode, mcgnode, lgn, hgn, gns); every other `train` option is a
+/// keyword of the same name with underscores (`epochs=300`, `seed=1`,
+/// `recipe="paper"`, `edge_physics=True`, `lr_drop=[(300, 1e-3)]`,
+/// `block_hidden={"edge_out": [16, 16]}`, `quiet=True`, ...). Progress goes
+/// to stderr as the CLI prints it (unless quiet); a model that explains
+/// little of its targets warns (UserWarning).
+///
+/// Returns the model file's training report as a dict (seed, epochs_run,
+/// best_epoch, train_loss, validation_loss, explained, seconds, ...), with
+/// "out", "summary" (the line the CLI prints at the end) and
+/// "explained_line". Raises mcgnode.Error with the CLI's message.
+#[pyfunction]
+#[pyo3(signature = (bags, out, *, variant, **options))]
+fn train<'py>(
+    py: Python<'py>,
+    bags: &Bound<'py, PyAny>,
+    out: PathBuf,
+    variant: String,
+    options: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use clap::{Args as _, FromArgMatches as _};
+    use mcgnode::cli::train::Args;
+    let cmd = Args::augment_args(clap::Command::new("mcgnode train")).no_binary_name(true);
+    let argv = train_argv(&cmd, bags, &out, variant, options)?;
     let args = cmd
         .try_get_matches_from(&argv)
         .and_then(|m| Args::from_arg_matches(&m))

@@ -154,113 +154,139 @@ type SystemSummary = (usize, Vec<usize>, Vec<usize>, usize, f64);
 fn info(a: InfoArgs) -> Result<()> {
     for path in &a.paths {
         println!("{}", path.display());
-        for part in bag_parts(path)? {
-            let storage = match part.storage {
-                Storage::Mcap => "mcap",
-                Storage::Sqlite3 => "sqlite3",
-            };
-            let mut how = vec![storage.to_string()];
-            if let Some(c) = part.file_compression {
-                how.push(format!("file compression {}", c.name()));
-            }
-            if let Some(c) = part.message_compression {
-                how.push(format!("message compression {}", c.name()));
-            }
-            println!("  file: {} ({})", part.path.display(), how.join(", "));
-        }
-        // topic -> (type, count, first, last log time)
-        let mut topics: BTreeMap<String, (String, usize, u64, u64)> = BTreeMap::new();
-        scan_input(path, |m| {
-            let e = topics
-                .entry(m.topic.to_string())
-                .or_insert_with(|| (m.schema_name.to_string(), 0, u64::MAX, 0));
-            e.1 += 1;
-            e.2 = e.2.min(m.log_time);
-            e.3 = e.3.max(m.log_time);
-            Ok(())
-        })
-        .with_context(|| format!("reading {}", path.display()))?;
-        let (first, last) = topics
-            .values()
-            .fold((u64::MAX, 0), |(a, b), t| (a.min(t.2), b.max(t.3)));
-        let total: usize = topics.values().map(|t| t.1).sum();
-        println!(
-            "  messages: {total}, duration: {:.3} s",
-            if total == 0 {
-                0.0
-            } else {
-                (last - first) as f64 * 1e-9
-            }
-        );
-        println!("  topics:");
-        for (t, (ty, n, _, _)) in &topics {
-            println!("    {t}  {ty}  {n} messages");
-        }
-        let bag = read_bags(
-            std::slice::from_ref(path),
-            &ReadOptions {
-                topic: a.topic.clone(),
-            },
-        )?;
-        if bag.trajectories.is_empty() {
-            println!("  no ParticleState trajectories");
-            continue;
-        }
-        println!("  ParticleState topic: {}", bag.topic);
-        let mut systems: BTreeMap<String, SystemSummary> = BTreeMap::new();
-        for tr in &bag.trajectories {
-            let name = if tr.system.is_empty() {
-                "(unnamed)".to_string()
-            } else {
-                tr.system.clone()
-            };
-            let e = systems.entry(name).or_default();
-            e.0 += 1;
-            if !e.1.contains(&tr.graph.n()) {
-                e.1.push(tr.graph.n());
-            }
-            if !e.2.contains(&tr.graph.dim) {
-                e.2.push(tr.graph.dim);
-            }
-            e.3 += tr.samples.len();
-            e.4 = e.4.max(tr.samples.last().map_or(0.0, |s| s.t));
-        }
-        println!("  systems:");
-        for (name, (n, parts, dims, states, span)) in &systems {
-            let list = |v: &[usize]| {
-                v.iter()
-                    .map(ToString::to_string)
-                    .collect::<Vec<_>>()
-                    .join("/")
-            };
-            println!(
-                "    {name}: {n} trajectories, {} particles, {}D, {states} states, longest {span:.3} s",
-                list(parts),
-                list(dims)
-            );
-        }
-        let field = match &bag.field {
-            None => "unknown (the messages do not state it)".to_string(),
-            Some(f) if f.is_free() => "none (closed when there are no anchors)".to_string(),
-            Some(f) => format!(
-                "gravity {} along -y, drag {}, force {:?}",
-                f.gravity, f.drag, f.force
-            ),
-        };
-        println!("  field: {field}");
-        println!("  contacts: {}", contacts(&bag.trajectories));
-        if !bag.derived_velocities.is_empty() {
-            println!(
-                "  velocities: derived from positions and stamps (position-only) in {} trajectories",
-                bag.derived_velocities.len()
-            );
-        }
-        if !bag.metadata.is_empty() {
-            let keys: Vec<&str> = bag.metadata.keys().map(String::as_str).collect();
-            println!("  mcgnode metadata: {}", keys.join(", "));
-        }
+        print_files(path)?;
+        print_topics(path)?;
+        print_particle_states(path, a.topic.as_deref())?;
     }
     Ok(())
+}
+
+/// Prints the files of the bag at `path`: storage and compression.
+fn print_files(path: &std::path::Path) -> Result<()> {
+    for part in bag_parts(path)? {
+        let storage = match part.storage {
+            Storage::Mcap => "mcap",
+            Storage::Sqlite3 => "sqlite3",
+        };
+        let mut how = vec![storage.to_string()];
+        if let Some(c) = part.file_compression {
+            how.push(format!("file compression {}", c.name()));
+        }
+        if let Some(c) = part.message_compression {
+            how.push(format!("message compression {}", c.name()));
+        }
+        println!("  file: {} ({})", part.path.display(), how.join(", "));
+    }
+    Ok(())
+}
+
+/// Prints the message count and duration of the bag at `path`, and its
+/// topics with their types and message counts.
+fn print_topics(path: &std::path::Path) -> Result<()> {
+    // topic -> (type, count, first, last log time)
+    let mut topics: BTreeMap<String, (String, usize, u64, u64)> = BTreeMap::new();
+    scan_input(path, |m| {
+        let e = topics
+            .entry(m.topic.to_string())
+            .or_insert_with(|| (m.schema_name.to_string(), 0, u64::MAX, 0));
+        e.1 += 1;
+        e.2 = e.2.min(m.log_time);
+        e.3 = e.3.max(m.log_time);
+        Ok(())
+    })
+    .with_context(|| format!("reading {}", path.display()))?;
+    let (first, last) = topics
+        .values()
+        .fold((u64::MAX, 0), |(a, b), t| (a.min(t.2), b.max(t.3)));
+    let total: usize = topics.values().map(|t| t.1).sum();
+    println!(
+        "  messages: {total}, duration: {:.3} s",
+        if total == 0 {
+            0.0
+        } else {
+            (last - first) as f64 * 1e-9
+        }
+    );
+    println!("  topics:");
+    for (t, (ty, n, _, _)) in &topics {
+        println!("    {t}  {ty}  {n} messages");
+    }
+    Ok(())
+}
+
+/// Prints what the ParticleState trajectories of the bag at `path` hold:
+/// systems, field, contacts, derived velocities and metadata keys.
+fn print_particle_states(path: &std::path::Path, topic: Option<&str>) -> Result<()> {
+    let bag = read_bags(
+        &[path.to_path_buf()],
+        &ReadOptions {
+            topic: topic.map(str::to_string),
+        },
+    )?;
+    if bag.trajectories.is_empty() {
+        println!("  no ParticleState trajectories");
+        return Ok(());
+    }
+    println!("  ParticleState topic: {}", bag.topic);
+    print_systems(&bag.trajectories);
+    let field = match &bag.field {
+        None => "unknown (the messages do not state it)".to_string(),
+        Some(f) if f.is_free() => "none (closed when there are no anchors)".to_string(),
+        Some(f) => format!(
+            "gravity {} along -y, drag {}, force {:?}",
+            f.gravity, f.drag, f.force
+        ),
+    };
+    println!("  field: {field}");
+    println!("  contacts: {}", contacts(&bag.trajectories));
+    if !bag.derived_velocities.is_empty() {
+        println!(
+            "  velocities: derived from positions and stamps (position-only) in {} trajectories",
+            bag.derived_velocities.len()
+        );
+    }
+    if !bag.metadata.is_empty() {
+        let keys: Vec<&str> = bag.metadata.keys().map(String::as_str).collect();
+        println!("  mcgnode metadata: {}", keys.join(", "));
+    }
+    Ok(())
+}
+
+/// Prints the trajectories per system name: count, particle counts,
+/// dimensions, states and longest span.
+fn print_systems(trajs: &[crate::system::Trajectory]) {
+    let mut systems: BTreeMap<String, SystemSummary> = BTreeMap::new();
+    for tr in trajs {
+        let name = if tr.system.is_empty() {
+            "(unnamed)".to_string()
+        } else {
+            tr.system.clone()
+        };
+        let e = systems.entry(name).or_default();
+        e.0 += 1;
+        if !e.1.contains(&tr.graph.n()) {
+            e.1.push(tr.graph.n());
+        }
+        if !e.2.contains(&tr.graph.dim) {
+            e.2.push(tr.graph.dim);
+        }
+        e.3 += tr.samples.len();
+        e.4 = e.4.max(tr.samples.last().map_or(0.0, |s| s.t));
+    }
+    println!("  systems:");
+    for (name, (n, parts, dims, states, span)) in &systems {
+        let list = |v: &[usize]| {
+            v.iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join("/")
+        };
+        println!(
+            "    {name}: {n} trajectories, {} particles, {}D, {states} states, longest {span:.3} s",
+            list(parts),
+            list(dims)
+        );
+    }
 }
 
 /// The interaction radii and kinematic particle counts of the trajectories:
@@ -315,23 +341,8 @@ fn repair(a: RepairArgs) -> Result<()> {
 
 /// Draws one MarkerArray of `a.bag` to `a.png`.
 fn draw(a: &DrawArgs) -> Result<()> {
-    use crate::ros::wire::markers::{MarkerArray, ARROW, CUBE_LIST, LINE_LIST, SPHERE_LIST};
-    use crate::ros::wire::RosType as _;
-    let bytes = std::fs::read(&a.bag).with_context(|| format!("reading {}", a.bag.display()))?;
-    let mut arrays = vec![];
-    for m in mcap::MessageStream::new(&bytes)
-        .with_context(|| format!("{} is not MCAP", a.bag.display()))?
-    {
-        let m = m.with_context(|| format!("reading {}", a.bag.display()))?;
-        if m.channel
-            .schema
-            .as_ref()
-            .is_some_and(|s| s.name == MarkerArray::TYPE_NAME)
-        {
-            arrays.push((m.log_time, m.channel.topic.clone(), m.data.into_owned()));
-        }
-    }
-    arrays.sort_by_key(|x| x.0);
+    use crate::ros::wire::markers::MarkerArray;
+    let arrays = marker_arrays(&a.bag)?;
     let n = arrays.len();
     let i = a.index.unwrap_or(n.saturating_sub(1));
     let Some((_, topic, data)) = arrays.get(i) else {
@@ -344,6 +355,48 @@ fn draw(a: &DrawArgs) -> Result<()> {
     };
     let arr: MarkerArray = crate::data::msg::decode_cdr(data)
         .with_context(|| format!("decoding MarkerArray {i} of {}", a.bag.display()))?;
+    let (mut scene, stamp) = marker_scene(&arr);
+    let (sec, nanosec, frame) = stamp.unwrap_or_default();
+    scene.title =
+        format!("{topic}, MarkerArray {i} (of {n}): stamp {sec}.{nanosec:09} s, frame {frame}");
+    crate::plot::draw_scene(&a.png, &scene)?;
+    println!(
+        "drew MarkerArray {i} (of {n}; {} markers) to {}",
+        arr.markers.len(),
+        a.png.display()
+    );
+    Ok(())
+}
+
+/// The MarkerArray messages of the MCAP file `bag` as (log time, topic,
+/// CDR bytes), in log-time order.
+fn marker_arrays(bag: &std::path::Path) -> Result<Vec<(u64, String, Vec<u8>)>> {
+    use crate::ros::wire::markers::MarkerArray;
+    use crate::ros::wire::RosType as _;
+    let bytes = std::fs::read(bag).with_context(|| format!("reading {}", bag.display()))?;
+    let mut arrays = vec![];
+    for m in mcap::MessageStream::new(&bytes)
+        .with_context(|| format!("{} is not MCAP", bag.display()))?
+    {
+        let m = m.with_context(|| format!("reading {}", bag.display()))?;
+        if m.channel
+            .schema
+            .as_ref()
+            .is_some_and(|s| s.name == MarkerArray::TYPE_NAME)
+        {
+            arrays.push((m.log_time, m.channel.topic.clone(), m.data.into_owned()));
+        }
+    }
+    arrays.sort_by_key(|x| x.0);
+    Ok(arrays)
+}
+
+/// The scene the added markers of `arr` draw (untitled), and the stamp and
+/// frame of the first of them.
+fn marker_scene(
+    arr: &crate::ros::wire::markers::MarkerArray,
+) -> (crate::plot::Scene, Option<(i32, u32, String)>) {
+    use crate::ros::wire::markers::{ARROW, CUBE_LIST, LINE_LIST, SPHERE_LIST};
     let v = |p: &crate::data::msg::Point| [p.x, p.y, p.z];
     let rgb = |c: &crate::ros::wire::markers::ColorRgba| {
         let u = |x: f32| (x.clamp(0.0, 1.0) * 255.0).round() as u8;
@@ -388,14 +441,5 @@ fn draw(a: &DrawArgs) -> Result<()> {
             _ => {}
         }
     }
-    let (sec, nanosec, frame) = stamp.unwrap_or_default();
-    scene.title =
-        format!("{topic}, MarkerArray {i} (of {n}): stamp {sec}.{nanosec:09} s, frame {frame}");
-    crate::plot::draw_scene(&a.png, &scene)?;
-    println!(
-        "drew MarkerArray {i} (of {n}; {} markers) to {}",
-        arr.markers.len(),
-        a.png.display()
-    );
-    Ok(())
+    (scene, stamp)
 }

@@ -4,6 +4,7 @@
 
 use crate::model::{ArchPreset, EdgeInput, MessageFn};
 use crate::plan::CostKind;
+use crate::simulate::DataIntegrator;
 use crate::train::{BodyForce, EngineKind, Recipe};
 
 /// A clap value enum `$arg` mirroring the library's `$lib`, variant for
@@ -96,6 +97,17 @@ value_enum! {
         Final,
         /// Mean distance over the horizon's control steps: get there soon and stay.
         Along,
+    }
+}
+
+value_enum! {
+    /// `simulate --integrator`.
+    IntegratorArg => DataIntegrator {
+        /// Velocity Verlet (+ SHAKE/RATTLE for bars): symplectic, bars exact.
+        Verlet,
+        /// Classical RK4 on (q, p) with the exact constrained acceleration
+        /// ([`crate::physics::rk4::rk4_trajectories`]): the paper's HGN data.
+        Rk4,
     }
 }
 

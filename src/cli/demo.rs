@@ -7,10 +7,10 @@ use crate::evaluate::table;
 use crate::model::Variant;
 use crate::models::ModelKind;
 use crate::physics::{SystemConfig, SystemKind};
-use crate::reproduce::lab::{Lab, TrainSpec};
+use crate::reproduce::lab::{Lab, TrainSpec, Trained};
 use crate::train::{ModelOptions, TrainConfig};
 use anyhow::{Context, Result};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Options of `demo`.
 #[derive(clap::Args, Debug, Clone)]
@@ -50,25 +50,7 @@ pub fn run(a: Args) -> Result<()> {
         resume: false,
     };
     if a.mpc {
-        let r = crate::reproduce::mpc::run(&lab, a.quick, a.seed)?;
-        println!(
-            "{:<16} {:>8} {:>15} {:>18}",
-            "planner", "success", "final distance", "ms per step"
-        );
-        for (name, p) in &r.planners {
-            println!(
-                "{name:<16} {:>7.0}% {:>15.3} {:>18.1}",
-                100.0 * p.success_rate,
-                p.final_distance,
-                1e3 * p.seconds_per_step
-            );
-        }
-        println!(
-            "wrote {} and {}",
-            a.out.join("mpc.json").display(),
-            a.out.join("mpc.png").display()
-        );
-        return Ok(());
+        return mpc(&lab, &a);
     }
     let (n_train, n_test, epochs) = if a.quick {
         (20, 10, 60)
@@ -76,51 +58,8 @@ pub fn run(a: Args) -> Result<()> {
         (100, 100, 1500)
     };
     let epochs = a.epochs.unwrap_or(epochs);
-    let train = lab.bag(
-        "train-5-spring",
-        &SystemConfig::new(SystemKind::Spring, 5),
-        n_train,
-        a.seed,
-        false,
-    )?;
-    let mut tests = vec![];
-    for n in SIZES {
-        let mut c = SystemConfig::new(SystemKind::Spring, n);
-        c.states = 201; // 20 s, the paper's spring evaluation horizon
-        tests.push(lab.bag(
-            &format!("test-{n}-spring"),
-            &c,
-            n_test,
-            a.seed + 1000,
-            false,
-        )?);
-    }
-    lab.say(&format!(
-        "simulated {n_train} training trajectories of 5 springs and {n_test} test trajectories \
-         of 5, 20 and 50 springs (20 s each)"
-    ));
-    let specs: Vec<TrainSpec> = VARIANTS
-        .iter()
-        .map(|&v| TrainSpec {
-            label: format!("{v}-5-spring"),
-            kind: ModelKind::Family(v),
-            bags: vec![train.clone()],
-            cfg: TrainConfig {
-                epochs,
-                patience: epochs,
-                seed: a.seed,
-                // The trainings run side by side.
-                threads: (crate::engine::all_cores() / VARIANTS.len()).max(1),
-                ..TrainConfig::default()
-            },
-            opts: ModelOptions::default(),
-        })
-        .collect();
-    let models = lab
-        .train_all(&specs)
-        .into_iter()
-        .collect::<crate::Result<Vec<_>>>()?;
-    lab.say(&format!("trained GNODE and MCGNODE ({epochs} epochs each)"));
+    let (train, tests) = simulate(&lab, a.seed, n_train, n_test)?;
+    let models = train_models(&lab, &train, epochs, a.seed)?;
     let (mut panels, mut json) = (vec![], vec![]);
     for (n, bag) in SIZES.iter().zip(&tests) {
         let mut curves = vec![];
@@ -148,4 +87,82 @@ pub fn run(a: Args) -> Result<()> {
         summary.display()
     );
     Ok(())
+}
+
+/// `demo --mpc`: runs the closed-loop experiment and prints its table.
+fn mpc(lab: &Lab, a: &Args) -> Result<()> {
+    let r = crate::reproduce::mpc::run(lab, a.quick, a.seed)?;
+    println!(
+        "{:<16} {:>8} {:>15} {:>18}",
+        "planner", "success", "final distance", "ms per step"
+    );
+    for (name, p) in &r.planners {
+        println!(
+            "{name:<16} {:>7.0}% {:>15.3} {:>18.1}",
+            100.0 * p.success_rate,
+            p.final_distance,
+            1e3 * p.seconds_per_step
+        );
+    }
+    println!(
+        "wrote {} and {}",
+        a.out.join("mpc.json").display(),
+        a.out.join("mpc.png").display()
+    );
+    Ok(())
+}
+
+/// Simulates the training bag (`n_train` trajectories of 5 springs) and one
+/// test bag per size in [`SIZES`] (`n_test` trajectories of 20 s each).
+fn simulate(
+    lab: &Lab,
+    seed: u64,
+    n_train: usize,
+    n_test: usize,
+) -> Result<(PathBuf, Vec<PathBuf>)> {
+    let train = lab.bag(
+        "train-5-spring",
+        &SystemConfig::new(SystemKind::Spring, 5),
+        n_train,
+        seed,
+        false,
+    )?;
+    let mut tests = vec![];
+    for n in SIZES {
+        let mut c = SystemConfig::new(SystemKind::Spring, n);
+        c.states = 201; // 20 s, the paper's spring evaluation horizon
+        tests.push(lab.bag(&format!("test-{n}-spring"), &c, n_test, seed + 1000, false)?);
+    }
+    lab.say(&format!(
+        "simulated {n_train} training trajectories of 5 springs and {n_test} test trajectories \
+         of 5, 20 and 50 springs (20 s each)"
+    ));
+    Ok((train, tests))
+}
+
+/// Trains the [`VARIANTS`] side by side on `train`.
+fn train_models(lab: &Lab, train: &Path, epochs: usize, seed: u64) -> Result<Vec<Trained>> {
+    let specs: Vec<TrainSpec> = VARIANTS
+        .iter()
+        .map(|&v| TrainSpec {
+            label: format!("{v}-5-spring"),
+            kind: ModelKind::Family(v),
+            bags: vec![train.to_path_buf()],
+            cfg: TrainConfig {
+                epochs,
+                patience: epochs,
+                seed,
+                // The trainings run side by side.
+                threads: (crate::engine::all_cores() / VARIANTS.len()).max(1),
+                ..TrainConfig::default()
+            },
+            opts: ModelOptions::default(),
+        })
+        .collect();
+    let models = lab
+        .train_all(&specs)
+        .into_iter()
+        .collect::<crate::Result<Vec<_>>>()?;
+    lab.say(&format!("trained GNODE and MCGNODE ({epochs} epochs each)"));
+    Ok(models)
 }

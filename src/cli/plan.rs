@@ -5,7 +5,8 @@ use super::choices::{CostArg, SamplerArg};
 use super::{parse_vector, Vector};
 use crate::models::{load_any_model, ModelRef};
 use crate::physics::SystemKind;
-use crate::plan::{plan, refine, Controls, Cost, Problem, Sampler, Timing};
+use crate::plan::{plan, refine, Controls, Cost, Plan, Problem, Refined, Sampler, Timing};
+use crate::system::State;
 use anyhow::{bail, Result};
 use serde_json::json;
 use std::path::PathBuf;
@@ -113,24 +114,6 @@ pub fn run(a: Args) -> Result<()> {
             a.target.0.len()
         );
     }
-    let sampler = match a.sampler {
-        SamplerArg::Random => Sampler::Random {
-            candidates: a.candidates,
-            sigma: a.sigma,
-        },
-        SamplerArg::Cem => Sampler::Cem {
-            candidates: a.candidates,
-            iterations: a.iterations,
-            elites: a.elites,
-            sigma: a.sigma,
-        },
-        SamplerArg::Mppi => Sampler::Mppi {
-            candidates: a.candidates,
-            iterations: a.iterations,
-            sigma: a.sigma,
-            temperature: a.temperature,
-        },
-    };
     let problem = Problem {
         model: model.as_ref(),
         graph: g,
@@ -150,7 +133,7 @@ pub fn run(a: Args) -> Result<()> {
         max_speed: a.max_speed,
     };
     let quiet = a.json;
-    let p = plan(&problem, sampler, None, a.sample_seed, |it| {
+    let p = plan(&problem, sampler(&a), None, a.sample_seed, |it| {
         if !quiet {
             eprintln!(
                 "round {}: best cost {:.4e}, mean {:.4e}, {} diverged",
@@ -159,64 +142,124 @@ pub fn run(a: Args) -> Result<()> {
         }
         true
     })?;
-    let search_cost = p.cost;
-    let refined = if a.refine > 0 {
-        let r = refine(&problem, &p.best, a.refine)?;
-        if !quiet {
-            eprintln!(
-                "refined by {} gradient steps: cost {:.4e} → {:.4e}",
-                r.steps.len(),
-                r.start_cost,
-                r.cost
-            );
-        }
-        Some(r)
+    let refined = refine_plan(&problem, &p, a.refine, quiet)?;
+    let still = problem.cost_of(&Controls::zeros(a.horizon, problem.width()))?;
+    if a.json {
+        print_json(&a, &problem, particle, &p, refined.as_ref(), still)
     } else {
-        None
-    };
-    let (best, cost, predicted) = match &refined {
+        print_text(&a, particle, d, &p, refined.as_ref(), still);
+        Ok(())
+    }
+}
+
+/// The sampler the options choose.
+fn sampler(a: &Args) -> Sampler {
+    match a.sampler {
+        SamplerArg::Random => Sampler::Random {
+            candidates: a.candidates,
+            sigma: a.sigma,
+        },
+        SamplerArg::Cem => Sampler::Cem {
+            candidates: a.candidates,
+            iterations: a.iterations,
+            elites: a.elites,
+            sigma: a.sigma,
+        },
+        SamplerArg::Mppi => Sampler::Mppi {
+            candidates: a.candidates,
+            iterations: a.iterations,
+            sigma: a.sigma,
+            temperature: a.temperature,
+        },
+    }
+}
+
+/// `steps` gradient steps from the search's best (none when 0), said on
+/// stderr unless `quiet`.
+fn refine_plan(problem: &Problem, p: &Plan, steps: usize, quiet: bool) -> Result<Option<Refined>> {
+    if steps == 0 {
+        return Ok(None);
+    }
+    let r = refine(problem, &p.best, steps)?;
+    if !quiet {
+        eprintln!(
+            "refined by {} gradient steps: cost {:.4e} → {:.4e}",
+            r.steps.len(),
+            r.start_cost,
+            r.cost
+        );
+    }
+    Ok(Some(r))
+}
+
+/// The plan printed: the refined one when there is one, else the search's
+/// best, as (controls, cost, predicted trajectory).
+fn chosen<'a>(p: &'a Plan, refined: Option<&'a Refined>) -> (&'a Controls, f64, &'a [State]) {
+    match refined {
         Some(r) => (&r.best, r.cost, &r.predicted),
         None => (&p.best, p.cost, &p.predicted),
-    };
-    let still = problem.cost_of(&Controls::zeros(a.horizon, problem.width()))?;
-    let rows: Vec<&[f64]> = (0..best.steps).map(|k| best.row(k)).collect();
-    if a.json {
-        let doc = json!({
-            "model": model.describe(),
-            "particle": particle,
-            "target": a.target.0,
-            "driven": problem.driven(),
-            "dt": dt,
-            "substeps": a.substeps,
-            "control_step": problem.timing.control_step(),
-            "cost": cost,
-            "search_cost": search_cost,
-            "hold_still_cost": still,
-            "best": rows,
-            "predicted": predicted.iter().map(|s| &s.q).collect::<Vec<_>>(),
-            "predicted_velocities": predicted.iter().map(|s| &s.v).collect::<Vec<_>>(),
-            "refine": refined.as_ref().map(|r| json!({
-                "start_cost": r.start_cost,
-                "steps": r.steps,
-                "gradient": r.grad,
-            })),
-            "costs": p.costs,
-            "iterations": p.iterations,
-            "evaluated": p.evaluated,
-            "seconds": p.seconds,
-        });
-        println!("{}", serde_json::to_string_pretty(&doc)?);
-    } else {
-        let end = predicted
-            .last()
-            .map(|s| s.q[particle * d..(particle + 1) * d].to_vec());
-        println!(
-            "{} candidates in {:.3} s: best cost {:.4e} (holding still: {:.4e}); particle {particle} predicted at {:?}, target {:?}",
-            p.evaluated, p.seconds, cost, still, end.unwrap_or_default(), a.target.0
-        );
-        for (k, r) in rows.iter().enumerate() {
-            println!("  step {k}: velocity {r:?}");
-        }
     }
+}
+
+/// `plan --json`: one JSON document on stdout.
+fn print_json(
+    a: &Args,
+    problem: &Problem,
+    particle: usize,
+    p: &Plan,
+    refined: Option<&Refined>,
+    still: f64,
+) -> Result<()> {
+    let (best, cost, predicted) = chosen(p, refined);
+    let rows: Vec<&[f64]> = (0..best.steps).map(|k| best.row(k)).collect();
+    let doc = json!({
+        "model": problem.model.describe(),
+        "particle": particle,
+        "target": a.target.0,
+        "driven": problem.driven(),
+        "dt": problem.timing.dt,
+        "substeps": a.substeps,
+        "control_step": problem.timing.control_step(),
+        "cost": cost,
+        "search_cost": p.cost,
+        "hold_still_cost": still,
+        "best": rows,
+        "predicted": predicted.iter().map(|s| &s.q).collect::<Vec<_>>(),
+        "predicted_velocities": predicted.iter().map(|s| &s.v).collect::<Vec<_>>(),
+        "refine": refined.map(|r| json!({
+            "start_cost": r.start_cost,
+            "steps": r.steps,
+            "gradient": r.grad,
+        })),
+        "costs": p.costs,
+        "iterations": p.iterations,
+        "evaluated": p.evaluated,
+        "seconds": p.seconds,
+    });
+    println!("{}", serde_json::to_string_pretty(&doc)?);
     Ok(())
+}
+
+/// `plan` without --json: the cost, where the particle ends, and the plan's
+/// velocities step by step.
+fn print_text(
+    a: &Args,
+    particle: usize,
+    d: usize,
+    p: &Plan,
+    refined: Option<&Refined>,
+    still: f64,
+) {
+    let (best, cost, predicted) = chosen(p, refined);
+    let rows: Vec<&[f64]> = (0..best.steps).map(|k| best.row(k)).collect();
+    let end = predicted
+        .last()
+        .map(|s| s.q[particle * d..(particle + 1) * d].to_vec());
+    println!(
+        "{} candidates in {:.3} s: best cost {:.4e} (holding still: {:.4e}); particle {particle} predicted at {:?}, target {:?}",
+        p.evaluated, p.seconds, cost, still, end.unwrap_or_default(), a.target.0
+    );
+    for (k, r) in rows.iter().enumerate() {
+        println!("  step {k}: velocity {r:?}");
+    }
 }

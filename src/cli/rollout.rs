@@ -1,9 +1,10 @@
 //! `mcgnode rollout`.
 
 use crate::data::bag::write_trajectories_with_field;
+use crate::dynamics::Dynamics;
 use crate::models::{load_any_model, ModelRef};
 use crate::physics::SystemKind;
-use crate::system::{Sample, Trajectory};
+use crate::system::{Graph, Sample, State, Trajectory};
 use anyhow::{bail, Result};
 use std::path::PathBuf;
 
@@ -75,42 +76,15 @@ pub fn run(a: Args) -> Result<()> {
     }
     let steps = (a.duration / dt).round() as usize;
     let t0 = std::time::Instant::now();
-    // The GNODE family integrates on the allocation-free kernel, baselines on candle.
-    // Kinematic particles that move in the recording follow it (cubic
-    // Hermite between its states); otherwise they are held.
     let moving = Trajectory {
         id: a.start.trajectory,
         system: system.clone(),
         graph: graph.clone(),
         samples: recorded,
     };
-    let states = if crate::evaluate::kinematic_moves(&moving) {
-        let drive = crate::physics::Drive::from_samples(&graph, &moving.samples, dt, steps)?;
-        let have = moving
-            .samples
-            .last()
-            .map_or(0.0, |s| s.t - moving.samples[0].t);
-        if have + 0.5 * dt < steps as f64 * dt {
-            bail!(
-                "--initial records its kinematic particles' motion for {have} s only: give \
-                 --duration {have} or less"
-            );
-        }
-        model.rollout_driven(&graph, &start, dt, steps, every, &drive)?
-    } else {
-        model.rollout_every(&graph, &start, dt, steps, every)?
-    };
+    let states = roll_out(model.as_ref(), &moving, &start, dt, steps, every)?;
     let secs = t0.elapsed().as_secs_f64();
-    let mut acc = vec![0.0; graph.ndof()];
-    let mut samples = Vec::with_capacity(states.len());
-    for (k, state) in states.into_iter().enumerate() {
-        model.acceleration(&graph, &state, &mut acc)?;
-        samples.push(Sample {
-            t: (k * every) as f64 * dt,
-            state,
-            acc: Some(acc.clone()),
-        });
-    }
+    let samples = with_accelerations(model.as_ref(), &graph, states, dt, every)?;
     let n = samples.len();
     let tr = Trajectory {
         id: 0,
@@ -138,4 +112,58 @@ pub fn run(a: Args) -> Result<()> {
         a.out.display()
     );
     Ok(())
+}
+
+/// Rolls `model` out from `start` for `steps` steps of `dt`, keeping every
+/// `every`-th state. The GNODE family integrates on the allocation-free
+/// kernel, baselines on candle. Kinematic particles that move in the
+/// recording `moving` follow it (cubic Hermite between its states);
+/// otherwise they are held.
+fn roll_out(
+    model: &dyn Dynamics,
+    moving: &Trajectory,
+    start: &State,
+    dt: f64,
+    steps: usize,
+    every: usize,
+) -> Result<Vec<State>> {
+    let graph = &moving.graph;
+    Ok(if crate::evaluate::kinematic_moves(moving) {
+        let drive = crate::physics::Drive::from_samples(graph, &moving.samples, dt, steps)?;
+        let have = moving
+            .samples
+            .last()
+            .map_or(0.0, |s| s.t - moving.samples[0].t);
+        if have + 0.5 * dt < steps as f64 * dt {
+            bail!(
+                "--initial records its kinematic particles' motion for {have} s only: give \
+                 --duration {have} or less"
+            );
+        }
+        model.rollout_driven(graph, start, dt, steps, every, &drive)?
+    } else {
+        model.rollout_every(graph, start, dt, steps, every)?
+    })
+}
+
+/// The rolled-out states as samples stamped from 0, each with the model's
+/// acceleration.
+fn with_accelerations(
+    model: &dyn Dynamics,
+    graph: &Graph,
+    states: Vec<State>,
+    dt: f64,
+    every: usize,
+) -> Result<Vec<Sample>> {
+    let mut acc = vec![0.0; graph.ndof()];
+    let mut samples = Vec::with_capacity(states.len());
+    for (k, state) in states.into_iter().enumerate() {
+        model.acceleration(graph, &state, &mut acc)?;
+        samples.push(Sample {
+            t: (k * every) as f64 * dt,
+            state,
+            acc: Some(acc.clone()),
+        });
+    }
+    Ok(samples)
 }

@@ -1,5 +1,6 @@
 //! `mcgnode simulate`.
 
+use super::choices::IntegratorArg;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::simulate::{simulate_with, DataIntegrator};
 use anyhow::Result;
@@ -63,8 +64,8 @@ pub struct Args {
     pub dim: Option<usize>,
     /// Integrator: verlet (velocity Verlet + RATTLE, the default) or rk4
     /// (Hamiltonian RK4 on (q, p), the paper's data for HGN).
-    #[arg(long, value_enum, default_value_t = DataIntegrator::Verlet)]
-    pub integrator: DataIntegrator,
+    #[arg(long, value_enum, default_value_t = IntegratorArg::Verlet)]
+    pub integrator: IntegratorArg,
 }
 
 /// Builds the simulator configuration from the options.
@@ -111,8 +112,9 @@ pub fn config(a: &Args) -> Result<SystemConfig> {
 /// Runs `simulate`.
 pub fn run(a: Args) -> Result<()> {
     let cfg = config(&a)?;
+    let integrator = DataIntegrator::from(a.integrator);
     let t0 = std::time::Instant::now();
-    simulate_with(&cfg, a.integrator, a.trajectories, a.seed, &a.out)?;
+    simulate_with(&cfg, integrator, a.trajectories, a.seed, &a.out)?;
     eprintln!(
         "wrote {} trajectories of a {}-particle {}D {}{} ({} states every {} s, dt {}, {}) to {} in {:.1} s",
         a.trajectories,
@@ -123,7 +125,7 @@ pub fn run(a: Args) -> Result<()> {
         cfg.states,
         cfg.dt * cfg.save_every as f64,
         cfg.dt,
-        a.integrator.name(),
+        integrator.name(),
         a.out.display(),
         t0.elapsed().as_secs_f64()
     );

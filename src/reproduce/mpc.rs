@@ -6,13 +6,14 @@
 //! seeded targets: success rate, mean final distance and planning time per
 //! control step (`mpc.json`), and a picture of one episode (`mpc.png`).
 
-use super::lab::{Lab, TrainSpec};
+use super::lab::{Lab, TrainSpec, Trained};
 use crate::dynamics::Dynamics;
 use crate::error::{Context, Result};
 use crate::model::Variant;
 use crate::models::{load_any_model, ModelKind, ModelRef};
 use crate::physics::{SystemConfig, SystemKind};
 use crate::plan::{mpc, Cost, CostKind, EpisodeReport, Sampler, Timing};
+use crate::system::{Graph, State};
 use crate::train::recipe::{Auto, Recipe};
 use crate::train::{ModelOptions, TrainConfig};
 use rand::{Rng, SeedableRng};
@@ -78,7 +79,75 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
     } else {
         (100, 1000, 20, 60, 64)
     };
-    let train = lab.bag("held-chain-train", &cfg, n_train, seed, false)?;
+    let trained = train_models(lab, &cfg, n_train, epochs, seed)?;
+    let explained = |k: usize| trained[k].report.explained;
+    let planners = planners(&trained)?;
+    let graph = cfg.graph();
+    let episodes = episodes(&cfg, &graph, n_targets, seed);
+    let setup = Setup {
+        cfg: &cfg,
+        graph: &graph,
+        timing: Timing {
+            dt: 0.005,
+            substeps: 20,
+        },
+        sampler: Sampler::Cem {
+            candidates,
+            iterations: 3,
+            elites: 8,
+            sigma: 0.5,
+        },
+        steps,
+        seed,
+    };
+    let mut report = MpcReport {
+        planners: Default::default(),
+        targets: episodes.iter().map(|e| e.1.clone()).collect(),
+        settings: setup.settings(candidates),
+    };
+    // The picture shows the episode whose target is farthest from the start.
+    let shown = farthest(&episodes);
+    let mut first: Vec<(String, EpisodeReport)> = vec![];
+    for (name, model, refine) in &planners {
+        let results = setup.episodes(&episodes, name, model.as_deref(), *refine)?;
+        if let Some(r) = results.get(shown) {
+            first.push(((*name).to_string(), r.clone()));
+        }
+        let explained = match *name {
+            "mcgnode" => explained(0),
+            "gnode" => explained(1),
+            _ => None,
+        };
+        let res = planner_result(&results, explained);
+        lab.say(&format!(
+            "{name}: success {:.0} %, mean final distance {:.3}, {:.1} ms per control step",
+            100.0 * res.success_rate,
+            res.final_distance,
+            1e3 * res.seconds_per_step
+        ));
+        report.planners.insert((*name).to_string(), res);
+    }
+    let json = lab.dir.join("mpc.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("writing {}", json.display()))?;
+    picture(lab, &episodes[shown], &first)?;
+    Ok(report)
+}
+
+/// One episode: the chain's start and the free end's target (x, y).
+type Target = (State, Vec<f64>);
+
+/// Simulates `n_train` trajectories of the held chain with random gripper
+/// motions and trains MCGNODE and GNODE on them, side by side, for `epochs`
+/// epochs each.
+fn train_models(
+    lab: &Lab,
+    cfg: &SystemConfig,
+    n_train: usize,
+    epochs: usize,
+    seed: u64,
+) -> Result<Vec<Trained>> {
+    let train = lab.bag("held-chain-train", cfg, n_train, seed, false)?;
     lab.say(&format!(
         "simulated {n_train} trajectories of a {LINKS}-link chain whose gripper moves at random"
     ));
@@ -114,24 +183,34 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
         pct(explained(0)),
         pct(explained(1))
     ));
+    Ok(trained)
+}
+
+/// The planners compared: the trained MCGNODE (with and without gradient
+/// steps) and GNODE, the true physics, and holding still.
+fn planners(trained: &[Trained]) -> Result<Vec<Planner<'static>>> {
     let load = |p: &std::path::Path| -> Result<Arc<dyn Dynamics>> {
         Ok(load_any_model(&ModelRef::File(p.to_path_buf()))?.dynamics)
     };
     let truth = crate::models::truth::truth(SystemKind::HeldChain);
     let mcgnode = load(&trained[0].path)?;
-    let planners: Vec<Planner> = vec![
+    Ok(vec![
         ("mcgnode", Some(mcgnode.clone()), 0),
         ("mcgnode_refined", Some(mcgnode), REFINE_STEPS),
         ("gnode", Some(load(&trained[1].path)?), 0),
         ("truth", Some(truth), 0),
         ("none", None, 0),
-    ];
-    let graph = cfg.graph();
+    ])
+}
+
+/// `n_targets` seeded episodes: a start of the chain and a target near its
+/// free end.
+fn episodes(cfg: &SystemConfig, graph: &Graph, n_targets: usize, seed: u64) -> Vec<Target> {
     let end = LINKS - 1;
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x006d_7063);
-    let episodes: Vec<(crate::system::State, Vec<f64>)> = (0..n_targets)
+    (0..n_targets)
         .map(|i| {
-            let start = cfg.start_for(&graph, seed + 7000, i);
+            let start = cfg.start_for(graph, seed + 7000, i);
             let (x, y) = (start.q[end * 2], start.q[end * 2 + 1]);
             let target = vec![
                 x + rng.random_range(-1.5..1.5),
@@ -139,55 +218,70 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
             ];
             (start, target)
         })
-        .collect();
-    let timing = Timing {
-        dt: 0.005,
-        substeps: 20,
-    };
-    let sampler = Sampler::Cem {
-        candidates,
-        iterations: 3,
-        elites: 8,
-        sigma: 0.5,
-    };
-    let settings = format!(
-        "{LINKS}-link held chain (springs k = {}, g = {}), world dt {}; planner CEM {candidates} \
-         candidates x 3 rounds (8 elites, sigma 0.5 m/s), horizon 10 control steps of {} s \
-         (rollouts at dt {}), speed bound {MAX_SPEED} m/s, cost: mean squared distance of the free end \
-         over the horizon + {SPEED_WEIGHT} × its squared speed + 1e-3 effort; {steps} control steps per episode; success: final \
-         distance < {SUCCESS_DISTANCE}",
-        cfg.stiffness,
-        cfg.field.gravity,
-        cfg.dt,
-        timing.control_step(),
-        timing.dt
-    );
-    let mut report = MpcReport {
-        planners: Default::default(),
-        targets: episodes.iter().map(|e| e.1.clone()).collect(),
-        settings,
-    };
-    // The picture shows the episode whose target is farthest from the start.
-    let far = |(s, t): &(crate::system::State, Vec<f64>)| {
-        (s.q[end * 2] - t[0]).hypot(s.q[end * 2 + 1] - t[1])
-    };
-    let shown = (0..episodes.len())
+        .collect()
+}
+
+/// The episode whose target is farthest from the free end's start.
+fn farthest(episodes: &[Target]) -> usize {
+    let end = LINKS - 1;
+    let far = |(s, t): &Target| (s.q[end * 2] - t[0]).hypot(s.q[end * 2 + 1] - t[1]);
+    (0..episodes.len())
         .max_by(|&a, &b| far(&episodes[a]).total_cmp(&far(&episodes[b])))
-        .unwrap_or(0);
-    let mut first: Vec<(String, EpisodeReport)> = vec![];
-    for (name, model, refine) in &planners {
+        .unwrap_or(0)
+}
+
+/// What every episode shares: the world, the planner's search and the
+/// episode length.
+struct Setup<'a> {
+    cfg: &'a SystemConfig,
+    graph: &'a Graph,
+    timing: Timing,
+    sampler: Sampler,
+    /// Control steps per episode.
+    steps: usize,
+    seed: u64,
+}
+
+impl Setup<'_> {
+    /// The settings, in words.
+    fn settings(&self, candidates: usize) -> String {
+        let (cfg, timing, steps) = (self.cfg, self.timing, self.steps);
+        format!(
+            "{LINKS}-link held chain (springs k = {}, g = {}), world dt {}; planner CEM {candidates} \
+             candidates x 3 rounds (8 elites, sigma 0.5 m/s), horizon 10 control steps of {} s \
+             (rollouts at dt {}), speed bound {MAX_SPEED} m/s, cost: mean squared distance of the free end \
+             over the horizon + {SPEED_WEIGHT} × its squared speed + 1e-3 effort; {steps} control steps per episode; success: final \
+             distance < {SUCCESS_DISTANCE}",
+            cfg.stiffness,
+            cfg.field.gravity,
+            cfg.dt,
+            timing.control_step(),
+            timing.dt
+        )
+    }
+
+    /// Runs every episode with the planner `name` (`model`; none: hold
+    /// still), `refine` gradient steps after each search.
+    fn episodes(
+        &self,
+        episodes: &[Target],
+        name: &str,
+        model: Option<&dyn Dynamics>,
+        refine: usize,
+    ) -> Result<Vec<EpisodeReport>> {
+        let end = LINKS - 1;
         let mut results = vec![];
         for (i, (start, target)) in episodes.iter().enumerate() {
             let ep = mpc::Episode {
-                graph: &graph,
-                field: &cfg.field,
-                world_dt: cfg.dt,
+                graph: self.graph,
+                field: &self.cfg.field,
+                world_dt: self.cfg.dt,
                 start: start.clone(),
-                planner: model.as_deref(),
-                sampler,
-                timing,
+                planner: model,
+                sampler: self.sampler,
+                timing: self.timing,
                 horizon: 10,
-                steps,
+                steps: self.steps,
                 cost: Cost {
                     kind: CostKind::Along,
                     particles: vec![end],
@@ -196,51 +290,33 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
                     speed: SPEED_WEIGHT,
                 },
                 max_speed: MAX_SPEED,
-                seed: seed + 100 * i as u64,
-                refine: *refine,
+                seed: self.seed + 100 * i as u64,
+                refine,
             };
             let r = mpc::run(&ep).with_context(|| format!("{name}, target {i}"))?;
-            if i == shown {
-                first.push(((*name).to_string(), r.clone()));
-            }
             results.push(r);
         }
-        let m = results.len() as f64;
-        let distances: Vec<f64> = results.iter().map(|r| r.final_distance).collect();
-        let res = PlannerResult {
-            success_rate: distances.iter().filter(|d| **d < SUCCESS_DISTANCE).count() as f64 / m,
-            final_distance: distances.iter().sum::<f64>() / m,
-            seconds_per_step: results.iter().map(|r| r.seconds_per_step).sum::<f64>() / m,
-            distances,
-            explained: match *name {
-                "mcgnode" => explained(0),
-                "gnode" => explained(1),
-                _ => None,
-            },
-        };
-        lab.say(&format!(
-            "{name}: success {:.0} %, mean final distance {:.3}, {:.1} ms per control step",
-            100.0 * res.success_rate,
-            res.final_distance,
-            1e3 * res.seconds_per_step
-        ));
-        report.planners.insert((*name).to_string(), res);
+        Ok(results)
     }
-    let json = lab.dir.join("mpc.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&report)?)
-        .with_context(|| format!("writing {}", json.display()))?;
-    picture(lab, &episodes[shown], &first)?;
-    Ok(report)
+}
+
+/// One planner's results over its episodes.
+fn planner_result(results: &[EpisodeReport], explained: Option<f64>) -> PlannerResult {
+    let m = results.len() as f64;
+    let distances: Vec<f64> = results.iter().map(|r| r.final_distance).collect();
+    PlannerResult {
+        success_rate: distances.iter().filter(|d| **d < SUCCESS_DISTANCE).count() as f64 / m,
+        final_distance: distances.iter().sum::<f64>() / m,
+        seconds_per_step: results.iter().map(|r| r.seconds_per_step).sum::<f64>() / m,
+        distances,
+        explained,
+    }
 }
 
 /// `mpc.png`: one episode's target, each planner's executed path of the free
 /// end, and MCGNODE's first predicted path; widths a fraction of the picture's
 /// span.
-fn picture(
-    lab: &Lab,
-    episode: &(crate::system::State, Vec<f64>),
-    runs: &[(String, EpisodeReport)],
-) -> Result<()> {
+fn picture(lab: &Lab, episode: &Target, runs: &[(String, EpisodeReport)]) -> Result<()> {
     use plotters::style::RGBColor;
     let colour = |name: &str| match name {
         "mcgnode" => RGBColor(220, 90, 20),

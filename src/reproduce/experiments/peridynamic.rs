@@ -14,6 +14,7 @@ use crate::reproduce::lab::{Lab, TrainSpec, Trained};
 use crate::reproduce::report::{num, table, Experiment, Row};
 use crate::reproduce::scale::Scale;
 use crate::train::{ModelOptions, TrainConfig};
+use std::path::{Path, PathBuf};
 
 /// Training of the peridynamic models: batches of 10 states (a cube state
 /// has 1,560 directed bonds, so 10 states still make a large batch, and 750
@@ -56,22 +57,7 @@ fn peri_opts(kind: ModelKind) -> ModelOptions {
 pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
     let sys = "peridynamic";
     let base = SystemConfig::new(SystemKind::Peridynamic, sc.peri_particles);
-    let train_bag = lab.bag(
-        "train-peridynamic",
-        &base,
-        sc.peri_train_trajectories,
-        TRAIN_SEED,
-        false,
-    )?;
-    let mut tc = base.clone();
-    tc.states = sc.peri_states;
-    let test_bag = lab.bag(
-        "test-peridynamic",
-        &tc,
-        sc.peri_test_trajectories,
-        TEST_SEED,
-        false,
-    )?;
+    let (train_bag, test_bag) = bags(lab, sc, &base)?;
     let kinds = [
         ModelKind::Family(Variant::Mcgnode),
         ModelKind::Family(Variant::Gnode),
@@ -87,38 +73,8 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
             opts: peri_opts(k),
         })
         .collect();
-    // GNS costs 6x MCGNODE per cube epoch on candle: the baselines train
-    // after the family, for at most the wall-clock time MCGNODE took (a
-    // user's budget).
-    let is_family = |s: &TrainSpec| matches!(s.kind, ModelKind::Family(_));
-    let family = specs.iter().take_while(|s| is_family(s)).count();
-    let mut trained = lab.train_all(&specs[..family]);
-    let budget = specs
-        .iter()
-        .zip(&trained)
-        .find(|(s, _)| s.kind == ModelKind::Family(Variant::Mcgnode))
-        .and_then(|(_, t)| t.as_ref().ok())
-        .map(|t| t.report.seconds);
-    for s in &mut specs[family..] {
-        s.cfg.time_budget = budget;
-    }
-    trained.extend(lab.train_all(&specs[family..]));
-    let mut jobs = vec![];
-    for (k, t) in kinds.iter().zip(&trained) {
-        if let Ok(t) = t {
-            jobs.push(EvalJob {
-                experiment: Experiment::Peridynamic,
-                system: sys.into(),
-                label: k.name().into(),
-                particles: sc.peri_particles,
-                x: None,
-                model: t.path.clone(),
-                bag: test_bag.clone(),
-                dt: None,
-                max: sc.peri_test_trajectories,
-            });
-        }
-    }
+    let trained = train_within_budget(lab, &mut specs);
+    let jobs = eval_jobs(sc, &kinds, &trained, &test_bag);
     let rows = run_evals(lab, jobs);
     let names: Vec<String> = kinds.iter().map(|k| k.name().to_string()).collect();
     let mut md = peridynamic_intro(sc, &base, &test_bag)?;
@@ -149,6 +105,73 @@ pub fn peridynamic(lab: &Lab, sc: &Scale) -> Result<Section> {
         ],
     );
     Ok(section(md, rows, &specs, trained))
+}
+
+/// Simulates the cube's training and test bags.
+fn bags(lab: &Lab, sc: &Scale, base: &SystemConfig) -> Result<(PathBuf, PathBuf)> {
+    let train_bag = lab.bag(
+        "train-peridynamic",
+        base,
+        sc.peri_train_trajectories,
+        TRAIN_SEED,
+        false,
+    )?;
+    let mut tc = base.clone();
+    tc.states = sc.peri_states;
+    let test_bag = lab.bag(
+        "test-peridynamic",
+        &tc,
+        sc.peri_test_trajectories,
+        TEST_SEED,
+        false,
+    )?;
+    Ok((train_bag, test_bag))
+}
+
+/// Trains the family's specs (the leading ones), then the baselines'. GNS
+/// costs 6x MCGNODE per cube epoch on candle: the baselines train after the
+/// family, for at most the wall-clock time MCGNODE took (a user's budget).
+fn train_within_budget(lab: &Lab, specs: &mut [TrainSpec]) -> Vec<Result<Trained>> {
+    let is_family = |s: &TrainSpec| matches!(s.kind, ModelKind::Family(_));
+    let family = specs.iter().take_while(|s| is_family(s)).count();
+    let mut trained = lab.train_all(&specs[..family]);
+    let budget = specs
+        .iter()
+        .zip(&trained)
+        .find(|(s, _)| s.kind == ModelKind::Family(Variant::Mcgnode))
+        .and_then(|(_, t)| t.as_ref().ok())
+        .map(|t| t.report.seconds);
+    for s in &mut specs[family..] {
+        s.cfg.time_budget = budget;
+    }
+    trained.extend(lab.train_all(&specs[family..]));
+    trained
+}
+
+/// One evaluation on the test bag per model that trained.
+fn eval_jobs(
+    sc: &Scale,
+    kinds: &[ModelKind],
+    trained: &[Result<Trained>],
+    test_bag: &Path,
+) -> Vec<EvalJob> {
+    let mut jobs = vec![];
+    for (k, t) in kinds.iter().zip(trained) {
+        if let Ok(t) = t {
+            jobs.push(EvalJob {
+                experiment: Experiment::Peridynamic,
+                system: "peridynamic".into(),
+                label: k.name().into(),
+                particles: sc.peri_particles,
+                x: None,
+                model: t.path.clone(),
+                bag: test_bag.to_path_buf(),
+                dt: None,
+                max: sc.peri_test_trajectories,
+            });
+        }
+    }
+    jobs
 }
 
 /// What each cube model's training ran: epochs, seconds, validation MSE.
