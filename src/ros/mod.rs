@@ -47,6 +47,8 @@ pub mod lifecycle_services;
 pub mod markers;
 pub mod names;
 pub mod node;
+pub mod param_check;
+pub mod param_load;
 pub mod params;
 pub mod plan;
 pub mod plan_action;
