@@ -21,14 +21,15 @@ use super::service::{self, OnFailure::Warn};
 use super::topics::{
     CLOCK_TOPIC, LIVE_ACCURACY_TOPIC, PLAN_SERVICE, REPLAY_SERVICE, STANDARD_DIAGNOSTICS_TOPIC,
 };
-use super::training::{self, Trainer, TrainingServers};
+use super::trainer::{Trainer, TrainingServers};
+use super::training_services;
 use super::wire::{ClockMsg, LoadModel, MarkerArray, Plan, Replay, Rollout, RosService, Train};
 use super::wire::{
     DiagnosticArray, LiveAccuracy, NodeDiagnostics, ParticleForces, PlanRequest, PlanResponse,
     PredictedTrajectory, ReplayRequest, ReplayResponse, RolloutRequest, RolloutResponse,
 };
 
-/// The node's own DDS endpoints (training's are in [`training::create`] and
+/// The node's own DDS endpoints (training's are in [`super::trainer::create`] and
 /// [`action::create`]).
 pub(super) struct Endpoints {
     input: Subscription<ParticleState>,
@@ -154,7 +155,7 @@ pub(super) fn spawn_training(
         train,
         Train::NAME,
         Quiet,
-        training::train_call,
+        training_services::train_call,
     ));
     tokio::spawn(service::serve(
         trainer.clone(),
@@ -162,7 +163,7 @@ pub(super) fn spawn_training(
         load,
         LoadModel::NAME,
         Quiet,
-        training::load_call,
+        training_services::load_call,
     ));
     action::spawn(trainer, action_server);
 }

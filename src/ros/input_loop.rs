@@ -13,12 +13,13 @@ use crate::data::msg::ParticleState;
 use crate::data::stream::Reset;
 
 use super::accuracy::{self, Level};
+use super::drift_retraining::retrain_on_drift;
 use super::handles::{Handles, Warning};
 use super::input::Accepted;
 use super::markers::prediction_markers;
 use super::params::NodeParams;
 use super::predict::{self, Prediction};
-use super::training::{self, Trainer};
+use super::trainer::Trainer;
 use super::wire::{LiveAccuracy, MarkerArray, ParticleForces, PredictedTrajectory};
 
 /// Checks, records and predicts one incoming state, and scores it against
@@ -189,7 +190,7 @@ pub(super) async fn input_loop(
                 let (trainer, why) = (trainer.clone(), why.clone());
                 tokio::task::spawn_blocking(move || {
                     // The outcome is logged by retrain_on_drift itself.
-                    let _ = training::retrain_on_drift(&trainer, &p, &why);
+                    let _ = retrain_on_drift(&trainer, &p, &why);
                 });
             }
         }

@@ -26,7 +26,7 @@ use super::names::{Names, RosArgs};
 use super::param_server::declare_parameters;
 use super::params::{NodeParams, NODE_NAME};
 use super::record::Recorder;
-use super::training::{self, TrainerHandles};
+use super::trainer::{self, TrainerHandles};
 
 /// The handles of a node serving `model`, logging through `node` at
 /// `log_level` and above.
@@ -89,7 +89,7 @@ pub fn serve(
         .map_err(|e| err!("creating the node: {e:?}"))?;
     let endpoints = Endpoints::create(&mut node, &params, &names)?;
     let h = handles(&node, (&params, &names, ros.log_level), live, model)?;
-    let (trainer, servers) = training::create(&mut node, &params, &names, trainer_handles(&h))?;
+    let (trainer, servers) = trainer::create(&mut node, &params, &names, trainer_handles(&h))?;
     let action_server = action::create(&mut node, &names)?;
     let plan_action = super::plan_action::create(&mut node, &names)?;
     let lifecycle = super::lifecycle_services::create(&mut node, &names)?;

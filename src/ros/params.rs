@@ -1,4 +1,4 @@
-//! The node's parameters, declared once in one table ([`node_params!`]): the
+//! The node's parameters, declared once in one table (`node_params!`): the
 //! [`NodeParams`] struct, its defaults, each parameter's [`Spec`] (kind,
 //! description, run-time flag), typed access by name, the parameter-file
 //! text of the values, and why parameters are refused ([`ParamError`]).
