@@ -21,7 +21,8 @@ use super::names::Names;
 
 use super::qos::reliable_qos;
 use super::topics::TRAIN_ACTION;
-use super::training::{claim, run_training, Claim, Trainer, BUSY};
+use super::trainer::{claim, Claim, Trainer, BUSY};
+use super::training::run_training;
 use super::wire::{
     RosAction, TrainAction, TrainFeedback, TrainGoal, TrainRequest, TrainResponse, TrainResult,
 };

@@ -4,7 +4,12 @@
 //! ros2-client (pure Rust DDS), interoperable with rclpy; see scripts/ros/
 //! for rclpy stand-ins of the ros2 CLI.
 //!
-//! - [`params`] (+ [`yaml`]): the ROS 2 parameter file and `--set` overrides;
+//! - [`params`] (+ [`yaml`]): the parameter table (`node_params!`: the
+//!   struct, defaults, kinds, descriptions, run-time flags) and why
+//!   parameters are refused; [`param_load`]: the ROS 2 parameter file,
+//!   `--set` overrides and `--ros-args`; [`param_check`]: checking one value
+//!   against its kind; [`param_server`]: the parameters as ROS parameters
+//!   (declarations, descriptions, run-time changes validated and applied);
 //! - [`wire`]: the wire structs of every interface, each with its ROS type
 //!   name, one file per family;
 //! - [`names`]: ROS 2 names and `--ros-args` as rcl reads them (namespace,
@@ -15,14 +20,22 @@
 //! - [`accuracy`]: live accuracy, comparing incoming states with what was
 //!   predicted for them, and the drift alarm (no DDS);
 //! - [`record`]: MCAP recording of states, predictions and forces;
+//! - [`markers`]: the MarkerArray of a prediction (RViz, Foxglove);
 //! - [`handles`]: what the tasks share: parameters, model, diagnostics,
 //!   recorder, each a handle of its own;
 //! - [`qos`]: QoS profiles, ROS names, and topics and servers created by
 //!   their wire type;
-//! - [`node`]: the DDS entities and the event loop; it wires the modules
-//!   below, none of which imports it;
-//! - [`training`]: the Train and LoadModel services, training in the
-//!   background and atomic model swaps announced on `/mcgnode/model_swap`;
+//! - [`node`]: the node's wiring (DDS participant, handles, endpoints,
+//!   tasks, shutdown); it wires the modules below, none of which imports it;
+//! - [`endpoints`]: the node's own topics and servers and the tasks that
+//!   serve them (services included); [`input_loop`]: each incoming state
+//!   predicted and published; [`diagnostics`]: the periodic diagnostics and
+//!   the start and shutdown reports;
+//! - [`trainer`]: what every training shares (the handles, one training at
+//!   a time, the errors); [`training`]: the training job; [`model_swap`]:
+//!   saving, loading and atomic model swaps announced on
+//!   `/mcgnode/model_swap`; [`training_services`]: the Train and LoadModel
+//!   services' work; [`drift_retraining`]: retraining after a drift alarm;
 //! - [`action`]: the Train action (per-epoch feedback, cancel), on top of
 //!   [`training`];
 //! - [`plan`]: the Plan service's work (search, refine, the plan's kinematic
@@ -40,13 +53,21 @@ pub mod accuracy;
 pub mod action;
 pub mod calls;
 pub mod clock;
+pub mod diagnostics;
+pub mod drift_retraining;
+pub mod endpoints;
 pub mod handles;
 pub mod input;
+pub mod input_loop;
 pub mod lifecycle;
 pub mod lifecycle_services;
 pub mod markers;
+pub mod model_swap;
 pub mod names;
 pub mod node;
+pub mod param_check;
+pub mod param_load;
+pub mod param_server;
 pub mod params;
 pub mod plan;
 pub mod plan_action;
@@ -55,7 +76,9 @@ pub mod qos;
 pub mod record;
 pub mod service;
 pub mod topics;
+pub mod trainer;
 pub mod training;
+pub mod training_services;
 pub mod wire;
 pub mod yaml;
 

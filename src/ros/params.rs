@@ -1,12 +1,14 @@
-//! The node's parameters: defaults, a ROS 2 parameter file
-//! (`mcgnode: ros__parameters: {...}`), then `--set key=value` overrides.
-//! Unknown keys and ill-typed or out-of-range values are rejected before the
-//! node starts, with a message naming the key, what was given and what is expected.
+//! The node's parameters, declared once in one table (`node_params!`): the
+//! [`NodeParams`] struct, its defaults, each parameter's [`Spec`] (kind,
+//! description, run-time flag), typed access by name, the parameter-file
+//! text of the values, and why parameters are refused ([`ParamError`]).
+//! Reading files and `--set` is in [`super::param_load`], checking one value
+//! in [`super::param_check`].
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use super::topics;
-use super::yaml::{self, Scalar, Value, YamlError};
+use super::yaml::YamlError;
 
 /// Why parameters were refused: each names the key, what was given and what
 /// is expected.
@@ -158,8 +160,8 @@ fn known_parameters() -> String {
     SPECS.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
 }
 
+use super::names::NameError;
 pub use super::names::NODE_NAME;
-use super::names::{is_ros_name, NameError, Names};
 
 /// One parameter in the table: its name, kind, description, and whether it
 /// can change while the node runs.
@@ -194,7 +196,7 @@ pub enum ParamValue<'a> {
 }
 
 /// Where a parameter's value lives, typed (for the setter).
-enum Slot<'a> {
+pub(super) enum Slot<'a> {
     Str(&'a mut String),
     Bool(&'a mut bool),
     Int(&'a mut u32),
@@ -281,7 +283,7 @@ macro_rules! node_params {
                 }
             }
 
-            fn slot(&mut self, key: &str) -> Option<Slot<'_>> {
+            pub(super) fn slot(&mut self, key: &str) -> Option<Slot<'_>> {
                 match key {
                     $(stringify!($name) => Some(Slot::from(&mut self.$name)),)*
                     _ => None,
@@ -460,291 +462,7 @@ pub enum Kind {
     Choice(&'static [&'static str]),
 }
 
-/// Keys of a parameter file section that are this node's, as rcl matches
-/// them: `/**`, `**`, `/**/NAME`, the node's name, and its fully qualified
-/// name with or without the leading slash; the default name too (the shipped
-/// files use `mcgnode:`).
-fn is_our_section(key: &str, names: &Names) -> bool {
-    let fqn = names.fqn();
-    matches!(key, "/**" | "**")
-        || key.trim_start_matches('/') == NODE_NAME
-        || key.trim_start_matches('/') == names.node()
-        || key.strip_prefix("/**/") == Some(names.node())
-        || key == fqn
-        || Some(key) == fqn.strip_prefix('/')
-}
-
-/// What a parameter file section for another node means.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Others {
-    /// An error (`--params`: the file is this node's).
-    Refuse,
-    /// Skipped (`--params-file`: one file may configure many nodes).
-    Skip,
-}
-
-fn read_file(path: &Path) -> Result<String, ParamError> {
-    std::fs::read_to_string(path).map_err(|source| ParamError::Read {
-        path: path.to_path_buf(),
-        source,
-    })
-}
-
 impl NodeParams {
-    /// Defaults, then the file (if any), then each `key=value` override in order.
-    pub fn load(file: Option<&Path>, overrides: &[String]) -> Result<NodeParams, ParamError> {
-        Self::load_with(file, overrides, &super::names::RosArgs::default())
-    }
-
-    /// [`NodeParams::load`], then what `--ros-args` says: each
-    /// `--params-file` in order (sections for other nodes skipped, as rcl
-    /// does; a file with none for this node is an error), then each `-p`.
-    pub fn load_with(
-        file: Option<&Path>,
-        overrides: &[String],
-        ros: &super::names::RosArgs,
-    ) -> Result<NodeParams, ParamError> {
-        let names = ros.names()?;
-        let mut p = NodeParams::default();
-        let in_file = |path: &Path, e: ParamError| ParamError::File {
-            path: path.to_path_buf(),
-            source: Box::new(e),
-        };
-        if let Some(path) = file {
-            p.apply_sections(&read_file(path)?, &names, Others::Refuse)
-                .map_err(|e| in_file(path, e))?;
-        }
-        for o in overrides {
-            p.apply_override(o)?;
-        }
-        for path in &ros.params_files {
-            let matched = p
-                .apply_sections(&read_file(path)?, &names, Others::Skip)
-                .map_err(|e| in_file(path, e))?;
-            if matched == 0 {
-                return Err(in_file(path, ParamError::NoSectionFor(names.fqn())));
-            }
-        }
-        for (key, value) in &ros.params {
-            p.set(key, &Scalar::parse_plain(value), true)
-                .map_err(|e| ParamError::Override {
-                    given: format!("-p {key}:={value}"),
-                    source: Box::new(e),
-                })?;
-        }
-        p.check_together()?;
-        Ok(p)
-    }
-
-    /// The topic and service parameters as absolute names, resolved for
-    /// `names` (namespace, node name, remaps) as rcl resolves them.
-    pub fn resolved(&self, names: &Names) -> Result<NodeParams, ParamError> {
-        let mut p = self.clone();
-        for name in [
-            &mut p.input_topic,
-            &mut p.trajectory_topic,
-            &mut p.forces_topic,
-            &mut p.diagnostics_topic,
-            &mut p.rollout_service,
-            &mut p.markers_topic,
-        ] {
-            *name = names.resolve(name)?;
-        }
-        Ok(p)
-    }
-
-    /// Checks what single parameters cannot: a poly smoother's window holds
-    /// at least `smoother_order + 2` states.
-    pub fn check_together(&self) -> Result<(), ParamError> {
-        crate::data::stream::Smoother::new(
-            &self.velocity_smoother,
-            self.smoother_window as usize,
-            self.smoother_order as usize,
-        )
-        .map(|_| ())
-        .map_err(|e| ParamError::Together(format!("smoother_window, smoother_order: {e}")))
-    }
-
-    /// Applies the contents of a ROS 2 parameter file.
-    pub fn apply_file_text(&mut self, text: &str) -> Result<(), ParamError> {
-        self.apply_sections(text, &Names::default(), Others::Refuse)
-            .map(|_| ())
-    }
-
-    /// Applies the sections of a parameter file that are this node's;
-    /// returns how many there were.
-    fn apply_sections(
-        &mut self,
-        text: &str,
-        names: &Names,
-        others: Others,
-    ) -> Result<usize, ParamError> {
-        let Value::Map(top) = yaml::parse(text)? else {
-            return Err(ParamError::NotAMapping);
-        };
-        if top.is_empty() {
-            return Err(ParamError::NoSection);
-        }
-        let mut matched = 0;
-        for (node, section) in &top {
-            if !is_our_section(node, names) {
-                if others == Others::Skip {
-                    continue;
-                }
-                return Err(ParamError::OtherNode(node.clone()));
-            }
-            matched += 1;
-            let Value::Map(entries) = section else {
-                return Err(ParamError::NoRosParameters(node.clone()));
-            };
-            for (k, v) in entries {
-                if k != "ros__parameters" {
-                    return Err(ParamError::UnexpectedKey {
-                        node: node.clone(),
-                        key: k.clone(),
-                    });
-                }
-                let mut flat = Vec::new();
-                flatten("", v, &mut flat);
-                for (key, value) in flat {
-                    self.set(&key, &value, false)?;
-                }
-            }
-        }
-        Ok(matched)
-    }
-
-    /// Applies one `key=value` command-line override.
-    pub fn apply_override(&mut self, kv: &str) -> Result<(), ParamError> {
-        let (k, v) = kv
-            .split_once('=')
-            .ok_or_else(|| ParamError::NotKeyValue(kv.to_string()))?;
-        self.set(k.trim(), &Scalar::parse_plain(v), true)
-            .map_err(|e| ParamError::Override {
-                given: kv.to_string(),
-                source: Box::new(e),
-            })
-    }
-
-    /// Sets one parameter, checking its name, type and range. Command-line
-    /// values for string parameters are taken as text whatever they look like.
-    pub fn set(&mut self, key: &str, value: &Scalar, from_cli: bool) -> Result<(), ParamError> {
-        let Some(kind) = spec(key).map(|s| s.kind) else {
-            return Err(ParamError::Unknown(key.to_string()));
-        };
-        let ill = |want: &str| ParamError::IllTyped {
-            key: key.to_string(),
-            want: want.to_string(),
-            got: format!("{} {value}", value.type_name()),
-        };
-        match kind {
-            Kind::Str | Kind::Topic => {
-                let s = match value {
-                    Scalar::Str(s) => s.clone(),
-                    Scalar::Null if kind == Kind::Str => String::new(),
-                    Scalar::Bool(_) | Scalar::Int(_) | Scalar::Float(_) if from_cli => {
-                        value.to_string()
-                    }
-                    _ => return Err(ill("a string")),
-                };
-                if kind == Kind::Topic && !is_ros_name(&s) {
-                    return Err(ParamError::BadName {
-                        key: key.to_string(),
-                        name: s,
-                    });
-                }
-                self.put(key, Put::Str(s));
-            }
-            Kind::Choice(words) => {
-                let Scalar::Str(w) = value else {
-                    return Err(ill(&format!("one of {}", words.join(", "))));
-                };
-                if !words.contains(&w.as_str()) {
-                    return Err(ill(&format!("one of {}", words.join(", "))));
-                }
-                self.put(key, Put::Str(w.clone()));
-            }
-            Kind::Bool => match value {
-                Scalar::Bool(b) => self.put(key, Put::Bool(*b)),
-                _ => return Err(ill("true or false")),
-            },
-            Kind::Int(lo, hi) => {
-                let Scalar::Int(i) = value else {
-                    return Err(ill(&format!("an integer in {lo}..={hi}")));
-                };
-                let v = u32::try_from(*i)
-                    .ok()
-                    .filter(|v| (lo..=hi).contains(v))
-                    .ok_or_else(|| ParamError::OutOfRange {
-                        key: key.to_string(),
-                        value: *i,
-                        lo,
-                        hi,
-                    })?;
-                self.put(key, Put::Int(v));
-            }
-            Kind::Double(positive) => {
-                let x = match value {
-                    Scalar::Float(x) => *x,
-                    Scalar::Int(i) => *i as f64,
-                    _ => return Err(ill("a number")),
-                };
-                let ok = x.is_finite() && if positive { x > 0.0 } else { x >= 0.0 };
-                if !ok {
-                    let want = if positive { "> 0" } else { ">= 0" };
-                    return Err(ParamError::NotPositive {
-                        key: key.to_string(),
-                        value: x,
-                        want,
-                    });
-                }
-                self.put(key, Put::Double(x));
-            }
-            Kind::Doubles(max) => {
-                let Scalar::List(items) = value else {
-                    return Err(ill(&format!("a list of at most {max} numbers > 0")));
-                };
-                if items.len() > max {
-                    return Err(ParamError::TooLong {
-                        key: key.to_string(),
-                        len: items.len(),
-                        max,
-                    });
-                }
-                let mut xs = Vec::with_capacity(items.len());
-                for item in items {
-                    let x = match item {
-                        Scalar::Float(x) => *x,
-                        Scalar::Int(i) => *i as f64,
-                        _ => return Err(ill(&format!("a list of at most {max} numbers > 0"))),
-                    };
-                    if !(x.is_finite() && x > 0.0) {
-                        return Err(ParamError::BadEntry {
-                            key: key.to_string(),
-                            value: x,
-                        });
-                    }
-                    xs.push(x);
-                }
-                self.put(key, Put::Doubles(xs));
-            }
-        }
-        Ok(())
-    }
-
-    /// Stores a checked value through its typed slot; the kind in [`SPECS`]
-    /// and the field's type agree (tested over the whole table).
-    fn put(&mut self, key: &str, value: Put) {
-        match (self.slot(key), value) {
-            (Some(Slot::Str(x)), Put::Str(v)) => *x = v,
-            (Some(Slot::Bool(x)), Put::Bool(v)) => *x = v,
-            (Some(Slot::Int(x)), Put::Int(v)) => *x = v,
-            (Some(Slot::Double(x)), Put::Double(v)) => *x = v,
-            (Some(Slot::Doubles(x)), Put::Doubles(v)) => *x = v,
-            _ => unreachable_key(key),
-        }
-    }
-
     /// The parameters as a ROS 2 parameter file (what `serve --print-params` prints).
     pub fn to_yaml(&self) -> String {
         let mut s = format!("{NODE_NAME}:\n  ros__parameters:\n");
@@ -783,15 +501,6 @@ impl NodeParams {
     }
 }
 
-/// A checked value on its way into its field.
-enum Put {
-    Str(String),
-    Bool(bool),
-    Int(u32),
-    Double(f64),
-    Doubles(Vec<f64>),
-}
-
 /// The table's entry for `key`.
 pub fn spec(key: &str) -> Option<&'static Spec> {
     SPECS.iter().find(|s| s.name == key)
@@ -807,69 +516,9 @@ pub fn runtime_settable_names() -> Vec<&'static str> {
     SPECS.iter().filter(|s| s.runtime).map(|s| s.name).collect()
 }
 
-/// A kind in SPECS that does not fit its field's type is a bug caught by the
-/// tests, and must not panic a running node.
-fn unreachable_key(key: &str) {
-    debug_assert!(false, "parameter {key}: its kind does not fit its field");
-}
-
-/// Nested mappings under `ros__parameters` become dotted names, as in ROS 2.
-fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Scalar)>) {
-    match v {
-        Value::Scalar(s) => out.push((prefix.to_string(), s.clone())),
-        Value::Map(m) => {
-            for (k, v) in m {
-                let key = if prefix.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{prefix}.{k}")
-                };
-                flatten(&key, v, out);
-            }
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn file_then_overrides() {
-        let mut p = NodeParams::default();
-        p.apply_file_text(
-            "mcgnode:\n  ros__parameters:\n    model: truth:pendulum\n    horizon: 20\n    \
-             dt: 1\n    qos_reliable: false\n    input_topic: /robot/state\n",
-        )
-        .unwrap();
-        assert_eq!(p.model, "truth:pendulum");
-        assert_eq!(p.horizon, 20);
-        assert_eq!(p.dt, 1.0);
-        assert!(!p.qos_reliable);
-        assert_eq!(p.input_topic, "/robot/state");
-        p.apply_override("horizon=7").unwrap();
-        p.apply_override("record_dir=123").unwrap();
-        assert_eq!(p.horizon, 7);
-        assert_eq!(p.record_dir, "123");
-    }
-
-    #[test]
-    fn every_spec_round_trips_through_to_yaml() {
-        let mut p = NodeParams {
-            horizon: 3,
-            dt: 0.25,
-            record_dir: "/tmp/x".into(),
-            accuracy_lead_times: vec![0.1, 0.5, 1.0],
-            accuracy_warn_re: 0.02,
-            accuracy_retrain: true,
-            accuracy_retrain_epochs: 7,
-            ..NodeParams::default()
-        };
-        p.qos_reliable = false;
-        let mut q = NodeParams::default();
-        q.apply_file_text(&p.to_yaml()).unwrap();
-        assert_eq!(p, q);
-    }
 
     /// Each kind in the table fits its field's type, so `set` stores every
     /// checked value (a mismatch would be dropped by `put`).
@@ -892,184 +541,5 @@ mod tests {
         assert!(p.value("horizn").is_none());
         let names: std::collections::BTreeSet<_> = SPECS.iter().map(|s| s.name).collect();
         assert_eq!(names.len(), SPECS.len(), "a name twice in the table");
-    }
-
-    /// Setting one bool changes that parameter and no other.
-    #[test]
-    fn each_bool_sets_only_itself() {
-        let d = NodeParams::default();
-        for Spec {
-            name: key, kind, ..
-        } in SPECS
-        {
-            if *kind != Kind::Bool {
-                continue;
-            }
-            let flipped = d.raw_value(key) != "true";
-            let mut p = d.clone();
-            p.set(key, &Scalar::Bool(flipped), false).unwrap();
-            assert_eq!(p.raw_value(key), flipped.to_string(), "{key}");
-            for other in SPECS.iter().map(|s| s.name).filter(|k| k != key) {
-                assert_eq!(
-                    p.raw_value(other),
-                    d.raw_value(other),
-                    "{key} changed {other}"
-                );
-            }
-        }
-    }
-
-    #[test]
-    fn rejects_unknown_ill_typed_and_out_of_range() {
-        for (text, want) in [
-            (
-                "mcgnode:\n  ros__parameters:\n    horizn: 5\n",
-                "unknown parameter \"horizn\"",
-            ),
-            (
-                "mcgnode:\n  ros__parameters:\n    horizon: 2.5\n",
-                "must be an integer",
-            ),
-            (
-                "mcgnode:\n  ros__parameters:\n    horizon: 0\n",
-                "outside 1..=",
-            ),
-            (
-                "mcgnode:\n  ros__parameters:\n    dt: fast\n",
-                "must be a number",
-            ),
-            (
-                "mcgnode:\n  ros__parameters:\n    dt: -1\n",
-                "must be finite and > 0",
-            ),
-            (
-                "mcgnode:\n  ros__parameters:\n    qos_reliable: 1\n",
-                "true or false",
-            ),
-            (
-                "mcgnode:\n  ros__parameters:\n    model: 5\n",
-                "must be a string",
-            ),
-            (
-                "mcgnode:\n  ros__parameters:\n    input_topic: x y\n",
-                "is not a ROS 2 name",
-            ),
-            ("other:\n  ros__parameters:\n    dt: 1.0\n", "another node"),
-            ("mcgnode:\n  params:\n    dt: 1.0\n", "only ros__parameters"),
-            (
-                "mcgnode:\n  ros__parameters:\n    a:\n      b: 1\n",
-                "unknown parameter \"a.b\"",
-            ),
-        ] {
-            let e = NodeParams::default()
-                .apply_file_text(text)
-                .unwrap_err()
-                .to_string();
-            assert!(e.contains(want), "{text:?}: {e}");
-        }
-        for (set, want) in [
-            ("accuracy_lead_times=0.5", "must be a list"),
-            (
-                "accuracy_lead_times=[0.1, -1]",
-                "entry -1 must be finite and > 0",
-            ),
-            ("accuracy_lead_times=[0.1, x]", "must be a list"),
-        ] {
-            let e = NodeParams::default()
-                .apply_override(set)
-                .unwrap_err()
-                .to_string();
-            assert!(e.contains(want), "{set}: {e}");
-        }
-        let mut p = NodeParams::default();
-        p.apply_override("accuracy_lead_times=[0.1, 1]").unwrap();
-        assert_eq!(p.accuracy_lead_times, vec![0.1, 1.0]);
-        let e = NodeParams::default()
-            .apply_override("horizon")
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("key=value"), "{e}");
-        let e = NodeParams::default()
-            .apply_override("nope=1")
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("unknown parameter"), "{e}");
-    }
-
-    #[test]
-    fn wildcard_and_slashed_sections_are_ours() {
-        for head in ["/**", "/mcgnode", "mcgnode"] {
-            let mut p = NodeParams::default();
-            p.apply_file_text(&format!("{head}:\n  ros__parameters:\n    horizon: 9\n"))
-                .unwrap();
-            assert_eq!(p.horizon, 9, "{head}");
-        }
-    }
-
-    #[test]
-    fn ros_args_params_files_and_p_apply_in_order() {
-        use super::super::names::RosArgs;
-        let dir = tempfile::tempdir().unwrap();
-        let fleet = dir.path().join("fleet.yaml");
-        std::fs::write(
-            &fleet,
-            "/robot1/mcgnode:\n  ros__parameters:\n    horizon: 7\n\
-             /robot2/mcgnode:\n  ros__parameters:\n    horizon: 9\n\
-             /**:\n  ros__parameters:\n    dt: 0.5\n",
-        )
-        .unwrap();
-        let only1 = dir.path().join("only1.yaml");
-        std::fs::write(
-            &only1,
-            "/robot1/mcgnode:\n  ros__parameters:\n    horizon: 7\n",
-        )
-        .unwrap();
-        let load = |args: &[&str]| {
-            let args: Vec<String> = args.iter().map(|a| (*a).to_string()).collect();
-            NodeParams::load_with(None, &["horizon=3".into()], &RosArgs::parse(&args).unwrap())
-        };
-        let f = fleet.to_str().unwrap();
-        let p = load(&["-r", "__ns:=/robot2", "--params-file", f, "-p", "dt:=0.25"]).unwrap();
-        assert_eq!(
-            (p.horizon, p.dt),
-            (9, 0.25),
-            "file over --set, -p over the file"
-        );
-        let p = load(&["-r", "__ns:=/robot3", "--params-file", f]).unwrap();
-        assert_eq!(
-            (p.horizon, p.dt),
-            (3, 0.5),
-            "only /** is for /robot3/mcgnode"
-        );
-        let e = load(&[
-            "-r",
-            "__ns:=/robot3",
-            "--params-file",
-            only1.to_str().unwrap(),
-        ])
-        .unwrap_err()
-        .to_string();
-        assert!(
-            e.contains("no section for this node (/robot3/mcgnode)"),
-            "{e}"
-        );
-        let e = load(&["-p", "nope:=1"]).unwrap_err().to_string();
-        assert!(
-            e.contains("-p nope:=1") && e.contains("unknown parameter"),
-            "{e}"
-        );
-        // Names resolve for the node's namespace.
-        let names = RosArgs::parse(&["-r".into(), "__ns:=/robot2".into()])
-            .unwrap()
-            .names()
-            .unwrap();
-        let r = NodeParams::default().resolved(&names).unwrap();
-        assert_eq!(r.input_topic, "/robot2/particle_state");
-        assert_eq!(r.rollout_service, "/robot2/mcgnode/rollout");
-        let d = NodeParams::default().resolved(&Names::default()).unwrap();
-        assert_eq!(
-            d.trajectory_topic, "/mcgnode/predicted_trajectory",
-            "unchanged by default"
-        );
     }
 }

@@ -8,7 +8,10 @@ use super::wire::{PlanRequest, PlanResponse};
 use crate::data::msg::{Point, Vector3};
 use crate::dynamics::Dynamics;
 use crate::physics::Drive;
-use crate::plan::{plan, refine, Controls, Cost, CostKind, Iteration, Problem, Sampler, Timing};
+use crate::plan::{
+    plan, refine, Controls, Cost, CostKind, Iteration, Plan, Problem, Sampler, Timing,
+};
+use crate::system::{Graph, State};
 
 /// Why a Plan or Rollout request is refused: the message names the fix.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -127,6 +130,43 @@ fn answer(
     s: &PlanSettings,
     on_round: &mut dyn FnMut(&Iteration) -> bool,
 ) -> Result<PlanResponse, Refused> {
+    let (graph, start, horizon, kind) = checked(model, req, s)?;
+    let d = graph.dim;
+    let sub = s.substeps.max(1);
+    let started = std::time::Instant::now();
+    let problem = Problem {
+        model,
+        graph: &graph,
+        start: &start,
+        timing: Timing {
+            dt: s.dt / f64::from(sub),
+            substeps: sub as usize,
+        },
+        horizon: horizon as usize,
+        cost: cost(req, kind, d),
+        max_speed: if req.max_speed == 0.0 {
+            2.0
+        } else {
+            req.max_speed
+        },
+    };
+    let (p, refined) = search(&problem, req, on_round)?;
+    let seconds = if refined.is_empty() {
+        p.seconds
+    } else {
+        started.elapsed().as_secs_f64()
+    };
+    respond(&problem, req, s, p, (&refined, seconds))
+}
+
+/// The request checked before any work, in this order: refine steps, state
+/// size, the model taking its graph, horizon, one target per particle, cost
+/// kind. Gives the graph, the start, the horizon and the cost kind.
+fn checked(
+    model: &dyn Dynamics,
+    req: &PlanRequest,
+    s: &PlanSettings,
+) -> Result<(Graph, State, u32, CostKind), Refused> {
     let no = |e: &dyn std::fmt::Display| Refused(e.to_string());
     if req.refine > MAX_REFINE {
         return Err(Refused(format!(
@@ -136,7 +176,6 @@ fn answer(
     }
     predict::check_size(&req.initial, s.max_particles).map_err(|e| no(&e))?;
     let (graph, start) = predict::accept(model, &req.initial).map_err(|e| no(&e))?;
-    let d = graph.dim;
     let horizon = if req.horizon == 0 {
         s.horizon
     } else {
@@ -164,38 +203,37 @@ fn answer(
             )))
         }
     };
-    let sub = s.substeps.max(1);
-    let started = std::time::Instant::now();
-    let problem = Problem {
-        model,
-        graph: &graph,
-        start: &start,
-        timing: Timing {
-            dt: s.dt / f64::from(sub),
-            substeps: sub as usize,
-        },
-        horizon: horizon as usize,
-        cost: Cost {
-            kind,
-            particles: req.particles.iter().map(|&p| p as usize).collect(),
-            targets: req
-                .targets
-                .iter()
-                .flat_map(|p| [p.x, p.y, p.z].into_iter().take(d))
-                .collect(),
-            effort: req.effort,
-            speed: req.speed,
-        },
-        max_speed: if req.max_speed == 0.0 {
-            2.0
-        } else {
-            req.max_speed
-        },
-    };
-    let mut p = plan(&problem, sampler(req)?, None, req.seed, on_round).map_err(|e| no(&e))?;
+    Ok((graph, start, horizon, kind))
+}
+
+/// The cost a request asks for, its targets in `d` dimensions.
+fn cost(req: &PlanRequest, kind: CostKind, d: usize) -> Cost {
+    Cost {
+        kind,
+        particles: req.particles.iter().map(|&p| p as usize).collect(),
+        targets: req
+            .targets
+            .iter()
+            .flat_map(|p| [p.x, p.y, p.z].into_iter().take(d))
+            .collect(),
+        effort: req.effort,
+        speed: req.speed,
+    }
+}
+
+/// The search the request asks for, then its gradient refinement when it
+/// asks for one (and the search found a finite cost); with what the
+/// refinement says for the message ("" without one).
+fn search(
+    problem: &Problem,
+    req: &PlanRequest,
+    on_round: &mut dyn FnMut(&Iteration) -> bool,
+) -> Result<(Plan, String), Refused> {
+    let no = |e: &dyn std::fmt::Display| Refused(e.to_string());
+    let mut p = plan(problem, sampler(req)?, None, req.seed, on_round).map_err(|e| no(&e))?;
     let mut refined = String::new();
     if req.refine > 0 && p.cost.is_finite() {
-        let r = refine(&problem, &p.best, req.refine as usize).map_err(|e| no(&e))?;
+        let r = refine(problem, &p.best, req.refine as usize).map_err(|e| no(&e))?;
         refined = format!(
             "; refined by {} gradient steps from {:.4e}",
             r.steps.len(),
@@ -203,16 +241,25 @@ fn answer(
         );
         (p.best, p.cost, p.predicted) = (r.best, r.cost, r.predicted);
     }
-    let seconds = if refined.is_empty() {
-        p.seconds
-    } else {
-        started.elapsed().as_secs_f64()
-    };
+    Ok((p, refined))
+}
+
+/// The answer for plan `p`: its best sequence, the kinematic motion it
+/// gives, its predicted trajectory and the cost of holding still.
+fn respond(
+    problem: &Problem,
+    req: &PlanRequest,
+    s: &PlanSettings,
+    p: Plan,
+    (refined, seconds): (&str, f64),
+) -> Result<PlanResponse, Refused> {
+    let no = |e: &dyn std::fmt::Display| Refused(e.to_string());
+    let d = problem.graph.dim;
     let still = problem
         .cost_of(&Controls::zeros(problem.horizon, problem.width()))
         .map_err(|e| no(&e))?;
     let driven = problem.driven();
-    let drive = p.best.drive(&driven, d, &start, problem.timing);
+    let drive = p.best.drive(&driven, d, problem.start, problem.timing);
     let (kinematic_positions, kinematic_velocities) = motion(&drive);
     let best = p
         .best
@@ -235,7 +282,7 @@ fn answer(
         best,
         kinematic_positions,
         kinematic_velocities,
-        trajectory: predict::trajectory_of(&req.initial, &graph, s.dt, &p.predicted[1..]),
+        trajectory: predict::trajectory_of(&req.initial, problem.graph, s.dt, &p.predicted[1..]),
         costs: p.costs,
         seconds,
     })

@@ -1,301 +1,31 @@
-//! Retraining and model swaps: the Train and LoadModel services, the swap
-//! announcement on `/mcgnode/model_swap`, and the training job shared with the
-//! Train action ([`super::action`]).
+//! The training job, shared by the Train service
+//! ([`super::training_services`]) and the Train action ([`super::action`]):
+//! a request checked, the bags chosen, the model trained (or fine-tuned),
+//! then saved and swapped in ([`super::model_swap`]).
 //!
 //! Training runs on a thread of its own (tokio's blocking pool) while the node
 //! keeps predicting with the old model. Only when training succeeds is the new
-//! model saved (atomically) to the model folder and swapped in under the
-//! model's write lock, which in-flight predictions never wait on for long: they
-//! clone the `Arc` and predict outside the lock. A failed, refused or cancelled
-//! training leaves the old model in place and says why (response and log).
-//!
-//! The Train service call returns when training has ended (its response holds
-//! the model path and losses; epochs bound how long that takes): callers that
-//! want progress or cancel use the action. One training at a time: a second
-//! request, by service or action, is refused at once.
-//!
-//! Models go to [`model_dir`]: `<record_dir>/models` when the node records,
-//! else `<temp dir>/mcgnode-models`.
-//!
-//! With `accuracy_retrain`, a drift alarm starts [`retrain_on_drift`]: a
-//! warm start of the served model on what is recorded next, swapped in only
-//! if it beats the old model on a held-out recording.
-//!
-//! A [`Trainer`] holds only the handles training needs (model, recorder,
-//! diagnostics, clock); the Train action ([`super::action`]) builds on it, and
-//! the node wires both, so neither imports the node.
+//! model saved and swapped in. A failed, refused or cancelled training leaves
+//! the old model in place and says why (response and log). One training at a
+//! time: a second request, by service or action, is refused at once
+//! ([`super::trainer::claim`]).
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::Arc;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
 
 use ros2_client::log::LogLevel;
-use ros2_client::{Node, Publisher, Server};
 
-use crate::data::msg::{Header, Time};
-use crate::dynamics::Dynamics;
-use crate::kernel::TrainedModel;
 use crate::model::{ModelFile, Variant};
-use crate::models::{train_from_bags, ModelKind, ModelRef};
+use crate::models::{train_from_bags, ModelKind};
 use crate::train::{Auto, EpochReport, ModelOptions, Recipe, TrainConfig};
 
-use super::clock::Clock;
-use super::handles::{Diagnostics, ModelHandle, RecorderHandle};
-use super::names::Names;
-use super::params::NodeParams;
-use super::qos::{publisher, reliable_qos, server};
-use super::topics::{LOAD_MODEL_SERVICE, MODEL_SWAP_TOPIC, TRAIN_SERVICE};
-use super::wire::{
-    LoadModel, LoadModelRequest, LoadModelResponse, ModelSwap, Train, TrainRequest, TrainResponse,
-};
+use super::model_swap::{save_and_load, swap};
+use super::trainer::{Trainer, TrainingError};
+use super::wire::{TrainRequest, TrainResponse};
 
 /// Variant trained when a request leaves it empty.
 pub const DEFAULT_VARIANT: Variant = Variant::Mcgnode;
-
-/// Training state and the handles it needs, shared by the Train and
-/// LoadModel services and the Train action.
-pub struct Trainer {
-    /// The model to replace.
-    model: Arc<ModelHandle>,
-    /// The recordings trained on when a request names no bags.
-    recorder: Arc<RecorderHandle>,
-    /// The log.
-    diag: Arc<Diagnostics>,
-    /// Stamps swap announcements.
-    clock: Arc<Clock>,
-    /// Set while a training runs (service or action).
-    busy: AtomicBool,
-    /// Announces swaps.
-    swap: Publisher<ModelSwap>,
-    /// Where trained models are written.
-    model_dir: PathBuf,
-    /// Numbers model files written by this process.
-    seq: AtomicU64,
-}
-
-/// The Train and LoadModel servers, for [`super::service::serve`] with
-/// [`train_call`] and [`load_call`].
-pub struct TrainingServers {
-    /// The Train service.
-    pub train: Server<TrainRequest, TrainResponse>,
-    /// The LoadModel service.
-    pub load: Server<LoadModelRequest, LoadModelResponse>,
-}
-
-/// Where trained models go: `<record_dir>/models`, or
-/// `<temp dir>/mcgnode-models` when the node does not record.
-pub fn model_dir(params: &NodeParams) -> PathBuf {
-    if !params.model_dir.is_empty() {
-        PathBuf::from(&params.model_dir)
-    } else if params.record_dir.is_empty() {
-        std::env::temp_dir().join("mcgnode-models")
-    } else {
-        Path::new(&params.record_dir).join("models")
-    }
-}
-
-/// The handles a [`Trainer`] works with.
-pub struct TrainerHandles {
-    /// The model to replace.
-    pub model: Arc<ModelHandle>,
-    /// The recordings trained on when a request names no bags.
-    pub recorder: Arc<RecorderHandle>,
-    /// The log.
-    pub diag: Arc<Diagnostics>,
-    /// Stamps swap announcements.
-    pub clock: Arc<Clock>,
-}
-
-/// Creates the swap publisher and the Train and LoadModel servers.
-pub fn create(
-    node: &mut Node,
-    params: &NodeParams,
-    names: &Names,
-    handles: TrainerHandles,
-) -> crate::error::Result<(Arc<Trainer>, TrainingServers)> {
-    let swap = publisher(node, names, MODEL_SWAP_TOPIC, &reliable_qos())?;
-    let train = server::<Train>(node, names, TRAIN_SERVICE)?;
-    let load = server::<LoadModel>(node, names, LOAD_MODEL_SERVICE)?;
-    let TrainerHandles {
-        model,
-        recorder,
-        diag,
-        clock,
-    } = handles;
-    let trainer = Trainer {
-        model,
-        recorder,
-        diag,
-        clock,
-        busy: AtomicBool::new(false),
-        swap,
-        model_dir: model_dir(params),
-        seq: AtomicU64::new(0),
-    };
-    trainer.log(
-        LogLevel::Info,
-        &format!(
-            "services {}, {}; swaps announced on {}; trained models go to {}",
-            names.resolve(TRAIN_SERVICE)?,
-            names.resolve(LOAD_MODEL_SERVICE)?,
-            names.resolve(MODEL_SWAP_TOPIC)?,
-            trainer.model_dir.display()
-        ),
-    );
-    Ok((Arc::new(trainer), TrainingServers { train, load }))
-}
-
-impl Trainer {
-    /// Logs through the node's log.
-    pub fn log(&self, level: LogLevel, msg: &str) {
-        self.diag.log(level, msg);
-    }
-
-    /// The node's diagnostics (for the service loop's failure reports).
-    pub fn diagnostics(&self) -> Arc<Diagnostics> {
-        self.diag.clone()
-    }
-}
-
-/// The right to train, held for the training's duration; released on drop.
-pub struct Claim(Arc<Trainer>);
-
-impl Drop for Claim {
-    fn drop(&mut self) {
-        self.0.busy.store(false, Ordering::Release);
-    }
-}
-
-/// The right to train, or `None` while another training runs.
-pub fn claim(trainer: &Arc<Trainer>) -> Option<Claim> {
-    trainer
-        .busy
-        .compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire)
-        .is_ok()
-        .then(|| Claim(trainer.clone()))
-}
-
-/// Why a training (requested, or after a drift alarm) was refused or failed;
-/// the message goes to the caller's reply and the log.
-#[derive(Debug, thiserror::Error)]
-pub enum TrainingError {
-    /// Another training runs.
-    #[error("refused: a training is already running (one at a time)")]
-    Busy,
-    /// The request names no known variant.
-    #[error(transparent)]
-    Variant(#[from] crate::names::UnknownName),
-    /// The request asks for no epochs.
-    #[error("epochs must be at least 1")]
-    NoEpochs,
-    /// A requested bag is not there.
-    #[error("bag {0:?} does not exist or is not a file")]
-    MissingBag(String),
-    /// No bags given and no recording to train on.
-    #[error("the node records nothing (set record_dir to train on what it sees)")]
-    NoRecording,
-    /// No bags given and nothing recorded yet.
-    #[error("the node has recorded nothing yet in {}", .0.display())]
-    NothingRecorded(PathBuf),
-    /// Closing the recording failed.
-    #[error(transparent)]
-    Record(#[from] super::record::RecordError),
-    /// The served model has no file to start from.
-    #[error("the served model ({0}) is not a model file")]
-    NotAFile(String),
-    /// The served model's file does not read back.
-    #[error("cannot read the served model {}: {source}", path.display())]
-    ReadServed {
-        /// Its file.
-        path: PathBuf,
-        /// Why.
-        source: crate::model::file::ModelFileError,
-    },
-    /// A fine-tuning request names another variant than the served one.
-    #[error(
-        "the served model is {served}, the request asks for {requested}; leave variant empty to \
-         fine-tune it"
-    )]
-    OtherVariant {
-        /// The served model's variant.
-        served: Variant,
-        /// The request's.
-        requested: String,
-    },
-    /// Training failed.
-    #[error("training failed: {0:#}")]
-    Train(crate::error::Error),
-    /// The trained model does not save.
-    #[error("saving the model failed: {0:#}")]
-    Save(crate::error::Error),
-    /// The trained model does not load back.
-    #[error("the trained model does not load: {0:#}")]
-    Load(crate::error::Error),
-    /// The held-out bag does not replay.
-    #[error("replaying the held-out bag {bag} failed: {source:#}")]
-    Replay {
-        /// The bag.
-        bag: String,
-        /// Why.
-        source: crate::error::Error,
-    },
-    /// Too few bags recorded after a drift alarm.
-    #[error(
-        "{recorded} bag(s) recorded in the {after} s after the alarm; need 2 (the last is held \
-         out): set record_split_seconds below accuracy_retrain_after"
-    )]
-    TooFewBags {
-        /// Bags recorded.
-        recorded: usize,
-        /// `accuracy_retrain_after`, seconds.
-        after: f64,
-    },
-}
-
-crate::error::typed_errors!(TrainingError);
-
-/// Why a second training is refused.
-pub const BUSY: TrainingError = TrainingError::Busy;
-
-/// Replaces the served model, announces it on the swap topic and in the log;
-/// returns how long the write lock was held.
-pub fn swap(
-    shared: &Trainer,
-    model: Arc<dyn Dynamics>,
-    file: Option<PathBuf>,
-    reason: &str,
-) -> Duration {
-    let new_model = model.describe();
-    let (old, locked) = shared.model.replace(model, file);
-    // Bags recorded from now on (and the open one) name the new model.
-    shared.recorder.record(|r| r.set_model(&new_model));
-    let msg = ModelSwap {
-        header: Header {
-            stamp: Time::from_nanos(shared.clock.now_ns()),
-            frame_id: String::new(),
-        },
-        old_model: old.describe(),
-        new_model: new_model.clone(),
-        reason: reason.to_string(),
-    };
-    let published = shared.swap.publish(msg);
-    shared.log(
-        LogLevel::Info,
-        &format!(
-            "model swapped ({:.1} µs under the lock): now serving {new_model} (was {}); {reason}",
-            locked.as_secs_f64() * 1e6,
-            old.describe()
-        ),
-    );
-    if let Err(e) = published {
-        shared.log(
-            LogLevel::Warn,
-            &format!("announcing the model swap on {MODEL_SWAP_TOPIC} failed: {e:?}"),
-        );
-    }
-    locked
-}
 
 /// The variant of a request: empty means [`DEFAULT_VARIANT`].
 pub fn request_variant(variant: &str) -> Result<Variant, TrainingError> {
@@ -316,11 +46,6 @@ pub fn check_request(req: &TrainRequest) -> Result<Variant, TrainingError> {
         return Err(TrainingError::MissingBag(missing.clone()));
     }
     Ok(variant)
-}
-
-/// File name of the `seq`-th model trained by this process.
-pub fn model_file_name(variant: Variant, unix_secs: u64, pid: u32, seq: u64) -> String {
-    format!("{variant}-{unix_secs}-{pid}-{seq}.json")
 }
 
 /// The bags to train on: the request's, or this run's recordings (the open
@@ -346,51 +71,117 @@ pub fn run_training(
     shared: &Trainer,
     req: &TrainRequest,
     cancel: &AtomicBool,
-    mut progress: impl FnMut(&EpochReport),
+    progress: impl FnMut(&EpochReport),
     source: &str,
 ) -> TrainResponse {
     let start = Instant::now();
-    let log = |level, msg: &str| shared.log(level, &format!("{source}: {msg}"));
-    let fail = |why: String| {
-        let message = format!("{why}; still serving {}", shared.model.get().describe());
-        log(LogLevel::Warn, &message);
+    let job = Job { shared, source };
+    let what = match prepare(&job, req) {
+        Ok(x) => x,
+        Err(failed) => return failed,
+    };
+    let variant = what.variant;
+    let file = match train(&job, req, what, cancel, progress) {
+        Ok(f) => f,
+        Err(failed) => return failed,
+    };
+    // A cancel after the last epoch still wins: nothing is swapped.
+    if cancel.load(Ordering::Acquire) {
+        return job.fail("training cancelled after its last epoch".into());
+    }
+    swap_in(&job, file, variant, start)
+}
+
+/// One training and who asked for it (`source`, named in its messages).
+struct Job<'a> {
+    shared: &'a Trainer,
+    source: &'a str,
+}
+
+impl Job<'_> {
+    /// Logs `msg` under the caller's name.
+    fn log(&self, level: LogLevel, msg: &str) {
+        self.shared.log(level, &format!("{}: {msg}", self.source));
+    }
+
+    /// The answer of a training that did not happen or failed, logged: the
+    /// old model stays.
+    fn fail(&self, why: String) -> TrainResponse {
+        let message = format!(
+            "{why}; still serving {}",
+            self.shared.model.get().describe()
+        );
+        self.log(LogLevel::Warn, &message);
         TrainResponse {
             success: false,
             message,
             ..TrainResponse::default()
         }
-    };
+    }
+}
+
+/// What a request trains.
+struct Prepared {
+    variant: Variant,
+    /// The served file a fine-tuning starts from.
+    init: Option<Box<ModelFile>>,
+    bags: Vec<PathBuf>,
+}
+
+/// What a request trains, checked; `Err`: the failed answer.
+fn prepare(job: &Job, req: &TrainRequest) -> Result<Prepared, TrainResponse> {
     let variant = match check_request(req) {
         Ok(v) => v,
-        Err(e) => return fail(format!("bad request: {e}")),
+        Err(e) => return Err(job.fail(format!("bad request: {e}"))),
     };
     let (variant, init) = if req.fine_tune {
-        match fine_tune_start(shared, &req.variant) {
+        match fine_tune_start(job.shared, &req.variant) {
             Ok((v, f, path)) => {
-                log(
+                job.log(
                     LogLevel::Info,
                     &format!("fine-tuning the served model {}", path.display()),
                 );
                 (v, Some(Box::new(f)))
             }
             Err(e @ (TrainingError::NotAFile(_) | TrainingError::ReadServed { .. })) => {
-                return fail(format!(
+                return Err(job.fail(format!(
                     "cannot fine-tune: {e} (load one with LoadModel, or train without fine_tune)"
-                ))
+                )))
             }
-            Err(e) => return fail(format!("cannot fine-tune: {e}")),
+            Err(e) => return Err(job.fail(format!("cannot fine-tune: {e}"))),
         }
     } else {
         (variant, None)
     };
-    let bags = match training_bags(shared, &req.bags) {
+    let bags = match training_bags(job.shared, &req.bags) {
         Ok(b) => b,
         Err(e @ (TrainingError::NoRecording | TrainingError::NothingRecorded(_))) => {
-            return fail(format!("no bags given and {e}"))
+            return Err(job.fail(format!("no bags given and {e}")))
         }
-        Err(e) => return fail(e.to_string()),
+        Err(e) => return Err(job.fail(e.to_string())),
     };
-    log(
+    Ok(Prepared {
+        variant,
+        init,
+        bags,
+    })
+}
+
+/// Trains `variant` (from `init` when fine-tuning) on `bags` with the
+/// default recipe and the request's epochs and seed, reporting each epoch to
+/// `progress` and every tenth to the log; `Err`: the failed answer.
+fn train(
+    job: &Job,
+    req: &TrainRequest,
+    Prepared {
+        variant,
+        init,
+        bags,
+    }: Prepared,
+    cancel: &AtomicBool,
+    mut progress: impl FnMut(&EpochReport),
+) -> Result<ModelFile, TrainResponse> {
+    job.log(
         LogLevel::Info,
         &format!(
             "training {variant} for {} epochs (seed {}) on {} bag(s): {}",
@@ -417,11 +208,11 @@ pub fn run_training(
         &bags,
         &auto_options(),
         &cfg,
-        |m| log(LogLevel::Info, m),
+        |m| job.log(LogLevel::Info, m),
         |r| {
             progress(r);
             if r.epoch % every == 0 || r.epoch == r.epochs {
-                log(
+                job.log(
                     LogLevel::Info,
                     &format!(
                         "epoch {}/{}: train {:.3e}, validation {:.3e}",
@@ -432,15 +223,16 @@ pub fn run_training(
             !cancel.load(Ordering::Acquire)
         },
     );
-    let file = match trained.map(crate::models::TrainedFile::into_family) {
-        Ok(Some(f)) => f,
-        Ok(None) => return fail(format!("{variant} did not train a GNODE-family file")),
-        Err(e) => return fail(TrainingError::Train(e).to_string()),
-    };
-    // A cancel after the last epoch still wins: nothing is swapped.
-    if cancel.load(Ordering::Acquire) {
-        return fail("training cancelled after its last epoch".into());
+    match trained.map(crate::models::TrainedFile::into_family) {
+        Ok(Some(f)) => Ok(f),
+        Ok(None) => Err(job.fail(format!("{variant} did not train a GNODE-family file"))),
+        Err(e) => Err(job.fail(TrainingError::Train(e).to_string())),
     }
+}
+
+/// Saves the trained `file`, swaps it in, and answers with its figures and
+/// timings (`start`: when the request came).
+fn swap_in(job: &Job, file: ModelFile, variant: Variant, start: Instant) -> TrainResponse {
     // From here to the swap is what a caller waits on top of training.
     let trained_at = Instant::now();
     let (train_loss, validation_loss) = (file.training.train_loss, file.training.validation_loss);
@@ -448,16 +240,17 @@ pub fn run_training(
     let explained = file.training.explained.unwrap_or(f64::NAN);
     let learned = file.training.explained_line();
     if let Some(w) = file.training.explained_warning() {
-        log(LogLevel::Warn, &w);
+        job.log(LogLevel::Warn, &w);
     }
-    let (path, model) = match save_and_load(shared, file, variant) {
+    let (path, model) = match save_and_load(job.shared, file, variant) {
         Ok(x) => x,
-        Err(e) => return fail(e.to_string()),
+        Err(e) => return job.fail(e.to_string()),
     };
     let took = trained_at.duration_since(start).as_secs_f64();
     let path_s = path.display().to_string();
+    let source = job.source;
     let locked = swap(
-        shared,
+        job.shared,
         model,
         Some(path),
         &format!(
@@ -498,7 +291,7 @@ fn fine_tune_start(
 }
 
 /// The file of the served model, read back: what a warm start begins from.
-fn served_file(shared: &Trainer) -> Result<(PathBuf, ModelFile), TrainingError> {
+pub(super) fn served_file(shared: &Trainer) -> Result<(PathBuf, ModelFile), TrainingError> {
     let Some(path) = shared.model.file() else {
         return Err(TrainingError::NotAFile(shared.model.get().describe()));
     };
@@ -509,213 +302,11 @@ fn served_file(shared: &Trainer) -> Result<(PathBuf, ModelFile), TrainingError> 
     Ok((path, file))
 }
 
-/// Saves a trained model (atomically) to the model folder and loads it as
-/// the node serves models (checked against what it was trained for).
-fn save_and_load(
-    shared: &Trainer,
-    file: ModelFile,
-    variant: Variant,
-) -> Result<(PathBuf, Arc<dyn Dynamics>), TrainingError> {
-    let seq = shared.seq.fetch_add(1, Ordering::Relaxed);
-    let secs = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_secs())
-        .unwrap_or(0);
-    let path = shared
-        .model_dir
-        .join(model_file_name(variant, secs, std::process::id(), seq));
-    file.save(&path)
-        .map_err(|e| TrainingError::Save(e.into()))?;
-    let v = serde_json::to_value(&file).map_err(|e| TrainingError::Save(e.into()))?;
-    let trained_for = crate::compat::TrainedFor::from_model_json(&path.display().to_string(), &v);
-    let m = TrainedModel::from_file(file).map_err(TrainingError::Load)?;
-    Ok((
-        path,
-        Arc::new(crate::models::Checked::new(Arc::new(m), trained_for)),
-    ))
-}
-
-/// Retrains after a drift alarm (`why`), blocking: warm-starts the served
-/// model file (`train --init` semantics, [`TrainConfig::init`]) on the bags
-/// recorded during the `accuracy_retrain_after` seconds after the alarm,
-/// holding the last of them out, and swaps the new model in only if its
-/// replayed RE on that held-out bag (as the node predicts:
-/// [`crate::replay::replay_as_node`]) is below the old model's. Returns
-/// what was decided, or why nothing was tried; either way it is logged.
-pub fn retrain_on_drift(
-    trainer: &Arc<Trainer>,
-    p: &NodeParams,
-    why: &str,
-) -> Result<String, TrainingError> {
-    const SOURCE: &str = "drift retraining";
-    let result = retrain(trainer, p, why);
-    match &result {
-        Ok(m) => trainer.log(LogLevel::Info, &format!("{SOURCE}: {m}")),
-        // A retraining (or a requested training) already runs: expected
-        // while the alarm flickers, not worth a warning.
-        Err(e @ TrainingError::Busy) => trainer.log(LogLevel::Info, &format!("{SOURCE}: {e}")),
-        Err(e) => trainer.log(LogLevel::Warn, &format!("{SOURCE}: {e}")),
-    }
-    result
-}
-
-fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, TrainingError> {
-    let Some(_claim) = claim(trainer) else {
-        return Err(TrainingError::Busy);
-    };
-    let (init_path, init) = served_file(trainer)?;
-    // Close the bag open at the alarm: the bags after it hold only what the
-    // system did after the drift was seen.
-    let before = match trainer.recorder.finish() {
-        None => return Err(TrainingError::NoRecording),
-        Some(r) => r?.1.len(),
-    };
-    trainer.log(
-        LogLevel::Info,
-        &format!(
-            "drift retraining after \"{why}\": recording {} s, then warm-starting {} for {} epochs",
-            p.accuracy_retrain_after,
-            init_path.display(),
-            p.accuracy_retrain_epochs
-        ),
-    );
-    std::thread::sleep(Duration::from_secs_f64(p.accuracy_retrain_after));
-    let bags = match trainer.recorder.finish() {
-        Some(r) => r?.1,
-        None => Vec::new(),
-    };
-    let recent = bags.get(before..).unwrap_or_default();
-    let Some((held_out, train)) = recent.split_last().filter(|(_, t)| !t.is_empty()) else {
-        return Err(TrainingError::TooFewBags {
-            recorded: recent.len(),
-            after: p.accuracy_retrain_after,
-        });
-    };
-    let variant = init.hyper.variant;
-    let explained_old = init.training.explained;
-    let cfg = TrainConfig {
-        epochs: p.accuracy_retrain_epochs as usize,
-        init: Some(Box::new(init)),
-        auto: Auto::GIVEN_EPOCHS,
-        ..TrainConfig::default()
-    };
-    let file = train_from_bags(
-        ModelKind::Family(variant),
-        train,
-        &auto_options(),
-        &cfg,
-        |_| {},
-        |_| true,
-    )
-    .map_err(TrainingError::Train)?
-    .into_family()
-    .ok_or_else(|| {
-        TrainingError::Train(crate::error::Error::msg(format!(
-            "{variant} did not train a GNODE-family file"
-        )))
-    })?;
-    let held = held_out.display().to_string();
-    let score = |m: &dyn Dynamics| {
-        crate::replay::replay_as_node(m, &held, p.dt, p.substeps, p.horizon)
-            .map(|(r, _)| r.averages.re)
-            .map_err(|source| TrainingError::Replay {
-                bag: held.clone(),
-                source,
-            })
-    };
-    let old = trainer.model.get();
-    let candidate = TrainedModel::from_file(file.clone()).map_err(TrainingError::Load)?;
-    let (re_old, re_new) = (score(old.as_ref())?, score(&candidate)?);
-    let explained_new = file.training.explained;
-    let percent =
-        |f: Option<f64>| f.map_or("unknown".to_string(), |f| format!("{:.2} %", 100.0 * f));
-    let figures = format!(
-        "held-out RE (mean over lead times, {held}) {re_new:.3e} for the retrained model \
-         against {re_old:.3e} for the served one; explains {} of its validation targets \
-         against {} for the served one; trained on {} bag(s) for {} epochs",
-        percent(explained_new),
-        percent(explained_old),
-        train.len(),
-        file.training.epochs_run
-    );
-    // A model that explains less of its targets than the served one did of
-    // its own is not swapped in, even when it happened to replay better.
-    let explains_less = matches!((explained_old, explained_new), (Some(o), Some(n)) if n < o);
-    if re_new.is_finite() && re_new < re_old && !explains_less {
-        let (path, model) = save_and_load(trainer, file, variant)?;
-        let reason = format!("{}: {figures}", "drift retraining");
-        swap(trainer, model, Some(path.clone()), &reason);
-        Ok(format!("swapped in {}: {figures}", path.display()))
-    } else {
-        Ok(format!("kept the served model: {figures}"))
-    }
-}
-
 /// The architecture options of `mcgnode train`'s default recipe.
-fn auto_options() -> ModelOptions {
+pub(super) fn auto_options() -> ModelOptions {
     ModelOptions {
         recipe: Recipe::Auto,
         ..ModelOptions::default()
-    }
-}
-
-/// The Train service's work: refused at once while another training runs,
-/// else trains (blocking) and answers when done.
-pub fn train_call(shared: &Arc<Trainer>, req: TrainRequest) -> TrainResponse {
-    let Some(_claim) = claim(shared) else {
-        shared.log(LogLevel::Warn, &format!("Train service: {BUSY}"));
-        return TrainResponse {
-            success: false,
-            message: BUSY.to_string(),
-            ..TrainResponse::default()
-        };
-    };
-    run_training(
-        shared,
-        &req,
-        &AtomicBool::new(false),
-        |_| {},
-        "Train service",
-    )
-}
-
-/// The LoadModel service's work: [`load_and_swap`] of the request's path.
-pub fn load_call(shared: &Arc<Trainer>, req: LoadModelRequest) -> LoadModelResponse {
-    load_and_swap(shared, &req.path)
-}
-
-/// Loads `path` (a model file or `truth:*`) and swaps it in; a bad file
-/// leaves the old model.
-pub fn load_and_swap(shared: &Trainer, path: &str) -> LoadModelResponse {
-    let fail = |why: String| {
-        let message = format!("{why}; still serving {}", shared.model.get().describe());
-        shared.log(LogLevel::Warn, &format!("LoadModel: {message}"));
-        LoadModelResponse {
-            success: false,
-            message,
-        }
-    };
-    if path.trim().is_empty() {
-        return fail("no path given".into());
-    }
-    let loaded = path
-        .parse::<ModelRef>()
-        .map_err(crate::Error::from)
-        .and_then(|r| Ok((crate::models::load_model(&r)?, r)));
-    match loaded {
-        Err(e) => fail(format!("cannot load {path}: {e:#}")),
-        Ok((model, reference)) => {
-            let description = model.describe();
-            let file = reference.file().map(Path::to_path_buf);
-            let locked = swap(shared, model, file, &format!("LoadModel: model {path}"));
-            LoadModelResponse {
-                success: true,
-                message: format!(
-                    "now serving {description} ({:.1} µs under the lock)",
-                    locked.as_secs_f64() * 1e6
-                ),
-            }
-        }
     }
 }
 
@@ -757,20 +348,5 @@ mod tests {
         };
         let e = check_request(&missing).unwrap_err().to_string();
         assert!(e.contains("/nonexistent/x.mcap"), "{e}");
-    }
-
-    #[test]
-    fn model_dir_follows_record_dir() {
-        let p = NodeParams {
-            record_dir: "/data/rec".into(),
-            ..NodeParams::default()
-        };
-        assert_eq!(model_dir(&p), Path::new("/data/rec/models"));
-        let q = NodeParams::default();
-        assert!(model_dir(&q).starts_with(std::env::temp_dir()));
-        assert_ne!(
-            model_file_name(Variant::Mcgnode, 5, 7, 0),
-            model_file_name(Variant::Mcgnode, 5, 7, 1)
-        );
     }
 }

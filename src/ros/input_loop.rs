@@ -1,0 +1,247 @@
+//! The input loop: each incoming `ParticleState` checked, recorded, predicted
+//! and scored on the blocking pool, then its trajectory, forces, markers and
+//! live accuracy published; a drift alarm can start a retraining.
+
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::Instant;
+
+use ros2_client::log::LogLevel;
+use ros2_client::{Publisher, Subscription};
+
+use crate::data::msg::ParticleState;
+use crate::data::stream::Reset;
+
+use super::accuracy::{self, Level};
+use super::drift_retraining::retrain_on_drift;
+use super::handles::{Handles, Warning};
+use super::input::Accepted;
+use super::markers::prediction_markers;
+use super::params::NodeParams;
+use super::predict::{self, Prediction};
+use super::trainer::Trainer;
+use super::wire::{LiveAccuracy, MarkerArray, ParticleForces, PredictedTrajectory};
+
+/// Checks, records and predicts one incoming state, and scores it against
+/// what was predicted for its moment (blocking work). `None`: a
+/// position-only state kept as its stream's history while it warms up.
+fn handle_state(
+    h: &Handles,
+    msg: ParticleState,
+    received_ns: u64,
+) -> Result<Option<(Prediction, accuracy::Update)>, predict::PredictError> {
+    // Refused before anything is recorded or predicted: an oversized state
+    // would hold memory and its prediction could not be delivered promptly.
+    if let Some(why) = h.lifecycle.refusal() {
+        return Err(predict::PredictError::Inactive(why));
+    }
+    let params = h.params.get();
+    predict::check_size(&msg, params.max_particles)?;
+    h.recorder.record(|r| r.state(received_ns, &msg));
+    let id = msg.trajectory_id;
+    let input = match h.inputs.accept(&params, msg)? {
+        Accepted::Ready(input) => {
+            note_reset(h, id, input.reset.as_ref());
+            if input.derived {
+                h.diag.stats.derived.fetch_add(1, Ordering::Relaxed);
+            }
+            input
+        }
+        Accepted::WarmingUp { reset, .. } => {
+            note_reset(h, id, reset.as_ref());
+            h.diag.stats.warming_up.fetch_add(1, Ordering::Relaxed);
+            return Ok(None);
+        }
+    };
+    let model = h.model.get();
+    // A state the model was not trained for (another dimension, edge kinds
+    // or field) is refused with the reason, not predicted.
+    if let Some(t) = model.trained_for() {
+        t.check(&input.graph, input.field.as_ref())?;
+        if let Some(o) = t
+            .range
+            .as_ref()
+            .and_then(|r| r.check(&input.graph, &input.state, params.out_of_range_sigmas))
+        {
+            h.diag.stats.out_of_range.fetch_add(1, Ordering::Relaxed);
+            if params.out_of_range_refuse {
+                return Err(predict::PredictError::OutOfRange(o));
+            }
+            h.diag.failed(
+                &format!("out-of-range input, predicted anyway: {o}"),
+                Warning::OutOfRange,
+            );
+        }
+    }
+    let p = predict::predict_parts(
+        model.as_ref(),
+        &input.message,
+        &input.graph,
+        &input.state,
+        params.dt,
+        params.horizon,
+        params.substeps,
+    )?;
+    h.recorder
+        .record(|r| r.prediction(h.clock.now_log_ns(), &p.trajectory, &p.forces));
+    let scored = h.accuracy.update(&params, &input, &p);
+    Ok(Some((p, scored)))
+}
+
+/// Counts and logs a stream starting over (not rate-limited: it happens once
+/// per run, and says why predictions pause for a warm-up).
+fn note_reset(h: &Handles, trajectory: u32, reset: Option<&Reset>) {
+    if let Some(why) = reset {
+        h.diag.stats.history_resets.fetch_add(1, Ordering::Relaxed);
+        h.diag.log(
+            LogLevel::Info,
+            &format!("input stream {trajectory} starts over: {why}"),
+        );
+    }
+}
+
+/// What the input loop publishes.
+pub(super) struct Outputs {
+    pub(super) trajectory: Publisher<PredictedTrajectory>,
+    pub(super) forces: Publisher<ParticleForces>,
+    pub(super) accuracy: Publisher<LiveAccuracy>,
+    pub(super) markers: Publisher<MarkerArray>,
+    /// When the last markers went out (`markers_period`).
+    pub(super) last_markers: Option<Instant>,
+}
+
+/// The markers of `p` when they are on and `markers_period` has passed since
+/// the last ones (`last` is then reset).
+fn markers_due(
+    params: &NodeParams,
+    last: &mut Option<Instant>,
+    p: &Prediction,
+) -> Option<MarkerArray> {
+    let due =
+        params.markers && last.is_none_or(|t| t.elapsed().as_secs_f64() >= params.markers_period);
+    due.then(|| {
+        *last = Some(Instant::now());
+        prediction_markers(&p.trajectory, &p.forces)
+    })
+}
+
+/// Logs a change of the drift alarm: at its level, or as news when it clears.
+fn log_alarm(h: &Handles, level: Level, why: &str) {
+    let log_level = match level {
+        Level::Ok => LogLevel::Info,
+        Level::Warn => LogLevel::Warn,
+        Level::Error => LogLevel::Error,
+    };
+    let prefix = if level == Level::Ok {
+        "drift alarm cleared: "
+    } else {
+        ""
+    };
+    h.diag.log(log_level, &format!("{prefix}{why}"));
+}
+
+/// For each incoming state: predict, publish trajectory and forces, and the
+/// live accuracy when the state was compared with earlier predictions; a
+/// drift alarm starts a retraining with `trainer` when `accuracy_retrain` is on.
+pub(super) async fn input_loop(
+    h: Handles,
+    input: Subscription<ParticleState>,
+    mut out: Outputs,
+    trainer: Arc<Trainer>,
+) {
+    let stats = &h.diag.stats;
+    // Last sequence number seen from each publisher.
+    let mut last_seen: std::collections::HashMap<String, i64> = Default::default();
+    loop {
+        let msg = match input.async_take().await {
+            Ok((msg, info)) => {
+                let gap = sequence_gap(&mut last_seen, &info);
+                stats.dropped.fetch_add(gap, Ordering::Relaxed);
+                msg
+            }
+            Err(e) => {
+                // A sample that does not decode as a ParticleState.
+                stats.received.fetch_add(1, Ordering::Relaxed);
+                h.diag.reject(&format!("undecodable ParticleState: {e:?}"));
+                continue;
+            }
+        };
+        stats.received.fetch_add(1, Ordering::Relaxed);
+        let received_ns = h.clock.now_log_ns();
+        let worker = h.clone();
+        let job = tokio::task::spawn_blocking(move || handle_state(&worker, msg, received_ns));
+        let (prediction, scored) = match job.await {
+            Ok(Ok(Some(p))) => p,
+            Ok(Ok(None)) => continue,
+            Ok(Err(why)) => {
+                h.diag.reject(&format!("rejected input: {why}"));
+                continue;
+            }
+            Err(join) => {
+                h.diag.reject(&format!("prediction task failed: {join}"));
+                continue;
+            }
+        };
+        if let Some((level, why)) = &scored.alarm_changed {
+            log_alarm(&h, *level, why);
+            let p = h.params.get();
+            if *level != Level::Ok && p.accuracy_retrain {
+                // Off the input loop: it records for a while, then trains.
+                let (trainer, why) = (trainer.clone(), why.clone());
+                tokio::task::spawn_blocking(move || {
+                    // The outcome is logged by retrain_on_drift itself.
+                    let _ = retrain_on_drift(&trainer, &p, &why);
+                });
+            }
+        }
+        out.publish(&h, prediction, scored.message).await;
+    }
+}
+
+/// States a publisher sent that never reached us: the gap in its DDS
+/// sequence numbers since the last sample taken from it.
+fn sequence_gap(
+    last_seen: &mut std::collections::HashMap<String, i64>,
+    info: &ros2_client::MessageInfo,
+) -> u64 {
+    let publisher = format!("{:?}", info.publisher_gid());
+    let sn = info.sequence_number();
+    last_seen.insert(publisher, sn).map_or(0, |prev| {
+        u64::try_from(sn.saturating_sub(prev).saturating_sub(1)).unwrap_or(0)
+    })
+}
+
+impl Outputs {
+    /// Publishes a prediction (trajectory, forces, the markers when due) and
+    /// the live accuracy; counts it as predicted when trajectory and forces
+    /// went out, else warns.
+    async fn publish(&mut self, h: &Handles, p: Prediction, accuracy: Option<LiveAccuracy>) {
+        let markers = markers_due(&h.params.get(), &mut self.last_markers, &p);
+        let sent_traj = self.trajectory.async_publish(p.trajectory).await;
+        let sent_forces = self.forces.async_publish(p.forces).await;
+        if let Some(m) = markers {
+            h.recorder.record(|r| r.markers(h.clock.now_log_ns(), &m));
+            if let Err(e) = self.markers.async_publish(m).await {
+                let why = format!("publishing the markers failed: {e:?}");
+                h.diag.failed(&why, Warning::Input);
+            }
+        }
+        if let Some(m) = accuracy {
+            if let Err(e) = self.accuracy.async_publish(m).await {
+                let why = format!("publishing the live accuracy failed: {e:?}");
+                h.diag.failed(&why, Warning::Input);
+            }
+        }
+        let failed = match (sent_traj, sent_forces) {
+            (Ok(()), Ok(())) => None,
+            (Err(e), _) => Some(format!("publishing the trajectory failed: {e:?}")),
+            (_, Err(e)) => Some(format!("publishing the forces failed: {e:?}")),
+        };
+        match failed {
+            None => {
+                h.diag.stats.predicted.fetch_add(1, Ordering::Relaxed);
+            }
+            Some(why) => h.diag.failed(&why, Warning::Input),
+        }
+    }
+}
