@@ -24,6 +24,9 @@ pub use checkpoint::{Checkpoint, CheckpointError, Checkpointing};
 use checkpoint::{Progress, RngState, RunKey};
 pub use recipe::{Auto, Recipe};
 
+// Bag loading lives with the data; its paths under `train` are kept.
+pub use crate::data::load::{load_training_data, load_training_data_from, TrainingData};
+
 /// Training settings.
 #[derive(Clone, Debug)]
 pub struct TrainConfig {
@@ -915,129 +918,6 @@ impl ModelOptions {
         }
         Ok(h)
     }
-}
-
-/// Training data read from bags: the dataset and what a model file records about it.
-pub struct TrainingData {
-    /// States and target accelerations on one graph.
-    pub dataset: crate::data::dataset::Dataset,
-    /// What the model file says about its training data.
-    pub trained_on: crate::model::file::TrainedOn,
-    /// The simulator configuration from the first bag's metadata, if any.
-    pub system_config: Option<crate::physics::SystemConfig>,
-    /// Whether the data are a closed system (no anchors, no field), and why:
-    /// `None` when the bags neither say nor show it.
-    pub closed: Option<(bool, String)>,
-}
-
-/// Reads training bags (each an MCAP file, a rosbag2 directory or a .db3
-/// file) into a dataset ([`load_training_data_from`] on the only
-/// ParticleState topic).
-pub fn load_training_data(
-    bags: &[std::path::PathBuf],
-    log: impl FnMut(&str),
-) -> Result<TrainingData> {
-    load_training_data_from(bags, None, log)
-}
-
-/// Reads training bags into a dataset (recorded accelerations, else finite
-/// differences; `log` says which) with fingerprints of every trajectory's
-/// start, reading `topic` (needed when a bag holds several ParticleState
-/// topics).
-pub fn load_training_data_from(
-    bags: &[std::path::PathBuf],
-    topic: Option<&str>,
-    mut log: impl FnMut(&str),
-) -> Result<TrainingData> {
-    use crate::data::bag::{read_bags, ReadOptions};
-    use crate::data::dataset::AccSource;
-    use crate::data::field::{bag_field, bag_system};
-    use crate::system::fingerprint;
-    if bags.is_empty() {
-        bail!("no training bags given");
-    }
-    let mut trajectories = vec![];
-    let mut digests = vec![];
-    let mut system_config = None;
-    let mut closed: Option<(bool, String)> = None;
-    let read = ReadOptions {
-        topic: topic.map(str::to_string),
-    };
-    for p in bags {
-        let bag = read_bags(std::slice::from_ref(p), &read)?;
-        if system_config.is_none() {
-            system_config = bag_system(&bag)?;
-        }
-        // Closed: no anchors and no field, as the bag states or its data show.
-        let this = match bag_field(&bag, None)? {
-            _ if bag.trajectories.iter().any(|t| !t.graph.anchors.is_empty()) => {
-                Some((false, "anchors".to_string()))
-            }
-            Some(o) => Some((o.field.is_free(), o.source)),
-            None => None,
-        };
-        closed = match (closed, this) {
-            (None, t) if trajectories.is_empty() => t,
-            (Some((a, why)), Some((b, _))) if a == b => Some((a, why)),
-            _ => None,
-        };
-        digests.push(bag_digest(p)?);
-        trajectories.extend(bag.trajectories);
-    }
-    let ds = Dataset::from_trajectories(&trajectories)?;
-    let source = match ds.source {
-        AccSource::Recorded => "recorded",
-        AccSource::FiniteDifference => "finite-difference",
-    };
-    log(&format!(
-        "{} states of {} trajectories ({}-particle {}D graph); accelerations: {source}",
-        ds.len(),
-        trajectories.len(),
-        ds.graph.n(),
-        ds.graph.dim
-    ));
-    let first = trajectories.first().expect("dataset is not empty");
-    let trained_on = crate::model::file::TrainedOn {
-        system: first.system.clone(),
-        particles: ds.graph.n(),
-        dim: ds.graph.dim,
-        bag: bags
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect::<Vec<_>>()
-            .join(","),
-        bag_sha256: digests.join(","),
-        accelerations: source.to_string(),
-        trajectories: trajectories.len(),
-        states: ds.len(),
-        start_fingerprints: trajectories
-            .iter()
-            .filter_map(|t| t.samples.first())
-            .map(|s| fingerprint(&s.state))
-            .collect(),
-        system_config: system_config
-            .as_ref()
-            .map(serde_json::to_value)
-            .transpose()?,
-        edge_params: crate::model::file::EdgeParams::of(&ds.graph),
-    };
-    Ok(TrainingData {
-        dataset: ds,
-        trained_on,
-        system_config,
-        closed,
-    })
-}
-
-/// SHA-256 of a bag argument: of its file, or of each storage file of a
-/// rosbag2 directory joined by `+`.
-fn bag_digest(p: &std::path::Path) -> Result<String> {
-    let parts = crate::data::source::bag_parts(p)?;
-    Ok(parts
-        .iter()
-        .map(|part| crate::data::dataset::digest(&part.path))
-        .collect::<Result<Vec<_>, _>>()?
-        .join("+"))
 }
 
 /// Applies `--radius` (when given) to the training graph and says what the
