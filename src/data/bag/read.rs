@@ -158,7 +158,51 @@ fn describe_field(f: Option<&Field>) -> String {
 
 /// Reads one bag argument; returns it and the ParticleState topic read.
 fn read_one(path: &Path, opts: &ReadOptions) -> Result<(Bag, String), DataError> {
-    let mut topics: BTreeMap<String, Vec<Entry>> = BTreeMap::new();
+    let (mut topics, metadata) = decode_messages(path, opts)?;
+    let (topic, entries) = choose_topic(path, &mut topics, opts)?;
+    let (field, groups) = group_by_trajectory(path, entries)?;
+    let mut trajectories = Vec::with_capacity(groups.len());
+    let mut derived_velocities = vec![];
+    for (id, entries) in groups {
+        let (tr, derived) = trajectory(path, id, entries)?;
+        if derived {
+            derived_velocities.push(id);
+        }
+        trajectories.push(tr);
+    }
+    Ok((
+        Bag {
+            trajectories,
+            metadata,
+            field,
+            topic: topic.clone(),
+            sources: vec![path.to_path_buf()],
+            derived_velocities,
+        },
+        topic,
+    ))
+}
+
+/// Decoded messages by topic.
+type ByTopic = BTreeMap<String, Vec<Entry>>;
+/// Decoded messages by trajectory id.
+type ByTrajectory = BTreeMap<u32, Vec<Entry>>;
+
+/// A bag whose content is inconsistent, with what is wrong.
+fn bag_err(path: &Path, msg: String) -> DataError {
+    DataError::Bag {
+        path: path.to_path_buf(),
+        msg,
+    }
+}
+
+/// Decodes every ParticleState message of one bag argument (on the topic
+/// `opts` names, if any), by topic, and the `mcgnode` metadata record.
+fn decode_messages(
+    path: &Path,
+    opts: &ReadOptions,
+) -> Result<(ByTopic, BTreeMap<String, String>), DataError> {
+    let mut topics = ByTopic::new();
     let mut checked_schemas: Vec<(Vec<u8>, Layout)> = Vec::new();
     let records = scan_input(path, |raw| {
         if raw.schema_name != PARTICLE_STATE_TYPE {
@@ -201,15 +245,22 @@ fn read_one(path: &Path, opts: &ReadOptions) -> Result<(Bag, String), DataError>
             metadata.extend(m);
         }
     }
-    let bag_err = |msg: String| DataError::Bag {
-        path: path.to_path_buf(),
-        msg,
-    };
-    let (topic, entries) = match (topics.len(), &opts.topic) {
+    Ok((topics, metadata))
+}
+
+/// The topic to read and its messages: the one asked for, or the only one
+/// there is; refuses (listing them) when there are several.
+fn choose_topic(
+    path: &Path,
+    topics: &mut ByTopic,
+    opts: &ReadOptions,
+) -> Result<(String, Vec<Entry>), DataError> {
+    Ok(match (topics.len(), &opts.topic) {
         (0, Some(t)) => {
-            return Err(bag_err(format!(
-                "has no ParticleState messages on topic {t}"
-            )))
+            return Err(bag_err(
+                path,
+                format!("has no ParticleState messages on topic {t}"),
+            ))
         }
         (0, None) => (String::new(), vec![]),
         (1, _) => topics.pop_first().expect("one topic"),
@@ -218,19 +269,30 @@ fn read_one(path: &Path, opts: &ReadOptions) -> Result<(Bag, String), DataError>
                 .iter()
                 .map(|(t, e)| format!("{t} ({} messages)", e.len()))
                 .collect();
-            return Err(bag_err(format!(
-                "has ParticleState messages on several topics: {}; choose one with --topic",
-                list.join(", ")
-            )));
+            return Err(bag_err(
+                path,
+                format!(
+                    "has ParticleState messages on several topics: {}; choose one with --topic",
+                    list.join(", ")
+                ),
+            ));
         }
-    };
+    })
+}
+
+/// The messages grouped by trajectory id, and the field they all state
+/// (refused when two messages state different fields).
+fn group_by_trajectory(
+    path: &Path,
+    entries: Vec<Entry>,
+) -> Result<(Option<Field>, ByTrajectory), DataError> {
     let mut field: Option<(Option<Field>, usize, PathBuf)> = None;
-    let mut groups: BTreeMap<u32, Vec<Entry>> = BTreeMap::new();
+    let mut groups = ByTrajectory::new();
     for e in entries {
         match &field {
             None => field = Some((e.field.clone(), e.index, e.file.clone())),
             Some((f, i, file)) if *f != e.field => {
-                return Err(bag_err(format!(
+                return Err(bag_err(path, format!(
                     "message {} of {} states {}, message {} of {} states {}: one bag must describe one field",
                     i,
                     file.display(),
@@ -244,72 +306,84 @@ fn read_one(path: &Path, opts: &ReadOptions) -> Result<(Bag, String), DataError>
         }
         groups.entry(e.id).or_default().push(e);
     }
-    let mut trajectories = Vec::with_capacity(groups.len());
-    let mut derived_velocities = vec![];
-    for (id, mut entries) in groups {
-        entries.sort_by_key(|e| e.step);
-        let first = &entries[0];
-        let (t0, graph, system) = (first.stamp_ns, first.graph.clone(), first.system.clone());
-        let mut samples = Vec::with_capacity(entries.len());
-        for (k, e) in entries.iter().enumerate() {
-            if k > 0 {
-                let prev = &entries[k - 1];
-                if e.step == prev.step {
-                    return Err(bag_err(format!(
-                        "trajectory {id}: step {} appears twice (messages {} and {})",
-                        e.step, prev.index, e.index
-                    )));
-                }
-                if e.stamp_ns <= prev.stamp_ns {
-                    return Err(bag_err(format!(
-                        "trajectory {id}: step {} (message {}) is not stamped after step {} (message {})",
-                        e.step, e.index, prev.step, prev.index
-                    )));
-                }
-            }
-            if e.graph != graph {
-                return Err(bag_err(format!(
-                    "trajectory {id}: the graph (types, masses, edges or anchors) at step {} (message {}) differs from step {} (message {})",
-                    e.step, e.index, first.step, first.index
-                )));
-            }
-            if e.system != system {
-                return Err(bag_err(format!(
+    Ok((field.and_then(|(f, _, _)| f), groups))
+}
+
+/// Trajectory `id` from its messages: sorted by step, `t` from the first
+/// stamp, checked for repeated steps, stamps out of order and a graph or
+/// system that changes. Velocities the messages left empty are derived from
+/// the positions (then the flag is true).
+fn trajectory(
+    path: &Path,
+    id: u32,
+    mut entries: Vec<Entry>,
+) -> Result<(Trajectory, bool), DataError> {
+    entries.sort_by_key(|e| e.step);
+    let first = &entries[0];
+    let (t0, graph, system) = (first.stamp_ns, first.graph.clone(), first.system.clone());
+    let mut samples = Vec::with_capacity(entries.len());
+    for (k, e) in entries.iter().enumerate() {
+        if k > 0 {
+            check_order(path, id, &entries[k - 1], e)?;
+        }
+        if e.graph != graph {
+            return Err(bag_err(path, format!(
+                "trajectory {id}: the graph (types, masses, edges or anchors) at step {} (message {}) differs from step {} (message {})",
+                e.step, e.index, first.step, first.index
+            )));
+        }
+        if e.system != system {
+            return Err(bag_err(
+                path,
+                format!(
                     "trajectory {id}: system {:?} at step {} (message {}) differs from {:?}",
                     e.system, e.step, e.index, system
-                )));
-            }
-            let mut s = e.sample.clone();
-            s.t = (e.stamp_ns - t0) as f64 * 1e-9;
-            samples.push(s);
+                ),
+            ));
         }
-        let mut tr = Trajectory {
-            id,
-            system,
-            graph,
-            samples,
-        };
-        if entries.iter().any(|e| e.no_v) {
-            let v = crate::data::dataset::finite_difference_velocities(&tr)
-                .map_err(|e| bag_err(format!("position-only recording: {e}")))?;
-            for ((s, e), v) in tr.samples.iter_mut().zip(&entries).zip(v) {
-                if e.no_v {
-                    s.state.v = v;
-                }
-            }
-            derived_velocities.push(id);
-        }
-        trajectories.push(tr);
+        let mut s = e.sample.clone();
+        s.t = (e.stamp_ns - t0) as f64 * 1e-9;
+        samples.push(s);
     }
-    Ok((
-        Bag {
-            trajectories,
-            metadata,
-            field: field.and_then(|(f, _, _)| f),
-            topic: topic.clone(),
-            sources: vec![path.to_path_buf()],
-            derived_velocities,
-        },
-        topic,
-    ))
+    let mut tr = Trajectory {
+        id,
+        system,
+        graph,
+        samples,
+    };
+    let derived = entries.iter().any(|e| e.no_v);
+    if derived {
+        let v = crate::data::dataset::finite_difference_velocities(&tr)
+            .map_err(|e| bag_err(path, format!("position-only recording: {e}")))?;
+        for ((s, e), v) in tr.samples.iter_mut().zip(&entries).zip(v) {
+            if e.no_v {
+                s.state.v = v;
+            }
+        }
+    }
+    Ok((tr, derived))
+}
+
+/// Refuses a message `e` of trajectory `id` whose step repeats, or whose
+/// stamp is not after, that of the message before it (`prev`, by step).
+fn check_order(path: &Path, id: u32, prev: &Entry, e: &Entry) -> Result<(), DataError> {
+    if e.step == prev.step {
+        return Err(bag_err(
+            path,
+            format!(
+                "trajectory {id}: step {} appears twice (messages {} and {})",
+                e.step, prev.index, e.index
+            ),
+        ));
+    }
+    if e.stamp_ns <= prev.stamp_ns {
+        return Err(bag_err(
+            path,
+            format!(
+                "trajectory {id}: step {} (message {}) is not stamped after step {} (message {})",
+                e.step, e.index, prev.step, prev.index
+            ),
+        ));
+    }
+    Ok(())
 }

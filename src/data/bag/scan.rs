@@ -134,6 +134,8 @@ fn payload(data: &[u8], declared: Option<Codec>) -> Result<Option<Vec<u8>>, Data
     }
 }
 
+/// Reads a whole MCAP file (`read_path`; errors name `path`, the file as the
+/// user gave it) as [`scan_bag`] describes.
 fn scan_mcap(
     read_path: &Path,
     path: &Path,
@@ -144,32 +146,15 @@ fn scan_mcap(
         .metadata()
         .map_err(|e| DataError::io(path, "reading the size of", e))?
         .len();
-    let mcap_err = |what: String| DataError::Mcap {
-        path: path.to_path_buf(),
-        msg: what,
-    };
-    let mut reader = LinearReader::new_with_options(
-        LinearReaderOptions::default()
-            .with_prevalidate_chunk_crcs(true)
-            .with_validate_data_section_crc(true)
-            .with_validate_summary_section_crc(true)
-            .with_check_finishes_after_end_magic(true)
-            // Bounds what a corrupt length field can make the reader allocate; chunks
-            // decompress to more than the file size, hence the floor.
-            .with_record_length_limit(
-                usize::try_from(len.max(MIN_RECORD_LIMIT)).unwrap_or(usize::MAX),
-            ),
-    );
-    let mut schemas: HashMap<u16, SchemaInfo> = HashMap::new();
-    let mut channels: HashMap<u16, ChannelInfo> = HashMap::new();
-    let mut metadata = Vec::new();
-    let (mut n_records, mut n_messages) = (0usize, 0usize);
+    let mut reader = mcap_reader(len);
+    let mut scan = McapScan::new(path);
+    let mut n_records = 0usize;
     while let Some(event) = reader.next_event() {
         let event = event.map_err(|e| {
-            mcap_err(format!(
-                "{} (after {n_records} records)",
-                describe_mcap_error(&e)
-            ))
+            mcap_err(
+                path,
+                format!("{} (after {n_records} records)", describe_mcap_error(&e)),
+            )
         })?;
         let (opcode, data) = match event {
             LinearReadEvent::ReadRequest(need) => {
@@ -183,14 +168,80 @@ fn scan_mcap(
         };
         n_records += 1;
         let record = mcap::parse_record(opcode, data).map_err(|e| {
-            mcap_err(format!(
-                "record {n_records} (opcode {opcode:#04x}): {}",
-                describe_mcap_error(&e)
-            ))
+            mcap_err(
+                path,
+                format!(
+                    "record {n_records} (opcode {opcode:#04x}): {}",
+                    describe_mcap_error(&e)
+                ),
+            )
         })?;
+        scan.take(record, on_message)?;
+    }
+    Ok(scan.metadata)
+}
+
+/// A reader of a whole MCAP file of `len` bytes that checks every CRC, the
+/// end magic and that nothing follows it.
+fn mcap_reader(len: u64) -> LinearReader {
+    LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_prevalidate_chunk_crcs(true)
+            .with_validate_data_section_crc(true)
+            .with_validate_summary_section_crc(true)
+            .with_check_finishes_after_end_magic(true)
+            // Bounds what a corrupt length field can make the reader allocate; chunks
+            // decompress to more than the file size, hence the floor.
+            .with_record_length_limit(
+                usize::try_from(len.max(MIN_RECORD_LIMIT)).unwrap_or(usize::MAX),
+            ),
+    )
+}
+
+/// An MCAP file that does not read as one, with what is wrong.
+fn mcap_err(path: &Path, what: String) -> DataError {
+    DataError::Mcap {
+        path: path.to_path_buf(),
+        msg: what,
+    }
+}
+
+/// What [`scan_mcap`] has seen of one file so far.
+struct McapScan<'p> {
+    /// The file, as errors name it.
+    path: &'p Path,
+    /// Schemas by id.
+    schemas: HashMap<u16, SchemaInfo>,
+    /// Channels by id.
+    channels: HashMap<u16, ChannelInfo>,
+    /// Metadata records, in file order.
+    metadata: MetadataRecords,
+    /// Messages seen.
+    n_messages: usize,
+}
+
+impl<'p> McapScan<'p> {
+    /// Nothing seen yet of the file at `path`.
+    fn new(path: &'p Path) -> Self {
+        Self {
+            path,
+            schemas: HashMap::new(),
+            channels: HashMap::new(),
+            metadata: Vec::new(),
+            n_messages: 0,
+        }
+    }
+
+    /// Takes in the next record: schemas, channels and metadata are kept,
+    /// messages handed to `on_message`.
+    fn take(
+        &mut self,
+        record: Record<'_>,
+        on_message: &mut dyn FnMut(&RawMessage) -> Result<(), DataError>,
+    ) -> Result<(), DataError> {
         match record {
             Record::Schema { header, data } => {
-                schemas.insert(
+                self.schemas.insert(
                     header.id,
                     SchemaInfo {
                         name: header.name,
@@ -200,13 +251,16 @@ fn scan_mcap(
                 );
             }
             Record::Channel(c) => {
-                if c.schema_id != 0 && !schemas.contains_key(&c.schema_id) {
-                    return Err(mcap_err(format!(
-                        "channel {} ({}) refers to unknown schema {}",
-                        c.id, c.topic, c.schema_id
-                    )));
+                if c.schema_id != 0 && !self.schemas.contains_key(&c.schema_id) {
+                    return Err(mcap_err(
+                        self.path,
+                        format!(
+                            "channel {} ({}) refers to unknown schema {}",
+                            c.id, c.topic, c.schema_id
+                        ),
+                    ));
                 }
-                channels.insert(
+                self.channels.insert(
                     c.id,
                     ChannelInfo {
                         topic: c.topic,
@@ -216,38 +270,50 @@ fn scan_mcap(
                 );
             }
             Record::Message { header, data } => {
-                let index = n_messages;
-                n_messages += 1;
-                let ch = channels.get(&header.channel_id).ok_or_else(|| {
-                    mcap_err(format!(
-                        "message {index} refers to unknown channel {}",
-                        header.channel_id
-                    ))
-                })?;
-                let schema = schemas.get(&ch.schema_id);
-                let raw = RawMessage {
-                    index,
-                    topic: &ch.topic,
-                    schema_name: schema.map_or("", |s| s.name.as_str()),
-                    schema_encoding: schema.map_or("", |s| s.encoding.as_str()),
-                    schema_text: schema.map_or(&[][..], |s| s.data.as_slice()),
-                    message_encoding: &ch.message_encoding,
-                    log_time: header.log_time,
-                    data: &data,
-                    file: path,
-                };
-                on_message(&raw).map_err(|e| DataError::Message {
-                    path: path.to_path_buf(),
-                    index,
-                    topic: ch.topic.clone(),
-                    reason: Box::new(e),
-                })?;
+                self.message(header.channel_id, header.log_time, &data, on_message)?;
             }
-            Record::Metadata(m) => metadata.push((m.name, m.metadata)),
+            Record::Metadata(m) => self.metadata.push((m.name, m.metadata)),
             _ => {}
         }
+        Ok(())
     }
-    Ok(metadata)
+
+    /// Hands the next message, on channel `channel_id`, to `on_message`; its
+    /// error is reported with the file, the message's index and its topic.
+    fn message(
+        &mut self,
+        channel_id: u16,
+        log_time: u64,
+        data: &[u8],
+        on_message: &mut dyn FnMut(&RawMessage) -> Result<(), DataError>,
+    ) -> Result<(), DataError> {
+        let index = self.n_messages;
+        self.n_messages += 1;
+        let ch = self.channels.get(&channel_id).ok_or_else(|| {
+            mcap_err(
+                self.path,
+                format!("message {index} refers to unknown channel {channel_id}"),
+            )
+        })?;
+        let schema = self.schemas.get(&ch.schema_id);
+        let raw = RawMessage {
+            index,
+            topic: &ch.topic,
+            schema_name: schema.map_or("", |s| s.name.as_str()),
+            schema_encoding: schema.map_or("", |s| s.encoding.as_str()),
+            schema_text: schema.map_or(&[][..], |s| s.data.as_slice()),
+            message_encoding: &ch.message_encoding,
+            log_time,
+            data,
+            file: self.path,
+        };
+        on_message(&raw).map_err(|e| DataError::Message {
+            path: self.path.to_path_buf(),
+            index,
+            topic: ch.topic.clone(),
+            reason: Box::new(e),
+        })
+    }
 }
 
 /// `read` that retries on interruption; 0 means end of file.
