@@ -8,6 +8,7 @@
 //! - [`field`]: what a bag says about its system (configuration, field).
 //! - [`repair`]: rewriting an MCAP file cut short as a complete one.
 //! - [`dataset`]: states and target accelerations for training; bag digests.
+//! - [`load`]: training bags into a dataset and what a model file records about it.
 //! - [`observe`]: trajectories as a tracker sees them (noise, uneven rate, gaps).
 //! - [`stream`]: velocities of live position-only streams, causally (node, replay).
 
@@ -15,6 +16,7 @@ pub mod bag;
 pub mod dataset;
 mod error;
 pub mod field;
+pub mod load;
 pub mod meta;
 pub mod msg;
 pub mod observe;

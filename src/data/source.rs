@@ -11,6 +11,7 @@
 //! - `compression_mode: FILE`: each storage file is one zstd (or lz4) stream
 //!   (`DIR_0.mcap.zstd`); it is decompressed to a temporary file first.
 
+use std::collections::HashMap;
 use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -167,10 +168,7 @@ fn rosbag2_parts(dir: &Path) -> Result<Vec<BagPart>, DataError> {
         });
     }
     let text = std::fs::read_to_string(&meta).map_err(|e| DataError::io(&meta, "reading", e))?;
-    let bad = |msg: String| DataError::Bag {
-        path: meta.clone(),
-        msg,
-    };
+    let bad = |msg: String| metadata_err(&meta, msg);
     let docs = YamlLoader::load_from_str(&text).map_err(|e| bad(format!("not YAML: {e}")))?;
     let info = docs
         .first()
@@ -184,33 +182,69 @@ fn rosbag2_parts(dir: &Path) -> Result<Vec<BagPart>, DataError> {
             other => Err(bad(format!("{key} is not a string: {other:?}"))),
         }
     };
-    let storage = match str_of("storage_identifier")?.as_str() {
-        "mcap" => Storage::Mcap,
-        "sqlite3" => Storage::Sqlite3,
-        "" => return Err(bad("storage_identifier is missing".into())),
-        other => {
-            return Err(bad(format!(
-                "storage_identifier {other:?} is not supported (mcap or sqlite3)"
-            )))
-        }
-    };
+    let storage = storage_of(&str_of("storage_identifier")?, &meta)?;
     let codec = Codec::parse(&str_of("compression_format")?, &meta)?;
     let mode = str_of("compression_mode")?.to_ascii_uppercase();
-    let (file_compression, message_compression) = match (mode.as_str(), codec) {
-        ("" | "NONE", _) => (None, None),
-        ("FILE", Some(c)) => (Some(c), None),
-        ("MESSAGE", Some(c)) => (None, Some(c)),
-        ("FILE" | "MESSAGE", None) => {
-            return Err(bad(format!(
-                "compression_mode {mode} without a compression_format"
-            )))
-        }
-        (other, _) => {
-            return Err(bad(format!(
-                "compression_mode {other:?} is not supported (FILE, MESSAGE or none)"
-            )))
-        }
-    };
+    let (file_compression, message_compression) = compression_of(&mode, codec, &meta)?;
+    let files = relative_file_paths(info, &meta)?;
+    Ok(files
+        .into_iter()
+        .map(|f| BagPart {
+            path: storage_file(dir, &f),
+            storage,
+            file_compression,
+            message_compression,
+        })
+        .collect())
+}
+
+/// A metadata.yaml (`meta`) that does not describe a bag we read, with why.
+fn metadata_err(meta: &Path, msg: String) -> DataError {
+    DataError::Bag {
+        path: meta.to_path_buf(),
+        msg,
+    }
+}
+
+/// The storage a metadata.yaml's `storage_identifier` names.
+fn storage_of(identifier: &str, meta: &Path) -> Result<Storage, DataError> {
+    match identifier {
+        "mcap" => Ok(Storage::Mcap),
+        "sqlite3" => Ok(Storage::Sqlite3),
+        "" => Err(metadata_err(meta, "storage_identifier is missing".into())),
+        other => Err(metadata_err(
+            meta,
+            format!("storage_identifier {other:?} is not supported (mcap or sqlite3)"),
+        )),
+    }
+}
+
+/// How a rosbag2 directory's files are compressed, from its
+/// `compression_mode` (upper case) and `compression_format`: (whole files,
+/// each message).
+fn compression_of(
+    mode: &str,
+    codec: Option<Codec>,
+    meta: &Path,
+) -> Result<(Option<Codec>, Option<Codec>), DataError> {
+    match (mode, codec) {
+        ("" | "NONE", _) => Ok((None, None)),
+        ("FILE", Some(c)) => Ok((Some(c), None)),
+        ("MESSAGE", Some(c)) => Ok((None, Some(c))),
+        ("FILE" | "MESSAGE", None) => Err(metadata_err(
+            meta,
+            format!("compression_mode {mode} without a compression_format"),
+        )),
+        (other, _) => Err(metadata_err(
+            meta,
+            format!("compression_mode {other:?} is not supported (FILE, MESSAGE or none)"),
+        )),
+    }
+}
+
+/// The storage files metadata.yaml lists (`relative_file_paths`, not empty).
+fn relative_file_paths(info: &Yaml, meta: &Path) -> Result<Vec<String>, DataError> {
+    let bad = |msg: String| metadata_err(meta, msg);
     let files = match &info["relative_file_paths"] {
         Yaml::Array(a) => a
             .iter()
@@ -225,28 +259,22 @@ fn rosbag2_parts(dir: &Path) -> Result<Vec<BagPart>, DataError> {
     if files.is_empty() {
         return Err(bad("relative_file_paths is empty".into()));
     }
-    Ok(files
-        .into_iter()
-        .map(|f| {
-            // rosbag2 before Humble wrote paths with the directory's name in front.
-            let direct = dir.join(&f);
-            let path = if direct.exists() {
-                direct
-            } else {
-                Path::new(&f)
-                    .file_name()
-                    .map(|n| dir.join(n))
-                    .filter(|p| p.exists())
-                    .unwrap_or(direct)
-            };
-            BagPart {
-                path,
-                storage,
-                file_compression,
-                message_compression,
-            }
-        })
-        .collect())
+    Ok(files)
+}
+
+/// Where the storage file `f` listed in `dir`'s metadata.yaml is.
+fn storage_file(dir: &Path, f: &str) -> PathBuf {
+    // rosbag2 before Humble wrote paths with the directory's name in front.
+    let direct = dir.join(f);
+    if direct.exists() {
+        direct
+    } else {
+        Path::new(f)
+            .file_name()
+            .map(|n| dir.join(n))
+            .filter(|p| p.exists())
+            .unwrap_or(direct)
+    }
 }
 
 /// Decompresses a whole-file-compressed part into a temporary file.
@@ -288,61 +316,10 @@ pub fn scan_sqlite(
     mut on_message: impl FnMut(usize, &SqliteMessage) -> Result<(), DataError>,
 ) -> Result<(), DataError> {
     use rusqlite::{Connection, OpenFlags};
-    let err = |e: rusqlite::Error| DataError::Bag {
-        path: path.to_path_buf(),
-        msg: format!("sqlite3: {e}"),
-    };
+    let err = |e: rusqlite::Error| sqlite_err(path, e);
     let db = Connection::open_with_flags(path, OpenFlags::SQLITE_OPEN_READ_ONLY).map_err(err)?;
-    let has_defs: bool = db
-        .query_row(
-            "SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = 'message_definitions'",
-            [],
-            |r| r.get::<_, i64>(0),
-        )
-        .map_err(err)?
-        > 0;
-    let mut defs = std::collections::HashMap::new();
-    if has_defs {
-        let mut st = db
-            .prepare(
-                "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions",
-            )
-            .map_err(err)?;
-        let rows = st
-            .query_map([], |r| {
-                Ok((
-                    r.get::<_, String>(0)?,
-                    (r.get::<_, String>(1)?, r.get::<_, String>(2)?),
-                ))
-            })
-            .map_err(err)?;
-        for row in rows {
-            let (t, d) = row.map_err(err)?;
-            defs.insert(t, d);
-        }
-    }
-    let mut topics = std::collections::HashMap::new();
-    {
-        let mut st = db
-            .prepare("SELECT id, name, type, serialization_format FROM topics")
-            .map_err(err)?;
-        let rows = st
-            .query_map([], |r| {
-                Ok((
-                    r.get::<_, i64>(0)?,
-                    (
-                        r.get::<_, String>(1)?,
-                        r.get::<_, String>(2)?,
-                        r.get::<_, String>(3)?,
-                    ),
-                ))
-            })
-            .map_err(err)?;
-        for row in rows {
-            let (id, t) = row.map_err(err)?;
-            topics.insert(id, t);
-        }
-    }
+    let defs = sqlite_definitions(&db, path)?;
+    let topics = sqlite_topics(&db, path)?;
     let mut st = db
         .prepare("SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id")
         .map_err(err)?;
@@ -371,4 +348,82 @@ pub fn scan_sqlite(
         index += 1;
     }
     Ok(())
+}
+
+/// A sqlite3 error, naming the file.
+fn sqlite_err(path: &Path, e: rusqlite::Error) -> DataError {
+    DataError::Bag {
+        path: path.to_path_buf(),
+        msg: format!("sqlite3: {e}"),
+    }
+}
+
+/// The message definitions a rosbag2 sqlite3 file stores (from Iron on), by
+/// message type: (encoding, text). Empty when it has none.
+fn sqlite_definitions(
+    db: &rusqlite::Connection,
+    path: &Path,
+) -> Result<HashMap<String, (String, String)>, DataError> {
+    let err = |e: rusqlite::Error| sqlite_err(path, e);
+    let has_defs: bool = db
+        .query_row(
+            "SELECT count(*) FROM sqlite_master WHERE type = 'table' AND name = 'message_definitions'",
+            [],
+            |r| r.get::<_, i64>(0),
+        )
+        .map_err(err)?
+        > 0;
+    let mut defs = HashMap::new();
+    if has_defs {
+        let mut st = db
+            .prepare(
+                "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions",
+            )
+            .map_err(err)?;
+        let rows = st
+            .query_map([], |r| {
+                Ok((
+                    r.get::<_, String>(0)?,
+                    (r.get::<_, String>(1)?, r.get::<_, String>(2)?),
+                ))
+            })
+            .map_err(err)?;
+        for row in rows {
+            let (t, d) = row.map_err(err)?;
+            defs.insert(t, d);
+        }
+    }
+    Ok(defs)
+}
+
+/// A sqlite3 topic: name, message type and serialization format.
+type SqliteTopic = (String, String, String);
+
+/// The topics of a rosbag2 sqlite3 file, by id.
+fn sqlite_topics(
+    db: &rusqlite::Connection,
+    path: &Path,
+) -> Result<HashMap<i64, SqliteTopic>, DataError> {
+    let err = |e: rusqlite::Error| sqlite_err(path, e);
+    let mut topics = HashMap::new();
+    let mut st = db
+        .prepare("SELECT id, name, type, serialization_format FROM topics")
+        .map_err(err)?;
+    let rows = st
+        .query_map([], |r| {
+            Ok((
+                r.get::<_, i64>(0)?,
+                (
+                    r.get::<_, String>(1)?,
+                    r.get::<_, String>(2)?,
+                    r.get::<_, String>(3)?,
+                ),
+            ))
+        })
+        .map_err(err)?;
+    for row in rows {
+        let (id, t) = row.map_err(err)?;
+        topics.insert(id, t);
+    }
+    Ok(topics)
 }

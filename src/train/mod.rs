@@ -1,178 +1,48 @@
 //! Training: MSE on accelerations, Adam, batches of 100, a seeded 75:25 split,
 //! early stopping on the validation loss (the best weights are kept).
+//!
+//! - [`config`]: the settings ([`TrainConfig`]) and the gradient engine.
+//! - [`options`]: architecture choices ([`ModelOptions`], the body-force branch).
+//! - [`adam`]: the optimiser.
+//! - [`objective`]: the loss and its gradient, by candle or the native engine.
+//! - [`fit`](mod@fit): the training loop, with early stopping and checkpoints.
+//! - [`checkpoint`]: a run's state saved and taken up.
+//! - [`recipe`]: settings chosen from the data.
+//!
+//! This file trains a model of given hyperparameters ([`train`]) and a model
+//! from bags ([`train_from_bags`]); the bags are read by
+//! [`crate::data::load`].
 
 use crate::data::dataset::Dataset;
 use crate::engine::Engine;
 use crate::error::{bail, Result};
 use crate::model::batch::Batch;
-use crate::model::file::AdamState;
-use crate::model::file::TrainingReport;
-use crate::model::params::ParamStore;
+use crate::model::file::{AdamState, TrainingReport};
 use crate::model::plan::GraphPlan;
-use crate::model::{ArchPreset, EdgeInput, Hyper, MessageFn, Net, Variant};
+use crate::model::{Hyper, Net};
 use crate::system::{Graph, State};
 use candle_core::Tensor;
-use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
-use std::time::Instant;
 
+pub mod adam;
 pub mod checkpoint;
+pub mod config;
+pub mod fit;
+pub mod objective;
+pub mod options;
 pub mod recipe;
+
+pub use adam::Adam;
 pub use checkpoint::{Checkpoint, CheckpointError, Checkpointing};
-use checkpoint::{Progress, RngState, RunKey};
+pub use config::{EngineKind, TrainConfig};
+pub use fit::{check_data, fit, split, trivial_loss, trivial_loss_free, EpochReport, Split};
+pub use objective::{flat_params, set_flat_params, CandleObjective, EngineObjective, Objective};
+pub use options::{BodyForce, ModelOptions};
 pub use recipe::{Auto, Recipe};
 
-/// Training settings.
-#[derive(Clone, Debug)]
-pub struct TrainConfig {
-    /// Maximum epochs (paper: 10,000).
-    pub epochs: usize,
-    /// Adam learning rate (paper: 1e-3).
-    pub lr: f64,
-    /// Batch size (paper: 100).
-    pub batch: usize,
-    /// Fraction of states held out for validation (paper: 0.25).
-    pub validation: f64,
-    /// Stop when the validation loss has not improved for this many epochs.
-    pub patience: usize,
-    /// Seed for initialisation, split and shuffling (and, through distinct
-    /// streams, subsampling and noise).
-    pub seed: u64,
-    /// Gaussian noise on the target accelerations, percent of their standard
-    /// deviation (paper's noise experiments: 0, 1, 5, 10). Applied by
-    /// [`apply_data_options`].
-    pub noise: f64,
-    /// Train on a seeded random subset of this many states (paper's
-    /// data-efficiency experiments: 100 to 10,000); `None`: all. Applied by
-    /// [`apply_data_options`].
-    pub points: Option<usize>,
-    /// Gradient engine of the GNODE family (the baselines always use candle).
-    pub engine: EngineKind,
-    /// Threads of the native engine; results do not depend on it.
-    pub threads: usize,
-    /// Warm start: continue from this model's weights (and its Adam state when
-    /// it has one). Its hyperparameters must be the ones trained.
-    pub init: Option<Box<crate::model::ModelFile>>,
-    /// Scale inputs and outputs by statistics of the training split (stored
-    /// in the model file; see [`crate::model::Norm`]).
-    pub normalize: bool,
-    /// Step schedule: after epoch `e`, learning rate `lr` (pairs in any order;
-    /// the latest passed applies).
-    pub lr_drops: Vec<(usize, f64)>,
-    /// Stop after the first epoch that ends this many seconds after training
-    /// started (the best weights so far are kept): a wall-clock budget, as a
-    /// robot retraining between tasks has, and what `reproduce` gives the
-    /// baselines to compare them with MCGNODE at equal time.
-    pub time_budget: Option<f64>,
-    /// Save the run's state as it goes, and resume from the file when it
-    /// exists (see [`checkpoint`]).
-    pub checkpoint: Option<Checkpointing>,
-    /// Settings the default recipe chooses from the data instead of taking
-    /// them from this config ([`recipe`]; none by default).
-    pub auto: Auto,
-}
-
-impl TrainConfig {
-    /// The learning rate of epoch `epoch` (from 1).
-    pub fn lr_at(&self, epoch: usize) -> f64 {
-        self.lr_drops
-            .iter()
-            .filter(|(e, _)| epoch > *e)
-            .max_by_key(|(e, _)| *e)
-            .map_or(self.lr, |(_, lr)| *lr)
-    }
-}
-
-impl Default for TrainConfig {
-    fn default() -> Self {
-        Self {
-            epochs: 10_000,
-            lr: 1e-3,
-            batch: 100,
-            validation: 0.25,
-            patience: 1_000,
-            seed: 0,
-            noise: 0.0,
-            points: None,
-            engine: EngineKind::Native,
-            threads: crate::engine::all_cores(),
-            init: None,
-            normalize: true,
-            lr_drops: vec![],
-            time_budget: None,
-            checkpoint: None,
-            auto: Auto::default(),
-        }
-    }
-}
-
-impl TrainConfig {
-    /// This config with the settings in [`TrainConfig::auto`] chosen by the
-    /// default recipe for `states` states of `graph` (before the split), and
-    /// a line saying what was chosen (`None` when nothing was).
-    pub fn resolved(&self, graph: &Graph, states: usize) -> (TrainConfig, Option<String>) {
-        self.resolved_for(recipe::directed_edges(graph), states)
-    }
-
-    /// [`TrainConfig::resolved`] for states of `edges` directed edges each
-    /// (with contacts: [`recipe::directed_edges_in`]).
-    pub fn resolved_for(&self, edges: usize, states: usize) -> (TrainConfig, Option<String>) {
-        let a = self.auto;
-        let mut c = self.clone();
-        c.auto = Auto::default();
-        if !a.any() {
-            return (c, None);
-        }
-        let warm = self.init.is_some();
-        if a.batch {
-            c.batch = recipe::batch_for_edges(edges);
-        }
-        if a.lr {
-            c.lr = if warm { 1e-3 } else { 1e-2 };
-        }
-        if a.epochs {
-            let n_val = ((states as f64 * c.validation).round() as usize)
-                .clamp(1, states.saturating_sub(1).max(1));
-            c.epochs = recipe::epochs_for(states.saturating_sub(n_val), c.batch);
-        }
-        if a.lr_drops && !warm {
-            c.lr_drops = vec![((c.epochs * 2).div_ceil(3), c.lr / 10.0)];
-        }
-        let drops = c
-            .lr_drops
-            .iter()
-            .map(|(e, lr)| format!(", {lr:e} after epoch {e}"))
-            .collect::<String>();
-        let line = format!(
-            "recipe: batch {} states ({} directed edges each), {} epochs, lr {:e}{drops}{}",
-            c.batch,
-            edges,
-            c.epochs,
-            c.lr,
-            if warm { " (warm start)" } else { "" }
-        );
-        (c, Some(line))
-    }
-}
-
-/// One epoch's figures, handed to the progress callback.
-#[derive(Clone, Debug)]
-pub struct EpochReport {
-    /// Epoch number, from 1.
-    pub epoch: usize,
-    /// Epochs asked for.
-    pub epochs: usize,
-    /// Mean training loss over the epoch's batches.
-    pub train_loss: f64,
-    /// Validation loss after the epoch.
-    pub validation_loss: f64,
-    /// Best validation loss so far.
-    pub best: f64,
-    /// Seconds since training started.
-    pub elapsed: f64,
-}
+// Bag loading lives with the data; its paths under `train` are kept.
+pub use crate::data::load::{load_training_data, load_training_data_from, TrainingData};
 
 /// The result of training.
 pub struct Trained {
@@ -182,503 +52,6 @@ pub struct Trained {
     pub report: TrainingReport,
     /// Adam's state after the last epoch.
     pub optimizer: crate::model::file::AdamState,
-}
-
-/// Adam (Kingma & Ba) on one flat parameter vector: the same update for
-/// both engines and every model kind.
-pub struct Adam {
-    lr: f64,
-    m: Vec<f64>,
-    v: Vec<f64>,
-    t: i32,
-}
-
-impl Adam {
-    /// Zero moments for `len` parameters.
-    pub fn new(lr: f64, len: usize) -> Self {
-        Self {
-            lr,
-            m: vec![0.0; len],
-            v: vec![0.0; len],
-            t: 0,
-        }
-    }
-
-    /// Continues from a saved state (moments flat, in parameter order).
-    pub fn resume(lr: f64, step: i32, m: Vec<f64>, v: Vec<f64>) -> Self {
-        Self { lr, m, v, t: step }
-    }
-
-    /// Sets the learning rate (a schedule's step).
-    pub fn set_lr(&mut self, lr: f64) {
-        self.lr = lr;
-    }
-
-    /// (updates taken, first moments, second moments).
-    pub fn state(&self) -> (i32, &[f64], &[f64]) {
-        (self.t, &self.m, &self.v)
-    }
-
-    /// One update of `theta` from `grad`.
-    pub fn step(&mut self, theta: &mut [f64], grad: &[f64]) {
-        const B1: f64 = 0.9;
-        const B2: f64 = 0.999;
-        const EPS: f64 = 1e-8;
-        self.t += 1;
-        let c1 = 1.0 - B1.powi(self.t);
-        let c2 = 1.0 - B2.powi(self.t);
-        for (((p, g), m), v) in theta.iter_mut().zip(grad).zip(&mut self.m).zip(&mut self.v) {
-            *m = B1 * *m + (1.0 - B1) * g;
-            *v = B2 * *v + (1.0 - B2) * g * g;
-            *p -= self.lr * (*m / c1) / ((*v / c2).sqrt() + EPS);
-        }
-    }
-}
-
-/// What [`fit`] minimises: a mean loss over samples, with its gradient, as a
-/// function of one flat parameter vector.
-pub trait Objective {
-    /// Mean loss over the samples `idx` at `theta`, its gradient written to `grad`.
-    fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64>;
-    /// Mean loss over the samples `idx` at `theta`.
-    fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64>;
-}
-
-/// The parameters of a candle store as one flat vector, in definition order.
-pub fn flat_params(store: &ParamStore) -> Result<Vec<f64>> {
-    let mut out = vec![];
-    for v in store.vars() {
-        out.extend(v.as_tensor().flatten_all()?.to_vec1::<f64>()?);
-    }
-    Ok(out)
-}
-
-/// Sets a candle store's parameters from a flat vector (definition order).
-pub fn set_flat_params(store: &ParamStore, theta: &[f64]) -> Result<()> {
-    let mut at = 0;
-    for v in store.vars() {
-        let n = v.elem_count();
-        v.set(&Tensor::from_vec(
-            theta[at..at + n].to_vec(),
-            v.shape(),
-            v.device(),
-        )?)?;
-        at += n;
-    }
-    if at != theta.len() {
-        bail!("{} parameters given, the model has {at}", theta.len());
-    }
-    Ok(())
-}
-
-/// A candle loss `loss(indices)` over a store, differentiated by candle's
-/// autodiff: the reference engine, and the one the baselines use. With more
-/// than one thread, a batch is cut into one chunk per thread whose gradients
-/// are summed in order (so results depend on the thread count only through
-/// rounding); candle itself runs each chunk on one thread.
-pub struct CandleObjective<'a, F> {
-    store: &'a ParamStore,
-    loss: F,
-    pool: Option<rayon::ThreadPool>,
-    threads: usize,
-}
-
-impl<'a, F: Fn(&[usize]) -> Result<Tensor> + Sync> CandleObjective<'a, F> {
-    /// The objective of `loss` on `store`'s parameters, on one thread.
-    pub fn new(store: &'a ParamStore, loss: F) -> Self {
-        Self {
-            store,
-            loss,
-            pool: None,
-            threads: 1,
-        }
-    }
-
-    /// The same, with batches cut over `threads` threads.
-    pub fn with_threads(store: &'a ParamStore, loss: F, threads: usize) -> Result<Self> {
-        let threads = threads.max(1);
-        let pool = if threads > 1 {
-            Some(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()?,
-            )
-        } else {
-            None
-        };
-        Ok(Self {
-            store,
-            loss,
-            pool,
-            threads,
-        })
-    }
-
-    /// Mean loss and its gradient over one chunk.
-    fn chunk(&self, idx: &[usize], with_grad: bool) -> Result<(f64, Vec<f64>)> {
-        let l = (self.loss)(idx)?;
-        let value = l.to_scalar::<f64>()?;
-        let mut out = vec![];
-        if with_grad {
-            let grads = l.backward()?;
-            for var in self.store.vars() {
-                match grads.get(&var) {
-                    Some(g) => out.extend(g.flatten_all()?.to_vec1::<f64>()?),
-                    // Parameters the loss does not read have no gradient.
-                    None => out.extend(std::iter::repeat_n(0.0, var.elem_count())),
-                }
-            }
-        }
-        Ok((value, out))
-    }
-
-    /// The chunks of `idx` (at most `max` samples each, at least one per
-    /// thread when there are enough), evaluated in order.
-    fn chunks(
-        &self,
-        idx: &[usize],
-        max: usize,
-        with_grad: bool,
-    ) -> Result<Vec<(usize, f64, Vec<f64>)>> {
-        let size = idx.len().div_ceil(self.threads).clamp(1, max);
-        let parts: Vec<&[usize]> = idx.chunks(size).collect();
-        let run = |c: &&[usize]| -> Result<(usize, f64, Vec<f64>)> {
-            let (l, g) = self.chunk(c, with_grad)?;
-            Ok((c.len(), l, g))
-        };
-        match &self.pool {
-            Some(pool) if parts.len() > 1 => pool.install(|| parts.par_iter().map(run).collect()),
-            _ => parts.iter().map(run).collect(),
-        }
-    }
-}
-
-impl<F: Fn(&[usize]) -> Result<Tensor> + Sync> Objective for CandleObjective<'_, F> {
-    fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64> {
-        set_flat_params(self.store, theta)?;
-        let n = idx.len() as f64;
-        let parts = self.chunks(idx, usize::MAX, true)?;
-        if let [(_, l, g)] = parts.as_slice() {
-            grad.copy_from_slice(g);
-            return Ok(*l);
-        }
-        grad.fill(0.0);
-        let mut total = 0.0;
-        for (len, l, g) in parts {
-            let w = len as f64 / n;
-            total += l * w;
-            for (x, y) in grad.iter_mut().zip(&g) {
-                *x += y * w;
-            }
-        }
-        Ok(total)
-    }
-
-    fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64> {
-        set_flat_params(self.store, theta)?;
-        let total: f64 = self
-            .chunks(idx, 1000, false)?
-            .iter()
-            .map(|(len, l, _)| l * *len as f64)
-            .sum();
-        Ok(total / idx.len() as f64)
-    }
-}
-
-/// The hand-written engine on one graph's states and target accelerations.
-pub struct EngineObjective<'a> {
-    engine: &'a mut Engine,
-    states: &'a [State],
-    targets: &'a [Vec<f64>],
-}
-
-impl<'a> EngineObjective<'a> {
-    /// The objective of `engine` on these states and targets.
-    pub fn new(engine: &'a mut Engine, states: &'a [State], targets: &'a [Vec<f64>]) -> Self {
-        Self {
-            engine,
-            states,
-            targets,
-        }
-    }
-}
-
-impl Objective for EngineObjective<'_> {
-    fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64> {
-        Ok(self
-            .engine
-            .loss_grad(theta, self.states, self.targets, idx, grad))
-    }
-
-    fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64> {
-        Ok(self.engine.loss(theta, self.states, self.targets, idx))
-    }
-}
-
-/// Checks training data against its graph and the settings.
-pub fn check_data(
-    graph: &Graph,
-    states: &[State],
-    acc: &[Vec<f64>],
-    cfg: &TrainConfig,
-) -> Result<()> {
-    if states.len() != acc.len() {
-        bail!("{} states but {} accelerations", states.len(), acc.len());
-    }
-    if states.len() < 2 {
-        bail!("need at least 2 states to train (got {})", states.len());
-    }
-    if !(cfg.validation > 0.0 && cfg.validation < 1.0) {
-        bail!("validation fraction must be in (0, 1)");
-    }
-    if cfg.batch == 0 || cfg.epochs == 0 {
-        bail!("batch size and epochs must be positive");
-    }
-    graph.validate()?;
-    for (i, (s, a)) in states.iter().zip(acc).enumerate() {
-        s.validate(graph)
-            .map_err(|e| crate::error::err!("state {i}: {e}"))?;
-        if a.len() != graph.ndof() || a.iter().any(|x| !x.is_finite()) {
-            bail!("accelerations of state {i} have the wrong size or are not finite");
-        }
-    }
-    Ok(())
-}
-
-/// Sample indices held out for validation, and the rest.
-#[derive(Clone, Debug)]
-pub struct Split {
-    /// Validation samples.
-    pub validation: Vec<usize>,
-    /// Training samples.
-    pub train: Vec<usize>,
-}
-
-/// The seeded split of `n` samples (validation fraction from `cfg`).
-pub fn split(n: usize, cfg: &TrainConfig, rng: &mut ChaCha8Rng) -> Split {
-    let mut order: Vec<usize> = (0..n).collect();
-    order.shuffle(rng);
-    let n_val = ((n as f64 * cfg.validation).round() as usize).clamp(1, n - 1);
-    let train = order.split_off(n_val);
-    Split {
-        validation: order,
-        train,
-    }
-}
-
-/// The loop every trainable model shares: a [`split`] of the samples,
-/// shuffled batches, Adam on the flat
-/// parameters `theta` (from `adam`'s state, which is left as the last epoch
-/// made it), validation after every epoch, early stopping; the best parameters
-/// are left in `theta`. `on_epoch` returns false to cancel.
-///
-/// With [`TrainConfig::checkpoint`], the run's state is saved as it goes and,
-/// when the file exists, taken up from it: the result is the one an
-/// uninterrupted run gives, and the seconds and time budget count every
-/// session.
-pub fn fit(
-    theta: &mut [f64],
-    split: Split,
-    cfg: &TrainConfig,
-    rng: &mut ChaCha8Rng,
-    objective: &mut dyn Objective,
-    adam: &mut Adam,
-    mut on_epoch: impl FnMut(&EpochReport) -> bool,
-) -> Result<TrainingReport> {
-    let Split {
-        validation: val_idx,
-        train: train_idx,
-    } = split;
-    let val_idx = val_idx.as_slice();
-    if adam.m.len() != theta.len() {
-        bail!(
-            "optimiser state has {} entries, the model {}",
-            adam.m.len(),
-            theta.len()
-        );
-    }
-    if let Some(b) = cfg.time_budget {
-        if !(b > 0.0 && b.is_finite()) {
-            bail!("the time budget must be a positive number of seconds, got {b}");
-        }
-    }
-    if let Some(ck) = &cfg.checkpoint {
-        if !(ck.every >= 0.0 && ck.every.is_finite()) {
-            bail!(
-                "the checkpoint interval must be a number of seconds >= 0, got {}",
-                ck.every
-            );
-        }
-    }
-    let mut run = Progress::fresh(theta, train_idx);
-    let mut resumed_at = None;
-    let key = match &cfg.checkpoint {
-        Some(ck) => {
-            let key = RunKey {
-                parameters: theta.len(),
-                train: run.train_order.len(),
-                validation: val_idx.len(),
-                seed: cfg.seed,
-                batch: cfg.batch,
-                lr: cfg.lr,
-                lr_drops: cfg.lr_drops.clone(),
-                patience: cfg.patience,
-                time_budget: cfg.time_budget,
-                initial_loss: objective.loss(theta, val_idx)?,
-            };
-            if let Some(c) = Checkpoint::load_for(&ck.path, &key)? {
-                run = resume(c, &ck.path, &run.train_order, theta, rng, adam, cfg.lr)?;
-                resumed_at = Some(run.epoch);
-            }
-            Some(key)
-        }
-        None => None,
-    };
-    let mut grad = vec![0.0; theta.len()];
-    let start = Instant::now();
-    let mut last_save = Instant::now();
-    let before = run.seconds;
-    let first = run.epoch + 1;
-    for epoch in first..=cfg.epochs {
-        if run.stopped_early || run.out_of_time {
-            break;
-        }
-        adam.set_lr(cfg.lr_at(epoch));
-        run.train_order.shuffle(rng);
-        let (mut sum, mut count) = (0.0, 0usize);
-        for chunk in run.train_order.chunks(cfg.batch) {
-            let lv = objective.loss_grad(theta, chunk, &mut grad)?;
-            if !lv.is_finite() {
-                bail!("training diverged at epoch {epoch} (loss {lv})");
-            }
-            adam.step(theta, &grad);
-            sum += lv * chunk.len() as f64;
-            count += chunk.len();
-        }
-        let train_loss = sum / count as f64;
-        let val = objective.loss(theta, val_idx)?;
-        run.epoch = epoch;
-        if !val.is_finite() {
-            bail!("validation loss is not finite at epoch {epoch}");
-        }
-        if val < run.best {
-            run.best = val;
-            run.best_epoch = epoch;
-            run.best_train = train_loss;
-            run.best_theta.copy_from_slice(theta);
-        }
-        let report = EpochReport {
-            epoch,
-            epochs: cfg.epochs,
-            train_loss,
-            validation_loss: val,
-            best: run.best,
-            elapsed: before + start.elapsed().as_secs_f64(),
-        };
-        // Seconds to the end of the last epoch: the report, the checkpoint
-        // and a resumed finished run state the same figure, so a budget
-        // derived from it matches exactly.
-        run.seconds = report.elapsed;
-        run.stopped_early = epoch - run.best_epoch >= cfg.patience;
-        run.out_of_time =
-            !run.stopped_early && cfg.time_budget.is_some_and(|b| report.elapsed >= b);
-        if let (Some(ck), Some(key)) = (&cfg.checkpoint, &key) {
-            let last = epoch == cfg.epochs || run.stopped_early || run.out_of_time;
-            if last || last_save.elapsed().as_secs_f64() >= ck.every {
-                let (adam_step, m, v) = adam.state();
-                let c = Checkpoint {
-                    format: checkpoint::FORMAT.into(),
-                    key: key.clone(),
-                    progress: run.clone(),
-                    theta: theta.to_vec(),
-                    adam_step,
-                    adam_m: m.to_vec(),
-                    adam_v: v.to_vec(),
-                    rng: RngState::of(rng),
-                };
-                c.save(&ck.path)?;
-                last_save = Instant::now();
-            }
-        }
-        if !on_epoch(&report) {
-            bail!("training cancelled at epoch {epoch}");
-        }
-    }
-    theta.copy_from_slice(&run.best_theta);
-    Ok(TrainingReport {
-        seed: cfg.seed,
-        epochs_requested: cfg.epochs,
-        epochs_run: run.epoch,
-        best_epoch: run.best_epoch,
-        train_loss: run.best_train,
-        validation_loss: run.best,
-        stopped_early: run.stopped_early,
-        seconds: run.seconds,
-        batch: cfg.batch,
-        lr: cfg.lr,
-        patience: cfg.patience,
-        noise: cfg.noise,
-        points: cfg.points,
-        lr_drops: cfg.lr_drops.clone(),
-        time_budget: cfg.time_budget,
-        out_of_time: run.out_of_time,
-        resumed_at,
-        trivial_loss: None,
-        explained: None,
-    })
-}
-
-/// Takes up a checkpoint (already checked against the run's key) for a run
-/// whose training samples are `train_order`: the parameters, Adam and the
-/// RNG as it left them, and its progress.
-fn resume(
-    c: Checkpoint,
-    path: &std::path::Path,
-    train_order: &[usize],
-    theta: &mut [f64],
-    rng: &mut ChaCha8Rng,
-    adam: &mut Adam,
-    lr: f64,
-) -> Result<Progress> {
-    let (mut have, mut want) = (c.progress.train_order.clone(), train_order.to_vec());
-    have.sort_unstable();
-    want.sort_unstable();
-    if have != want {
-        bail!(
-            "checkpoint {} holds another training split; remove it to train afresh",
-            path.display()
-        );
-    }
-    *rng = c.rng(path)?;
-    *adam = Adam::resume(lr, c.adam_step, c.adam_m, c.adam_v);
-    theta.copy_from_slice(&c.theta);
-    Ok(c.progress)
-}
-
-/// The trivial predictor's loss on the samples `idx`: the MSE of predicting
-/// zero acceleration, i.e. the targets' mean square (every entry weighs the
-/// same, as in the training loss).
-pub fn trivial_loss(acc: &[Vec<f64>], idx: &[usize]) -> f64 {
-    trivial_loss_free(acc, idx, |_| true)
-}
-
-/// [`trivial_loss`] over the coordinates `free(f)` keeps (the free
-/// particles', as the GNODE family's loss).
-pub fn trivial_loss_free(acc: &[Vec<f64>], idx: &[usize], free: impl Fn(usize) -> bool) -> f64 {
-    let (mut sum, mut count) = (0.0, 0usize);
-    for &i in idx {
-        for (f, a) in acc[i].iter().enumerate() {
-            if free(f) {
-                sum += a * a;
-                count += 1;
-            }
-        }
-    }
-    if count == 0 {
-        0.0
-    } else {
-        sum / count as f64
-    }
 }
 
 /// Mixed into [`TrainConfig::seed`] for the subsample's stream ("points"), so
@@ -798,248 +171,6 @@ pub fn train(
     })
 }
 
-/// Which engine computes the GNODE family's gradients.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum EngineKind {
-    /// Hand-written reverse mode on the kernel's layout, over all cores (default).
-    Native,
-    /// Candle's autodiff: the reference.
-    Candle,
-}
-
-/// Whether MCGNODE learns a body-force branch.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum BodyForce {
-    /// On unless the bag says the system is closed (no field, no anchors).
-    Auto,
-    /// Always learn body forces.
-    On,
-    /// Never: internal forces only, momentum conserved exactly.
-    Off,
-}
-
-/// Architecture choices on top of a variant's paper defaults.
-#[derive(Clone, Debug)]
-pub struct ModelOptions {
-    /// Hidden units of the graph MLPs.
-    pub hidden: usize,
-    /// Embedding width.
-    pub embed: usize,
-    /// Message-passing rounds.
-    pub rounds: usize,
-    /// Body-force branch (MCGNODE).
-    pub body_force: BodyForce,
-    /// One-hot width; default: largest type in the data + 1.
-    pub types: Option<usize>,
-    /// The ParticleState topic to train on, when a bag holds several.
-    pub topic: Option<String>,
-    /// Architecture preset (the authors' code by default).
-    pub arch: ArchPreset,
-    /// Hidden layers per graph MLP, overriding the preset.
-    pub hidden_layers: Option<usize>,
-    /// Message functions, overriding the preset.
-    pub message: Option<MessageFn>,
-    /// Edge-update input, overriding the preset.
-    pub edge_input: Option<EdgeInput>,
-    /// Per-block hidden sizes (block weight prefix → sizes).
-    pub block_hidden: std::collections::BTreeMap<String, Vec<usize>>,
-    /// Edges read their rest length and stiffness.
-    pub edge_physics: bool,
-    /// The interaction radius to train with, overriding the bags' (none:
-    /// theirs).
-    pub radius: Option<f64>,
-    /// With [`Recipe::Auto`], the blocks that embed and decode edges get the
-    /// recipe's widths ([`recipe::edge_blocks`]) unless `block_hidden` names
-    /// them; [`Recipe::Paper`] (the default here) adds nothing.
-    pub recipe: Recipe,
-}
-
-impl Default for ModelOptions {
-    fn default() -> Self {
-        Self {
-            hidden: 5,
-            embed: 5,
-            rounds: 1,
-            body_force: BodyForce::Auto,
-            types: None,
-            topic: None,
-            arch: ArchPreset::Authors,
-            hidden_layers: None,
-            message: None,
-            edge_input: None,
-            block_hidden: Default::default(),
-            edge_physics: false,
-            radius: None,
-            recipe: Recipe::Paper,
-        }
-    }
-}
-
-impl ModelOptions {
-    /// The hyperparameters these options give a variant on a `dim`-D graph of
-    /// `particles` particles with `types` types (body force left on).
-    pub fn hyper(
-        &self,
-        variant: Variant,
-        dim: usize,
-        types: usize,
-        particles: usize,
-    ) -> Result<Hyper> {
-        let mut h = Hyper::new(variant, dim, types, particles).with_preset(self.arch);
-        h.hidden = self.hidden;
-        h.embed = self.embed;
-        h.rounds = self.rounds;
-        h.hidden_layers = self.hidden_layers.unwrap_or(h.hidden_layers);
-        h.message = self.message.unwrap_or(h.message);
-        h.edge_input = self.edge_input.unwrap_or(h.edge_input);
-        h.block_hidden = self.block_hidden.clone();
-        if self.recipe == Recipe::Auto {
-            for (block, sizes) in recipe::edge_blocks(variant) {
-                h.block_hidden.entry(block.to_string()).or_insert(sizes);
-            }
-        }
-        h.edge_physics = self.edge_physics;
-        let known: Vec<String> = crate::model::Arch::new(&h)
-            .mlps
-            .iter()
-            .map(|(b, _)| b.prefix())
-            .collect();
-        if let Some(bad) = h.block_hidden.keys().find(|k| !known.contains(k)) {
-            bail!(
-                "--block-hidden names block {bad:?}, which a {variant} model does not have (it has: {})",
-                known.join(", ")
-            );
-        }
-        if h.hidden == 0 || h.embed == 0 {
-            bail!("--hidden and --embed must be positive");
-        }
-        Ok(h)
-    }
-}
-
-/// Training data read from bags: the dataset and what a model file records about it.
-pub struct TrainingData {
-    /// States and target accelerations on one graph.
-    pub dataset: crate::data::dataset::Dataset,
-    /// What the model file says about its training data.
-    pub trained_on: crate::model::file::TrainedOn,
-    /// The simulator configuration from the first bag's metadata, if any.
-    pub system_config: Option<crate::physics::SystemConfig>,
-    /// Whether the data are a closed system (no anchors, no field), and why:
-    /// `None` when the bags neither say nor show it.
-    pub closed: Option<(bool, String)>,
-}
-
-/// Reads training bags (each an MCAP file, a rosbag2 directory or a .db3
-/// file) into a dataset ([`load_training_data_from`] on the only
-/// ParticleState topic).
-pub fn load_training_data(
-    bags: &[std::path::PathBuf],
-    log: impl FnMut(&str),
-) -> Result<TrainingData> {
-    load_training_data_from(bags, None, log)
-}
-
-/// Reads training bags into a dataset (recorded accelerations, else finite
-/// differences; `log` says which) with fingerprints of every trajectory's
-/// start, reading `topic` (needed when a bag holds several ParticleState
-/// topics).
-pub fn load_training_data_from(
-    bags: &[std::path::PathBuf],
-    topic: Option<&str>,
-    mut log: impl FnMut(&str),
-) -> Result<TrainingData> {
-    use crate::data::bag::{read_bags, ReadOptions};
-    use crate::data::dataset::AccSource;
-    use crate::data::field::{bag_field, bag_system};
-    use crate::system::fingerprint;
-    if bags.is_empty() {
-        bail!("no training bags given");
-    }
-    let mut trajectories = vec![];
-    let mut digests = vec![];
-    let mut system_config = None;
-    let mut closed: Option<(bool, String)> = None;
-    let read = ReadOptions {
-        topic: topic.map(str::to_string),
-    };
-    for p in bags {
-        let bag = read_bags(std::slice::from_ref(p), &read)?;
-        if system_config.is_none() {
-            system_config = bag_system(&bag)?;
-        }
-        // Closed: no anchors and no field, as the bag states or its data show.
-        let this = match bag_field(&bag, None)? {
-            _ if bag.trajectories.iter().any(|t| !t.graph.anchors.is_empty()) => {
-                Some((false, "anchors".to_string()))
-            }
-            Some(o) => Some((o.field.is_free(), o.source)),
-            None => None,
-        };
-        closed = match (closed, this) {
-            (None, t) if trajectories.is_empty() => t,
-            (Some((a, why)), Some((b, _))) if a == b => Some((a, why)),
-            _ => None,
-        };
-        digests.push(bag_digest(p)?);
-        trajectories.extend(bag.trajectories);
-    }
-    let ds = Dataset::from_trajectories(&trajectories)?;
-    let source = match ds.source {
-        AccSource::Recorded => "recorded",
-        AccSource::FiniteDifference => "finite-difference",
-    };
-    log(&format!(
-        "{} states of {} trajectories ({}-particle {}D graph); accelerations: {source}",
-        ds.len(),
-        trajectories.len(),
-        ds.graph.n(),
-        ds.graph.dim
-    ));
-    let first = trajectories.first().expect("dataset is not empty");
-    let trained_on = crate::model::file::TrainedOn {
-        system: first.system.clone(),
-        particles: ds.graph.n(),
-        dim: ds.graph.dim,
-        bag: bags
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect::<Vec<_>>()
-            .join(","),
-        bag_sha256: digests.join(","),
-        accelerations: source.to_string(),
-        trajectories: trajectories.len(),
-        states: ds.len(),
-        start_fingerprints: trajectories
-            .iter()
-            .filter_map(|t| t.samples.first())
-            .map(|s| fingerprint(&s.state))
-            .collect(),
-        system_config: system_config
-            .as_ref()
-            .map(serde_json::to_value)
-            .transpose()?,
-        edge_params: crate::model::file::EdgeParams::of(&ds.graph),
-    };
-    Ok(TrainingData {
-        dataset: ds,
-        trained_on,
-        system_config,
-        closed,
-    })
-}
-
-/// SHA-256 of a bag argument: of its file, or of each storage file of a
-/// rosbag2 directory joined by `+`.
-fn bag_digest(p: &std::path::Path) -> Result<String> {
-    let parts = crate::data::source::bag_parts(p)?;
-    Ok(parts
-        .iter()
-        .map(|part| crate::data::dataset::digest(&part.path))
-        .collect::<Result<Vec<_>, _>>()?
-        .join("+"))
-}
-
 /// Applies `--radius` (when given) to the training graph and says what the
 /// models will see of contacts and kinematic particles.
 pub fn set_radius(graph: &mut Graph, radius: Option<f64>, mut log: impl FnMut(&str)) -> Result<()> {
@@ -1090,70 +221,13 @@ pub(crate) fn train_from_bags(
     );
     let mut hyper = opts.hyper(variant, ds.graph.dim, types, ds.graph.n())?;
     hyper.interaction_radius = ds.graph.interaction_radius;
-    hyper.body_force = match opts.body_force {
-        BodyForce::On => true,
-        BodyForce::Off => false,
-        BodyForce::Auto => match &data.closed {
-            Some((closed, _)) => !closed,
-            // A warm start keeps its model's branch (below).
-            None if variant == crate::model::Variant::Mcgnode && cfg.init.is_none() => bail!(
-                "the training bags do not say whether the system is closed (their messages \
-                 leave the field unknown, there is no system_config metadata, and the data do \
-                 not show a closed system): pass --body-force off for a closed system \
-                 (momentum conserved exactly) or --body-force on"
-            ),
-            None => true,
-        },
-    };
+    hyper.body_force = body_force(variant, opts.body_force, data.closed.as_ref(), cfg)?;
     if let Some(init) = &cfg.init {
         // A warm start keeps the architecture it was trained with.
-        let h = &init.hyper;
-        if h.variant != variant {
-            bail!("--init model is a {} model, not {variant}", h.variant);
-        }
-        if h.dim != ds.graph.dim || ds.graph.types.iter().any(|&t| t as usize >= h.types) {
-            bail!(
-                "--init model is {}D with {} particle types; the data are {}D with types up to {}",
-                h.dim,
-                h.types,
-                ds.graph.dim,
-                types - 1
-            );
-        }
-        if !variant.biases().graph && h.particles != ds.graph.n() {
-            bail!(
-                "--init NODE model was built for {} particles, the data have {}",
-                h.particles,
-                ds.graph.n()
-            );
-        }
-        log(&format!(
-            "continuing from a model trained for {} epochs (validation MSE {:.3e}), {}",
-            init.training.epochs_run,
-            init.training.validation_loss,
-            if init.optimizer.is_some() {
-                "with its Adam state"
-            } else {
-                "with a fresh Adam state"
-            }
-        ));
-        hyper = h.clone();
+        hyper = warm_start_hyper(init, variant, &ds.graph, types, &mut log)?;
     }
     if variant == crate::model::Variant::Mcgnode {
-        let why = match (&opts.body_force, &data.closed) {
-            _ if cfg.init.is_some() => ", from the --init model".to_string(),
-            (BodyForce::Auto, Some((_, why))) => format!(", from {why}"),
-            (BodyForce::Auto, None) => String::new(),
-            _ => ", as asked".to_string(),
-        };
-        log(&format!(
-            "body-force branch: {}{why}",
-            if hyper.body_force {
-                "on"
-            } else {
-                "off (closed system: momentum is conserved exactly)"
-            }
-        ));
+        log_body_force(&hyper, opts.body_force, data.closed.as_ref(), cfg, &mut log);
     }
     let trained = train(hyper, &ds.graph, &ds.states, &ds.acc, cfg, on_epoch)?;
     Ok(crate::model::ModelFile {
@@ -1165,4 +239,98 @@ pub(crate) fn train_from_bags(
         weights: trained.net.store.weights()?,
         optimizer: Some(trained.optimizer),
     })
+}
+
+/// Whether a `variant` model trained on data that are `closed` (or not, or
+/// that do not say) learns a body-force branch: as `asked`, or with
+/// [`BodyForce::Auto`] unless the data are closed. A fresh MCGNODE on data
+/// that do not say is refused.
+fn body_force(
+    variant: crate::model::Variant,
+    asked: BodyForce,
+    closed: Option<&(bool, String)>,
+    cfg: &TrainConfig,
+) -> Result<bool> {
+    Ok(match asked {
+        BodyForce::On => true,
+        BodyForce::Off => false,
+        BodyForce::Auto => match closed {
+            Some((closed, _)) => !closed,
+            // A warm start keeps its model's branch (below).
+            None if variant == crate::model::Variant::Mcgnode && cfg.init.is_none() => bail!(
+                "the training bags do not say whether the system is closed (their messages \
+                 leave the field unknown, there is no system_config metadata, and the data do \
+                 not show a closed system): pass --body-force off for a closed system \
+                 (momentum conserved exactly) or --body-force on"
+            ),
+            None => true,
+        },
+    })
+}
+
+/// The hyperparameters of the `--init` model, checked to fit a `variant`
+/// model on `graph` (with particle types up to `types - 1`); `log` says what
+/// training continues from.
+fn warm_start_hyper(
+    init: &crate::model::ModelFile,
+    variant: crate::model::Variant,
+    graph: &Graph,
+    types: usize,
+    mut log: impl FnMut(&str),
+) -> Result<Hyper> {
+    let h = &init.hyper;
+    if h.variant != variant {
+        bail!("--init model is a {} model, not {variant}", h.variant);
+    }
+    if h.dim != graph.dim || graph.types.iter().any(|&t| t as usize >= h.types) {
+        bail!(
+            "--init model is {}D with {} particle types; the data are {}D with types up to {}",
+            h.dim,
+            h.types,
+            graph.dim,
+            types - 1
+        );
+    }
+    if !variant.biases().graph && h.particles != graph.n() {
+        bail!(
+            "--init NODE model was built for {} particles, the data have {}",
+            h.particles,
+            graph.n()
+        );
+    }
+    log(&format!(
+        "continuing from a model trained for {} epochs (validation MSE {:.3e}), {}",
+        init.training.epochs_run,
+        init.training.validation_loss,
+        if init.optimizer.is_some() {
+            "with its Adam state"
+        } else {
+            "with a fresh Adam state"
+        }
+    ));
+    Ok(h.clone())
+}
+
+/// Says whether an MCGNODE model learns body forces, and why.
+fn log_body_force(
+    hyper: &Hyper,
+    asked: BodyForce,
+    closed: Option<&(bool, String)>,
+    cfg: &TrainConfig,
+    mut log: impl FnMut(&str),
+) {
+    let why = match (asked, closed) {
+        _ if cfg.init.is_some() => ", from the --init model".to_string(),
+        (BodyForce::Auto, Some((_, why))) => format!(", from {why}"),
+        (BodyForce::Auto, None) => String::new(),
+        _ => ", as asked".to_string(),
+    };
+    log(&format!(
+        "body-force branch: {}{why}",
+        if hyper.body_force {
+            "on"
+        } else {
+            "off (closed system: momentum is conserved exactly)"
+        }
+    ));
 }

@@ -1,12 +1,12 @@
-//! The `mcgnode_msgs/msg/ParticleState` message: serde structs in wire order, CDR
-//! encoding, the ros2msg schema text, and conversion to and from [`Graph`] + [`Sample`].
-//!
-//! The structs are plain serde structs so that both the MCAP bags and the ROS node
-//! (ros2-client) can use them as they are.
+//! `mcgnode_msgs/msg/ParticleState` in this build's layout: its constants,
+//! schema text, and conversion to and from [`Graph`] + [`Sample`].
 
-use serde::{de::DeserializeOwned, Deserialize, Serialize};
+use serde::{Deserialize, Serialize};
 
-use super::DataError;
+use super::cdr::encode_cdr;
+use super::ros_types::{ros2msg_schema, Header, Point, Time, Vector3};
+use super::ros_types::{DEP_HEADER, DEP_POINT, DEP_TIME, DEP_VECTOR3};
+use crate::data::DataError;
 use crate::physics::Field;
 use crate::system::{Edge, EdgeKind, Endpoint, Graph, Sample, State};
 
@@ -14,15 +14,7 @@ use crate::system::{Edge, EdgeKind, Endpoint, Graph, Sample, State};
 pub const PARTICLE_STATE_TYPE: &str = "mcgnode_msgs/msg/ParticleState";
 
 /// The one copy of the .msg definition.
-pub const PARTICLE_STATE_MSG: &str = include_str!("../../msg/ParticleState.msg");
-
-/// The first layout of the message (before `field_status`, `gravity`, `drag` and
-/// `force`), kept so that bags written with it stay readable.
-pub const PARTICLE_STATE_MSG_V1: &str = include_str!("particle_state_v1.msg");
-
-/// The second layout (before `interaction_radius` and `kinematic`), kept so
-/// that bags written with it stay readable.
-pub const PARTICLE_STATE_MSG_V2: &str = include_str!("particle_state_v2.msg");
+pub const PARTICLE_STATE_MSG: &str = include_str!("../../../msg/ParticleState.msg");
 
 /// `field_status` value: gravity, drag and force are not known (`FIELD_UNKNOWN`).
 pub const FIELD_UNKNOWN: u8 = 0;
@@ -37,128 +29,12 @@ pub const EDGE_SPRING: u8 = 0;
 /// `edge_kind` value of a rigid bar (`EDGE_BAR` in the .msg).
 pub const EDGE_BAR: u8 = 1;
 
-/// `std_msgs/Header` definition, as a ros2msg dependency block (name, text).
-pub const DEP_HEADER: (&str, &str) = (
-    "std_msgs/Header",
-    "# Standard metadata for higher-level stamped data types.\n\
-     builtin_interfaces/Time stamp\n\
-     string frame_id\n",
-);
-/// `builtin_interfaces/Time` definition, as a ros2msg dependency block.
-pub const DEP_TIME: (&str, &str) = (
-    "builtin_interfaces/Time",
-    "# Time since the epoch (here: simulation time).\n\
-     int32 sec\n\
-     uint32 nanosec\n",
-);
-/// `geometry_msgs/Vector3` definition, as a ros2msg dependency block.
-pub const DEP_VECTOR3: (&str, &str) =
-    ("geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n");
-/// `geometry_msgs/Point` definition, as a ros2msg dependency block.
-pub const DEP_POINT: (&str, &str) = ("geometry_msgs/Point", "float64 x\nfloat64 y\nfloat64 z\n");
-
-/// Builds a ros2msg schema as rosbag2 writes it: the main definition, then each
-/// dependency as a block headed by a line of 80 `=` and `MSG: pkg/Type`.
-pub fn ros2msg_schema(main: &str, deps: &[(&str, &str)]) -> String {
-    let mut s = main.to_string();
-    for (name, text) in deps {
-        if !s.ends_with('\n') {
-            s.push('\n');
-        }
-        s.push_str(&"=".repeat(80));
-        s.push_str("\nMSG: ");
-        s.push_str(name);
-        s.push('\n');
-        s.push_str(text);
-    }
-    s
-}
-
 /// The full ros2msg schema text of [`ParticleState`] with its dependencies.
 pub fn particle_state_schema() -> String {
     ros2msg_schema(
         PARTICLE_STATE_MSG,
         &[DEP_HEADER, DEP_TIME, DEP_VECTOR3, DEP_POINT],
     )
-}
-
-/// `builtin_interfaces/Time` in its wire layout.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Time {
-    /// Whole seconds.
-    pub sec: i32,
-    /// Nanoseconds, `0..1_000_000_000`.
-    pub nanosec: u32,
-}
-
-impl Time {
-    /// Seconds to `Time`, rounded to the nearest nanosecond. Saturates outside the
-    /// `i32` seconds range, and maps NaN to zero (writers validate times first).
-    pub fn from_secs(t: f64) -> Time {
-        Time::from_nanos(if t.is_nan() {
-            0
-        } else {
-            (t * 1e9).round() as i64 // `as` saturates, which is what we want here
-        })
-    }
-
-    /// Nanoseconds to `Time` (floor division, so `nanosec` is always in range).
-    pub fn from_nanos(ns: i64) -> Time {
-        let sec = ns.div_euclid(1_000_000_000);
-        let nanosec = ns.rem_euclid(1_000_000_000) as u32;
-        match i32::try_from(sec) {
-            Ok(sec) => Time { sec, nanosec },
-            Err(_) if sec < 0 => Time {
-                sec: i32::MIN,
-                nanosec: 0,
-            },
-            Err(_) => Time {
-                sec: i32::MAX,
-                nanosec: 999_999_999,
-            },
-        }
-    }
-
-    /// Total nanoseconds (exact).
-    pub fn as_nanos(&self) -> i64 {
-        i64::from(self.sec) * 1_000_000_000 + i64::from(self.nanosec)
-    }
-
-    /// Seconds as a float.
-    pub fn as_secs(&self) -> f64 {
-        self.as_nanos() as f64 * 1e-9
-    }
-}
-
-/// `std_msgs/Header`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Header {
-    /// Time stamp.
-    pub stamp: Time,
-    /// Coordinate frame.
-    pub frame_id: String,
-}
-
-/// `geometry_msgs/Vector3`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Vector3 {
-    /// x component.
-    pub x: f64,
-    /// y component.
-    pub y: f64,
-    /// z component (0 in 2D).
-    pub z: f64,
-}
-
-/// `geometry_msgs/Point`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Point {
-    /// x coordinate.
-    pub x: f64,
-    /// y coordinate.
-    pub y: f64,
-    /// z coordinate (0 in 2D).
-    pub z: f64,
 }
 
 /// `mcgnode_msgs/msg/ParticleState`; fields in .msg order (see msg/ParticleState.msg).
@@ -209,159 +85,6 @@ pub struct ParticleState {
     pub interaction_radius: f64,
     /// Per particle: motion given, never predicted; empty when none is.
     pub kinematic: Vec<bool>,
-}
-
-/// The message in its second layout ([`PARTICLE_STATE_MSG_V2`]): what bags
-/// written before contacts hold. Decodes into a [`ParticleState`] with no
-/// contacts (radius 0) and no kinematic particle.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct ParticleStateV2 {
-    /// See [`ParticleState::header`].
-    pub header: Header,
-    /// See [`ParticleState::trajectory_id`].
-    pub trajectory_id: u32,
-    /// See [`ParticleState::step`].
-    pub step: u32,
-    /// See [`ParticleState::system`].
-    pub system: String,
-    /// See [`ParticleState::dimension`].
-    pub dimension: u8,
-    /// See [`ParticleState::types`].
-    pub types: Vec<u32>,
-    /// See [`ParticleState::masses`].
-    pub masses: Vec<f64>,
-    /// See [`ParticleState::positions`].
-    pub positions: Vec<Vector3>,
-    /// See [`ParticleState::velocities`].
-    pub velocities: Vec<Vector3>,
-    /// See [`ParticleState::accelerations`].
-    pub accelerations: Vec<Vector3>,
-    /// See [`ParticleState::edge_a`].
-    pub edge_a: Vec<u32>,
-    /// See [`ParticleState::edge_b`].
-    pub edge_b: Vec<u32>,
-    /// See [`ParticleState::edge_kind`].
-    pub edge_kind: Vec<u8>,
-    /// See [`ParticleState::edge_rest_length`].
-    pub edge_rest_length: Vec<f64>,
-    /// See [`ParticleState::edge_stiffness`].
-    pub edge_stiffness: Vec<f64>,
-    /// See [`ParticleState::anchors`].
-    pub anchors: Vec<Point>,
-    /// See [`ParticleState::field_status`].
-    pub field_status: u8,
-    /// See [`ParticleState::gravity`].
-    pub gravity: Vector3,
-    /// See [`ParticleState::drag`].
-    pub drag: f64,
-    /// See [`ParticleState::force`].
-    pub force: Vector3,
-}
-
-impl From<ParticleStateV2> for ParticleState {
-    fn from(m: ParticleStateV2) -> Self {
-        ParticleState {
-            header: m.header,
-            trajectory_id: m.trajectory_id,
-            step: m.step,
-            system: m.system,
-            dimension: m.dimension,
-            types: m.types,
-            masses: m.masses,
-            positions: m.positions,
-            velocities: m.velocities,
-            accelerations: m.accelerations,
-            edge_a: m.edge_a,
-            edge_b: m.edge_b,
-            edge_kind: m.edge_kind,
-            edge_rest_length: m.edge_rest_length,
-            edge_stiffness: m.edge_stiffness,
-            anchors: m.anchors,
-            field_status: m.field_status,
-            gravity: m.gravity,
-            drag: m.drag,
-            force: m.force,
-            interaction_radius: 0.0,
-            kinematic: vec![],
-        }
-    }
-}
-
-/// The message in its first layout ([`PARTICLE_STATE_MSG_V1`]): what bags
-/// written before the field entries hold. Decodes into a [`ParticleState`]
-/// with `field_status` = [`FIELD_UNKNOWN`].
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct ParticleStateV1 {
-    /// See [`ParticleState::header`].
-    pub header: Header,
-    /// See [`ParticleState::trajectory_id`].
-    pub trajectory_id: u32,
-    /// See [`ParticleState::step`].
-    pub step: u32,
-    /// See [`ParticleState::system`].
-    pub system: String,
-    /// See [`ParticleState::dimension`].
-    pub dimension: u8,
-    /// See [`ParticleState::types`].
-    pub types: Vec<u32>,
-    /// See [`ParticleState::masses`].
-    pub masses: Vec<f64>,
-    /// See [`ParticleState::positions`].
-    pub positions: Vec<Vector3>,
-    /// See [`ParticleState::velocities`].
-    pub velocities: Vec<Vector3>,
-    /// See [`ParticleState::accelerations`].
-    pub accelerations: Vec<Vector3>,
-    /// See [`ParticleState::edge_a`].
-    pub edge_a: Vec<u32>,
-    /// See [`ParticleState::edge_b`].
-    pub edge_b: Vec<u32>,
-    /// See [`ParticleState::edge_kind`].
-    pub edge_kind: Vec<u8>,
-    /// See [`ParticleState::edge_rest_length`].
-    pub edge_rest_length: Vec<f64>,
-    /// See [`ParticleState::edge_stiffness`].
-    pub edge_stiffness: Vec<f64>,
-    /// See [`ParticleState::anchors`].
-    pub anchors: Vec<Point>,
-}
-
-impl From<ParticleStateV1> for ParticleState {
-    fn from(m: ParticleStateV1) -> Self {
-        ParticleState {
-            header: m.header,
-            trajectory_id: m.trajectory_id,
-            step: m.step,
-            system: m.system,
-            dimension: m.dimension,
-            types: m.types,
-            masses: m.masses,
-            positions: m.positions,
-            velocities: m.velocities,
-            accelerations: m.accelerations,
-            edge_a: m.edge_a,
-            edge_b: m.edge_b,
-            edge_kind: m.edge_kind,
-            edge_rest_length: m.edge_rest_length,
-            edge_stiffness: m.edge_stiffness,
-            anchors: m.anchors,
-            field_status: FIELD_UNKNOWN,
-            ..ParticleState::default()
-        }
-    }
-}
-
-/// Which layout a bag's `ParticleState` schema declares.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Layout {
-    /// This build's msg/ParticleState.msg.
-    Current,
-    /// [`PARTICLE_STATE_MSG_V2`] (before contacts).
-    V2,
-    /// [`PARTICLE_STATE_MSG_V1`].
-    V1,
-    /// No schema text to tell (e.g. an old sqlite3 bag): try both.
-    Unknown,
 }
 
 /// Flat `dim`-vectors to 3-vectors (z = 0 in 2D). Tolerates a bad `dim`: the
@@ -667,34 +390,6 @@ impl ParticleState {
     pub fn to_cdr(&self) -> Result<Vec<u8>, DataError> {
         encode_cdr(self)
     }
-
-    /// Decodes CDR bytes (with encapsulation header) in this build's layout;
-    /// garbage and truncated bytes give an error.
-    pub fn from_cdr(bytes: &[u8]) -> Result<ParticleState, DataError> {
-        Self::from_cdr_as(bytes, Layout::Current)
-    }
-
-    /// Decodes CDR bytes in the given layout. [`Layout::Unknown`] (a bag that
-    /// stores no definition) tries this build's layout, then the second
-    /// ([`ParticleStateV2`], no contacts), then the first
-    /// ([`ParticleStateV1`], field unknown): a whole message of one cannot
-    /// pass for another (a shorter one is short of bytes, a longer one has
-    /// more than 3 bytes over: each layout appends at least 12), but a message
-    /// cut exactly at an older layout's end would read as that layout, so
-    /// this is used only when the bag cannot say.
-    pub fn from_cdr_as(bytes: &[u8], layout: Layout) -> Result<ParticleState, DataError> {
-        match layout {
-            Layout::Current => decode_cdr(bytes),
-            Layout::V2 => decode_cdr::<ParticleStateV2>(bytes).map(ParticleState::from),
-            Layout::V1 => decode_cdr::<ParticleStateV1>(bytes).map(ParticleState::from),
-            Layout::Unknown => decode_cdr::<ParticleState>(bytes).or_else(|e| {
-                decode_cdr::<ParticleStateV2>(bytes)
-                    .map(ParticleState::from)
-                    .or_else(|_| decode_cdr::<ParticleStateV1>(bytes).map(ParticleState::from))
-                    .map_err(|_| e)
-            }),
-        }
-    }
 }
 
 /// Rejects non-finite components and, in 2D, a non-zero z.
@@ -723,54 +418,4 @@ fn flatten(field: &str, vs: &[Vector3], dim: usize) -> Result<Vec<f64>, DataErro
         out.extend_from_slice(&[v.x, v.y, v.z][..dim]);
     }
     Ok(out)
-}
-
-/// The encapsulation header of little-endian plain CDR.
-pub const CDR_LE_HEADER: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
-
-// `cdr-encoding` needs a `byteorder` type, which is not one of our direct
-// dependencies; rustdds (inside ros2-client) re-exports the same functions
-// with a representation id instead.
-use ros2_client::dds::rustdds::serialization::{
-    deserialize_from_cdr_with_rep_id, to_writer_with_rep_id, RepresentationIdentifier,
-};
-
-/// Serialises any message to little-endian CDR with the 4-byte encapsulation header.
-pub fn encode_cdr<T: Serialize>(msg: &T) -> Result<Vec<u8>, DataError> {
-    let mut buf = CDR_LE_HEADER.to_vec();
-    to_writer_with_rep_id(&mut buf, msg, RepresentationIdentifier::CDR_LE)
-        .map_err(|e| DataError::Cdr(format!("encoding failed: {e}")))?;
-    Ok(buf)
-}
-
-/// Deserialises CDR bytes with their encapsulation header (little- or big-endian
-/// plain CDR). Truncated or garbage input gives an error; at most 3 trailing
-/// padding bytes are accepted.
-pub fn decode_cdr<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, DataError> {
-    if bytes.len() < 4 {
-        return Err(DataError::Cdr(format!(
-            "{} bytes is too short for the 4-byte encapsulation header",
-            bytes.len()
-        )));
-    }
-    let rep = match [bytes[0], bytes[1]] {
-        [0x00, 0x01] => RepresentationIdentifier::CDR_LE,
-        [0x00, 0x00] => RepresentationIdentifier::CDR_BE,
-        other => {
-            return Err(DataError::Cdr(format!(
-                "encapsulation {:02x} {:02x} is not plain CDR (expected 00 01 or 00 00)",
-                other[0], other[1]
-            )))
-        }
-    };
-    let body = &bytes[4..];
-    let (msg, used) = deserialize_from_cdr_with_rep_id::<T>(body, rep)
-        .map_err(|e| DataError::Cdr(format!("decoding {} body bytes failed: {e}", body.len())))?;
-    if body.len() - used > 3 {
-        return Err(DataError::Cdr(format!(
-            "{} bytes left over after the message (schema mismatch?)",
-            body.len() - used
-        )));
-    }
-    Ok(msg)
 }

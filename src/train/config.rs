@@ -1,0 +1,146 @@
+//! Training settings: [`TrainConfig`] and the gradient engine it chooses.
+
+use super::recipe::{self, Auto};
+use crate::system::Graph;
+
+/// Training settings.
+#[derive(Clone, Debug)]
+pub struct TrainConfig {
+    /// Maximum epochs (paper: 10,000).
+    pub epochs: usize,
+    /// Adam learning rate (paper: 1e-3).
+    pub lr: f64,
+    /// Batch size (paper: 100).
+    pub batch: usize,
+    /// Fraction of states held out for validation (paper: 0.25).
+    pub validation: f64,
+    /// Stop when the validation loss has not improved for this many epochs.
+    pub patience: usize,
+    /// Seed for initialisation, split and shuffling (and, through distinct
+    /// streams, subsampling and noise).
+    pub seed: u64,
+    /// Gaussian noise on the target accelerations, percent of their standard
+    /// deviation (paper's noise experiments: 0, 1, 5, 10). Applied by
+    /// [`apply_data_options`](super::apply_data_options).
+    pub noise: f64,
+    /// Train on a seeded random subset of this many states (paper's
+    /// data-efficiency experiments: 100 to 10,000); `None`: all. Applied by
+    /// [`apply_data_options`](super::apply_data_options).
+    pub points: Option<usize>,
+    /// Gradient engine of the GNODE family (the baselines always use candle).
+    pub engine: EngineKind,
+    /// Threads of the native engine; results do not depend on it.
+    pub threads: usize,
+    /// Warm start: continue from this model's weights (and its Adam state when
+    /// it has one). Its hyperparameters must be the ones trained.
+    pub init: Option<Box<crate::model::ModelFile>>,
+    /// Scale inputs and outputs by statistics of the training split (stored
+    /// in the model file; see [`crate::model::Norm`]).
+    pub normalize: bool,
+    /// Step schedule: after epoch `e`, learning rate `lr` (pairs in any order;
+    /// the latest passed applies).
+    pub lr_drops: Vec<(usize, f64)>,
+    /// Stop after the first epoch that ends this many seconds after training
+    /// started (the best weights so far are kept): a wall-clock budget, as a
+    /// robot retraining between tasks has, and what `reproduce` gives the
+    /// baselines to compare them with MCGNODE at equal time.
+    pub time_budget: Option<f64>,
+    /// Save the run's state as it goes, and resume from the file when it
+    /// exists (see [`checkpoint`](super::checkpoint)).
+    pub checkpoint: Option<super::checkpoint::Checkpointing>,
+    /// Settings the default recipe chooses from the data instead of taking
+    /// them from this config ([`recipe`](super::recipe); none by default).
+    pub auto: Auto,
+}
+
+impl TrainConfig {
+    /// The learning rate of epoch `epoch` (from 1).
+    pub fn lr_at(&self, epoch: usize) -> f64 {
+        self.lr_drops
+            .iter()
+            .filter(|(e, _)| epoch > *e)
+            .max_by_key(|(e, _)| *e)
+            .map_or(self.lr, |(_, lr)| *lr)
+    }
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            epochs: 10_000,
+            lr: 1e-3,
+            batch: 100,
+            validation: 0.25,
+            patience: 1_000,
+            seed: 0,
+            noise: 0.0,
+            points: None,
+            engine: EngineKind::Native,
+            threads: crate::engine::all_cores(),
+            init: None,
+            normalize: true,
+            lr_drops: vec![],
+            time_budget: None,
+            checkpoint: None,
+            auto: Auto::default(),
+        }
+    }
+}
+
+impl TrainConfig {
+    /// This config with the settings in [`TrainConfig::auto`] chosen by the
+    /// default recipe for `states` states of `graph` (before the split), and
+    /// a line saying what was chosen (`None` when nothing was).
+    pub fn resolved(&self, graph: &Graph, states: usize) -> (TrainConfig, Option<String>) {
+        self.resolved_for(recipe::directed_edges(graph), states)
+    }
+
+    /// [`TrainConfig::resolved`] for states of `edges` directed edges each
+    /// (with contacts: [`recipe::directed_edges_in`]).
+    pub fn resolved_for(&self, edges: usize, states: usize) -> (TrainConfig, Option<String>) {
+        let a = self.auto;
+        let mut c = self.clone();
+        c.auto = Auto::default();
+        if !a.any() {
+            return (c, None);
+        }
+        let warm = self.init.is_some();
+        if a.batch {
+            c.batch = recipe::batch_for_edges(edges);
+        }
+        if a.lr {
+            c.lr = if warm { 1e-3 } else { 1e-2 };
+        }
+        if a.epochs {
+            let n_val = ((states as f64 * c.validation).round() as usize)
+                .clamp(1, states.saturating_sub(1).max(1));
+            c.epochs = recipe::epochs_for(states.saturating_sub(n_val), c.batch);
+        }
+        if a.lr_drops && !warm {
+            c.lr_drops = vec![((c.epochs * 2).div_ceil(3), c.lr / 10.0)];
+        }
+        let drops = c
+            .lr_drops
+            .iter()
+            .map(|(e, lr)| format!(", {lr:e} after epoch {e}"))
+            .collect::<String>();
+        let line = format!(
+            "recipe: batch {} states ({} directed edges each), {} epochs, lr {:e}{drops}{}",
+            c.batch,
+            edges,
+            c.epochs,
+            c.lr,
+            if warm { " (warm start)" } else { "" }
+        );
+        (c, Some(line))
+    }
+}
+
+/// Which engine computes the GNODE family's gradients.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EngineKind {
+    /// Hand-written reverse mode on the kernel's layout, over all cores (default).
+    Native,
+    /// Candle's autodiff: the reference.
+    Candle,
+}
