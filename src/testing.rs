@@ -66,3 +66,41 @@ pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, 
     let m = TrainedModel::from_file(file)?;
     Ok((net, m))
 }
+
+/// The bar constraint of a one-state candle batch built from the tensors
+/// `q`, `v` (`n × d`) by candle ops — A `(1, k, n·d)`, Aᵀ, Ȧq̇ `(1, k, 1)` —
+/// where [`crate::model::batch::Batch::new`] computes it from numbers, so
+/// that candle's autodiff reaches positions and velocities through A(q) and
+/// Ȧq̇ (the reference for the executor's reverse pass down to a state).
+pub fn candle_constraint(
+    plan: &crate::model::plan::GraphPlan,
+    q: &candle_core::Tensor,
+    v: &candle_core::Tensor,
+) -> Result<(
+    candle_core::Tensor,
+    candle_core::Tensor,
+    candle_core::Tensor,
+)> {
+    use crate::model::plan::BarEnd;
+    use candle_core::{Device, Tensor};
+    let (n, d, k) = (plan.n, plan.dim, plan.bars.len());
+    let (mut inc, mut fixed) = (vec![0.0; k * n], vec![0.0; k * d]);
+    for (r, bar) in plan.bars.iter().enumerate() {
+        inc[r * n + bar.a] = 1.0;
+        match &bar.b {
+            BarEnd::Particle(b) => inc[r * n + b] = -1.0,
+            BarEnd::Fixed(p) => fixed[r * d..(r + 1) * d].copy_from_slice(p),
+        }
+    }
+    let inc = Tensor::from_vec(inc, (k, n), &Device::Cpu)?;
+    let fixed = Tensor::from_vec(fixed, (k, d), &Device::Cpu)?;
+    let dq = (inc.matmul(q)? - fixed)?;
+    let dv = inc.matmul(v)?;
+    let a = inc
+        .unsqueeze(2)?
+        .broadcast_mul(&dq.unsqueeze(1)?)?
+        .reshape((1, k, n * d))?;
+    let at = a.transpose(1, 2)?.contiguous()?;
+    let adq = dv.sqr()?.sum_keepdim(1)?.reshape((1, k, 1))?;
+    Ok((a, at, adq))
+}

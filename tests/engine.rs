@@ -214,6 +214,19 @@ fn cases() -> Vec<Case> {
     out
 }
 
+/// The candle model `net` of `case` as a trained model (kernel and file).
+fn trained(case: &Case, net: &Net) -> TrainedModel {
+    let file = mcgnode::testing::random_model(case.hyper.variant, &case.graph, 0)
+        .map(|(_, m)| m.file)
+        .unwrap();
+    let file = mcgnode::model::ModelFile {
+        hyper: case.hyper.clone(),
+        weights: net.store.weights().unwrap(),
+        ..file
+    };
+    TrainedModel::from_file(file).unwrap()
+}
+
 #[test]
 fn engine_gradients_equal_candle_and_finite_differences() {
     for (ci, case) in cases().into_iter().enumerate() {
@@ -290,15 +303,7 @@ fn engine_gradients_equal_candle_and_finite_differences() {
             }
         }
         // The engine's accelerations are the kernel's.
-        let file = mcgnode::testing::random_model(case.hyper.variant, g, 0)
-            .map(|(_, m)| m.file)
-            .unwrap();
-        let file = mcgnode::model::ModelFile {
-            hyper: case.hyper.clone(),
-            weights: net.store.weights().unwrap(),
-            ..file
-        };
-        let model = TrainedModel::from_file(file).unwrap();
+        let model = trained(&case, &net);
         let mut ws = model.kernel.workspace(g).unwrap();
         let acc_e = eng.accelerations(&theta, &states[..3]);
         let mut a = vec![0.0; g.ndof()];
@@ -486,51 +491,6 @@ fn a_model_serves_only_its_radius() {
     assert!(Engine::new(&h, &g, 1).is_ok());
 }
 
-/// The bar constraint of a one-state batch built from the Vars q, q̇ by
-/// candle ops (Batch::new computes it from numbers), so that candle's
-/// autodiff reaches positions and velocities through A(q) and Ȧq̇.
-fn constraint_from(
-    plan: &GraphPlan,
-    q: &candle_core::Tensor,
-    v: &candle_core::Tensor,
-) -> (
-    candle_core::Tensor,
-    candle_core::Tensor,
-    candle_core::Tensor,
-) {
-    use candle_core::{Device, Tensor};
-    use mcgnode::model::plan::BarEnd;
-    let (n, d, k) = (plan.n, plan.dim, plan.bars.len());
-    let (mut inc, mut fixed) = (vec![0.0; k * n], vec![0.0; k * d]);
-    for (r, bar) in plan.bars.iter().enumerate() {
-        inc[r * n + bar.a] = 1.0;
-        match &bar.b {
-            BarEnd::Particle(b) => inc[r * n + b] = -1.0,
-            BarEnd::Fixed(p) => fixed[r * d..(r + 1) * d].copy_from_slice(p),
-        }
-    }
-    let inc = Tensor::from_vec(inc, (k, n), &Device::Cpu).unwrap();
-    let fixed = Tensor::from_vec(fixed, (k, d), &Device::Cpu).unwrap();
-    let dq = (inc.matmul(q).unwrap() - fixed).unwrap();
-    let dv = inc.matmul(v).unwrap();
-    let a = inc
-        .unsqueeze(2)
-        .unwrap()
-        .broadcast_mul(&dq.unsqueeze(1).unwrap())
-        .unwrap()
-        .reshape((1, k, n * d))
-        .unwrap();
-    let at = a.transpose(1, 2).unwrap().contiguous().unwrap();
-    let adq = dv
-        .sqr()
-        .unwrap()
-        .sum_keepdim(1)
-        .unwrap()
-        .reshape((1, k, 1))
-        .unwrap();
-    (a, at, adq)
-}
-
 /// Planning gradients chain the engine's reverse pass down to a state:
 /// ∂(ḡ·q̈)/∂q and ∂(ḡ·q̈)/∂q̇ equal candle's autodiff (through the edge
 /// inputs, node inputs and the constraint's A(q), Ȧq̇) to 1e-10 and central
@@ -545,15 +505,7 @@ fn state_gradients_equal_candle_and_finite_differences() {
             &mut ChaCha8Rng::seed_from_u64(ci as u64),
         )
         .unwrap();
-        let file = mcgnode::testing::random_model(case.hyper.variant, g, 0)
-            .map(|(_, m)| m.file)
-            .unwrap();
-        let file = mcgnode::model::ModelFile {
-            hyper: case.hyper.clone(),
-            weights: net.store.weights().unwrap(),
-            ..file
-        };
-        let model = TrainedModel::from_file(file).unwrap();
+        let model = trained(&case, &net);
         let mut sg = model.kernel.gradient(g).unwrap();
         let (states, _) = data(g, 1, 500 + ci as u64);
         let st = &states[0];
@@ -585,7 +537,9 @@ fn state_gradients_equal_candle_and_finite_differences() {
         batch.q = qv.as_tensor().clone();
         batch.v = vv.as_tensor().clone();
         if !plan.bars.is_empty() {
-            batch.constraint = Some(constraint_from(&plan, qv.as_tensor(), vv.as_tensor()));
+            batch.constraint = Some(
+                mcgnode::testing::candle_constraint(&plan, qv.as_tensor(), vv.as_tensor()).unwrap(),
+            );
         }
         let out = net.forward(&batch).unwrap().acc;
         let w = candle_core::Tensor::from_slice(&gacc, (g.n(), g.dim), &dev).unwrap();

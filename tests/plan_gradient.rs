@@ -295,46 +295,6 @@ fn the_plan_command_refines() {
     assert!(e.contains("no gradient"), "{e}");
 }
 
-/// The bar constraint of a one-state batch from the tensors q, q̇ by candle
-/// ops, so that autodiff reaches them through A(q) and Ȧq̇ (as in
-/// tests/engine.rs).
-fn constraint_from(
-    plan: &mcgnode::model::plan::GraphPlan,
-    q: &Tensor,
-    v: &Tensor,
-) -> (Tensor, Tensor, Tensor) {
-    use mcgnode::model::plan::BarEnd;
-    let (n, d, k) = (plan.n, plan.dim, plan.bars.len());
-    let (mut inc, mut fixed) = (vec![0.0; k * n], vec![0.0; k * d]);
-    for (r, bar) in plan.bars.iter().enumerate() {
-        inc[r * n + bar.a] = 1.0;
-        match &bar.b {
-            BarEnd::Particle(b) => inc[r * n + b] = -1.0,
-            BarEnd::Fixed(p) => fixed[r * d..(r + 1) * d].copy_from_slice(p),
-        }
-    }
-    let inc = Tensor::from_vec(inc, (k, n), &Device::Cpu).unwrap();
-    let fixed = Tensor::from_vec(fixed, (k, d), &Device::Cpu).unwrap();
-    let dq = (inc.matmul(q).unwrap() - fixed).unwrap();
-    let dv = inc.matmul(v).unwrap();
-    let a = inc
-        .unsqueeze(2)
-        .unwrap()
-        .broadcast_mul(&dq.unsqueeze(1).unwrap())
-        .unwrap()
-        .reshape((1, k, n * d))
-        .unwrap();
-    let at = a.transpose(1, 2).unwrap().contiguous().unwrap();
-    let adq = dv
-        .sqr()
-        .unwrap()
-        .sum_keepdim(1)
-        .unwrap()
-        .reshape((1, k, 1))
-        .unwrap();
-    (a, at, adq)
-}
-
 /// ∂cost/∂u by candle's autodiff through the whole rollout, written out in
 /// candle ops: the drive from the velocity knots, velocity Verlet, the
 /// driven particles placed, q̈ from the candle model (with A(q), Ȧq̇ from
@@ -382,7 +342,7 @@ fn candle_gradient(net: &mcgnode::model::Net, p: &Problem, u: &Controls) -> (f64
         b.q = q.reshape((n, d)).unwrap();
         b.v = v.reshape((n, d)).unwrap();
         if !plan.bars.is_empty() {
-            b.constraint = Some(constraint_from(&plan, &b.q, &b.v));
+            b.constraint = Some(mcgnode::testing::candle_constraint(&plan, &b.q, &b.v).unwrap());
         }
         let a = net.forward(&b).unwrap().acc.reshape(nd).unwrap();
         (a * &keep).unwrap()

@@ -8,30 +8,21 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 
-use crate::error::err;
-use ros2_client::action::{
-    ActionServerQosPolicies, AsyncActionServer, ExecutingGoalHandle, GoalEndStatus,
-};
+use ros2_client::action::{ExecutingGoalHandle, GoalEndStatus};
 use ros2_client::action_msgs::GoalId;
 use ros2_client::log::LogLevel;
-use ros2_client::qos::{Durability, History};
-use ros2_client::{Node, QosProfile, ServiceMapping};
+use ros2_client::Node;
 
 use super::names::Names;
 
-use super::qos::reliable_qos;
 use super::topics::TRAIN_ACTION;
 use super::trainer::{claim, Claim, Trainer, BUSY};
 use super::training::run_training;
 use super::wire::{
-    RosAction, TrainAction, TrainFeedback, TrainGoal, TrainRequest, TrainResponse, TrainResult,
+    TrainAction, TrainFeedback, TrainGoal, TrainRequest, TrainResponse, TrainResult,
 };
 
-type ActionServer = AsyncActionServer<
-    <TrainAction as RosAction>::Goal,
-    <TrainAction as RosAction>::Result,
-    <TrainAction as RosAction>::Feedback,
->;
+type ActionServer = super::qos::ActionServerOf<TrainAction>;
 
 /// The Train action server, handed to [`spawn`].
 pub struct TrainActionServer(ActionServer, String);
@@ -39,32 +30,10 @@ pub struct TrainActionServer(ActionServer, String);
 /// The goal being executed and its cancel flag.
 type Running = Arc<Mutex<Option<(GoalId, Arc<AtomicBool>)>>>;
 
-/// Creates the action server (QoS as rclpy's action defaults: reliable,
-/// volatile services and feedback; transient-local status).
+/// Creates the action server (QoS as rclpy's action defaults).
 pub fn create(node: &mut Node, names: &Names) -> crate::error::Result<TrainActionServer> {
-    let status = QosProfile::publisher_default()
-        .durability(Durability::TransientLocal)
-        .history(History::KeepLast { depth: 1 });
-    let qos = ActionServerQosPolicies {
-        goal_service: reliable_qos(),
-        result_service: reliable_qos(),
-        cancel_service: reliable_qos(),
-        feedback_publisher: reliable_qos(),
-        status_publisher: status,
-    };
-    let name = super::qos::ros_name(names, TRAIN_ACTION)?;
-    let server = node
-        .create_action_server(
-            ServiceMapping::Enhanced,
-            &name,
-            &TrainAction::action_type_name(),
-            qos,
-        )
-        .map_err(|e| err!("creating the Train action: {e:?}"))?;
-    Ok(TrainActionServer(
-        AsyncActionServer::new(server),
-        names.resolve(TRAIN_ACTION)?,
-    ))
+    let (server, name) = super::qos::action_server::<TrainAction>(node, names, TRAIN_ACTION)?;
+    Ok(TrainActionServer(server, name))
 }
 
 /// Starts the goal and cancel tasks (inside the runtime).
@@ -158,20 +127,7 @@ async fn execute(
             "Train action",
         )
     });
-    tokio::pin!(job);
-    let resp = loop {
-        tokio::select! {
-            Some(fb) = rx.recv() => {
-                // Fails once the goal is canceling: expected, not worth a warning.
-                let _ = server.publish_feedback(handle.clone(), fb).await;
-            }
-            done = &mut job => break done,
-        }
-    };
-    // Epochs the job reported just before it ended: a feedback per epoch.
-    while let Ok(fb) = rx.try_recv() {
-        let _ = server.publish_feedback(handle.clone(), fb).await;
-    }
+    let resp = super::qos::forward_feedback::<TrainAction, _>(&server, &handle, &mut rx, job).await;
     let resp = resp.unwrap_or_else(|join| TrainResponse {
         success: false,
         message: format!("training task failed: {join}"),

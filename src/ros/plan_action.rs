@@ -9,23 +9,18 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 
-use crate::error::err;
-use ros2_client::action::{
-    ActionServerQosPolicies, AsyncActionServer, ExecutingGoalHandle, GoalEndStatus,
-};
+use ros2_client::action::{ExecutingGoalHandle, GoalEndStatus};
 use ros2_client::action_msgs::GoalId;
 use ros2_client::log::LogLevel;
-use ros2_client::qos::{Durability, History};
-use ros2_client::{Node, QosProfile, ServiceMapping};
+use ros2_client::Node;
 
 use super::calls::plan_call_with;
 use super::handles::Handles;
 use super::names::Names;
-use super::qos::reliable_qos;
 use super::topics::PLAN_ACTION;
-use super::wire::{PlanAction, PlanFeedback, PlanGoal, PlanResult, RosAction};
+use super::wire::{PlanAction, PlanFeedback, PlanGoal, PlanResult};
 
-type ActionServer = AsyncActionServer<PlanGoal, PlanResult, PlanFeedback>;
+type ActionServer = super::qos::ActionServerOf<PlanAction>;
 
 /// The Plan action server, handed to [`spawn`].
 pub struct PlanActionServer(ActionServer, String);
@@ -33,32 +28,10 @@ pub struct PlanActionServer(ActionServer, String);
 /// The goals being executed and their cancel flags.
 type Running = Arc<Mutex<Vec<(GoalId, Arc<AtomicBool>)>>>;
 
-/// Creates the action server (QoS as rclpy's action defaults, as the Train
-/// action's).
+/// Creates the action server (QoS as rclpy's action defaults).
 pub fn create(node: &mut Node, names: &Names) -> crate::error::Result<PlanActionServer> {
-    let status = QosProfile::publisher_default()
-        .durability(Durability::TransientLocal)
-        .history(History::KeepLast { depth: 1 });
-    let qos = ActionServerQosPolicies {
-        goal_service: reliable_qos(),
-        result_service: reliable_qos(),
-        cancel_service: reliable_qos(),
-        feedback_publisher: reliable_qos(),
-        status_publisher: status,
-    };
-    let name = super::qos::ros_name(names, PLAN_ACTION)?;
-    let server = node
-        .create_action_server(
-            ServiceMapping::Enhanced,
-            &name,
-            &PlanAction::action_type_name(),
-            qos,
-        )
-        .map_err(|e| err!("creating the Plan action: {e:?}"))?;
-    Ok(PlanActionServer(
-        AsyncActionServer::new(server),
-        names.resolve(PLAN_ACTION)?,
-    ))
+    let (server, name) = super::qos::action_server::<PlanAction>(node, names, PLAN_ACTION)?;
+    Ok(PlanActionServer(server, name))
 }
 
 /// Starts the goal and cancel tasks (inside the runtime).
@@ -137,20 +110,7 @@ async fn execute(
             !flag.load(Ordering::Acquire)
         })
     });
-    tokio::pin!(job);
-    let resp = loop {
-        tokio::select! {
-            Some(fb) = rx.recv() => {
-                // Fails once the goal is canceling: expected, not worth a warning.
-                let _ = server.publish_feedback(handle.clone(), fb).await;
-            }
-            done = &mut job => break done,
-        }
-    };
-    // Rounds the job reported just before it ended: a feedback per round.
-    while let Ok(fb) = rx.try_recv() {
-        let _ = server.publish_feedback(handle.clone(), fb).await;
-    }
+    let resp = super::qos::forward_feedback::<PlanAction, _>(&server, &handle, &mut rx, job).await;
     let id = handle.goal_id();
     running
         .lock()

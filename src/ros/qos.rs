@@ -9,7 +9,7 @@ use ros2_client::{Name, Node, Publisher, QosProfile, Server, ServiceMapping, Sub
 
 use super::names::Names;
 use super::params::NodeParams;
-use super::wire::{RosService, RosType};
+use super::wire::{RosAction, RosService, RosType};
 
 /// Topic QoS from the parameters: volatile, keep-last `qos_depth`.
 pub fn topic_qos(p: &NodeParams) -> QosProfile {
@@ -102,4 +102,72 @@ pub fn server<S: RosService>(
         reliable_qos(),
     )
     .map_err(|e| err!("creating the {} service {name}: {e:?}", S::NAME))
+}
+
+/// ros2-client's action server for our action type `A`.
+pub type ActionServerOf<A> = ros2_client::action::AsyncActionServer<
+    <A as RosAction>::Goal,
+    <A as RosAction>::Result,
+    <A as RosAction>::Feedback,
+>;
+
+/// An action server of type `A` named `name` (resolved for `names`), with
+/// rclpy's action QoS (reliable, volatile services and feedback;
+/// transient-local status), and its resolved name.
+pub fn action_server<A: RosAction>(
+    node: &mut Node,
+    names: &Names,
+    name: &str,
+) -> crate::error::Result<(ActionServerOf<A>, String)> {
+    let status = QosProfile::publisher_default()
+        .durability(Durability::TransientLocal)
+        .history(History::KeepLast { depth: 1 });
+    let qos = ros2_client::action::ActionServerQosPolicies {
+        goal_service: reliable_qos(),
+        result_service: reliable_qos(),
+        cancel_service: reliable_qos(),
+        feedback_publisher: reliable_qos(),
+        status_publisher: status,
+    };
+    let server = node
+        .create_action_server(
+            ServiceMapping::Enhanced,
+            &ros_name(names, name)?,
+            &A::action_type_name(),
+            qos,
+        )
+        .map_err(|e| err!("creating the {} action {name}: {e:?}", A::NAME))?;
+    Ok((
+        ros2_client::action::AsyncActionServer::new(server),
+        names.resolve(name)?,
+    ))
+}
+
+/// Publishes what `rx` receives as the goal's feedback until `job` ends, then
+/// what the job sent just before it ended (a feedback per report); returns
+/// the job's output.
+pub async fn forward_feedback<A: RosAction, T>(
+    server: &ActionServerOf<A>,
+    handle: &ros2_client::action::ExecutingGoalHandle<A::Goal>,
+    rx: &mut tokio::sync::mpsc::UnboundedReceiver<A::Feedback>,
+    job: tokio::task::JoinHandle<T>,
+) -> Result<T, tokio::task::JoinError>
+where
+    A::Goal: Clone,
+    A::Feedback: Clone,
+{
+    tokio::pin!(job);
+    let done = loop {
+        tokio::select! {
+            Some(fb) = rx.recv() => {
+                // Fails once the goal is canceling: expected, not worth a warning.
+                let _ = server.publish_feedback(handle.clone(), fb).await;
+            }
+            done = &mut job => break done,
+        }
+    };
+    while let Ok(fb) = rx.try_recv() {
+        let _ = server.publish_feedback(handle.clone(), fb).await;
+    }
+    done
 }
