@@ -1095,3 +1095,25 @@ fn bench_vs_reference_refuses_a_missing_ref_dir() {
         assert!(err.contains("Usage") || err.contains("git clone"), "{err}");
     }
 }
+
+/// A reader that goes away (`| head`) ends a command quietly, as Unix tools
+/// end, not with a panic from `println!`.
+#[test]
+fn a_closed_pipe_ends_a_command_without_a_panic() {
+    let o = Command::new("bash")
+        .arg("-c")
+        .arg(
+            r#""$BIN" plan --model truth:held-chain --target 1,-6 --horizon 100 --candidates 8 \
+                --iterations 1 --elites 2 --json | head -c 100 >/dev/null; echo "status ${PIPESTATUS[0]}""#,
+        )
+        .env("BIN", env!("CARGO_BIN_EXE_mcgnode"))
+        .output()
+        .unwrap();
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    // 141 = 128 + SIGPIPE: killed by the signal, as `yes | head` is.
+    assert!(out.contains("status 141"), "{out} / {err}");
+}

@@ -75,10 +75,25 @@ pub fn error_report(e: &anyhow::Error) -> String {
     out
 }
 
+/// A command whose reader goes away (`mcgnode plan --json | head`) ends
+/// quietly as Unix tools do, by SIGPIPE, instead of panicking in `println!`.
+/// Not for `serve`: the node keeps serving (and recording) whatever happens
+/// to its output.
+fn quiet_on_closed_pipe() {
+    // SAFETY: restores the default action of one signal before any thread
+    // that could be writing is started; no handler is installed.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 /// Parses the command line and runs the subcommand.
 pub fn run() -> anyhow::Result<()> {
     crate::alloc::prepare_for_candle();
     let cli = Cli::parse();
+    if !matches!(cli.command, Command::Serve(_)) {
+        quiet_on_closed_pipe();
+    }
     match cli.command {
         Command::Simulate(a) => simulate::run(a),
         Command::Train(a) => train::run(a),
