@@ -324,6 +324,47 @@ fn describe(f: &Field) -> String {
     }
 }
 
+/// The last system a [`TrainedFor::check`] passed for (the graph, the field
+/// and a key naming the model), so that a stream of states of one system is
+/// checked once, not once per state: the next state of the same system costs
+/// a comparison. A different graph, field or key is checked in full.
+#[derive(Debug, Default)]
+pub struct Passed {
+    last: std::sync::Mutex<Option<(u64, Graph, Option<Field>)>>,
+    full: std::sync::atomic::AtomicU64,
+}
+
+impl Passed {
+    /// [`TrainedFor::check`] of `graph` and `field` for the model `key`
+    /// names, skipped when the last one that passed was the same.
+    pub fn check(
+        &self,
+        key: u64,
+        trained: &TrainedFor,
+        graph: &Graph,
+        field: Option<&Field>,
+    ) -> Result<(), Mismatch> {
+        let same = |last: &Option<(u64, Graph, Option<Field>)>| {
+            last.as_ref()
+                .is_some_and(|(k, g, f)| *k == key && g == graph && f.as_ref() == field)
+        };
+        if self.last.lock().is_ok_and(|l| same(&l)) {
+            return Ok(());
+        }
+        self.full.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        trained.check(graph, field)?;
+        if let Ok(mut l) = self.last.lock() {
+            *l = Some((key, graph.clone(), field.cloned()));
+        }
+        Ok(())
+    }
+
+    /// How many checks ran in full.
+    pub fn full_checks(&self) -> u64 {
+        self.full.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
 /// Checks every distinct graph of a bag (and the field its data state, when
 /// known) against what a model was trained on; the error names the trajectory.
 pub fn check_bag(

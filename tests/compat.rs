@@ -308,3 +308,30 @@ fn inputs_far_outside_the_training_scales_are_out_of_range() {
         "{o}"
     );
 }
+
+/// A stream of states of one system is checked once: the next state of the
+/// same graph, field and model costs a comparison; another graph, field or
+/// model (a swap) is checked in full, and a refusal is never remembered.
+#[test]
+fn one_full_check_per_system_in_a_row() {
+    let t = TrainedFor::from_model_file(Path::new(&format!(
+        "{ROOT}/bags/models/spring5-mcgnode.json"
+    )))
+    .unwrap();
+    let p = mcgnode::compat::Passed::default();
+    let (five, seven) = (graph(SystemKind::Spring, 5), graph(SystemKind::Spring, 7));
+    let calm = Field::default();
+    for _ in 0..100 {
+        p.check(0, &t, &five, Some(&calm)).unwrap();
+    }
+    assert_eq!(p.full_checks(), 1);
+    p.check(0, &t, &seven, Some(&calm)).unwrap();
+    p.check(0, &t, &five, None).unwrap();
+    p.check(1, &t, &five, None).unwrap();
+    assert_eq!(p.full_checks(), 4);
+    let pendulum = graph(SystemKind::Pendulum, 5);
+    for k in 0..3 {
+        assert!(p.check(1, &t, &pendulum, None).is_err());
+        assert_eq!(p.full_checks(), 5 + k);
+    }
+}

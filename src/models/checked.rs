@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use crate::compat::TrainedFor;
+use crate::compat::{Passed, TrainedFor};
 use crate::dynamics::{Dynamics, DynamicsError, Forces, Rollout};
 use crate::system::{Graph, State};
 
@@ -12,12 +12,28 @@ use crate::system::{Graph, State};
 pub struct Checked {
     inner: Arc<dyn Dynamics>,
     trained: TrainedFor,
+    /// The last graph checked: a stream of one system is checked once.
+    passed: Passed,
 }
 
 impl Checked {
     /// Wraps `inner`.
     pub fn new(inner: Arc<dyn Dynamics>, trained: TrainedFor) -> Checked {
-        Checked { inner, trained }
+        Checked {
+            inner,
+            trained,
+            passed: Passed::default(),
+        }
+    }
+
+    /// [`TrainedFor::check`] without a field, once per graph in a row.
+    fn check(&self, graph: &Graph) -> Result<(), DynamicsError> {
+        Ok(self.passed.check(0, &self.trained, graph, None)?)
+    }
+
+    /// How many graph checks ran in full (not skipped as the last graph).
+    pub fn full_checks(&self) -> u64 {
+        self.passed.full_checks()
     }
 }
 
@@ -27,7 +43,7 @@ impl Dynamics for Checked {
     }
 
     fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
-        self.trained.check(graph, None)?;
+        self.check(graph)?;
         self.inner.supports(graph)
     }
 
@@ -41,12 +57,12 @@ impl Dynamics for Checked {
         state: &State,
         out: &mut [f64],
     ) -> Result<(), DynamicsError> {
-        self.trained.check(graph, None)?;
+        self.check(graph)?;
         self.inner.acceleration(graph, state, out)
     }
 
     fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, DynamicsError> {
-        self.trained.check(graph, None)?;
+        self.check(graph)?;
         self.inner.forces(graph, state)
     }
 
@@ -58,7 +74,7 @@ impl Dynamics for Checked {
         steps: usize,
         every: usize,
     ) -> Result<(Vec<State>, Forces), DynamicsError> {
-        self.trained.check(graph, None)?;
+        self.check(graph)?;
         self.inner
             .rollout_with_forces(graph, start, dt, steps, every)
     }
@@ -71,7 +87,7 @@ impl Dynamics for Checked {
         steps: usize,
         every: usize,
     ) -> Result<Vec<State>, DynamicsError> {
-        self.trained.check(graph, None)?;
+        self.check(graph)?;
         self.inner.rollout_every(graph, start, dt, steps, every)
     }
 
@@ -79,7 +95,7 @@ impl Dynamics for Checked {
         &self,
         graph: &Graph,
     ) -> Result<Option<Box<dyn crate::dynamics::StateGradient>>, DynamicsError> {
-        self.trained.check(graph, None)?;
+        self.check(graph)?;
         self.inner.state_gradient(graph)
     }
 
@@ -92,7 +108,7 @@ impl Dynamics for Checked {
         every: usize,
         drive: &crate::physics::Drive,
     ) -> Result<Vec<State>, DynamicsError> {
-        self.trained.check(graph, None)?;
+        self.check(graph)?;
         self.inner
             .rollout_driven(graph, start, dt, steps, every, drive)
     }
@@ -103,7 +119,7 @@ impl Dynamics for Checked {
         states: &[State],
         out: &mut [Vec<f64>],
     ) -> Result<(), DynamicsError> {
-        self.trained.check(graph, None)?;
+        self.check(graph)?;
         self.inner.acceleration_batch(graph, states, out)
     }
 
@@ -115,7 +131,7 @@ impl Dynamics for Checked {
         steps: usize,
         every: usize,
     ) -> Result<Vec<Rollout>, DynamicsError> {
-        self.trained.check(graph, None)?;
+        self.check(graph)?;
         self.inner.rollout_many(graph, starts, dt, steps, every)
     }
 
@@ -126,7 +142,7 @@ impl Dynamics for Checked {
         dt: f64,
         steps: usize,
     ) -> Result<Vec<State>, DynamicsError> {
-        self.trained.check(graph, None)?;
+        self.check(graph)?;
         self.inner.rollout(graph, start, dt, steps)
     }
 }

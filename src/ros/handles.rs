@@ -54,30 +54,36 @@ impl LiveParams {
 /// replace it while predictions go on: readers clone the `Arc` and predict
 /// outside the lock. Beside it, the file it came from (`None` for
 /// `truth:*`), which a warm-start retraining continues from.
-pub struct ModelHandle(RwLock<(Arc<dyn Dynamics>, Option<PathBuf>)>);
+pub struct ModelHandle(RwLock<Served>);
+
+/// The model served, its file, and how many swaps came before it.
+struct Served(Arc<dyn Dynamics>, Option<PathBuf>, u64);
 
 impl ModelHandle {
     /// Serves `model`, loaded from `file` when it came from one.
     pub fn new(model: Arc<dyn Dynamics>, file: Option<PathBuf>) -> Self {
-        ModelHandle(RwLock::new((model, file)))
+        ModelHandle(RwLock::new(Served(model, file, 0)))
+    }
+
+    fn read(&self) -> std::sync::RwLockReadGuard<'_, Served> {
+        self.0.read().unwrap_or_else(PoisonError::into_inner)
     }
 
     /// The model served now.
     pub fn get(&self) -> Arc<dyn Dynamics> {
-        self.0
-            .read()
-            .unwrap_or_else(PoisonError::into_inner)
-            .0
-            .clone()
+        self.read().0.clone()
+    }
+
+    /// The model served now and its generation (swaps before it): what names
+    /// it in caches, where a freed model's address could be reused.
+    pub fn served(&self) -> (Arc<dyn Dynamics>, u64) {
+        let s = self.read();
+        (s.0.clone(), s.2)
     }
 
     /// The file of the model served now, if it came from one.
     pub fn file(&self) -> Option<PathBuf> {
-        self.0
-            .read()
-            .unwrap_or_else(PoisonError::into_inner)
-            .1
-            .clone()
+        self.read().1.clone()
     }
 
     /// Serves `model` (from `file`) from now on; returns the old model and
@@ -88,10 +94,9 @@ impl ModelHandle {
         file: Option<PathBuf>,
     ) -> (Arc<dyn Dynamics>, Duration) {
         let start = Instant::now();
-        let old = std::mem::replace(
-            &mut *self.0.write().unwrap_or_else(PoisonError::into_inner),
-            (model, file),
-        );
+        let mut s = self.0.write().unwrap_or_else(PoisonError::into_inner);
+        let generation = s.2 + 1;
+        let old = std::mem::replace(&mut *s, Served(model, file, generation));
         (old.0, start.elapsed())
     }
 }
@@ -370,6 +375,9 @@ pub struct Handles {
     pub inputs: Arc<super::input::Inputs>,
     /// The managed-node state: only an active node predicts.
     pub lifecycle: Arc<super::lifecycle::Lifecycle>,
+    /// The last system the served model was checked for (graph, field):
+    /// a stream of one system is checked once, and again after a swap.
+    pub passed: Arc<crate::compat::Passed>,
 }
 
 #[cfg(test)]

@@ -53,11 +53,13 @@ fn handle_state(
             return Ok(None);
         }
     };
-    let model = h.model.get();
+    let (model, generation) = h.model.served();
     // A state the model was not trained for (another dimension, edge kinds
     // or field) is refused with the reason, not predicted.
     if let Some(t) = model.trained_for() {
-        t.check(&input.graph, input.field.as_ref())?;
+        // Keyed by the model served: a swap checks again.
+        h.passed
+            .check(generation, t, &input.graph, input.field.as_ref())?;
         if let Some(o) = t
             .range
             .as_ref()

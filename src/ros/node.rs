@@ -53,6 +53,7 @@ fn handles(
         clock: Arc::new(super::clock::Clock::new(params.use_sim_time)),
         accuracy: Arc::new(accuracy::Live::default()),
         inputs: Arc::new(super::input::Inputs::default()),
+        passed: Arc::new(crate::compat::Passed::default()),
         lifecycle: Arc::new(super::lifecycle::Lifecycle::new(if params.lifecycle {
             super::lifecycle::Primary::Unconfigured
         } else {
