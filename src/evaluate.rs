@@ -309,12 +309,7 @@ pub fn table(e: &Evaluation, rows: usize) -> String {
     );
     let still_at = |i: usize| still.map_or(String::new(), |r| r.cell(i));
     let n = s.t.len();
-    let picks: Vec<usize> = if n <= rows {
-        (0..n).collect()
-    } else {
-        (0..rows).map(|k| k * (n - 1) / (rows - 1)).collect()
-    };
-    for i in picks {
+    for i in crate::metrics::evenly_spaced(n, rows) {
         out += &format!(
             "{:>8.3}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}{}\n",
             s.t[i],

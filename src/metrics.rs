@@ -314,6 +314,18 @@ pub(crate) fn log_band(mean: f64, var: f64) -> (f64, f64, f64) {
     (mean.exp(), (mean - half).exp(), (mean + half).exp())
 }
 
+/// `rows` indices spread evenly over `0..n`, first and last included (all of
+/// them when there are no more than `rows`): the rows a table of a curve
+/// prints.
+pub fn evenly_spaced(n: usize, rows: usize) -> Vec<usize> {
+    let rows = rows.max(2);
+    if n <= rows {
+        (0..n).collect()
+    } else {
+        (0..rows).map(|k| k * (n - 1) / (rows - 1)).collect()
+    }
+}
+
 /// Summarises curves that share their times (within 1e-9 relative).
 ///
 /// Errors on no curves, differing times or lengths, or non-finite / negative

@@ -53,13 +53,7 @@ pub fn table(r: &ReplayReport, rows: usize) -> String {
     );
     let still_at = |i: usize| still.map_or(String::new(), |x| x.cell(i));
     let n = s.t.len();
-    let rows = rows.max(2);
-    let picks: Vec<usize> = if n <= rows {
-        (0..n).collect()
-    } else {
-        (0..rows).map(|k| k * (n - 1) / (rows - 1)).collect()
-    };
-    for i in picks {
+    for i in crate::metrics::evenly_spaced(n, rows) {
         out += &format!(
             "{:>9.4}  {:>8}  {:>10.3e}  {:>10.3e}  {:>10.3e}  {:>10.3e}{}\n",
             s.t[i],
