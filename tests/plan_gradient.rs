@@ -12,6 +12,9 @@
 #![allow(clippy::too_many_lines)]
 
 use candle_core::{Device, Tensor, Var};
+mod common;
+
+use common::cli::{ok, run_in};
 use mcgnode::dynamics::Dynamics;
 use mcgnode::model::Variant;
 use mcgnode::models::truth::truth;
@@ -212,14 +215,7 @@ fn refining_lowers_the_cost_and_models_without_gradients_are_refused() {
 fn the_plan_command_refines() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let run = |args: &[&str]| {
-        let o = std::process::Command::new(env!("CARGO_BIN_EXE_mcgnode"))
-            .current_dir(d)
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    };
+    let run = |args: &[&str]| ok(&run_in(d, args));
     // A model that responds to its gripper (a random one hardly does).
     run(&[
         "simulate",
@@ -237,7 +233,7 @@ fn the_plan_command_refines() {
     run(&[
         "train", "--model", "mcgnode", "--data", "hc.mcap", "--epochs", "100", "--out", "m.json",
     ]);
-    let args = |m: &str| -> Vec<String> {
+    let args = |m: &'static str| {
         [
             "plan",
             "--model",
@@ -260,17 +256,8 @@ fn the_plan_command_refines() {
             "10",
             "--json",
         ]
-        .iter()
-        .map(|s| (*s).to_string())
-        .collect()
     };
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mcgnode"))
-        .current_dir(d)
-        .args(args("m.json"))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let j: serde_json::Value = serde_json::from_str(&run(&args("m.json"))).unwrap();
     let (cost, search) = (
         j["cost"].as_f64().unwrap(),
         j["search_cost"].as_f64().unwrap(),
@@ -285,11 +272,7 @@ fn the_plan_command_refines() {
     assert!(cost < search, "{cost} = {search}: nothing refined");
     assert_eq!(j["best"].as_array().unwrap().len(), 5);
     assert_eq!(j["predicted"].as_array().unwrap().len(), 6);
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_mcgnode"))
-        .current_dir(d)
-        .args(args("truth:held-chain"))
-        .output()
-        .unwrap();
+    let o = run_in(d, &args("truth:held-chain"));
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains("no gradient"), "{e}");

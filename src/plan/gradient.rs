@@ -57,6 +57,16 @@ impl Problem<'_> {
     /// diverges has no gradient: an error.
     pub fn gradient(&self, controls: &Controls) -> Result<Gradient, PlanError> {
         self.check()?;
+        self.gradient_with(self.state_gradient()?.as_mut(), controls)
+    }
+
+    /// [`Problem::gradient`] on a reverse pass already built for the graph
+    /// (refining takes many gradients of one problem).
+    fn gradient_with(
+        &self,
+        model: &mut dyn StateGradient,
+        controls: &Controls,
+    ) -> Result<Gradient, PlanError> {
         if controls.steps != self.horizon || controls.width != self.width() {
             return Err(PlanError::Problem(format!(
                 "the controls have {} steps of {} numbers, the problem {} of {}",
@@ -66,13 +76,12 @@ impl Problem<'_> {
                 self.width()
             )));
         }
-        let mut model = self.state_gradient()?;
         let mut proj = model.projector();
-        let (tape, predicted) = self.forward(model.as_mut(), proj.as_mut(), controls)?;
+        let (tape, predicted) = self.forward(model, proj.as_mut(), controls)?;
         let cost = self
             .cost
             .of(&predicted, self.graph.dim, controls, self.timing);
-        let grad = self.backward(model.as_mut(), proj.as_ref(), controls, &tape, &predicted);
+        let grad = self.backward(model, proj.as_ref(), controls, &tape, &predicted);
         Ok(Gradient {
             cost,
             grad,
@@ -262,7 +271,9 @@ pub struct Refined {
 /// `iterations` steps or when no step length lowers the cost.
 pub fn refine(problem: &Problem, init: &Controls, iterations: usize) -> Result<Refined, PlanError> {
     let clip = |x: f64| x.clamp(-problem.max_speed, problem.max_speed);
-    let mut at = problem.gradient(init)?;
+    problem.check()?;
+    let mut model = problem.state_gradient()?;
+    let mut at = problem.gradient_with(model.as_mut(), init)?;
     let (start_cost, mut u) = (at.cost, init.clone());
     let mut steps = vec![];
     let norm = |g: &[f64]| g.iter().map(|x| x * x).sum::<f64>().sqrt();
@@ -288,7 +299,7 @@ pub fn refine(problem: &Problem, init: &Controls, iterations: usize) -> Result<R
             };
             let cost = problem.cost_of(&trial)?;
             if cost < at.cost {
-                let next = problem.gradient(&trial)?;
+                let next = problem.gradient_with(model.as_mut(), &trial)?;
                 steps.push(RefineStep {
                     cost: next.cost,
                     grad_norm: norm(&at.grad),

@@ -62,7 +62,8 @@ impl Sampler {
         }
     }
 
-    fn iterations(self) -> usize {
+    /// Rounds of the search (random shooting: one).
+    pub fn iterations(self) -> usize {
         match self {
             Sampler::Random { .. } => 1,
             Sampler::Cem { iterations, .. } | Sampler::Mppi { iterations, .. } => iterations,

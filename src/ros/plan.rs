@@ -62,6 +62,12 @@ pub const MAX_CANDIDATES: u32 = 65_536;
 /// See [`MAX_CANDIDATES`].
 pub const MAX_ITERATIONS: u32 = 100;
 
+/// Rounds the search of `req` runs, its defaults resolved (0 for a request
+/// that will be refused): what the Plan action's feedback counts against.
+pub fn rounds(req: &PlanRequest) -> usize {
+    sampler(req).map_or(0, Sampler::iterations)
+}
+
 /// The sampler a request asks for, with the defaults of `mcgnode plan`.
 fn sampler(req: &PlanRequest) -> Result<Sampler, Refused> {
     if req.candidates > MAX_CANDIDATES || req.iterations > MAX_ITERATIONS {
@@ -427,5 +433,21 @@ mod tests {
         });
         assert!(r.success, "{}", r.message);
         assert_eq!((rounds, r.best.len()), (1, 5));
+    }
+
+    /// The action's feedback counts the rounds the search runs, defaults
+    /// resolved: CEM's 4 when 0 is asked, random shooting's one.
+    #[test]
+    fn rounds_resolve_the_defaults() {
+        let with = |iterations: u32, sampler: &str| PlanRequest {
+            iterations,
+            sampler: sampler.into(),
+            ..PlanRequest::default()
+        };
+        assert_eq!(rounds(&with(2, "cem")), 2);
+        assert_eq!(rounds(&with(0, "")), 4);
+        assert_eq!(rounds(&with(3, "mppi")), 3);
+        assert_eq!(rounds(&with(7, "random")), 1);
+        assert_eq!(rounds(&with(0, "grid")), 0);
     }
 }

@@ -102,7 +102,7 @@ async fn execute(
 ) {
     let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<PlanFeedback>();
     let (worker, flag) = (h.clone(), cancel.clone());
-    let rounds = req.iterations.max(1) as usize;
+    let rounds = super::plan::rounds(&req);
     let job = tokio::task::spawn_blocking(move || {
         plan_call_with(&worker, &req, &mut |it| {
             // The receiver lives until the job ends.
