@@ -417,14 +417,17 @@ fn learned_rollouts_keep_bars_exact() {
 /// from one call, equals the two asked apart (to the bit), on a model that
 /// keeps its workspace between calls while the graph changes under it.
 #[test]
-fn rollout_with_forces_equals_rollout_and_forces_apart() {
+fn predict_into_equals_rollout_and_forces_apart() {
     let (c5, g5) = system(SystemKind::Pendulum, 5);
     let (c7, g7) = system(SystemKind::Pendulum, 7);
     for v in [Variant::Gnode, Variant::Cgnode, Variant::Mcgnode] {
         let (_, m) = mcgnode::testing::random_model(v, &g5, 4).unwrap();
+        // One set of buffers, refilled by every call.
+        let mut p = mcgnode::Predicted::default();
         for (c, g) in [(&c5, &g5), (&c7, &g7), (&c5, &g5)] {
             let s = c.start_for(g, 9, 0);
-            let (states, forces) = m.rollout_with_forces(g, &s, 1e-3, 30, 3).unwrap();
+            m.predict_into(g, &s, 1e-3, 30, 3, &mut p).unwrap();
+            let (states, forces) = (p.states.to_states(), p.forces.to_forces(g.dim));
             // A fresh model: nothing kept from the calls before.
             let fresh = TrainedModel::from_file(m.file.clone()).unwrap();
             assert_eq!(

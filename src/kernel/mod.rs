@@ -43,6 +43,9 @@ pub struct Workspace {
     /// SHAKE/RATTLE onto the bars with the learned masses, for rollouts of
     /// constrained models on graphs with bars (see [`Kernel::set_project_bars`]).
     pub projector: Option<Projector>,
+    /// A rollout's q, q̇ and q̈, kept so that the next one on this workspace
+    /// allocates nothing.
+    rollout: [Vec<f64>; 3],
 }
 
 impl Workspace {
@@ -181,6 +184,7 @@ impl Kernel {
             edge_force: vec![0.0; ne * plan.dim],
             forward: Forward::new(self.arch.clone(), plan),
             projector,
+            rollout: [vec![0.0; nd], vec![0.0; nd], vec![0.0; nd]],
         })
     }
 

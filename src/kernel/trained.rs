@@ -1,7 +1,7 @@
 //! A trained model, loaded from its file, running on the inference kernel.
 
 use super::{Kernel, Workspace};
-use crate::dynamics::{Dynamics, DynamicsError, EdgeForce, Forces, Rollout};
+use crate::dynamics::{Dynamics, DynamicsError, FlatForces, Forces, Predicted, Rollout};
 use crate::error::Result;
 use crate::model::file::ModelFile;
 use crate::physics::{verlet, Drive};
@@ -100,16 +100,39 @@ impl TrainedModel {
         first: impl FnOnce(&mut Workspace, &[f64]),
         mut visit: impl FnMut(usize, &[f64], &[f64]),
     ) -> Option<usize> {
-        let d = start.q.len();
-        let mut q = start.q.clone();
-        let mut v = start.v.clone();
+        // The workspace's buffers, taken so that the forward pass can
+        // borrow the workspace beside them.
+        let [mut q, mut v, mut a] = std::mem::take(&mut ws.rollout);
+        let reset = |x: &mut Vec<f64>, from: &[f64]| {
+            x.clear();
+            x.extend_from_slice(from);
+        };
+        reset(&mut q, &start.q);
+        reset(&mut v, &start.v);
+        a.resize(q.len(), 0.0);
         if let Some(drive) = drive {
             drive.place(0, &mut q, &mut v);
         }
-        let mut a = vec![0.0; d];
         self.kernel.acceleration(ws, &q, &v, &mut a);
         first(ws, &a);
         visit(0, &q, &v);
+        let diverged = self.steps(ws, (&mut q, &mut v, &mut a), dt, steps, every, drive, visit);
+        ws.rollout = [q, v, a];
+        diverged
+    }
+
+    /// Steps 1 to `steps` of [`TrainedModel::verlet`] from (q, q̇, q̈).
+    #[allow(clippy::too_many_arguments)]
+    fn steps(
+        &self,
+        ws: &mut Workspace,
+        (q, v, a): (&mut [f64], &mut [f64], &mut [f64]),
+        dt: f64,
+        steps: usize,
+        every: usize,
+        drive: Option<&Drive>,
+        mut visit: impl FnMut(usize, &[f64], &[f64]),
+    ) -> Option<usize> {
         let every = every.max(1);
         for step in 1..=steps {
             // The projector and the forward pass borrow the workspace apart.
@@ -123,14 +146,13 @@ impl TrainedModel {
                 self.kernel.acceleration(ws, q, v, a);
                 Ok::<(), Infallible>(())
             };
-            let Ok(()) =
-                verlet::step_placed(&mut q, &mut v, &mut a, dt, projector.as_mut(), place, accel);
+            let Ok(()) = verlet::step_placed(q, v, a, dt, projector.as_mut(), place, accel);
             ws.projector = projector;
-            if q.iter().chain(&v).any(|x| !x.is_finite()) {
+            if q.iter().chain(v.iter()).any(|x| !x.is_finite()) {
                 return Some(step);
             }
             if step % every == 0 {
-                visit(step, &q, &v);
+                visit(step, q, v);
             }
         }
         None
@@ -161,48 +183,34 @@ impl TrainedModel {
         (out, diverged)
     }
 
-    /// Forces of the workspace's last evaluation, whose accelerations are `acc`.
-    fn forces_of(&self, ws: &mut Workspace, graph: &Graph, acc: &[f64]) -> Forces {
+    /// Forces of the workspace's last evaluation, whose accelerations are
+    /// `acc`, into `out` (its memory reused).
+    fn forces_of(&self, ws: &mut Workspace, graph: &Graph, acc: &[f64], out: &mut FlatForces) {
         self.kernel.read_forces(ws);
         let b = self.file.hyper.variant.biases();
-        let total = if b.constrained {
-            ws.force.clone()
+        out.clear();
+        if b.constrained {
+            out.total.extend_from_slice(&ws.force);
         } else {
             // Acceleration-predicting models: force = m q̈ with the true masses.
-            acc.iter()
-                .enumerate()
-                .map(|(i, a)| a * graph.masses[i / graph.dim])
-                .collect()
-        };
-        let d = graph.dim;
-        let edges = if b.pairwise {
-            ws.edge_pairs()
-                .zip(ws.edge_force.chunks(d))
-                .map(|((a, b), f)| EdgeForce {
-                    a,
-                    b,
-                    force: f.to_vec(),
-                })
-                .collect()
-        } else {
-            vec![]
-        };
-        Forces { total, edges }
+            let m = |i: usize| graph.masses[i / graph.dim];
+            out.total
+                .extend(acc.iter().enumerate().map(|(i, a)| a * m(i)));
+        }
+        if b.pairwise {
+            out.pairs.extend(ws.edge_pairs());
+            out.pair_force.extend_from_slice(&ws.edge_force);
+        }
     }
 
-    /// A rollout on the kept workspace, with the forces of its first
-    /// evaluation when `forces` is set.
-    #[allow(clippy::too_many_arguments)]
-    fn rollout_and_forces(
-        &self,
+    /// Checks a rollout's start, drive and step before it runs.
+    fn check_rollout(
         graph: &Graph,
         start: &State,
         dt: f64,
         steps: usize,
-        every: usize,
         drive: Option<&Drive>,
-        forces: bool,
-    ) -> Result<(Vec<State>, Option<Forces>), DynamicsError> {
+    ) -> Result<(), DynamicsError> {
         start.validate(graph)?;
         if let Some(drive) = drive {
             drive.check(graph, steps)?;
@@ -210,17 +218,23 @@ impl TrainedModel {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(DynamicsError::TimeStep(dt));
         }
+        Ok(())
+    }
+
+    /// A rollout on the kept workspace, its states returned.
+    fn kept_rollout(
+        &self,
+        graph: &Graph,
+        start: &State,
+        (dt, steps, every): (f64, usize, usize),
+        drive: Option<&Drive>,
+    ) -> Result<Vec<State>, DynamicsError> {
+        Self::check_rollout(graph, start, dt, steps, drive)?;
         let mut kept = self.cache.take(&self.kernel, graph)?;
-        let mut f = None;
-        let first = |ws: &mut Workspace, acc: &[f64]| {
-            if forces {
-                f = Some(self.forces_of(ws, graph, acc));
-            }
-        };
-        let (out, diverged) = self.states(&mut kept.1, start, dt, steps, every, drive, first);
+        let (out, diverged) = self.states(&mut kept.1, start, dt, steps, every, drive, |_, _| {});
         self.cache.put(kept);
         match diverged {
-            None => Ok((out, f)),
+            None => Ok(out),
             Some(step) => Err(DynamicsError::Diverged(step)),
         }
     }
@@ -280,9 +294,10 @@ impl Dynamics for TrainedModel {
         let mut acc = vec![0.0; graph.ndof()];
         self.kernel
             .acceleration(&mut kept.1, &state.q, &state.v, &mut acc);
-        let f = self.forces_of(&mut kept.1, graph, &acc);
+        let mut f = FlatForces::default();
+        self.forces_of(&mut kept.1, graph, &acc, &mut f);
         self.cache.put(kept);
-        Ok(f)
+        Ok(f.to_forces(graph.dim))
     }
 
     fn rollout_every(
@@ -293,9 +308,7 @@ impl Dynamics for TrainedModel {
         steps: usize,
         every: usize,
     ) -> Result<Vec<State>, DynamicsError> {
-        Ok(self
-            .rollout_and_forces(graph, start, dt, steps, every, None, false)?
-            .0)
+        self.kept_rollout(graph, start, (dt, steps, every), None)
     }
 
     /// On the kept workspace, the driven particles placed before every
@@ -309,24 +322,33 @@ impl Dynamics for TrainedModel {
         every: usize,
         drive: &Drive,
     ) -> Result<Vec<State>, DynamicsError> {
-        Ok(self
-            .rollout_and_forces(graph, start, dt, steps, every, Some(drive), false)?
-            .0)
+        self.kept_rollout(graph, start, (dt, steps, every), Some(drive))
     }
 
     /// The forces come from the rollout's first evaluation, in the same
-    /// workspace: one forward pass fewer per prediction.
-    fn rollout_with_forces(
+    /// workspace: one forward pass fewer per prediction. On the graph of the
+    /// last call, nothing is allocated (`out` and the workspace are reused).
+    fn predict_into(
         &self,
         graph: &Graph,
         start: &State,
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<(Vec<State>, Forces), DynamicsError> {
-        let (states, forces) =
-            self.rollout_and_forces(graph, start, dt, steps, every, None, true)?;
-        Ok((states, forces.unwrap_or_default()))
+        out: &mut Predicted,
+    ) -> Result<(), DynamicsError> {
+        Self::check_rollout(graph, start, dt, steps, None)?;
+        let mut kept = self.cache.take(&self.kernel, graph)?;
+        out.states.clear(graph.ndof());
+        let (kept_states, forces) = (&mut out.states, &mut out.forces);
+        let first = |ws: &mut Workspace, acc: &[f64]| self.forces_of(ws, graph, acc, forces);
+        let visit = |_, q: &[f64], v: &[f64]| kept_states.push(q, v);
+        let diverged = self.verlet(&mut kept.1, start, dt, steps, every, None, first, visit);
+        self.cache.put(kept);
+        match diverged {
+            None => Ok(()),
+            Some(step) => Err(DynamicsError::Diverged(step)),
+        }
     }
 
     /// One kernel rollout per start (no batching needed: the kernel has no

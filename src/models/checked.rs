@@ -3,7 +3,7 @@
 use std::sync::Arc;
 
 use crate::compat::{Passed, TrainedFor};
-use crate::dynamics::{Dynamics, DynamicsError, Forces, Rollout};
+use crate::dynamics::{Dynamics, DynamicsError, Forces, Predicted, Rollout};
 use crate::system::{Graph, State};
 
 /// A model with what it was trained on: [`Dynamics::supports`] also refuses
@@ -66,17 +66,17 @@ impl Dynamics for Checked {
         self.inner.forces(graph, state)
     }
 
-    fn rollout_with_forces(
+    fn predict_into(
         &self,
         graph: &Graph,
         start: &State,
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<(Vec<State>, Forces), DynamicsError> {
+        out: &mut Predicted,
+    ) -> Result<(), DynamicsError> {
         self.check(graph)?;
-        self.inner
-            .rollout_with_forces(graph, start, dt, steps, every)
+        self.inner.predict_into(graph, start, dt, steps, every, out)
     }
 
     fn rollout_every(

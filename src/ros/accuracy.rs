@@ -27,13 +27,13 @@ use std::collections::VecDeque;
 use std::sync::{Mutex, PoisonError};
 
 use crate::data::stream::Streams;
+use crate::dynamics::KeptStates;
 use crate::metrics::error_curves;
 use crate::physics::Field;
 use crate::system::{Graph, State};
 
 use super::input::Input;
 use super::params::NodeParams;
-use super::predict::Prediction;
 use super::wire::LiveAccuracy;
 
 pub use crate::data::stream::Nanos;
@@ -380,11 +380,11 @@ impl Default for Live {
 
 impl Live {
     /// Scores `input` against the predictions made for its moment in its
-    /// stream, then keeps the states of `predicted` (its own prediction) at
-    /// the lead times. A stream that started over ([`Input::reset`]) starts
+    /// stream, then keeps the states of `predicted` (its own prediction:
+    /// the input, then one state every `dt`) at the lead times. A stream that started over ([`Input::reset`]) starts
     /// its figures and alarm over too. Nothing happens when
     /// `accuracy_lead_times` is empty.
-    pub fn update(&self, p: &NodeParams, input: &Input, predicted: &Prediction) -> Update {
+    pub fn update(&self, p: &NodeParams, input: &Input, predicted: &KeptStates) -> Update {
         let mut none = Update {
             message: None,
             alarm_changed: None,
@@ -424,10 +424,12 @@ impl Live {
             input.field.as_ref(),
             &input.state,
         );
+        let horizon = u32::try_from(predicted.len().saturating_sub(1)).unwrap_or(u32::MAX);
         let ahead: Vec<(usize, State)> = tracker
-            .steps(predicted.trajectory.dt, predicted.trajectory.steps)
+            .steps(p.dt, horizon)
             .into_iter()
-            .filter_map(|(lead, k)| Some((lead, predicted.states.get(k - 1)?.clone())))
+            .filter(|&(_, k)| k < predicted.len())
+            .map(|(lead, k)| (lead, predicted.state(k)))
             .collect();
         tracker.expect(id, t, ahead);
         if compared.is_empty() {
@@ -637,17 +639,17 @@ mod tests {
                 let Accepted::Ready(input) = inputs.accept(&p, m).unwrap() else {
                     panic!("full states are ready");
                 };
-                let pred = crate::ros::predict::predict_parts(
+                let mut pred = crate::dynamics::Predicted::default();
+                let at = (p.dt, p.horizon, p.substeps);
+                crate::ros::predict::predict_into(
                     model.as_ref(),
-                    &input.message,
                     &input.graph,
                     &input.state,
-                    p.dt,
-                    p.horizon,
-                    p.substeps,
+                    at,
+                    &mut pred,
                 )
                 .unwrap();
-                out.push((k, live.update(&p, &input, &pred)));
+                out.push((k, live.update(&p, &input, &pred.states)));
             }
             out
         };

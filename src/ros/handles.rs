@@ -378,6 +378,9 @@ pub struct Handles {
     /// The last system the served model was checked for (graph, field):
     /// a stream of one system is checked once, and again after a swap.
     pub passed: Arc<crate::compat::Passed>,
+    /// The last prediction's buffers, refilled by the next (no allocation
+    /// while the system stays the same).
+    pub predicted: Arc<std::sync::Mutex<crate::dynamics::Predicted>>,
 }
 
 #[cfg(test)]

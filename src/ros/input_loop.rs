@@ -3,7 +3,7 @@
 //! live accuracy published; a drift alarm can start a retraining.
 
 use std::sync::atomic::Ordering;
-use std::sync::Arc;
+use std::sync::{Arc, PoisonError};
 use std::time::Instant;
 
 use ros2_client::log::LogLevel;
@@ -54,39 +54,32 @@ fn handle_state(
         }
     };
     let (model, generation) = h.model.served();
-    // A state the model was not trained for (another dimension, edge kinds
-    // or field) is refused with the reason, not predicted.
-    if let Some(t) = model.trained_for() {
-        // Keyed by the model served: a swap checks again.
-        h.passed
-            .check(generation, t, &input.graph, input.field.as_ref())?;
-        if let Some(o) = t
-            .range
-            .as_ref()
-            .and_then(|r| r.check(&input.graph, &input.state, params.out_of_range_sigmas))
-        {
+    // The buffers of the last prediction, refilled: the input loop awaits
+    // each state's job, so they are never wanted twice at once.
+    let mut kept = h.predicted.lock().unwrap_or_else(PoisonError::into_inner);
+    let outside = predict::predict_served(
+        (model.as_ref(), generation),
+        &h.passed,
+        &input,
+        &params,
+        &mut kept,
+    )
+    .inspect_err(|e| {
+        if matches!(e, predict::PredictError::OutOfRange(_)) {
             h.diag.stats.out_of_range.fetch_add(1, Ordering::Relaxed);
-            if params.out_of_range_refuse {
-                return Err(predict::PredictError::OutOfRange(o));
-            }
-            h.diag.failed(
-                &format!("out-of-range input, predicted anyway: {o}"),
-                Warning::OutOfRange,
-            );
         }
+    })?;
+    if let Some(o) = outside {
+        h.diag.stats.out_of_range.fetch_add(1, Ordering::Relaxed);
+        h.diag.failed(
+            &format!("out-of-range input, predicted anyway: {o}"),
+            Warning::OutOfRange,
+        );
     }
-    let p = predict::predict_parts(
-        model.as_ref(),
-        &input.message,
-        &input.graph,
-        &input.state,
-        params.dt,
-        params.horizon,
-        params.substeps,
-    )?;
+    let p = predict::messages(&input.message, &input.graph, params.dt, &kept)?;
     h.recorder
         .record(|r| r.prediction(h.clock.now_log_ns(), &p.trajectory, &p.forces));
-    let scored = h.accuracy.update(&params, &input, &p);
+    let scored = h.accuracy.update(&params, &input, &kept.states);
     Ok(Some((p, scored)))
 }
 

@@ -54,6 +54,7 @@ fn handles(
         accuracy: Arc::new(accuracy::Live::default()),
         inputs: Arc::new(super::input::Inputs::default()),
         passed: Arc::new(crate::compat::Passed::default()),
+        predicted: Default::default(),
         lifecycle: Arc::new(super::lifecycle::Lifecycle::new(if params.lifecycle {
             super::lifecycle::Primary::Unconfigured
         } else {

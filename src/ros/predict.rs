@@ -1,12 +1,19 @@
 //! From an incoming `ParticleState` to the node's outputs: checks the message,
 //! asks the model for a rollout and forces, and builds the reply messages.
 //! Pure functions, no ROS: the node and the Rollout service both call these.
+//!
+//! The prediction itself ([`predict_into`]) fills buffers the caller keeps:
+//! the node predicts state after state of one system without allocating;
+//! only the wire messages it then publishes are new ([`messages`]).
 
-use crate::data::msg::{to_vec3, Header, ParticleState, Vector3};
+use crate::compat::{OutOfRange, Passed};
+use crate::data::msg::{Header, ParticleState, Vector3};
 use crate::data::DataError;
-use crate::dynamics::{Dynamics, DynamicsError, Forces};
+use crate::dynamics::{Dynamics, DynamicsError, FlatForces, KeptStates, Predicted};
 use crate::system::{Graph, State};
 
+use super::input::Input;
+use super::params::NodeParams;
 use super::wire::{ParticleForces, PredictedTrajectory};
 
 /// Why a state gets no prediction; each message says what to change.
@@ -56,16 +63,13 @@ pub enum PredictError {
 
 crate::error::typed_errors!(PredictError);
 
-/// A prediction for one state.
+/// The wire messages of a prediction for one state.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Prediction {
     /// `horizon` states after the input.
     pub trajectory: PredictedTrajectory,
     /// Forces at the input state.
     pub forces: ParticleForces,
-    /// The trajectory's states as the model gave them (state `k` is
-    /// `(k + 1)·dt` after the input), for live accuracy.
-    pub states: Vec<State>,
 }
 
 /// Refuses a state with more than `max_particles` particles (counted as the
@@ -112,7 +116,7 @@ pub fn trajectory(
     substeps: u32,
 ) -> Result<PredictedTrajectory, PredictError> {
     let states = rollout(model, graph, start, dt, steps, substeps)?;
-    Ok(trajectory_msg(input, graph, dt, &states[1..]))
+    Ok(trajectory_of(input, graph, dt, &states[1..]))
 }
 
 /// [`trajectory`] with the kinematic particles moved along `drive` (one row
@@ -131,7 +135,7 @@ pub fn trajectory_driven(
     let (states, ()) = integrate(dt, steps, substeps, |h, n, every| {
         Ok((model.rollout_driven(graph, start, h, n, every, drive)?, ()))
     })?;
-    Ok(trajectory_msg(input, graph, dt, &states[1..]))
+    Ok(trajectory_of(input, graph, dt, &states[1..]))
 }
 
 /// The wire message of `states` predicted after `input`, `dt` apart.
@@ -141,25 +145,78 @@ pub fn trajectory_of(
     dt: f64,
     states: &[State],
 ) -> PredictedTrajectory {
-    trajectory_msg(input, graph, dt, states)
+    let mut kept = KeptStates::default();
+    kept.fill(graph.ndof(), states);
+    trajectory_msg(input, graph, dt, &kept, 0)
 }
 
-/// [`rollout`] and the forces at `start`, from one call (one evaluation of
-/// the start for models with a forward pass).
-fn rollout_and_forces(
+/// The model's states every `dt` for `horizon` steps from `start` (the
+/// first is `start` itself), integrated with `dt / substeps`, and the forces
+/// at `start`, into `out`: on the graph of the last call, a model with a
+/// forward pass allocates nothing. The model is asked whether it supports
+/// the graph.
+pub fn predict_into(
     model: &dyn Dynamics,
     graph: &Graph,
     start: &State,
+    (dt, horizon, substeps): (f64, u32, u32),
+    out: &mut Predicted,
+) -> Result<(), PredictError> {
+    model.supports(graph).map_err(PredictError::Unsupported)?;
+    let (h, n, every) = integration(dt, horizon, substeps)?;
+    model
+        .predict_into(graph, start, h, n, every, out)
+        .map_err(|e| match e {
+            DynamicsError::Forces(e) => PredictError::Forces(*e),
+            e => PredictError::Rollout(e),
+        })?;
+    if out.states.is_empty() {
+        return Err(no_states());
+    }
+    Ok(())
+}
+
+/// The node's prediction for a parsed input, into `out`: the served model
+/// (`model`, swap `generation`) checked against the input's system once per
+/// system (`passed`), the input against the training range (refused when
+/// `out_of_range_refuse` is set), then [`predict_into`]. Returns what was out
+/// of range when it predicted anyway. On the system of the last call this
+/// allocates nothing (`tests/alloc_free.rs` counts).
+pub fn predict_served(
+    (model, generation): (&dyn Dynamics, u64),
+    passed: &Passed,
+    input: &Input,
+    params: &NodeParams,
+    out: &mut Predicted,
+) -> Result<Option<OutOfRange>, PredictError> {
+    let mut outside = None;
+    // A state the model was not trained for (another dimension, edge kinds
+    // or field) is refused with the reason, not predicted.
+    if let Some(t) = model.trained_for() {
+        // Keyed by the model served: a swap checks again.
+        passed.check(generation, t, &input.graph, input.field.as_ref())?;
+        let sigmas = params.out_of_range_sigmas;
+        outside = (t.range.as_ref()).and_then(|r| r.check(&input.graph, &input.state, sigmas));
+        if let (Some(o), true) = (&outside, params.out_of_range_refuse) {
+            return Err(PredictError::OutOfRange(o.clone()));
+        }
+    }
+    let at = (params.dt, params.horizon, params.substeps);
+    predict_into(model, &input.graph, &input.state, at, out)?;
+    Ok(outside)
+}
+
+/// The wire messages of `p`, predicted from `input` (parsed as `graph`)
+/// every `dt`.
+pub fn messages(
+    input: &ParticleState,
+    graph: &Graph,
     dt: f64,
-    steps: u32,
-    substeps: u32,
-) -> Result<(Vec<State>, Forces), PredictError> {
-    integrate(dt, steps, substeps, |h, n, every| {
-        model.rollout_with_forces(graph, start, h, n, every)
-    })
-    .map_err(|e| match e {
-        PredictError::Rollout(DynamicsError::Forces(e)) => PredictError::Forces(*e),
-        e => e,
+    p: &Predicted,
+) -> Result<Prediction, PredictError> {
+    Ok(Prediction {
+        trajectory: trajectory_msg(input, graph, dt, &p.states, 1),
+        forces: forces_msg(&input.header, graph.dim, &p.forces)?,
     })
 }
 
@@ -179,6 +236,21 @@ fn rollout(
     Ok(states)
 }
 
+/// The integration step, step count and output stride of `steps` steps of
+/// `dt` split in `substeps`, after checking `dt`.
+fn integration(dt: f64, steps: u32, substeps: u32) -> Result<(f64, usize, usize), PredictError> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(PredictError::BadStep(dt));
+    }
+    let sub = substeps.max(1) as usize;
+    Ok((dt / sub as f64, steps as usize * sub, sub))
+}
+
+/// A model that answered with no state at all.
+fn no_states() -> PredictError {
+    PredictError::Rollout(DynamicsError::Model("the model returned no states".into()))
+}
+
 /// Runs `roll(dt / substeps, steps · substeps, substeps)` after checking
 /// `dt`, refusing an empty answer.
 fn integrate<T>(
@@ -187,59 +259,56 @@ fn integrate<T>(
     substeps: u32,
     roll: impl FnOnce(f64, usize, usize) -> Result<(Vec<State>, T), DynamicsError>,
 ) -> Result<(Vec<State>, T), PredictError> {
-    if !(dt.is_finite() && dt > 0.0) {
-        return Err(PredictError::BadStep(dt));
-    }
-    let sub = substeps.max(1) as usize;
-    let (states, extra) =
-        roll(dt / sub as f64, steps as usize * sub, sub).map_err(PredictError::Rollout)?;
+    let (h, n, every) = integration(dt, steps, substeps)?;
+    let (states, extra) = roll(h, n, every).map_err(PredictError::Rollout)?;
     if states.is_empty() {
-        return Err(PredictError::Rollout(DynamicsError::Model(
-            "the model returned no states".into(),
-        )));
+        return Err(no_states());
     }
     Ok((states, extra))
 }
 
-/// The wire message of the predicted `states` after `input`, `dt` apart.
+/// The wire message of the predicted `states` from the `skip`-th on, after
+/// `input`, `dt` apart.
 fn trajectory_msg(
     input: &ParticleState,
     graph: &Graph,
     dt: f64,
-    states: &[State],
+    states: &KeptStates,
+    skip: usize,
 ) -> PredictedTrajectory {
-    let n = graph.n();
-    let (mut positions, mut velocities) = (
-        Vec::with_capacity(n * states.len()),
-        Vec::with_capacity(n * states.len()),
-    );
-    for state in states {
-        positions.extend(to_vec3(&state.q, graph.dim));
-        velocities.extend(to_vec3(&state.v, graph.dim));
+    let (n, d) = (graph.n(), graph.dim);
+    let kept = states.len().saturating_sub(skip);
+    let (mut positions, mut velocities) =
+        (Vec::with_capacity(n * kept), Vec::with_capacity(n * kept));
+    for k in skip..states.len() {
+        positions.extend(states.q(k).chunks(d).map(vector3));
+        velocities.extend(states.v(k).chunks(d).map(vector3));
     }
     PredictedTrajectory {
         header: input.header.clone(),
         initial: input.clone(),
         dt,
-        steps: u32::try_from(states.len()).unwrap_or(u32::MAX),
+        steps: u32::try_from(kept).unwrap_or(u32::MAX),
         positions,
         velocities,
     }
 }
 
-/// Forces at the input state, as a message stamped with the input's header.
-pub fn forces(
-    model: &dyn Dynamics,
-    header: &Header,
-    graph: &Graph,
-    state: &State,
-) -> Result<ParticleForces, PredictError> {
-    let f = model.forces(graph, state).map_err(PredictError::Forces)?;
-    forces_msg(header, graph.dim, &f)
+/// A 2- or 3-component vector on the wire (z = 0 in 2D).
+fn vector3(c: &[f64]) -> Vector3 {
+    Vector3 {
+        x: c[0],
+        y: c[1],
+        z: c.get(2).copied().unwrap_or(0.0),
+    }
 }
 
-/// Converts [`Forces`] to the wire message (2D forces get z = 0).
-pub fn forces_msg(header: &Header, dim: usize, f: &Forces) -> Result<ParticleForces, PredictError> {
+/// Converts forces to the wire message (2D forces get z = 0).
+pub fn forces_msg(
+    header: &Header,
+    dim: usize,
+    f: &FlatForces,
+) -> Result<ParticleForces, PredictError> {
     let shape = PredictError::ForceShape;
     let vec3 = |c: &[f64]| -> Result<Vector3, PredictError> {
         if c.len() != dim {
@@ -248,16 +317,19 @@ pub fn forces_msg(header: &Header, dim: usize, f: &Forces) -> Result<ParticleFor
                 c.len()
             )));
         }
-        Ok(Vector3 {
-            x: c[0],
-            y: c[1],
-            z: c.get(2).copied().unwrap_or(0.0),
-        })
+        Ok(vector3(c))
     };
     if f.total.len() % dim != 0 {
+        let len = f.total.len();
         return Err(shape(format!(
-            "model gave {} total-force numbers in {dim}D",
-            f.total.len()
+            "model gave {len} total-force numbers in {dim}D"
+        )));
+    }
+    if f.pair_force.len() != f.pairs.len() * dim {
+        return Err(shape(format!(
+            "model gave {} pair-force numbers for {} pairs in {dim}D",
+            f.pair_force.len(),
+            f.pairs.len()
         )));
     }
     let idx =
@@ -265,17 +337,18 @@ pub fn forces_msg(header: &Header, dim: usize, f: &Forces) -> Result<ParticleFor
     Ok(ParticleForces {
         header: header.clone(),
         total: f.total.chunks(dim).map(vec3).collect::<Result<_, _>>()?,
-        edge_a: f.edges.iter().map(|e| idx(e.a)).collect::<Result<_, _>>()?,
-        edge_b: f.edges.iter().map(|e| idx(e.b)).collect::<Result<_, _>>()?,
+        edge_a: f.pairs.iter().map(|e| idx(e.0)).collect::<Result<_, _>>()?,
+        edge_b: f.pairs.iter().map(|e| idx(e.1)).collect::<Result<_, _>>()?,
         edge_force: f
-            .edges
-            .iter()
-            .map(|e| vec3(&e.force))
+            .pair_force
+            .chunks(dim)
+            .map(vec3)
             .collect::<Result<_, _>>()?,
     })
 }
 
-/// Everything the node publishes for one incoming state.
+/// Everything the node publishes for one incoming state (into buffers of
+/// its own; the node keeps them from state to state with [`predict_into`]).
 pub fn predict(
     model: &dyn Dynamics,
     input: &ParticleState,
@@ -284,31 +357,9 @@ pub fn predict(
     substeps: u32,
 ) -> Result<Prediction, PredictError> {
     let (graph, start) = accept(model, input)?;
-    predict_parts(model, input, &graph, &start, dt, horizon, substeps)
-}
-
-/// [`predict`] for an input already parsed into `graph` and `start` (what
-/// the node has: [`super::input::Input`]); the model is asked whether it
-/// supports the graph.
-pub fn predict_parts(
-    model: &dyn Dynamics,
-    input: &ParticleState,
-    graph: &Graph,
-    start: &State,
-    dt: f64,
-    horizon: u32,
-    substeps: u32,
-) -> Result<Prediction, PredictError> {
-    model.supports(graph).map_err(PredictError::Unsupported)?;
-    let (mut states, f) = rollout_and_forces(model, graph, start, dt, horizon, substeps)?;
-    states.remove(0);
-    let trajectory = trajectory_msg(input, graph, dt, &states);
-    let forces = forces_msg(&input.header, graph.dim, &f)?;
-    Ok(Prediction {
-        trajectory,
-        forces,
-        states,
-    })
+    let mut p = Predicted::default();
+    predict_into(model, &graph, &start, (dt, horizon, substeps), &mut p)?;
+    messages(input, &graph, dt, &p)
 }
 
 #[cfg(test)]
@@ -436,7 +487,7 @@ mod tests {
         ) -> Result<(), DynamicsError> {
             self.0.acceleration(graph, state, out)
         }
-        fn forces(&self, _: &Graph, _: &State) -> Result<Forces, DynamicsError> {
+        fn forces(&self, _: &Graph, _: &State) -> Result<crate::dynamics::Forces, DynamicsError> {
             Err(DynamicsError::Model("this model has no forces".into()))
         }
     }

@@ -7,6 +7,9 @@ use crate::model::arch::ArchError;
 use crate::physics::{verlet, Drive, DriveError, PhysicsError};
 use crate::system::{Graph, State, SystemError};
 
+mod predicted;
+pub use predicted::{FlatForces, KeptStates, Predicted};
+
 /// Forces a model attributes to a state.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Forces {
@@ -183,22 +186,26 @@ pub trait Dynamics: Send + Sync {
     /// Forces at a state.
     fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, DynamicsError>;
 
-    /// [`Dynamics::rollout_every`] and the [`Dynamics::forces`] at `start`,
-    /// what the node publishes for each state. Models with a forward pass
-    /// take the forces from the rollout's first evaluation.
-    fn rollout_with_forces(
+    /// [`Dynamics::rollout_every`] and the [`Dynamics::forces`] at `start`
+    /// into `out` (the start first), what the node publishes for each state.
+    /// Models with a forward pass take the forces from the rollout's first
+    /// evaluation and, on a graph they saw last, allocate nothing.
+    fn predict_into(
         &self,
         graph: &Graph,
         start: &State,
         dt: f64,
         steps: usize,
         every: usize,
-    ) -> Result<(Vec<State>, Forces), DynamicsError> {
+        out: &mut Predicted,
+    ) -> Result<(), DynamicsError> {
         let states = self.rollout_every(graph, start, dt, steps, every)?;
         let forces = self
             .forces(graph, start)
             .map_err(|e| DynamicsError::Forces(Box::new(e)))?;
-        Ok((states, forces))
+        out.states.fill(graph.ndof(), &states);
+        out.forces.fill(&forces);
+        Ok(())
     }
 
     /// Velocity-Verlet rollout of `steps` steps of `dt`, keeping `start` and
@@ -501,7 +508,7 @@ pub enum DynamicsError {
     #[error("{0}")]
     Model(String),
     /// The forces failed although the rollout did not
-    /// ([`Dynamics::rollout_with_forces`]): callers report it as such.
+    /// ([`Dynamics::predict_into`]): callers report it as such.
     #[error("{0}")]
     Forces(Box<DynamicsError>),
 }

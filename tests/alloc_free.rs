@@ -1,0 +1,197 @@
+//! The node's prediction path allocates nothing: a counting global allocator
+//! counts the heap allocations of `predict::predict_served` (compatibility
+//! check, training-range check, rollout and forces into the node's kept
+//! buffers) state after state of one system, for a model file loaded as the
+//! node loads it. The prediction is checked against the model's own rollout
+//! and forces computed apart, and the compatibility check against a count
+//! of full checks (one per system). Run with
+//! `cargo test --release --test alloc_free`.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use mcgnode::data::msg::ParticleState;
+use mcgnode::dynamics::{Dynamics, Predicted};
+use mcgnode::model::Variant;
+use mcgnode::models::{load_model, ModelRef};
+use mcgnode::physics::{SystemConfig, SystemKind};
+use mcgnode::ros::input::{Accepted, Input, Inputs};
+use mcgnode::ros::predict::{self, PredictError};
+use mcgnode::ros::NodeParams;
+use mcgnode::system::Sample;
+
+/// The system allocator, counting the allocations each thread makes.
+struct Counting;
+
+thread_local! {
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+fn count() {
+    // `try_with`: a thread being torn down has no counter left.
+    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+}
+
+// SAFETY: every call is forwarded to `System` unchanged; counting touches
+// only a thread-local integer, which allocates nothing.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        System.alloc(layout)
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count();
+        System.alloc_zeroed(layout)
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        System.realloc(ptr, layout, new_size)
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        System.dealloc(ptr, layout)
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// Allocations made on this thread while `f` runs, and its result.
+fn allocations<T>(f: impl FnOnce() -> T) -> (u64, T) {
+    let before = ALLOCATIONS.with(Cell::get);
+    let out = f();
+    (ALLOCATIONS.with(Cell::get) - before, out)
+}
+
+/// Parsed inputs (one parse each, as the node's input stage does) of
+/// `states` states of one simulated trajectory of `kind`, and the trained
+/// model file of `variant` for it, loaded as `serve` loads it.
+fn system(
+    kind: SystemKind,
+    particles: usize,
+    variant: Variant,
+    states: usize,
+) -> (Vec<Input>, std::sync::Arc<dyn Dynamics>, NodeParams) {
+    let mut cfg = SystemConfig::new(kind, particles);
+    cfg.states = states;
+    let graph = cfg.graph();
+    let tr = cfg.simulate_one(&graph, cfg.start_for(&graph, 7, 0), 0);
+    let (_, mut model) = mcgnode::testing::random_model(variant, &graph, 3).expect("random model");
+    // As `train` records them: the edges it was trained on.
+    model.file.trained_on.edge_params = mcgnode::model::file::EdgeParams::of(&graph);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("model.json");
+    model.file.save(&path).expect("saving the model file");
+    let model = load_model(&ModelRef::from_path(&path).expect("a model file"))
+        .expect("loading the model as serve does");
+    // Short predictions of untrained weights, which stay finite.
+    let params = NodeParams {
+        horizon: 10,
+        dt: 1e-3,
+        ..Default::default()
+    };
+    let inputs = Inputs::default();
+    let parsed = tr
+        .samples
+        .iter()
+        .enumerate()
+        .map(|(k, s): (usize, &Sample)| {
+            let msg = ParticleState::from_sample(0, k as u32, "test", &tr.graph, s);
+            match inputs.accept(&params, msg).expect("a valid state") {
+                Accepted::Ready(input) => *input,
+                other @ Accepted::WarmingUp { .. } => {
+                    panic!("a full state is ready, got {other:?}")
+                }
+            }
+        })
+        .collect();
+    (parsed, model, params)
+}
+
+/// After one warm-up state, every further state of the system is predicted
+/// with zero allocations; the prediction equals the model's rollout and
+/// forces computed apart; the compatibility check ran in full once.
+fn no_allocation_after_warm_up(kind: SystemKind, particles: usize, variant: Variant) {
+    let (inputs, model, params) = system(kind, particles, variant, 12);
+    let passed = mcgnode::compat::Passed::default();
+    let mut kept = Predicted::default();
+    let served = (model.as_ref(), 1);
+    // Warm-up: buffers sized for this system (contact systems: for every
+    // state's neighbours). The first call builds them, and is counted.
+    let (first, _) =
+        allocations(|| predict::predict_served(served, &passed, &inputs[0], &params, &mut kept));
+    assert!(
+        first > 0,
+        "{kind:?} {variant}: the first call counted {first}"
+    );
+    for input in &inputs {
+        predict::predict_served(served, &passed, input, &params, &mut kept)
+            .unwrap_or_else(|e| panic!("{kind:?} {variant}: {e}"));
+    }
+    for input in &inputs {
+        let (n, r) =
+            allocations(|| predict::predict_served(served, &passed, input, &params, &mut kept));
+        r.unwrap_or_else(|e| panic!("{kind:?} {variant}: {e}"));
+        assert_eq!(
+            n, 0,
+            "{kind:?} {variant}: {n} allocations in one prediction"
+        );
+        // The same numbers as the model's own rollout and forces, apart.
+        let want = model
+            .rollout_every(&input.graph, &input.state, params.dt, 10, 1)
+            .unwrap();
+        assert_eq!(kept.states.to_states(), want, "{kind:?} {variant}");
+        let f = model.forces(&input.graph, &input.state).unwrap();
+        assert_eq!(kept.forces.to_forces(input.graph.dim), f);
+        assert!(!f.total.is_empty());
+    }
+    // One graph, one full check.
+    assert_eq!(passed.full_checks(), 1, "{kind:?} {variant}");
+}
+
+#[test]
+fn springs_predict_without_allocating() {
+    no_allocation_after_warm_up(SystemKind::Spring, 5, Variant::Mcgnode);
+    no_allocation_after_warm_up(SystemKind::Spring, 5, Variant::Gnode);
+    no_allocation_after_warm_up(SystemKind::Spring, 50, Variant::Mcgnode);
+}
+
+#[test]
+fn bars_with_shake_predict_without_allocating() {
+    no_allocation_after_warm_up(SystemKind::Pendulum, 5, Variant::Mcgnode);
+    no_allocation_after_warm_up(SystemKind::HeldChain, 5, Variant::Cdgnode);
+}
+
+#[test]
+fn contacts_predict_without_allocating() {
+    no_allocation_after_warm_up(SystemKind::SoftSpheres, 100, Variant::Mcgnode);
+}
+
+/// The counter counts: the allocating form of the same prediction is seen,
+/// so a zero above is not a counter that never moves.
+#[test]
+fn the_counter_sees_allocations() {
+    let (inputs, model, params) = system(SystemKind::Spring, 5, Variant::Mcgnode, 3);
+    let (n, r) = allocations(|| {
+        predict::predict(
+            model.as_ref(),
+            &inputs[1].message,
+            params.dt,
+            params.horizon,
+            1,
+        )
+    });
+    r.unwrap();
+    assert!(n > 0, "the allocating path counted {n}");
+    // And a refusal is still an error, not a panic, on the kept buffers.
+    let mut bad = params.clone();
+    bad.dt = f64::NAN;
+    let e = predict::predict_served(
+        (model.as_ref(), 1),
+        &Default::default(),
+        &inputs[1],
+        &bad,
+        &mut Predicted::default(),
+    )
+    .unwrap_err();
+    assert!(matches!(e, PredictError::BadStep(_)), "{e}");
+}
