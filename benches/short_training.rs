@@ -9,7 +9,7 @@
 use mcgnode::baselines::Kind;
 use mcgnode::data::bag::read_trajectories;
 use mcgnode::evaluate::{evaluate, EvalOptions};
-use mcgnode::model::Variant;
+use mcgnode::gnode::Variant;
 use mcgnode::models::{load_any_model, train_any_from_bags, ModelKind, ModelRef};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::simulate::{simulate_with, DataIntegrator};

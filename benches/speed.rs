@@ -4,8 +4,8 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use mcgnode::bench::{rollout_seconds, training_set};
 use mcgnode::engine::{all_cores, Engine};
-use mcgnode::model::Variant;
-use mcgnode::model::{Hyper, Net};
+use mcgnode::gnode::Variant;
+use mcgnode::gnode::{Hyper, Net};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::testing::random_model;
 use rand::SeedableRng;

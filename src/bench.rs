@@ -3,7 +3,7 @@
 //! measured on this same 2-core machine.
 
 use crate::error::Result;
-use crate::model::{Hyper, Variant};
+use crate::gnode::{Hyper, Variant};
 use crate::physics::{SystemConfig, SystemKind};
 use crate::system::{Graph, State};
 use crate::testing::random_model;

@@ -27,7 +27,7 @@ pub struct TrainedFor {
     pub closed: Option<bool>,
     /// The edge kinds (rest length, stiffness) it was trained on, when it
     /// cannot read them as inputs (no edge physics): other edges are refused.
-    pub edge_params: Option<Vec<crate::model::file::EdgeParams>>,
+    pub edge_params: Option<Vec<crate::gnode::file::EdgeParams>>,
     /// The file records neither its training edges nor a system they follow
     /// from, and the model cannot read edges: graphs with particle edges are
     /// refused, naming the fix.
@@ -126,13 +126,13 @@ impl TrainedFor {
         let edge_physics = v["hyper"]["edge_physics"].as_bool().unwrap_or(false);
         // The edges it was trained on: as recorded, else (files written before
         // the record) those of the simulator's system it was trained on.
-        let edge_params: Option<Vec<crate::model::file::EdgeParams>> = t
+        let edge_params: Option<Vec<crate::gnode::file::EdgeParams>> = t
             .get("edge_params")
             .and_then(|e| serde_json::from_value(e.clone()).ok())
             .filter(|e: &Vec<_>| !e.is_empty())
             .or_else(|| {
                 cfg.as_ref()
-                    .map(|c| crate::model::file::EdgeParams::of(&c.graph()))
+                    .map(|c| crate::gnode::file::EdgeParams::of(&c.graph()))
                     .filter(|e| !e.is_empty())
             })
             .filter(|_| !edge_physics);
@@ -193,13 +193,13 @@ impl TrainedFor {
             }
         }
         if let Some(known) = &self.edge_params {
-            let words = |p: &crate::model::file::EdgeParams| {
+            let words = |p: &crate::gnode::file::EdgeParams| {
                 format!(
                     "{:?} (rest length {}, stiffness {})",
                     p.kind, p.rest_length, p.stiffness
                 )
             };
-            if let Some(p) = crate::model::file::EdgeParams::of(graph)
+            if let Some(p) = crate::gnode::file::EdgeParams::of(graph)
                 .iter()
                 .find(|p| !known.iter().any(|k| k.same(p)))
             {
@@ -389,13 +389,13 @@ pub fn check_bag(
 pub const OUT_OF_RANGE_SIGMAS: f64 = 10.0;
 
 /// The range of inputs a model saw in training, from the scales its file
-/// stores ([`crate::model::Norm`]: RMS position about the mean, velocity,
+/// stores ([`crate::gnode::Norm`]: RMS position about the mean, velocity,
 /// edge vector, stiffness): an input many scales beyond them is outside
 /// anything it learned from, and its prediction is an extrapolation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct InputRange {
     /// The training scales.
-    pub norm: crate::model::Norm,
+    pub norm: crate::gnode::Norm,
     /// The model reads absolute positions (GNODE-style node inputs, or a
     /// body-force branch); otherwise only differences, and positions are
     /// not checked.
@@ -427,14 +427,14 @@ impl InputRange {
     /// The range a model file states (`None`: no scales stored, as in files
     /// trained with --no-normalize or before scales existed, and baselines).
     pub fn from_model_json(v: &serde_json::Value) -> Option<InputRange> {
-        let hyper: crate::model::Hyper = serde_json::from_value(v["hyper"].clone()).ok()?;
+        let hyper: crate::gnode::Hyper = serde_json::from_value(v["hyper"].clone()).ok()?;
         let norm = hyper.norm.clone()?;
-        let arch = crate::model::Arch::new(&hyper);
-        let reads_positions = arch.node_input == crate::model::arch::NodeInput::Full
+        let arch = crate::gnode::Arch::new(&hyper);
+        let reads_positions = arch.node_input == crate::gnode::arch::NodeInput::Full
             || arch
                 .mlps
                 .iter()
-                .any(|(b, _)| *b == crate::model::arch::Block::GlobalEmbed);
+                .any(|(b, _)| *b == crate::gnode::arch::Block::GlobalEmbed);
         Some(InputRange {
             norm,
             reads_positions,

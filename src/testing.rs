@@ -2,8 +2,8 @@
 //! (hidden from the docs): models with random weights.
 
 use crate::error::Result;
+use crate::gnode::{Hyper, Net, Variant};
 use crate::kernel::TrainedModel;
-use crate::model::{Hyper, Net, Variant};
 use crate::system::Graph;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -22,11 +22,11 @@ pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, 
     hyper.body_force = !graph.anchors.is_empty();
     hyper.interaction_radius = graph.interaction_radius;
     let net = Net::new(hyper.clone(), &mut ChaCha8Rng::seed_from_u64(seed))?;
-    let file = crate::model::ModelFile {
-        format: crate::model::file::FORMAT.into(),
+    let file = crate::gnode::ModelFile {
+        format: crate::gnode::file::FORMAT.into(),
         crate_version: env!("CARGO_PKG_VERSION").into(),
         hyper,
-        trained_on: crate::model::file::TrainedOn {
+        trained_on: crate::gnode::file::TrainedOn {
             system: String::new(),
             particles: graph.n(),
             dim: graph.dim,
@@ -39,7 +39,7 @@ pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, 
             system_config: None,
             edge_params: vec![],
         },
-        training: crate::model::file::TrainingReport {
+        training: crate::gnode::file::TrainingReport {
             seed,
             epochs_requested: 0,
             epochs_run: 0,
@@ -69,11 +69,11 @@ pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, 
 
 /// The bar constraint of a one-state candle batch built from the tensors
 /// `q`, `v` (`n × d`) by candle ops — A `(1, k, n·d)`, Aᵀ, Ȧq̇ `(1, k, 1)` —
-/// where [`crate::model::batch::Batch::new`] computes it from numbers, so
+/// where [`crate::gnode::batch::Batch::new`] computes it from numbers, so
 /// that candle's autodiff reaches positions and velocities through A(q) and
 /// Ȧq̇ (the reference for the executor's reverse pass down to a state).
 pub fn candle_constraint(
-    plan: &crate::model::plan::GraphPlan,
+    plan: &crate::gnode::plan::GraphPlan,
     q: &candle_core::Tensor,
     v: &candle_core::Tensor,
 ) -> Result<(
@@ -81,7 +81,7 @@ pub fn candle_constraint(
     candle_core::Tensor,
     candle_core::Tensor,
 )> {
-    use crate::model::plan::BarEnd;
+    use crate::gnode::plan::BarEnd;
     use candle_core::{Device, Tensor};
     let (n, d, k) = (plan.n, plan.dim, plan.bars.len());
     let (mut inc, mut fixed) = (vec![0.0; k * n], vec![0.0; k * d]);

@@ -12,7 +12,7 @@ use std::cell::Cell;
 
 use mcgnode::data::msg::ParticleState;
 use mcgnode::dynamics::{Dynamics, Predicted};
-use mcgnode::model::Variant;
+use mcgnode::gnode::Variant;
 use mcgnode::models::{load_model, ModelRef};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::ros::input::{Accepted, Input, Inputs};
@@ -77,7 +77,7 @@ fn system(
     let tr = cfg.simulate_one(&graph, cfg.start_for(&graph, 7, 0), 0);
     let (_, mut model) = mcgnode::testing::random_model(variant, &graph, 3).expect("random model");
     // As `train` records them: the edges it was trained on.
-    model.file.trained_on.edge_params = mcgnode::model::file::EdgeParams::of(&graph);
+    model.file.trained_on.edge_params = mcgnode::gnode::file::EdgeParams::of(&graph);
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("model.json");
     model.file.save(&path).expect("saving the model file");

@@ -5,8 +5,8 @@
 use candle_core::{Device, Tensor, Var};
 use mcgnode::baselines::autodiff::{ensure_second_order, probe_second_derivative, DO_NOT_DETACH};
 use mcgnode::baselines::mechanics::{euler_lagrange, hamilton};
-use mcgnode::model::batch::Batch;
-use mcgnode::model::plan::GraphPlan;
+use mcgnode::gnode::batch::Batch;
+use mcgnode::gnode::plan::GraphPlan;
 use mcgnode::physics::{acceleration, SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State};
 use std::process::Command;
@@ -641,7 +641,7 @@ fn training_gradients_equal_grad_of_grad() {
 #[test]
 fn graph_network_input_gradients_equal_autodiff() {
     use mcgnode::baselines::graphnet::{GraphNet, GraphNetSpec};
-    use mcgnode::model::params::ParamStore;
+    use mcgnode::gnode::params::ParamStore;
     for (residual, edge_distance, rounds) in [(true, true, 2), (false, false, 1), (false, true, 2)]
     {
         let (_, b) = target_batch(SystemKind::Spring, 5, 2, 3);

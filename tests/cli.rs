@@ -948,7 +948,7 @@ fn train_recipes_explained_fraction_and_the_still_reference() {
     // ... and is what the library's defaults (reproduce's, and `train`'s
     // before the recipe) train: the same weights.
     let lib = mcgnode::models::train_from_bags(
-        mcgnode::models::ModelKind::Family(mcgnode::model::Variant::Mcgnode),
+        mcgnode::models::ModelKind::Family(mcgnode::gnode::Variant::Mcgnode),
         &[d.join("train.mcap")],
         &mcgnode::train::ModelOptions::default(),
         &mcgnode::train::TrainConfig {

@@ -254,7 +254,7 @@ fn legacy_model_files_refuse_edges_they_cannot_see() {
 #[test]
 fn inputs_far_outside_the_training_scales_are_out_of_range() {
     use mcgnode::compat::{InputRange, OUT_OF_RANGE_SIGMAS};
-    let norm = mcgnode::model::Norm {
+    let norm = mcgnode::gnode::Norm {
         q_mean: vec![0.0, 0.0],
         q_scale: 1.0,
         v_scale: 0.5,

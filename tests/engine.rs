@@ -9,10 +9,10 @@
 #![allow(clippy::too_many_lines)]
 
 use mcgnode::engine::Engine;
+use mcgnode::gnode::batch::Batch;
+use mcgnode::gnode::plan::GraphPlan;
+use mcgnode::gnode::{ArchPreset, Hyper, Net, Norm, Variant};
 use mcgnode::kernel::TrainedModel;
-use mcgnode::model::batch::Batch;
-use mcgnode::model::plan::GraphPlan;
-use mcgnode::model::{ArchPreset, Hyper, Net, Norm, Variant};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Edge, EdgeKind, Endpoint, Graph, State};
 use mcgnode::train::{train, EngineKind, TrainConfig};
@@ -219,7 +219,7 @@ fn trained(case: &Case, net: &Net) -> TrainedModel {
     let file = mcgnode::testing::random_model(case.hyper.variant, &case.graph, 0)
         .map(|(_, m)| m.file)
         .unwrap();
-    let file = mcgnode::model::ModelFile {
+    let file = mcgnode::gnode::ModelFile {
         hyper: case.hyper.clone(),
         weights: net.store.weights().unwrap(),
         ..file

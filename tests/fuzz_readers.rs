@@ -30,7 +30,7 @@ use mcgnode::baselines::{BaselineFile, BaselineHyper, BaselineNet, Kind};
 use mcgnode::data::msg::{encode_cdr, particle_state_schema, Layout, ParticleStateV1};
 use mcgnode::data::msg::{PARTICLE_STATE_MSG_V1, PARTICLE_STATE_TYPE};
 use mcgnode::data::{read_trajectories, ParticleState, METADATA_NAME, PARTICLE_STATE_TOPIC};
-use mcgnode::model::{ArchPreset, ModelFile, Net, Norm, Variant};
+use mcgnode::gnode::{ArchPreset, ModelFile, Net, Norm, Variant};
 use mcgnode::models::{load_any_model, ModelRef};
 use mcgnode::physics::{Field, SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State, Trajectory};

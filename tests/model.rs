@@ -4,11 +4,11 @@
 
 use candle_core::{Device, Tensor, Var};
 use mcgnode::dynamics::Dynamics;
+use mcgnode::gnode::batch::Batch;
+use mcgnode::gnode::plan::GraphPlan;
+use mcgnode::gnode::solve::solve;
+use mcgnode::gnode::{Hyper, ModelFile, Net, Variant};
 use mcgnode::kernel::TrainedModel;
-use mcgnode::model::batch::Batch;
-use mcgnode::model::plan::GraphPlan;
-use mcgnode::model::solve::solve;
-use mcgnode::model::{Hyper, ModelFile, Net, Variant};
 use mcgnode::models::ModelRef;
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State};
@@ -301,8 +301,8 @@ fn model_file_round_trip_and_bad_files() {
     };
     assert!(
         matches!(
-            e.find::<mcgnode::model::file::ModelFileError>(),
-            Some(mcgnode::model::file::ModelFileError::Parse { .. })
+            e.find::<mcgnode::gnode::file::ModelFileError>(),
+            Some(mcgnode::gnode::file::ModelFileError::Parse { .. })
         ),
         "{e:?}"
     );

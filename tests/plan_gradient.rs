@@ -16,7 +16,7 @@ mod common;
 
 use common::cli::{ok, run_in};
 use mcgnode::dynamics::Dynamics;
-use mcgnode::model::Variant;
+use mcgnode::gnode::Variant;
 use mcgnode::models::truth::truth;
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::plan::{refine, Controls, Cost, CostKind, Problem, Timing};
@@ -282,12 +282,12 @@ fn the_plan_command_refines() {
 /// candle ops: the drive from the velocity knots, velocity Verlet, the
 /// driven particles placed, q̈ from the candle model (with A(q), Ȧq̇ from
 /// the tensors), the cost. No projection onto bars: candle has no SHAKE.
-fn candle_gradient(net: &mcgnode::model::Net, p: &Problem, u: &Controls) -> (f64, Vec<f64>) {
+fn candle_gradient(net: &mcgnode::gnode::Net, p: &Problem, u: &Controls) -> (f64, Vec<f64>) {
     let dev = Device::Cpu;
     let g = p.graph;
     let (n, d) = (g.n(), g.dim);
     let nd = n * d;
-    let plan = mcgnode::model::plan::GraphPlan::new(g);
+    let plan = mcgnode::gnode::plan::GraphPlan::new(g);
     let (dt, sub) = (p.timing.dt, p.timing.substeps);
     let driven = p.driven();
     let w = driven.len() * d;
@@ -321,7 +321,7 @@ fn candle_gradient(net: &mcgnode::model::Net, p: &Problem, u: &Controls) -> (f64
     };
     let accel = |q: &Tensor, v: &Tensor| -> Tensor {
         let mut b =
-            mcgnode::model::batch::Batch::new(&plan, &[p.start], None, net.hyper.types).unwrap();
+            mcgnode::gnode::batch::Batch::new(&plan, &[p.start], None, net.hyper.types).unwrap();
         b.q = q.reshape((n, d)).unwrap();
         b.v = v.reshape((n, d)).unwrap();
         if !plan.bars.is_empty() {

@@ -5,8 +5,8 @@
 #![allow(clippy::too_many_lines)]
 
 use mcgnode::dynamics::Dynamics;
+use mcgnode::gnode::{Hyper, ModelFile, Variant};
 use mcgnode::kernel::TrainedModel;
-use mcgnode::model::{Hyper, ModelFile, Variant};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::State;
 use mcgnode::train::{train, TrainConfig};
@@ -477,7 +477,7 @@ fn normalisation_is_recorded_and_applied() {
 #[test]
 fn edge_physics_reads_stiffness_and_plain_models_refuse_other_edges() {
     use mcgnode::compat::TrainedFor;
-    use mcgnode::model::file::EdgeParams;
+    use mcgnode::gnode::file::EdgeParams;
     let (g, s, a) = data(SystemKind::Spring, 5, 3, 1);
     let mut stiff = g.clone();
     stiff.edges.iter_mut().for_each(|e| e.stiffness = 5.0);

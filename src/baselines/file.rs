@@ -1,10 +1,10 @@
-//! A trained baseline on disk: JSON like [`crate::model::ModelFile`], with its
+//! A trained baseline on disk: JSON like [`crate::gnode::ModelFile`], with its
 //! own format tag so neither loader mistakes one for the other.
 
 use super::net::BaselineHyper;
 use crate::error::{bail, Context, Result};
-use crate::model::file::{TrainedOn, TrainingReport};
-use crate::model::params::Weights;
+use crate::gnode::file::{TrainedOn, TrainingReport};
+use crate::gnode::params::Weights;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -31,7 +31,7 @@ pub struct BaselineFile {
 impl BaselineFile {
     /// Writes the file atomically (temporary file in the same folder, then rename).
     pub fn save(&self, path: &Path) -> Result<()> {
-        crate::model::file::write_json_atomic(path, self)
+        crate::gnode::file::write_json_atomic(path, self)
             .with_context(|| format!("writing baseline file {}", path.display()))
     }
 

@@ -5,7 +5,7 @@
 use super::net::{BaselineNet, Kind};
 use super::{gns, hgn, lgn};
 use crate::error::Result;
-use crate::model::batch::Batch;
+use crate::gnode::batch::Batch;
 use candle_core::Tensor;
 
 impl BaselineNet {

@@ -11,7 +11,7 @@
 
 use super::net::BaselineNet;
 use crate::error::Result;
-use crate::model::batch::Batch;
+use crate::gnode::batch::Batch;
 use candle_core::Tensor;
 
 /// Accelerations `(B·n, d)`.

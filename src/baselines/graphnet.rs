@@ -8,9 +8,9 @@
 //! update reads its own edge state, and node updates aggregate updated edges.
 
 use crate::error::Result;
-use crate::model::batch::Batch;
-use crate::model::mlp::{squareplus, squareplus_grad, Mlp};
-use crate::model::params::ParamStore;
+use crate::gnode::batch::Batch;
+use crate::gnode::mlp::{squareplus, squareplus_grad, Mlp};
+use crate::gnode::params::ParamStore;
 use candle_core::{DType, Device, Tensor};
 use rand::Rng;
 

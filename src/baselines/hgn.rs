@@ -9,7 +9,7 @@
 use super::mechanics::hamilton;
 use super::net::BaselineNet;
 use crate::error::{bail, Result};
-use crate::model::batch::Batch;
+use crate::gnode::batch::Batch;
 use crate::system::State;
 use candle_core::{Device, Tensor, Var};
 

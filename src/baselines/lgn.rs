@@ -11,7 +11,7 @@
 use super::mechanics::euler_lagrange;
 use super::net::BaselineNet;
 use crate::error::Result;
-use crate::model::batch::Batch;
+use crate::gnode::batch::Batch;
 use candle_core::{Tensor, Var};
 
 /// The learned Lagrangian summed over the batch.

@@ -5,7 +5,7 @@
 
 use super::autodiff::{grads, hessian};
 use crate::error::Result;
-use crate::model::solve::solve;
+use crate::gnode::solve::solve;
 use candle_core::{Tensor, Var};
 
 /// Constraint rows of a batch: A `(B, k, D)`, Aᵀ `(B, D, k)`, Ȧq̇ `(B, k, 1)`.

@@ -4,9 +4,9 @@
 
 use super::graphnet::{GraphNet, GraphNetSpec};
 use crate::error::{bail, Result};
-use crate::model::batch::Batch;
-use crate::model::mlp::Mlp;
-use crate::model::params::ParamStore;
+use crate::gnode::batch::Batch;
+use crate::gnode::mlp::Mlp;
+use crate::gnode::params::ParamStore;
 use candle_core::{DType, Device, Tensor};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -251,7 +251,7 @@ impl BaselineNet {
         let gq3 = gq.reshape((b.b, dd, 1))?;
         let s = a.matmul(&at.broadcast_mul(&minv)?)?;
         let rhs = (adq - a.matmul(&(&gq3 * &minv)?)?)?;
-        let lambda = crate::model::solve::solve(&s, &rhs)?;
+        let lambda = crate::gnode::solve::solve(&s, &rhs)?;
         Ok((gq3.neg()? - at.matmul(&lambda)?)?.reshape(b.q.dims())?)
     }
 

@@ -8,8 +8,8 @@ use super::file::{BaselineFile, FORMAT};
 use super::net::{BaselineHyper, BaselineNet};
 use super::trained::TrainedBaseline;
 use crate::error::{bail, Result};
-use crate::model::batch::Batch;
-use crate::model::plan::GraphPlan;
+use crate::gnode::batch::Batch;
+use crate::gnode::plan::GraphPlan;
 use crate::system::{Graph, State};
 use crate::train::{
     check_data, fit, flat_params, set_flat_params, CandleObjective, EpochReport, TrainConfig,

@@ -5,9 +5,9 @@ use super::file::BaselineFile;
 use super::net::{BaselineHyper, BaselineNet, Kind};
 use crate::dynamics::{Dynamics, DynamicsError, Forces};
 use crate::error::{bail, Result};
-use crate::model::arch::ArchError;
-use crate::model::batch::Batch;
-use crate::model::plan::GraphPlan;
+use crate::gnode::arch::ArchError;
+use crate::gnode::batch::Batch;
+use crate::gnode::plan::GraphPlan;
 use crate::system::{Graph, State};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -193,7 +193,7 @@ fn hold_kinematic(graph: &Graph, acc: &mut [f64]) {
 mod tests {
     use super::TrainedBaseline;
     use crate::baselines::{BaselineFile, BaselineHyper, BaselineNet, Kind};
-    use crate::model::Variant;
+    use crate::gnode::Variant;
     use crate::physics::{SystemConfig, SystemKind};
     use rand::SeedableRng;
 

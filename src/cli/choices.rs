@@ -2,7 +2,7 @@
 //! Each mirror keeps the variant docs that `--help` lists as the possible
 //! values, and turns into the library's enum with `From`.
 
-use crate::model::{ArchPreset, EdgeInput, MessageFn};
+use crate::gnode::{ArchPreset, EdgeInput, MessageFn};
 use crate::plan::CostKind;
 use crate::simulate::DataIntegrator;
 use crate::train::{BodyForce, EngineKind, Recipe};

@@ -4,7 +4,7 @@
 //! on held-out 5-, 20- and 50-spring bags.
 
 use crate::evaluate::table;
-use crate::model::Variant;
+use crate::gnode::Variant;
 use crate::models::ModelKind;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::reproduce::lab::{Lab, TrainSpec, Trained};

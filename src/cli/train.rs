@@ -1,7 +1,7 @@
 //! `mcgnode train`.
 
 use super::choices::{ArchArg, BodyForceArg, EdgeInputArg, EngineArg, MessageFnArg, RecipeArg};
-use crate::model::file::TrainingReport;
+use crate::gnode::file::TrainingReport;
 use crate::models::{train_any_from_bags, ModelKind};
 use crate::train::{Auto, Checkpointing, EpochReport, ModelOptions, Recipe, TrainConfig};
 use anyhow::Result;
@@ -249,7 +249,7 @@ pub fn train(
         init: a
             .init
             .as_deref()
-            .map(crate::model::ModelFile::load)
+            .map(crate::gnode::ModelFile::load)
             .transpose()?
             .map(Box::new),
         ..TrainConfig::default()

@@ -8,7 +8,7 @@ use super::bag::{read_bags, Bag, ReadOptions};
 use super::dataset::{AccSource, Dataset};
 use super::field::{bag_field, bag_system};
 use crate::error::{bail, Result};
-use crate::model::file::{EdgeParams, TrainedOn};
+use crate::gnode::file::{EdgeParams, TrainedOn};
 use crate::physics::SystemConfig;
 use crate::system::{fingerprint, Trajectory};
 

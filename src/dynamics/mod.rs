@@ -3,7 +3,7 @@
 //! the ROS node).
 
 use crate::compat::Mismatch;
-use crate::model::arch::ArchError;
+use crate::gnode::arch::ArchError;
 use crate::physics::{verlet, Drive, DriveError, PhysicsError};
 use crate::system::{Graph, State, SystemError};
 

@@ -5,10 +5,10 @@
 
 use super::dense::{squareplus_in_place, times_squareplus_grad, Mlp, Tape};
 use super::layout::Layout;
-use crate::model::arch::{Arch, Block, Decoder, NodeInput};
-use crate::model::plan::{BarEnd, GraphPlan};
-use crate::model::solve::lu_solve_in_place;
-use crate::model::variant::EdgeInput;
+use crate::gnode::arch::{Arch, Block, Decoder, NodeInput};
+use crate::gnode::plan::{BarEnd, GraphPlan};
+use crate::gnode::solve::lu_solve_in_place;
+use crate::gnode::variant::EdgeInput;
 use crate::physics::neighbors::NeighborSearch;
 use crate::system::State;
 
@@ -310,7 +310,7 @@ impl Chunk {
     /// (fixed, then its contacts), then all reversed, so edge `e` and
     /// `e + half` are the two directions of one bar, spring or contact. The
     /// constant edge inputs after q_i − q_j
-    /// ([`crate::model::arch::EdgeConst`]) are written with them. Without contacts the layout
+    /// ([`crate::gnode::arch::EdgeConst`]) are written with them. Without contacts the layout
     /// depends on `bs` alone and is kept.
     fn lay_out(&mut self, m: &Model, bs: usize) {
         let contacts = m.plan.has_contacts();
@@ -329,7 +329,7 @@ impl Chunk {
         } else {
             (&[][..], &[][..])
         };
-        let mut x = [0.0; crate::model::arch::EdgeConst::MAX_WIDTH];
+        let mut x = [0.0; crate::gnode::arch::EdgeConst::MAX_WIDTH];
         m.plan.directed_edges(bs, pairs, starts, |k, e| {
             recv[k] = e.recv;
             send[k] = e.send;

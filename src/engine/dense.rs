@@ -5,7 +5,7 @@
 // (`target_feature`) copies to be compiled for AVX2 at all.
 #![allow(clippy::inline_always)]
 
-use crate::model::mlp::squareplus_f64;
+use crate::gnode::mlp::squareplus_f64;
 
 /// squareplus'(z) from the activation y = squareplus(z): since
 /// z = y − 1/y and √(z² + 4) = y + 1/y, the derivative ½(1 + z/√(z²+4)) is

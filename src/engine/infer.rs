@@ -5,8 +5,8 @@
 //! equations exist once outside candle.
 
 use super::chunk::{Chunk, Model};
-use crate::model::arch::{Arch, Decoder};
-use crate::model::plan::GraphPlan;
+use crate::gnode::arch::{Arch, Decoder};
+use crate::gnode::plan::GraphPlan;
 
 /// One graph's forward pass and its buffers.
 #[derive(Clone, Debug)]

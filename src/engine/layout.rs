@@ -2,8 +2,8 @@
 //! offset, in definition order (the order candle's store uses), so that one
 //! Adam update serves both engines and the same seed gives the same start.
 
-use crate::model::arch::{Arch, Block, LOG_MASS};
-use crate::model::params::{Array, Weights};
+use crate::gnode::arch::{Arch, Block, LOG_MASS};
+use crate::gnode::params::{Array, Weights};
 use thiserror::Error;
 
 use super::dense::{Linear, Mlp};

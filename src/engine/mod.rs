@@ -21,9 +21,9 @@ pub use infer::Forward;
 pub use layout::{Layout, LayoutError};
 pub use reverse::Reverse;
 
-use crate::model::arch::Arch;
-use crate::model::plan::GraphPlan;
-use crate::model::variant::Hyper;
+use crate::gnode::arch::Arch;
+use crate::gnode::plan::GraphPlan;
+use crate::gnode::variant::Hyper;
 use crate::system::{Graph, State};
 use chunk::{Chunk, Model};
 use rayon::prelude::*;
@@ -39,7 +39,7 @@ const CHUNK_ROWS: usize = 1024;
 pub enum EngineError {
     /// The graph does not suit the model.
     #[error(transparent)]
-    Graph(#[from] crate::model::arch::ArchError),
+    Graph(#[from] crate::gnode::arch::ArchError),
     /// A thread pool could not be started.
     #[error("cannot start {threads} training threads: {reason}")]
     Threads {

@@ -4,8 +4,8 @@
 //! through a rollout ([`crate::plan::gradient`]).
 
 use super::chunk::{Chunk, Model};
-use crate::model::arch::Arch;
-use crate::model::plan::GraphPlan;
+use crate::gnode::arch::Arch;
+use crate::gnode::plan::GraphPlan;
 
 /// One graph's reverse pass and its buffers (a training chunk of one state).
 #[derive(Clone, Debug)]

@@ -5,8 +5,8 @@
 use super::{Kernel, Workspace};
 use crate::dynamics::StateGradient;
 use crate::engine::Reverse;
-use crate::model::arch::ArchError;
-use crate::model::plan::GraphPlan;
+use crate::gnode::arch::ArchError;
+use crate::gnode::plan::GraphPlan;
 use crate::physics::Projector;
 use crate::system::Graph;
 

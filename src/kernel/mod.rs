@@ -9,10 +9,10 @@ pub mod trained;
 
 use crate::engine::{Forward, Layout};
 use crate::error::{bail, Result};
-use crate::model::arch::{Arch, ArchError, LOG_MASS};
-use crate::model::params::Weights;
-use crate::model::plan::GraphPlan;
-use crate::model::variant::Hyper;
+use crate::gnode::arch::{Arch, ArchError, LOG_MASS};
+use crate::gnode::params::Weights;
+use crate::gnode::plan::GraphPlan;
+use crate::gnode::variant::Hyper;
 use crate::physics::Projector;
 use crate::system::Graph;
 pub use gradient::KernelGradient;
@@ -120,7 +120,7 @@ impl Kernel {
         check_sizes(hyper, w)?;
         // Names, shapes and finiteness are checked against the architecture that
         // `hyper` defines, so the loops below can trust every size.
-        let reference = crate::model::Net::new(
+        let reference = crate::gnode::Net::new(
             hyper.clone(),
             &mut rand_chacha::ChaCha8Rng::seed_from_u64(0),
         )?;
@@ -212,7 +212,7 @@ impl Kernel {
 mod tests {
     use super::TrainedModel;
     use crate::dynamics::Dynamics;
-    use crate::model::{ModelFile, Norm, Variant};
+    use crate::gnode::{ModelFile, Norm, Variant};
     use crate::physics::{SystemConfig, SystemKind};
 
     /// Builds a kernel from a random model's file after `edit`, as loading

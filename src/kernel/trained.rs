@@ -3,7 +3,7 @@
 use super::{Kernel, Workspace};
 use crate::dynamics::{Dynamics, DynamicsError, FlatForces, Forces, Predicted, Rollout};
 use crate::error::Result;
-use crate::model::file::ModelFile;
+use crate::gnode::file::ModelFile;
 use crate::physics::{verlet, Drive};
 use crate::system::{Graph, State};
 use std::convert::Infallible;

@@ -1,7 +1,7 @@
 //! The kinds of model: the GNODE family and the baselines, one name space.
 
 use crate::baselines::Kind;
-use crate::model::Variant;
+use crate::gnode::Variant;
 
 /// A model of the GNODE family or a baseline, named as on the command line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

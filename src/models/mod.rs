@@ -1,5 +1,5 @@
 //! Models of every kind, one home: the kinds ([`ModelKind`]: the GNODE family
-//! of [`crate::model`] and the [`crate::baselines`]), loading what a
+//! of [`crate::gnode`] and the [`crate::baselines`]), loading what a
 //! [`ModelRef`] names (a model file of either kind, `still`, or the ground
 //! truth `truth:<system>`, [`truth`]), and training
 //! any kind from bags into a model file.

@@ -4,7 +4,7 @@
 use super::ModelKind;
 use crate::baselines::BaselineFile;
 use crate::error::{Context, Result};
-use crate::model::file::{ModelFile, TrainingReport};
+use crate::gnode::file::{ModelFile, TrainingReport};
 use crate::train::{EpochReport, ModelOptions, TrainConfig};
 use std::path::{Path, PathBuf};
 

@@ -10,7 +10,7 @@ use super::report::Experiment::{
 use super::report::{num, Experiment, Row};
 use crate::baselines::Kind;
 use crate::error::Result;
-use crate::model::Variant;
+use crate::gnode::Variant;
 use crate::models::ModelKind;
 use std::cell::RefCell;
 

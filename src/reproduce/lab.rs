@@ -7,7 +7,7 @@
 use crate::data::bag::read_trajectories;
 use crate::error::{Context, Result};
 use crate::evaluate::{evaluate, EvalOptions, Evaluation};
-use crate::model::file::TrainingReport;
+use crate::gnode::file::TrainingReport;
 use crate::models::{load_any_model, train_any_from_bags, ModelKind, ModelRef};
 use crate::physics::SystemConfig;
 use crate::simulate::{simulate_with, DataIntegrator};

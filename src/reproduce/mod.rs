@@ -216,7 +216,7 @@ fn write_report(
         "evaluations": rows,
         "training": training,
     });
-    crate::model::file::write_json_atomic(&opts.out.join("results.json"), &json)?;
+    crate::gnode::file::write_json_atomic(&opts.out.join("results.json"), &json)?;
     Ok(report)
 }
 

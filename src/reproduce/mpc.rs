@@ -9,7 +9,7 @@
 use super::lab::{Lab, TrainSpec, Trained};
 use crate::dynamics::Dynamics;
 use crate::error::{Context, Result};
-use crate::model::Variant;
+use crate::gnode::Variant;
 use crate::models::{load_any_model, ModelKind, ModelRef};
 use crate::physics::{SystemConfig, SystemKind};
 use crate::plan::{mpc, Cost, CostKind, EpisodeReport, Sampler, Timing};

@@ -9,8 +9,8 @@ use std::time::Duration;
 use ros2_client::log::LogLevel;
 
 use crate::dynamics::Dynamics;
+use crate::gnode::ModelFile;
 use crate::kernel::TrainedModel;
-use crate::model::ModelFile;
 use crate::models::{train_from_bags, ModelKind};
 use crate::train::{Auto, TrainConfig};
 

@@ -14,8 +14,8 @@ use ros2_client::log::LogLevel;
 
 use crate::data::msg::{Header, Time};
 use crate::dynamics::Dynamics;
+use crate::gnode::{ModelFile, Variant};
 use crate::kernel::TrainedModel;
-use crate::model::{ModelFile, Variant};
 use crate::models::ModelRef;
 
 use super::topics::MODEL_SWAP_TOPIC;

@@ -415,7 +415,7 @@ mod tests {
         // A model file of the GNODE family refines; a cancel after the first
         // round keeps that round's best.
         let (_, learned) =
-            crate::testing::random_model(crate::model::Variant::Mcgnode, &g, 1).unwrap();
+            crate::testing::random_model(crate::gnode::Variant::Mcgnode, &g, 1).unwrap();
         let req = PlanRequest {
             refine: 3,
             ..good.clone()

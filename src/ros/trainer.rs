@@ -16,7 +16,7 @@ use std::sync::Arc;
 use ros2_client::log::LogLevel;
 use ros2_client::{Node, Publisher, Server};
 
-use crate::model::Variant;
+use crate::gnode::Variant;
 
 use super::clock::Clock;
 use super::handles::{Diagnostics, ModelHandle, RecorderHandle};
@@ -186,7 +186,7 @@ pub enum TrainingError {
         /// Its file.
         path: PathBuf,
         /// Why.
-        source: crate::model::file::ModelFileError,
+        source: crate::gnode::file::ModelFileError,
     },
     /// A fine-tuning request names another variant than the served one.
     #[error(

@@ -16,7 +16,7 @@ use std::time::Instant;
 
 use ros2_client::log::LogLevel;
 
-use crate::model::{ModelFile, Variant};
+use crate::gnode::{ModelFile, Variant};
 use crate::models::{train_from_bags, ModelKind};
 use crate::train::{Auto, EpochReport, ModelOptions, Recipe, TrainConfig};
 

@@ -4,7 +4,7 @@
 //! atomically every few minutes. A run of hours survives a stop or a crash
 //! and, resumed, ends bit for bit where an uninterrupted run would.
 
-use crate::model::file::{write_json_atomic, ModelFileError};
+use crate::gnode::file::{write_json_atomic, ModelFileError};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};

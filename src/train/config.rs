@@ -33,9 +33,9 @@ pub struct TrainConfig {
     pub threads: usize,
     /// Warm start: continue from this model's weights (and its Adam state when
     /// it has one). Its hyperparameters must be the ones trained.
-    pub init: Option<Box<crate::model::ModelFile>>,
+    pub init: Option<Box<crate::gnode::ModelFile>>,
     /// Scale inputs and outputs by statistics of the training split (stored
-    /// in the model file; see [`crate::model::Norm`]).
+    /// in the model file; see [`crate::gnode::Norm`]).
     pub normalize: bool,
     /// Step schedule: after epoch `e`, learning rate `lr` (pairs in any order;
     /// the latest passed applies).

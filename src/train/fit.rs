@@ -7,7 +7,7 @@ use super::checkpoint::{self, Checkpoint, Progress, RngState, RunKey};
 use super::config::TrainConfig;
 use super::objective::Objective;
 use crate::error::{bail, Result};
-use crate::model::file::TrainingReport;
+use crate::gnode::file::TrainingReport;
 use crate::system::{Graph, State};
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;

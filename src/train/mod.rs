@@ -16,10 +16,10 @@
 use crate::data::dataset::Dataset;
 use crate::engine::Engine;
 use crate::error::{bail, Result};
-use crate::model::batch::Batch;
-use crate::model::file::{AdamState, TrainingReport};
-use crate::model::plan::GraphPlan;
-use crate::model::{Hyper, Net};
+use crate::gnode::batch::Batch;
+use crate::gnode::file::{AdamState, TrainingReport};
+use crate::gnode::plan::GraphPlan;
+use crate::gnode::{Hyper, Net};
 use crate::system::{Graph, State};
 use candle_core::Tensor;
 use rand::SeedableRng;
@@ -51,7 +51,7 @@ pub struct Trained {
     /// Figures for the model file.
     pub report: TrainingReport,
     /// Adam's state after the last epoch.
-    pub optimizer: crate::model::file::AdamState,
+    pub optimizer: crate::gnode::file::AdamState,
 }
 
 /// Mixed into [`TrainConfig::seed`] for the subsample's stream ("points"), so
@@ -102,7 +102,7 @@ pub fn train(
     if cfg.normalize && cfg.init.is_none() && net.hyper.norm.is_none() {
         let s: Vec<&State> = sp.train.iter().map(|&i| &states[i]).collect();
         let a: Vec<&[f64]> = sp.train.iter().map(|&i| acc[i].as_slice()).collect();
-        net.set_norm(Some(crate::model::Norm::from_data(graph, &s, &a)));
+        net.set_norm(Some(crate::gnode::Norm::from_data(graph, &s, &a)));
     }
     if let Some(init) = &cfg.init {
         if init.hyper != net.hyper {
@@ -192,13 +192,13 @@ pub fn set_radius(graph: &mut Graph, radius: Option<f64>, mut log: impl FnMut(&s
 
 /// Trains a model from trajectory bags and returns the model file (not yet saved).
 pub(crate) fn train_from_bags(
-    variant: crate::model::Variant,
+    variant: crate::gnode::Variant,
     bags: &[std::path::PathBuf],
     opts: &ModelOptions,
     cfg: &TrainConfig,
     mut log: impl FnMut(&str),
     on_epoch: impl FnMut(&EpochReport) -> bool,
-) -> Result<crate::model::ModelFile> {
+) -> Result<crate::gnode::ModelFile> {
     log(&format!("training {variant}"));
     let mut data = load_training_data_from(bags, opts.topic.as_deref(), &mut log)?;
     set_radius(&mut data.dataset.graph, opts.radius, &mut log)?;
@@ -226,12 +226,12 @@ pub(crate) fn train_from_bags(
         // A warm start keeps the architecture it was trained with.
         hyper = warm_start_hyper(init, variant, &ds.graph, types, &mut log)?;
     }
-    if variant == crate::model::Variant::Mcgnode {
+    if variant == crate::gnode::Variant::Mcgnode {
         log_body_force(&hyper, opts.body_force, data.closed.as_ref(), cfg, &mut log);
     }
     let trained = train(hyper, &ds.graph, &ds.states, &ds.acc, cfg, on_epoch)?;
-    Ok(crate::model::ModelFile {
-        format: crate::model::file::FORMAT.to_string(),
+    Ok(crate::gnode::ModelFile {
+        format: crate::gnode::file::FORMAT.to_string(),
         crate_version: env!("CARGO_PKG_VERSION").to_string(),
         hyper: trained.net.hyper.clone(),
         trained_on: data.trained_on,
@@ -246,7 +246,7 @@ pub(crate) fn train_from_bags(
 /// [`BodyForce::Auto`] unless the data are closed. A fresh MCGNODE on data
 /// that do not say is refused.
 fn body_force(
-    variant: crate::model::Variant,
+    variant: crate::gnode::Variant,
     asked: BodyForce,
     closed: Option<&(bool, String)>,
     cfg: &TrainConfig,
@@ -257,7 +257,7 @@ fn body_force(
         BodyForce::Auto => match closed {
             Some((closed, _)) => !closed,
             // A warm start keeps its model's branch (below).
-            None if variant == crate::model::Variant::Mcgnode && cfg.init.is_none() => bail!(
+            None if variant == crate::gnode::Variant::Mcgnode && cfg.init.is_none() => bail!(
                 "the training bags do not say whether the system is closed (their messages \
                  leave the field unknown, there is no system_config metadata, and the data do \
                  not show a closed system): pass --body-force off for a closed system \
@@ -272,8 +272,8 @@ fn body_force(
 /// model on `graph` (with particle types up to `types - 1`); `log` says what
 /// training continues from.
 fn warm_start_hyper(
-    init: &crate::model::ModelFile,
-    variant: crate::model::Variant,
+    init: &crate::gnode::ModelFile,
+    variant: crate::gnode::Variant,
     graph: &Graph,
     types: usize,
     mut log: impl FnMut(&str),

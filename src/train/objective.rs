@@ -3,7 +3,7 @@
 
 use crate::engine::Engine;
 use crate::error::{bail, Result};
-use crate::model::params::ParamStore;
+use crate::gnode::params::ParamStore;
 use crate::system::State;
 use candle_core::Tensor;
 use rayon::prelude::*;

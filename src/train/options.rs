@@ -3,7 +3,7 @@
 
 use super::recipe::{self, Recipe};
 use crate::error::{bail, Result};
-use crate::model::{ArchPreset, EdgeInput, Hyper, MessageFn, Variant};
+use crate::gnode::{ArchPreset, EdgeInput, Hyper, MessageFn, Variant};
 
 /// Whether MCGNODE learns a body-force branch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -97,7 +97,7 @@ impl ModelOptions {
             }
         }
         h.edge_physics = self.edge_physics;
-        let known: Vec<String> = crate::model::Arch::new(&h)
+        let known: Vec<String> = crate::gnode::Arch::new(&h)
             .mlps
             .iter()
             .map(|(b, _)| b.prefix())

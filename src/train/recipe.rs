@@ -23,7 +23,7 @@
 //! `--recipe auto` is the default; `--recipe paper` restores the paper's settings exactly, and every setting
 //! given on the command line overrides the recipe's choice.
 
-use crate::model::Variant;
+use crate::gnode::Variant;
 use crate::system::Graph;
 
 /// How unset settings are chosen.

@@ -3,7 +3,7 @@
 
 use crate::baselines::Kind;
 use crate::evaluate::Evaluation;
-use crate::model::Variant;
+use crate::gnode::Variant;
 use crate::plot::{plot_metrics, Metric};
 use crate::reproduce::lab::{Job, Lab, TrainSpec, Trained};
 use crate::reproduce::report::{table, Experiment, Row};
@@ -139,7 +139,7 @@ pub(super) fn figure(
 pub(super) fn training_rows(
     specs: &[TrainSpec],
     trained: &[crate::error::Result<Trained>],
-    cells: impl Fn(&TrainSpec, &crate::model::file::TrainingReport) -> Vec<String>,
+    cells: impl Fn(&TrainSpec, &crate::gnode::file::TrainingReport) -> Vec<String>,
 ) -> Vec<Vec<String>> {
     specs
         .iter()

@@ -7,7 +7,7 @@ use super::common::{
 };
 use crate::baselines::Kind;
 use crate::error::Result;
-use crate::model::{ArchPreset, Variant};
+use crate::gnode::{ArchPreset, Variant};
 use crate::models::ModelKind;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::plot::Metric;

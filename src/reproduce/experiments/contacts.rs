@@ -10,7 +10,7 @@ use super::common::{
 };
 use crate::baselines::Kind;
 use crate::error::Result;
-use crate::model::Variant;
+use crate::gnode::Variant;
 use crate::models::ModelKind;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::reproduce::lab::{Lab, TrainSpec, Trained};

@@ -5,7 +5,7 @@ use super::common::{
 };
 use super::sweep::sweep_test_bag;
 use crate::error::Result;
-use crate::model::Variant;
+use crate::gnode::Variant;
 use crate::models::ModelKind;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::plot::Metric;

@@ -4,7 +4,7 @@ use super::common::Section;
 use super::sweep::{sweep, Sweep};
 use crate::baselines::Kind;
 use crate::error::Result;
-use crate::model::Variant;
+use crate::gnode::Variant;
 use crate::models::ModelKind;
 use crate::reproduce::lab::Lab;
 use crate::reproduce::report::Experiment;
