@@ -180,10 +180,17 @@ pub fn set_radius(graph: &mut Graph, radius: Option<f64>, mut log: impl FnMut(&s
         }
         graph.interaction_radius = r;
     }
+    let contacts = if graph.has_contacts() {
+        format!(
+            "contacts within radius {} (found at every state)",
+            graph.interaction_radius
+        )
+    } else {
+        "no contact edges (radius 0)".to_string()
+    };
     if graph.has_contacts() || graph.n_kinematic() > 0 {
         log(&format!(
-            "contacts within radius {} (found at every state); {} kinematic particles, left out of the loss",
-            graph.interaction_radius,
+            "{contacts}; {} kinematic particles, left out of the loss",
             graph.n_kinematic()
         ));
     }
