@@ -36,8 +36,9 @@ fn median(mut v: Vec<f64>) -> f64 {
 pub enum Trainee {
     /// A model of the GNODE family on an engine, with this many threads.
     Family(Variant, EngineKind, usize),
-    /// A baseline (candle).
-    Baseline(crate::baselines::Kind),
+    /// A baseline on an engine (LGN and HGN: candle whatever is asked),
+    /// with this many threads.
+    Baseline(crate::baselines::Kind, EngineKind, usize),
 }
 
 /// A data set like the paper's: `trajectories` × 100 states of `n` particles
@@ -90,8 +91,12 @@ pub fn epoch_seconds(
             h.body_force = !g.anchors.is_empty();
             crate::train::train(h, g, states, acc, &cfg, on_epoch)?;
         }
-        Trainee::Baseline(kind) => {
-            let h = crate::baselines::BaselineHyper::new(kind, g.dim, 1);
+        Trainee::Baseline(kind, engine, threads) => {
+            cfg.engine = engine;
+            cfg.threads = threads;
+            let types = g.types.iter().map(|&t| t as usize + 1).max().unwrap_or(1);
+            let mut h = crate::baselines::BaselineHyper::new(kind, g.dim, types);
+            h.interaction_radius = g.interaction_radius;
             crate::baselines::train_baseline(h, g, states, acc, &cfg, on_epoch)?;
         }
     }
@@ -300,19 +305,33 @@ fn baseline_epoch_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Ve
     let mut out = vec![];
     let data = training_set(SystemKind::Spring, 5, if quick { 10 } else { 100 });
     let states = data.1.len();
-    for (kind, jax) in [(Kind::Lgn, "960"), (Kind::Hgn, "320-410"), (Kind::Gns, "-")] {
+    let candle = (EngineKind::Candle, 1);
+    for (kind, jax) in [(Kind::Lgn, "960"), (Kind::Hgn, "320-410")] {
         let name = format!("5-spring {kind} epoch, {states} states (candle)");
-        let jax = (jax != "-" && !quick).then_some(jax);
-        if !want(&name) {
-            continue;
+        if want(&name) {
+            let t = Trainee::Baseline(kind, candle.0, candle.1);
+            let jax = (!quick).then_some(jax);
+            out.push(epoch_figure(name, t, &data, ep.min(3), jax)?);
         }
-        out.push(epoch_figure(
-            name,
-            Trainee::Baseline(kind),
-            &data,
-            ep.min(3),
-            jax,
-        )?);
+    }
+    // GNS on both engines, one thread each: on the springs, and on the
+    // soft-sphere box (a radius graph with its walls) that reproduce's
+    // contact part trains it on.
+    let balls = training_set(SystemKind::SoftSpheres, 100, if quick { 1 } else { 4 });
+    let sets = [("5-spring", &data), ("100-ball soft-sphere box", &balls)];
+    for ((what, set), (engine, threads)) in sets
+        .into_iter()
+        .flat_map(|s| [(s, candle), (s, (EngineKind::Native, 1))])
+    {
+        let name = format!(
+            "{what} gns epoch, {} states ({} engine, {threads} thread)",
+            set.1.len(),
+            format!("{engine:?}").to_lowercase()
+        );
+        if want(&name) {
+            let t = Trainee::Baseline(Kind::Gns, engine, threads);
+            out.push(epoch_figure(name, t, set, ep.min(3), None)?);
+        }
     }
     Ok(out)
 }

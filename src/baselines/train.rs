@@ -7,12 +7,14 @@
 use super::file::{BaselineFile, FORMAT};
 use super::net::{BaselineHyper, BaselineNet};
 use super::trained::TrainedBaseline;
+use crate::engine::{Gns, GnsSpec};
 use crate::error::{bail, Result};
 use crate::gnode::batch::Batch;
 use crate::gnode::plan::GraphPlan;
 use crate::system::{Graph, State};
 use crate::train::{
-    check_data, fit, flat_params, set_flat_params, CandleObjective, EpochReport, TrainConfig,
+    check_data, fit, flat_params, set_flat_params, CandleObjective, EngineKind, EpochReport,
+    GnsObjective, Objective, TrainConfig,
 };
 use candle_core::Tensor;
 use rand::SeedableRng;
@@ -50,7 +52,22 @@ pub fn train_baseline(
         net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?, masses)
     };
     let mut theta = flat_params(&net.store)?;
-    let mut obj = CandleObjective::with_threads(&net.store, loss, cfg.threads)?;
+    let mut obj: Box<dyn Objective + '_> = match (net.hyper.kind, cfg.engine) {
+        (super::net::Kind::Gns, EngineKind::Native) => {
+            let gns = Gns::new(
+                gns_spec(&net.hyper),
+                &param_sizes(&net)?,
+                graph,
+                cfg.threads,
+            )?;
+            Box::new(GnsObjective::new(gns, states, acc))
+        }
+        _ => Box::new(CandleObjective::with_threads(
+            &net.store,
+            loss,
+            cfg.threads,
+        )?),
+    };
     let mut adam = crate::train::Adam::new(cfg.lr, theta.len());
     let sp = crate::train::split(states.len(), cfg, &mut rng);
     // HGN's loss is on (q̇, ṗ): its trivial predictor says zero for both.
@@ -60,8 +77,17 @@ pub fn train_baseline(
             !graph.is_kinematic(f / graph.dim)
         }),
     };
-    let training =
-        fit(&mut theta, sp, cfg, &mut rng, &mut obj, &mut adam, on_epoch)?.with_trivial(trivial);
+    let training = fit(
+        &mut theta,
+        sp,
+        cfg,
+        &mut rng,
+        obj.as_mut(),
+        &mut adam,
+        on_epoch,
+    )?
+    .with_trivial(trivial);
+    drop(obj);
     set_flat_params(&net.store, &theta)?;
     let file = BaselineFile {
         format: FORMAT.to_string(),
@@ -72,6 +98,26 @@ pub fn train_baseline(
         weights: net.store.weights()?,
     };
     Ok(TrainedBaseline { file, net })
+}
+
+/// The executor's description of a GNS of these settings.
+pub fn gns_spec(h: &BaselineHyper) -> GnsSpec {
+    GnsSpec {
+        dim: h.dim,
+        types: h.types,
+        hidden: h.hidden,
+        latent: h.latent,
+        rounds: h.rounds,
+    }
+}
+
+/// Every parameter's name and scalar count, in the flat vector's order.
+pub fn param_sizes(net: &BaselineNet) -> Result<Vec<(String, usize)>> {
+    net.store
+        .names()
+        .iter()
+        .map(|n| Ok((n.clone(), net.store.get(n)?.elem_count())))
+        .collect()
 }
 
 /// Trains a baseline from trajectory bags (on ParticleState topic `topic`
@@ -104,6 +150,13 @@ pub(crate) fn train_baseline_from_bags(
         .map(|&t| t as usize + 1)
         .max()
         .unwrap_or(1);
+    if kind == super::net::Kind::Gns {
+        let engine = match cfg.engine {
+            EngineKind::Native => "the native engine (hand-written gradients)",
+            EngineKind::Candle => "candle's autodiff",
+        };
+        log(&format!("gradients by {engine}"));
+    }
     let mut hyper = BaselineHyper::new(kind, ds.graph.dim, types);
     hyper.interaction_radius = ds.graph.interaction_radius;
     let trained = train_baseline(hyper, &ds.graph, &ds.states, &ds.acc, cfg, on_epoch)?;

@@ -98,8 +98,9 @@ pub struct Args {
     /// on, off.
     #[arg(long, value_enum, default_value_t = BodyForceArg::Auto)]
     pub body_force: BodyForceArg,
-    /// Gradient engine of the GNODE family: native (hand-written, all
-    /// cores) or candle (the autodiff reference). Baselines always use candle.
+    /// Gradient engine of the GNODE family and GNS: native (hand-written,
+    /// all cores) or candle (the autodiff reference). LGN and HGN always use
+    /// candle.
     #[arg(long, value_enum, default_value_t = EngineArg::Native)]
     pub engine: EngineArg,
     /// Training threads of the native engine (default: all cores). The

@@ -13,10 +13,12 @@
 
 mod chunk;
 mod dense;
+mod gns;
 mod infer;
 mod layout;
 mod reverse;
 
+pub use gns::{Gns, GnsSpec};
 pub use infer::Forward;
 pub use layout::{Layout, LayoutError};
 pub use reverse::Reverse;
@@ -40,6 +42,9 @@ pub enum EngineError {
     /// The graph does not suit the model.
     #[error(transparent)]
     Graph(#[from] crate::gnode::arch::ArchError),
+    /// Parameters that do not fit the network.
+    #[error("{0}")]
+    Parameters(String),
     /// A thread pool could not be started.
     #[error("cannot start {threads} training threads: {reason}")]
     Threads {
@@ -60,6 +65,42 @@ pub struct Engine {
     threads: usize,
 }
 
+/// How a selection of `len` states of `rows` rows each (particles and
+/// directed edges) is cut into chunks: a function of `len` and the graph
+/// only, never of the thread count. The count is rounded up to a multiple of
+/// 4 so that 1, 2 and 4 threads share the chunks evenly.
+fn split(len: usize, rows: usize) -> Vec<(usize, usize)> {
+    let mut k = (len * rows).div_ceil(CHUNK_ROWS).max(1);
+    if k > 1 {
+        k = k.div_ceil(4) * 4;
+    }
+    let k = k.min(len).max(1);
+    let (base, extra) = (len / k, len % k);
+    let mut out = Vec::with_capacity(k);
+    let mut start = 0;
+    for i in 0..k {
+        let size = base + usize::from(i < extra);
+        out.push((start, start + size));
+        start += size;
+    }
+    out
+}
+
+/// A rayon pool of `threads` threads, or none for one.
+fn pool(threads: usize) -> Result<Option<rayon::ThreadPool>, EngineError> {
+    if threads <= 1 {
+        return Ok(None);
+    }
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map(Some)
+        .map_err(|e| EngineError::Threads {
+            threads,
+            reason: e.to_string(),
+        })
+}
+
 /// The number of cores, for `--threads` defaults.
 pub fn all_cores() -> usize {
     std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
@@ -71,19 +112,7 @@ impl Engine {
         let arch = Arch::new(hyper);
         arch.supports(graph)?;
         let threads = threads.max(1);
-        let pool = if threads > 1 {
-            Some(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .map_err(|e| EngineError::Threads {
-                        threads,
-                        reason: e.to_string(),
-                    })?,
-            )
-        } else {
-            None
-        };
+        let pool = pool(threads)?;
         Ok(Self {
             model: Model::new(arch, GraphPlan::new(graph)),
             chunks: vec![],
@@ -102,25 +131,9 @@ impl Engine {
         &self.model.arch
     }
 
-    /// How a selection of `len` states is cut into chunks: a function of
-    /// `len` and the graph only. The count is rounded up to a multiple of 4 so
-    /// that 1, 2 and 4 threads share the chunks evenly.
+    /// How a selection of `len` states is cut into chunks ([`split`]).
     fn split(&self, len: usize) -> Vec<(usize, usize)> {
-        let rows = len * self.model.rows_per_state();
-        let mut k = rows.div_ceil(CHUNK_ROWS).max(1);
-        if k > 1 {
-            k = k.div_ceil(4) * 4;
-        }
-        let k = k.min(len).max(1);
-        let (base, extra) = (len / k, len % k);
-        let mut out = Vec::with_capacity(k);
-        let mut start = 0;
-        for i in 0..k {
-            let size = base + usize::from(i < extra);
-            out.push((start, start + size));
-            start += size;
-        }
-        out
+        split(len, self.model.rows_per_state())
     }
 
     /// Runs the chunks of `idx` (wave by wave, each wave across the threads)

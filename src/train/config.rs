@@ -27,7 +27,8 @@ pub struct TrainConfig {
     /// data-efficiency experiments: 100 to 10,000); `None`: all. Applied by
     /// [`apply_data_options`](super::apply_data_options).
     pub points: Option<usize>,
-    /// Gradient engine of the GNODE family (the baselines always use candle).
+    /// Gradient engine of the GNODE family and GNS (LGN and HGN always use
+    /// candle).
     pub engine: EngineKind,
     /// Threads of the native engine; results do not depend on it.
     pub threads: usize,
@@ -136,7 +137,7 @@ impl TrainConfig {
     }
 }
 
-/// Which engine computes the GNODE family's gradients.
+/// Which engine computes the gradients of the GNODE family and GNS.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum EngineKind {
     /// Hand-written reverse mode on the kernel's layout, over all cores (default).

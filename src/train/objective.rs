@@ -1,7 +1,7 @@
 //! What [`fit`](super::fit) minimises: the [`Objective`] trait, with candle's
 //! autodiff and the hand-written engine behind it.
 
-use crate::engine::Engine;
+use crate::engine::{Engine, Gns};
 use crate::error::{bail, Result};
 use crate::gnode::params::ParamStore;
 use crate::system::State;
@@ -185,5 +185,36 @@ impl Objective for EngineObjective<'_> {
 
     fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64> {
         Ok(self.engine.loss(theta, self.states, self.targets, idx))
+    }
+}
+
+/// GNS on the executor ([`Gns`]) on one graph's states and target
+/// accelerations.
+pub struct GnsObjective<'a> {
+    gns: Gns,
+    states: &'a [State],
+    targets: &'a [Vec<f64>],
+}
+
+impl<'a> GnsObjective<'a> {
+    /// The objective of `gns` on these states and targets.
+    pub fn new(gns: Gns, states: &'a [State], targets: &'a [Vec<f64>]) -> Self {
+        Self {
+            gns,
+            states,
+            targets,
+        }
+    }
+}
+
+impl Objective for GnsObjective<'_> {
+    fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64> {
+        Ok(self
+            .gns
+            .loss_grad(theta, self.states, self.targets, idx, grad))
+    }
+
+    fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64> {
+        Ok(self.gns.loss(theta, self.states, self.targets, idx))
     }
 }

@@ -1,0 +1,522 @@
+//! GNS (the baseline of `baselines::gns`) on the executor: its graph
+//! network's forward pass and reverse-mode gradient written by hand on the
+//! feature-major layout, with the GNODE family's MLP, so that GNS trains at
+//! its best speed and comparisons at equal wall-clock time are fair.
+//!
+//! The equations, as the candle reference (`baselines::graphnet`, residual
+//! rounds with the distance as an edge feature) writes them:
+//! - encode: h = sqp(φ_v([onehot, q, q̇])), e = sqp(φ_e([w_ij, |w_ij|]));
+//! - each round: e ← e + φ_E([e, h_recv, h_send]); h ← h + φ_V([h, Σ_recv e]);
+//! - decode: q̈ = φ_out(h).
+//!
+//! Loss: the mean squared error of q̈ over the free particles' coordinates.
+//! Checked against candle's autodiff and finite differences
+//! (`tests/gns_engine.rs`).
+
+use rayon::prelude::*;
+
+use super::dense::{squareplus_in_place, times_squareplus_grad, Linear, Mlp, Tape};
+use super::EngineError;
+use crate::gnode::plan::GraphPlan;
+use crate::physics::neighbors::NeighborSearch;
+use crate::system::{Graph, State};
+
+/// Sizes of a GNS network (as `baselines::net::BaselineHyper` sets them).
+#[derive(Clone, Copy, Debug)]
+pub struct GnsSpec {
+    /// Spatial dimension.
+    pub dim: usize,
+    /// One-hot width.
+    pub types: usize,
+    /// Hidden units of every MLP (one hidden layer).
+    pub hidden: usize,
+    /// Latent width.
+    pub latent: usize,
+    /// Processor rounds.
+    pub rounds: usize,
+}
+
+/// The MLPs of a GNS at their offsets in the flat parameter vector.
+#[derive(Clone, Debug)]
+struct Net {
+    spec: GnsSpec,
+    node_em: Mlp,
+    edge_em: Mlp,
+    /// Per round: edge update, node update.
+    rounds: Vec<(Mlp, Mlp)>,
+    node_out: Mlp,
+}
+
+impl Net {
+    /// The MLPs, their parameters found in `params` (name, scalar count, in
+    /// the flat vector's order) under candle's names (`node_em.l0.w`, …).
+    fn new(spec: GnsSpec, params: &[(String, usize)]) -> Result<Self, EngineError> {
+        let mut at = std::collections::HashMap::new();
+        let mut off = 0;
+        for (name, len) in params {
+            at.insert(name.as_str(), (off, *len));
+            off += len;
+        }
+        let (h, l, d) = (spec.hidden, spec.latent, spec.dim);
+        let mlp = |name: &str, sizes: &[usize]| -> Result<Mlp, EngineError> {
+            let mut layers = vec![];
+            for (i, w) in sizes.windows(2).enumerate() {
+                let find = |what: &str, want: usize| {
+                    let key = format!("{name}.l{i}.{what}");
+                    match at.get(key.as_str()) {
+                        Some(&(o, len)) if len == want => Ok(o),
+                        _ => Err(EngineError::Parameters(format!(
+                            "GNS needs parameter {key} of {want} numbers"
+                        ))),
+                    }
+                };
+                layers.push(Linear {
+                    w: find("w", w[0] * w[1])?,
+                    b: find("b", w[1])?,
+                    inp: w[0],
+                    out: w[1],
+                });
+            }
+            Ok(Mlp { layers })
+        };
+        let rounds = (0..spec.rounds)
+            .map(|r| {
+                Ok((
+                    mlp(&format!("gn{r}.e"), &[3 * l, h, l])?,
+                    mlp(&format!("gn{r}.v"), &[2 * l, h, l])?,
+                ))
+            })
+            .collect::<Result<_, EngineError>>()?;
+        Ok(Self {
+            spec,
+            node_em: mlp("node_em", &[spec.types + 2 * d, h, l])?,
+            edge_em: mlp("edge_em", &[d + 1, h, l])?,
+            rounds,
+            node_out: mlp("node_out", &[l, h, d])?,
+        })
+    }
+
+    /// Every MLP, for sizing scratch.
+    fn mlps(&self) -> impl Iterator<Item = &Mlp> {
+        [&self.node_em, &self.edge_em, &self.node_out]
+            .into_iter()
+            .chain(self.rounds.iter().flat_map(|(e, v)| [e, v]))
+    }
+}
+
+/// GNS's loss and gradient on states of one graph (contacts found at each
+/// state when it has a radius), over `threads` threads; the result does not
+/// depend on the thread count.
+pub struct Gns {
+    net: Net,
+    plan: GraphPlan,
+    chunks: Vec<Chunk>,
+    pool: Option<rayon::ThreadPool>,
+    threads: usize,
+}
+
+impl Gns {
+    /// A GNS of `spec` for `graph`, its parameters laid out as `params`
+    /// (name and scalar count in the flat vector's order).
+    pub fn new(
+        spec: GnsSpec,
+        params: &[(String, usize)],
+        graph: &Graph,
+        threads: usize,
+    ) -> Result<Self, EngineError> {
+        let types = graph
+            .types
+            .iter()
+            .map(|&t| t as usize + 1)
+            .max()
+            .unwrap_or(1);
+        if graph.dim != spec.dim || types > spec.types {
+            return Err(EngineError::Parameters(format!(
+                "a GNS of {}D and {} particle types cannot take a {}D graph with {types}",
+                spec.dim, spec.types, graph.dim
+            )));
+        }
+        let threads = threads.max(1);
+        Ok(Self {
+            net: Net::new(spec, params)?,
+            plan: GraphPlan::new(graph),
+            chunks: vec![],
+            pool: super::pool(threads)?,
+            threads,
+        })
+    }
+
+    /// Mean squared error of the free particles' accelerations of states
+    /// `idx` against `targets`, and its gradient into `grad`.
+    pub fn loss_grad(
+        &mut self,
+        theta: &[f64],
+        states: &[State],
+        targets: &[Vec<f64>],
+        idx: &[usize],
+        grad: &mut [f64],
+    ) -> f64 {
+        let count = (idx.len() * self.plan.free_ndof()).max(1) as f64;
+        grad.fill(0.0);
+        let mut sse = 0.0;
+        self.run(theta, states, targets, idx, Some(1.0 / count), |c| {
+            sse += c.sse;
+            for (g, x) in grad.iter_mut().zip(&c.grad) {
+                *g += x;
+            }
+        });
+        sse / count
+    }
+
+    /// [`Gns::loss_grad`]'s loss alone.
+    pub fn loss(
+        &mut self,
+        theta: &[f64],
+        states: &[State],
+        targets: &[Vec<f64>],
+        idx: &[usize],
+    ) -> f64 {
+        let count = (idx.len() * self.plan.free_ndof()).max(1) as f64;
+        let mut sse = 0.0;
+        self.run(theta, states, targets, idx, None, |c| sse += c.sse);
+        sse / count
+    }
+
+    /// The chunks of `idx` across the threads, folded in chunk order.
+    fn run(
+        &mut self,
+        theta: &[f64],
+        states: &[State],
+        targets: &[Vec<f64>],
+        idx: &[usize],
+        scale: Option<f64>,
+        mut fold: impl FnMut(&Chunk),
+    ) {
+        let parts = super::split(idx.len(), self.plan.n + self.plan.recv.len());
+        let wave = (4 * self.threads).max(1);
+        let (net, plan) = (&self.net, &self.plan);
+        for group in parts.chunks(wave) {
+            if self.chunks.len() < group.len() {
+                self.chunks.resize_with(group.len(), Chunk::default);
+            }
+            let work = |(c, &(a, b)): (&mut Chunk, &(usize, usize))| {
+                let sel = &idx[a..b];
+                c.run(net, plan, theta, (states, targets, sel), scale);
+            };
+            match &self.pool {
+                Some(pool) => pool.install(|| {
+                    self.chunks[..group.len()]
+                        .par_iter_mut()
+                        .zip(group.par_iter())
+                        .for_each(work);
+                }),
+                None => self.chunks[..group.len()]
+                    .iter_mut()
+                    .zip(group.iter())
+                    .for_each(work),
+            }
+            self.chunks[..group.len()].iter().for_each(&mut fold);
+        }
+    }
+}
+
+/// One chunk's buffers (grown to the largest chunk, then reused) and results.
+#[derive(Default)]
+struct Chunk {
+    search: Option<NeighborSearch>,
+    pairs: Vec<(usize, usize)>,
+    starts: Vec<usize>,
+    recv: Vec<usize>,
+    send: Vec<usize>,
+    /// Node inputs `(T + 2d) × N` and edge inputs `(d + 1) × E`.
+    x: Vec<f64>,
+    feat: Vec<f64>,
+    /// Node latents before each round and after the last, `L × N` each.
+    h: Vec<Vec<f64>>,
+    /// Edge latents likewise, `L × E` each.
+    e: Vec<Vec<f64>>,
+    /// Per round: `[h_recv; h_send]` (`2L × E`) and Σ_recv e (`L × N`).
+    hrs: Vec<Vec<f64>>,
+    agg: Vec<Vec<f64>>,
+    out: Vec<f64>,
+    /// Tapes: node encoder, edge encoder, per round (edge, node), decoder.
+    tapes: Vec<Tape>,
+    /// Rows the tapes were made for (nodes, edges).
+    taped: (usize, usize),
+    /// Reverse-pass buffers.
+    gh: Vec<f64>,
+    gh2: Vec<f64>,
+    ge: Vec<f64>,
+    ge2: Vec<f64>,
+    ghrs: Vec<f64>,
+    gagg: Vec<f64>,
+    gout: Vec<f64>,
+    s1: Vec<f64>,
+    s2: Vec<f64>,
+    sse: f64,
+    grad: Vec<f64>,
+}
+
+/// `v` at least `len` long (zeros when it grows).
+fn room(v: &mut Vec<f64>, len: usize) -> &mut [f64] {
+    if v.len() < len {
+        v.resize(len, 0.0);
+    }
+    &mut v[..len]
+}
+
+impl Chunk {
+    /// Loss (and with `scale`, its gradient times `scale`) of the states
+    /// `sel` of `states` against `targets`.
+    fn run(
+        &mut self,
+        net: &Net,
+        plan: &GraphPlan,
+        theta: &[f64],
+        (states, targets, sel): (&[State], &[Vec<f64>], &[usize]),
+        scale: Option<f64>,
+    ) {
+        let nodes = sel.len() * plan.n;
+        let edges = self.lay_out(net, plan, states, sel);
+        self.forward(net, theta, nodes, edges, scale.is_some());
+        // The loss, and ∂L/∂q̈ into `gout`.
+        let d = plan.dim;
+        let gout = room(&mut self.gout, d * nodes);
+        self.sse = 0.0;
+        for (s, &i) in sel.iter().enumerate() {
+            for p in 0..plan.n {
+                if plan.is_kinematic(p) {
+                    for c in 0..d {
+                        gout[c * nodes + s * plan.n + p] = 0.0;
+                    }
+                    continue;
+                }
+                for c in 0..d {
+                    let row = s * plan.n + p;
+                    let r = self.out[c * nodes + row] - targets[i][p * d + c];
+                    self.sse += r * r;
+                    gout[c * nodes + row] = 2.0 * r * scale.unwrap_or(0.0);
+                }
+            }
+        }
+        if scale.is_some() {
+            self.backward(net, theta, nodes, edges);
+        }
+    }
+
+    /// Edges and inputs of the selected states; returns the directed edges.
+    fn lay_out(&mut self, net: &Net, plan: &GraphPlan, states: &[State], sel: &[usize]) -> usize {
+        let (n, d, t) = (plan.n, plan.dim, net.spec.types);
+        let nodes = sel.len() * n;
+        self.pairs.clear();
+        self.starts.clear();
+        if plan.has_contacts() {
+            let search = self.search.get_or_insert_with(|| plan.contact_search());
+            for &i in sel {
+                self.starts.push(self.pairs.len());
+                plan.contacts(search, &states[i].q, &mut self.pairs);
+            }
+            self.starts.push(self.pairs.len());
+        }
+        self.recv.clear();
+        self.send.clear();
+        let (recv, send) = (&mut self.recv, &mut self.send);
+        plan.directed_edges(sel.len(), &self.pairs, &self.starts, |_, e| {
+            recv.push(e.recv);
+            send.push(e.send);
+        });
+        let edges = self.recv.len();
+        let x = room(&mut self.x, (t + 2 * d) * nodes);
+        x.fill(0.0);
+        for (s, &i) in sel.iter().enumerate() {
+            for p in 0..n {
+                let row = s * n + p;
+                x[plan.types[p] * nodes + row] = 1.0;
+                for c in 0..d {
+                    x[(t + c) * nodes + row] = states[i].q[p * d + c];
+                    x[(t + d + c) * nodes + row] = states[i].v[p * d + c];
+                }
+            }
+        }
+        let feat = room(&mut self.feat, (d + 1) * edges);
+        for k in 0..edges {
+            let (r, s) = (self.recv[k], self.send[k]);
+            let mut sq = 0.0;
+            for c in 0..d {
+                let q = &self.x[(t + c) * nodes..(t + c + 1) * nodes];
+                let w = q[r] - q[s];
+                feat[c * edges + k] = w;
+                sq += w * w;
+            }
+            feat[d * edges + k] = sq.sqrt();
+        }
+        edges
+    }
+
+    /// The forward pass, keeping what the reverse pass needs when `record`.
+    fn forward(&mut self, net: &Net, th: &[f64], nodes: usize, edges: usize, record: bool) {
+        let (l, rounds) = (net.spec.latent, net.rounds.len());
+        self.ready_tapes(net, nodes, edges, record);
+        if self.h.len() < rounds + 1 {
+            self.h.resize_with(rounds + 1, Vec::new);
+            self.e.resize_with(rounds + 1, Vec::new);
+        }
+        if self.hrs.len() < rounds {
+            self.hrs.resize_with(rounds, Vec::new);
+            self.agg.resize_with(rounds, Vec::new);
+        }
+        let x_len = (net.spec.types + 2 * net.spec.dim) * nodes;
+        let h0 = room(&mut self.h[0], l * nodes);
+        net.node_em
+            .forward(th, &self.x[..x_len], &[], nodes, &mut self.tapes[0], h0);
+        squareplus_in_place(h0);
+        let e0 = room(&mut self.e[0], l * edges);
+        let feat = &self.feat[..(net.spec.dim + 1) * edges];
+        net.edge_em
+            .forward(th, feat, &[], edges, &mut self.tapes[1], e0);
+        squareplus_in_place(e0);
+        for (r, (we, wv)) in net.rounds.iter().enumerate() {
+            let (h_prev, h_next) = self.h.split_at_mut(r + 1);
+            let (e_prev, e_next) = self.e.split_at_mut(r + 1);
+            let (h, e) = (&h_prev[r][..l * nodes], &e_prev[r][..l * edges]);
+            let hrs = room(&mut self.hrs[r], 2 * l * edges);
+            for k in 0..l {
+                let hk = &h[k * nodes..(k + 1) * nodes];
+                for j in 0..edges {
+                    hrs[k * edges + j] = hk[self.recv[j]];
+                    hrs[(l + k) * edges + j] = hk[self.send[j]];
+                }
+            }
+            let e_new = room(&mut e_next[0], l * edges);
+            we.forward(th, e, hrs, edges, &mut self.tapes[2 + 2 * r], e_new);
+            for (x, old) in e_new.iter_mut().zip(e) {
+                *x += old;
+            }
+            let agg = room(&mut self.agg[r], l * nodes);
+            agg.fill(0.0);
+            for k in 0..l {
+                for j in 0..edges {
+                    agg[k * nodes + self.recv[j]] += e_new[k * edges + j];
+                }
+            }
+            let h_new = room(&mut h_next[0], l * nodes);
+            wv.forward(th, h, agg, nodes, &mut self.tapes[3 + 2 * r], h_new);
+            for (x, old) in h_new.iter_mut().zip(h) {
+                *x += old;
+            }
+        }
+        let out = room(&mut self.out, net.spec.dim * nodes);
+        let last = 2 + 2 * rounds;
+        net.node_out.forward(
+            th,
+            &self.h[rounds][..l * nodes],
+            &[],
+            nodes,
+            &mut self.tapes[last],
+            out,
+        );
+    }
+
+    /// Tapes that record (training) or only hold a tile (loss alone), for
+    /// `nodes` and `edges` rows.
+    fn ready_tapes(&mut self, net: &Net, nodes: usize, edges: usize, record: bool) {
+        // Recording tapes of enough rows serve both; tapes that only hold a
+        // tile serve the loss alone.
+        let built = self.tapes.len() == 3 + 2 * net.rounds.len();
+        let cover = self.taped.0 >= nodes && self.taped.1 >= edges;
+        if built && (cover || (!record && self.taped == (0, 0))) {
+            return;
+        }
+        let (nr, er) = if record {
+            (nodes.max(self.taped.0), edges.max(self.taped.1))
+        } else {
+            (0, 0)
+        };
+        let tape = |m: &Mlp, rows: usize| {
+            if record {
+                m.tape(rows)
+            } else {
+                m.inference_tape()
+            }
+        };
+        self.tapes = vec![tape(&net.node_em, nr), tape(&net.edge_em, er)];
+        for (we, wv) in &net.rounds {
+            self.tapes.push(tape(we, er));
+            self.tapes.push(tape(wv, nr));
+        }
+        self.tapes.push(tape(&net.node_out, nr));
+        self.taped = (nr, er);
+    }
+
+    /// The reverse pass from ∂L/∂q̈ (`gout`) to every parameter (`grad`).
+    fn backward(&mut self, net: &Net, th: &[f64], nodes: usize, edges: usize) {
+        let (l, d, rounds) = (net.spec.latent, net.spec.dim, net.rounds.len());
+        let width = net.mlps().map(Mlp::width).max().unwrap_or(0);
+        let rows = nodes.max(edges);
+        let grad = room(&mut self.grad, th.len());
+        grad.fill(0.0);
+        let (s1, s2) = (
+            room(&mut self.s1, width * rows),
+            room(&mut self.s2, width * rows),
+        );
+        let gh = room(&mut self.gh, l * nodes);
+        gh.fill(0.0);
+        let last = 2 + 2 * rounds;
+        net.node_out.backward(
+            th,
+            grad,
+            &self.h[rounds][..l * nodes],
+            &[],
+            nodes,
+            &self.tapes[last],
+            &self.gout[..d * nodes],
+            Some((gh, &mut [])),
+            s1,
+            s2,
+        );
+        let ge = room(&mut self.ge, l * edges);
+        ge.fill(0.0);
+        for (r, (we, wv)) in net.rounds.iter().enumerate().rev() {
+            // h_{r+1} = h_r + φ_V([h_r; agg]): the residual passes ∂L/∂h on.
+            let gh2 = room(&mut self.gh2, l * nodes);
+            gh2.copy_from_slice(gh);
+            let gagg = room(&mut self.gagg, l * nodes);
+            gagg.fill(0.0);
+            let (h, agg) = (&self.h[r][..l * nodes], &self.agg[r][..l * nodes]);
+            let tape = &self.tapes[3 + 2 * r];
+            wv.backward(th, grad, h, agg, nodes, tape, gh, Some((gh2, gagg)), s1, s2);
+            // agg = Σ_recv e_{r+1}.
+            for k in 0..l {
+                for j in 0..edges {
+                    ge[k * edges + j] += gagg[k * nodes + self.recv[j]];
+                }
+            }
+            // e_{r+1} = e_r + φ_E([e_r; h_recv; h_send]).
+            let ge2 = room(&mut self.ge2, l * edges);
+            ge2.copy_from_slice(ge);
+            let ghrs = room(&mut self.ghrs, 2 * l * edges);
+            ghrs.fill(0.0);
+            let (e, hrs) = (&self.e[r][..l * edges], &self.hrs[r][..2 * l * edges]);
+            let tape = &self.tapes[2 + 2 * r];
+            we.backward(th, grad, e, hrs, edges, tape, ge, Some((ge2, ghrs)), s1, s2);
+            for k in 0..l {
+                for j in 0..edges {
+                    gh2[k * nodes + self.recv[j]] += ghrs[k * edges + j];
+                    gh2[k * nodes + self.send[j]] += ghrs[(l + k) * edges + j];
+                }
+            }
+            gh.copy_from_slice(gh2);
+            ge.copy_from_slice(ge2);
+        }
+        // Through the encoders' squareplus to their weights.
+        times_squareplus_grad(gh, &self.h[0][..l * nodes]);
+        let x_len = (net.spec.types + 2 * d) * nodes;
+        let x = &self.x[..x_len];
+        net.node_em
+            .backward(th, grad, x, &[], nodes, &self.tapes[0], gh, None, s1, s2);
+        times_squareplus_grad(ge, &self.e[0][..l * edges]);
+        let feat = &self.feat[..(d + 1) * edges];
+        net.edge_em
+            .backward(th, grad, feat, &[], edges, &self.tapes[1], ge, None, s1, s2);
+    }
+}

@@ -1,0 +1,206 @@
+//! GNS on the executor (`engine::Gns`): its loss and gradient against
+//! candle's autodiff of the reference network (`baselines::graphnet`) to
+//! 1e-10, and against central differences; the same bits with 1 and 2
+//! threads; `train --model gns` on it by default. Springs (fixed edges),
+//! soft spheres (a radius graph with kinematic walls, left out of the loss)
+//! and a 3D lattice pair. Run with `cargo test --release --test gns_engine`.
+
+mod common;
+
+use mcgnode::baselines::{gns_spec, param_sizes, BaselineHyper, BaselineNet, Kind};
+use mcgnode::engine::Gns;
+use mcgnode::gnode::batch::Batch;
+use mcgnode::gnode::plan::GraphPlan;
+use mcgnode::physics::{SystemConfig, SystemKind};
+use mcgnode::system::{Graph, State};
+use mcgnode::train::{flat_params, CandleObjective, Objective};
+use rand::SeedableRng;
+
+/// States, target accelerations and a GNS with random weights for `kind`.
+fn case(
+    kind: SystemKind,
+    particles: usize,
+    dim: usize,
+) -> (Graph, Vec<State>, Vec<Vec<f64>>, BaselineNet) {
+    let mut cfg = SystemConfig::new(kind, particles);
+    cfg.dim = dim;
+    cfg.states = 6;
+    let tr = cfg.simulate(2, 5);
+    let graph = tr[0].graph.clone();
+    let (mut states, mut acc) = (vec![], vec![]);
+    for t in &tr {
+        for s in &t.samples {
+            states.push(s.state.clone());
+            acc.push(s.acc.clone().expect("simulated accelerations"));
+        }
+    }
+    let types = graph
+        .types
+        .iter()
+        .map(|&t| t as usize + 1)
+        .max()
+        .unwrap_or(1);
+    let mut hyper = BaselineHyper::new(Kind::Gns, graph.dim, types + 1);
+    hyper.interaction_radius = graph.interaction_radius;
+    let net = BaselineNet::new(hyper, &mut rand_chacha::ChaCha8Rng::seed_from_u64(7)).unwrap();
+    (graph, states, acc, net)
+}
+
+/// Candle's loss and gradient of the reference network on states `idx`.
+fn candle(
+    net: &BaselineNet,
+    graph: &Graph,
+    (states, acc): (&[State], &[Vec<f64>]),
+    theta: &[f64],
+    idx: &[usize],
+) -> (f64, Vec<f64>) {
+    let plan = GraphPlan::new(graph);
+    let loss = |idx: &[usize]| {
+        let s: Vec<&State> = idx.iter().map(|&i| &states[i]).collect();
+        let a: Vec<&[f64]> = idx.iter().map(|&i| acc[i].as_slice()).collect();
+        let b = Batch::new(&plan, &s, Some(&a), net.hyper.types)?;
+        net.loss(&b, &graph.masses)
+    };
+    let mut obj = CandleObjective::new(&net.store, loss);
+    let mut grad = vec![0.0; theta.len()];
+    let l = obj.loss_grad(theta, idx, &mut grad).unwrap();
+    (l, grad)
+}
+
+fn native(net: &BaselineNet, graph: &Graph, threads: usize) -> Gns {
+    Gns::new(
+        gns_spec(&net.hyper),
+        &param_sizes(net).unwrap(),
+        graph,
+        threads,
+    )
+    .unwrap()
+}
+
+fn rel(a: &[f64], b: &[f64]) -> f64 {
+    let scale = b.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+        / scale
+}
+
+/// Every case's loss and gradient against candle, to 1e-10.
+#[test]
+fn gradients_equal_candle() {
+    for (kind, n, dim) in [
+        (SystemKind::Spring, 5, 2),
+        (SystemKind::SoftSpheres, 9, 2),
+        (SystemKind::CollidingLattices, 16, 3),
+        (SystemKind::HeldChain, 6, 2),
+    ] {
+        let (graph, states, acc, net) = case(kind, n, dim);
+        let theta = flat_params(&net.store).unwrap();
+        let idx: Vec<usize> = (0..states.len()).rev().step_by(2).collect();
+        let (lc, gc) = candle(&net, &graph, (&states, &acc), &theta, &idx);
+        let mut gns = native(&net, &graph, 1);
+        let mut gn = vec![0.0; theta.len()];
+        let ln = gns.loss_grad(&theta, &states, &acc, &idx, &mut gn);
+        assert!(
+            (ln - lc).abs() <= 1e-10 * lc.abs(),
+            "{kind:?}: loss {ln} vs {lc}"
+        );
+        let r = rel(&gn, &gc);
+        assert!(
+            r <= 1e-10,
+            "{kind:?}: gradient differs by {r:.2e} of its largest"
+        );
+        assert!(
+            gc.iter().any(|g| g.abs() > 1e-6),
+            "{kind:?}: a gradient to compare"
+        );
+        // The loss alone is the same number.
+        assert_eq!(gns.loss(&theta, &states, &acc, &idx), ln, "{kind:?}");
+    }
+}
+
+/// Central differences on a spread of parameters (soft spheres: the radius
+/// graph and the walls).
+#[test]
+fn gradients_equal_finite_differences() {
+    let (graph, states, acc, net) = case(SystemKind::SoftSpheres, 9, 2);
+    let theta = flat_params(&net.store).unwrap();
+    let idx: Vec<usize> = (0..states.len()).collect();
+    let mut gns = native(&net, &graph, 1);
+    let mut g = vec![0.0; theta.len()];
+    gns.loss_grad(&theta, &states, &acc, &idx, &mut g);
+    let h = 1e-6;
+    let mut worst: f64 = 0.0;
+    for i in (0..theta.len()).step_by(theta.len() / 40 + 1) {
+        let mut t = theta.clone();
+        t[i] += h;
+        let up = gns.loss(&t, &states, &acc, &idx);
+        t[i] -= 2.0 * h;
+        let down = gns.loss(&t, &states, &acc, &idx);
+        let fd = (up - down) / (2.0 * h);
+        let scale = g.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        worst = worst.max((fd - g[i]).abs() / scale);
+    }
+    assert!(worst < 1e-6, "finite differences differ by {worst:.2e}");
+}
+
+/// One and two threads give the same bits.
+#[test]
+fn threads_do_not_change_the_bits() {
+    let (graph, states, acc, net) = case(SystemKind::SoftSpheres, 9, 2);
+    let theta = flat_params(&net.store).unwrap();
+    let idx: Vec<usize> = (0..states.len()).collect();
+    let run = |threads| {
+        let mut g = vec![0.0; theta.len()];
+        let l = native(&net, &graph, threads).loss_grad(&theta, &states, &acc, &idx, &mut g);
+        (l, g)
+    };
+    assert_eq!(run(1), run(2));
+}
+
+/// `train --model gns` runs on the native engine by default and says so;
+/// `--engine candle` trains the same model by autodiff to the same
+/// validation loss (within 1e-6 relative after 5 epochs).
+#[test]
+fn train_gns_natively_from_the_cli() {
+    use common::cli::{log_ok, run_in};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    log_ok(&run_in(
+        d,
+        &[
+            "simulate",
+            "--system",
+            "soft-spheres",
+            "--particles",
+            "9",
+            "--trajectories",
+            "3",
+            "--states",
+            "11",
+            "--out",
+            "box.mcap",
+        ],
+    ));
+    let train = |engine: &str, out: &str| {
+        let log = log_ok(&run_in(
+            d,
+            &[
+                "train", "--model", "gns", "--data", "box.mcap", "--epochs", "5", "--engine",
+                engine, "--out", out,
+            ],
+        ));
+        let file: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join(out)).unwrap()).unwrap();
+        (log, file["training"]["validation_loss"].as_f64().unwrap())
+    };
+    let (log, native) = train("native", "native.json");
+    assert!(log.contains("gradients by the native engine"), "{log}");
+    let (log, candle) = train("candle", "candle.json");
+    assert!(log.contains("gradients by candle's autodiff"), "{log}");
+    assert!(
+        (native - candle).abs() <= 1e-6 * candle.abs(),
+        "validation loss {native} (native) against {candle} (candle)"
+    );
+}
