@@ -1,0 +1,175 @@
+//! Tests of the dense kernels: the tiled and vector passes against plain
+//! references, bit for bit.
+
+use super::*;
+
+/// The reverse pass as it was written before [`dot4`], one output at a
+/// time: the reference the blocked one is tested against, bit for bit.
+#[allow(clippy::too_many_arguments)]
+fn backward_one_at_a_time(
+    l: &Linear,
+    th: &[f64],
+    g: &mut [f64],
+    a: &[f64],
+    c: &[f64],
+    r: usize,
+    gy: &[f64],
+    mut gx: Option<(&mut [f64], &mut [f64])>,
+) {
+    let na = a.len() / r;
+    for j in 0..l.out {
+        g[l.b + j] += sum(&gy[j * r..(j + 1) * r]);
+    }
+    for i in 0..l.inp {
+        let xi = if i < na {
+            &a[i * r..(i + 1) * r]
+        } else {
+            &c[(i - na) * r..(i - na + 1) * r]
+        };
+        for j in 0..l.out {
+            g[l.w + i * l.out + j] += dot(xi, &gy[j * r..(j + 1) * r]);
+        }
+        if let Some((ga, gc)) = gx.as_mut() {
+            let gxi = if i < na {
+                &mut ga[i * r..(i + 1) * r]
+            } else {
+                &mut gc[(i - na) * r..(i - na + 1) * r]
+            };
+            for j in 0..l.out {
+                let wv = th[l.w + i * l.out + j];
+                for (gv, yv) in gxi.iter_mut().zip(&gy[j * r..(j + 1) * r]) {
+                    *gv += wv * yv;
+                }
+            }
+        }
+    }
+}
+
+type Backward<'f> = &'f dyn Fn(&Tape, &mut [f64], &mut [f64], &mut [f64]);
+
+/// The blocked reverse pass of a layer (four outputs per pass) gives the
+/// bits of the one-output-at-a-time pass, for widths that are and are not
+/// multiples of four, with and without input gradients.
+#[test]
+fn blocked_backward_gives_the_same_bits() {
+    let wave =
+        |n: usize, k: f64| -> Vec<f64> { (0..n).map(|i| (k * i as f64 + 0.3).sin()).collect() };
+    for (inp, out, r) in [
+        (7usize, 16usize, 203usize),
+        (48, 16, 97),
+        (5, 5, 10),
+        (3, 9, 1),
+    ] {
+        let l = Linear {
+            w: 0,
+            b: inp * out,
+            inp,
+            out,
+        };
+        let th = wave(inp * out + out, 0.37);
+        let na = inp / 2;
+        let (a, c) = (wave(na * r, 0.11), wave((inp - na) * r, 0.23));
+        let gy = wave(out * r, 0.19);
+        let run = |blocked: bool, with_gx: bool| {
+            let mut g = wave(th.len(), 0.05);
+            let (mut ga, mut gc) = (wave(na * r, 0.07), wave((inp - na) * r, 0.13));
+            let gx = with_gx.then_some((&mut ga[..], &mut gc[..]));
+            if blocked {
+                l.backward(&th, &mut g, &a, &c, r, &gy, gx);
+            } else {
+                backward_one_at_a_time(&l, &th, &mut g, &a, &c, r, &gy, gx);
+            }
+            (g, ga, gc)
+        };
+        for with_gx in [true, false] {
+            let (x, y) = (run(true, with_gx), run(false, with_gx));
+            let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&x.0), bits(&y.0), "{inp}x{out}, {r} rows");
+            assert_eq!(bits(&x.1), bits(&y.1), "{inp}x{out}, {r} rows");
+            assert_eq!(bits(&x.2), bits(&y.2), "{inp}x{out}, {r} rows");
+        }
+    }
+}
+
+/// The dispatched passes (AVX2 where the CPU has it) give the same bits
+/// as the portable build of the same code: vectors only widen the loops.
+#[test]
+fn vector_build_gives_the_same_bits() {
+    let sizes = [7usize, 16, 16, 3];
+    let mut off = 0;
+    let layers = sizes
+        .windows(2)
+        .map(|s| {
+            let l = Linear {
+                w: off,
+                b: off + s[0] * s[1],
+                inp: s[0],
+                out: s[1],
+            };
+            off += s[0] * s[1] + s[1];
+            l
+        })
+        .collect();
+    let mlp = Mlp { layers };
+    let wave =
+        |n: usize, k: f64| -> Vec<f64> { (0..n).map(|i| (k * i as f64 + 0.3).sin()).collect() };
+    let th = wave(off, 0.37);
+    let r = 203; // not a multiple of any vector width
+    let (a, c) = (wave(4 * r, 0.11), wave(3 * r, 0.23));
+    let gy = wave(3 * r, 0.19);
+    let run = |fwd: &dyn Fn(&mut Tape, &mut [f64]), bwd: Backward| {
+        let mut tape = mlp.tape(r);
+        let mut y = vec![0.0; 3 * r];
+        fwd(&mut tape, &mut y);
+        let (mut g, mut ga, mut gc) = (vec![0.0; off], vec![0.0; 4 * r], vec![0.0; 3 * r]);
+        bwd(&tape, &mut g, &mut ga, &mut gc);
+        (y, g, ga, gc)
+    };
+    let w = mlp.width() * r;
+    let dispatched = run(
+        &|t, y| mlp.forward(&th, &a, &c, r, t, y),
+        &|t, g, ga, gc| {
+            let (mut s1, mut s2) = (vec![0.0; w], vec![0.0; w]);
+            mlp.backward(&th, g, &a, &c, r, t, &gy, Some((ga, gc)), &mut s1, &mut s2)
+        },
+    );
+    let portable = run(
+        &|t, y| mlp.forward_any(&th, &a, &c, r, t, y),
+        &|t, g, ga, gc| {
+            let (mut s1, mut s2) = (vec![0.0; w], vec![0.0; w]);
+            mlp.backward_any(&th, g, &a, &c, r, t, &gy, Some((ga, gc)), &mut s1, &mut s2)
+        },
+    );
+    assert!(dispatched.0.iter().any(|v| *v != 0.0));
+    assert_eq!(dispatched, portable);
+    // The tiled pass against the layer-by-layer one: the same outputs
+    // and tapes, recording or not, at row counts below, at and around a
+    // tile.
+    let rows = [
+        1,
+        4,
+        5,
+        8,
+        9,
+        10,
+        12,
+        13,
+        TILE - 1,
+        TILE,
+        TILE + 1,
+        TILE + 5,
+        203,
+    ];
+    for r in rows {
+        let (a, c) = (wave(4 * r, 0.11), wave(3 * r, 0.23));
+        let (mut want_tape, mut want) = (mlp.tape(r), vec![0.0; 3 * r]);
+        mlp.layerwise(&th, &a, &c, r, &mut want_tape, &mut want);
+        let (mut tape, mut y) = (mlp.tape(r), vec![0.0; 3 * r]);
+        mlp.forward(&th, &a, &c, r, &mut tape, &mut y);
+        assert_eq!(y, want, "{r} rows");
+        assert_eq!(tape.hidden, want_tape.hidden, "{r} rows: tape");
+        let mut yi = vec![0.0; 3 * r];
+        mlp.forward(&th, &a, &c, r, &mut mlp.inference_tape(), &mut yi);
+        assert_eq!(yi, want, "{r} rows, not recording");
+    }
+}
