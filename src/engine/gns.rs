@@ -13,8 +13,6 @@
 //! Checked against candle's autodiff and finite differences
 //! (`tests/gns_engine.rs`).
 
-use rayon::prelude::*;
-
 use super::dense::{squareplus_in_place, times_squareplus_grad, Linear, Mlp, Tape};
 use super::EngineError;
 use crate::gnode::plan::GraphPlan;
@@ -190,33 +188,15 @@ impl Gns {
         targets: &[Vec<f64>],
         idx: &[usize],
         scale: Option<f64>,
-        mut fold: impl FnMut(&Chunk),
+        fold: impl FnMut(&Chunk),
     ) {
         let parts = super::split(idx.len(), self.plan.n + self.plan.recv.len());
-        let wave = (4 * self.threads).max(1);
         let (net, plan) = (&self.net, &self.plan);
-        for group in parts.chunks(wave) {
-            if self.chunks.len() < group.len() {
-                self.chunks.resize_with(group.len(), Chunk::default);
-            }
-            let work = |(c, &(a, b)): (&mut Chunk, &(usize, usize))| {
-                let sel = &idx[a..b];
-                c.run(net, plan, theta, (states, targets, sel), scale);
-            };
-            match &self.pool {
-                Some(pool) => pool.install(|| {
-                    self.chunks[..group.len()]
-                        .par_iter_mut()
-                        .zip(group.par_iter())
-                        .for_each(work);
-                }),
-                None => self.chunks[..group.len()]
-                    .iter_mut()
-                    .zip(group.iter())
-                    .for_each(work),
-            }
-            self.chunks[..group.len()].iter().for_each(&mut fold);
-        }
+        let work = |c: &mut Chunk, (a, b): (usize, usize)| {
+            c.run(net, plan, theta, (states, targets, &idx[a..b]), scale);
+        };
+        let pool = (self.pool.as_ref(), self.threads);
+        super::in_waves(&mut self.chunks, pool, &parts, work, fold);
     }
 }
 

@@ -86,6 +86,31 @@ fn split(len: usize, rows: usize) -> Vec<(usize, usize)> {
     out
 }
 
+/// Runs `work` on the chunks `parts` (a chunk's buffers each), wave by wave
+/// across the pool's `threads` threads, and folds the results in chunk order
+/// with `fold`: the order, and so the sums, do not depend on the threads.
+fn in_waves<C: Default + Send>(
+    chunks: &mut Vec<C>,
+    (pool, threads): (Option<&rayon::ThreadPool>, usize),
+    parts: &[(usize, usize)],
+    work: impl Fn(&mut C, (usize, usize)) + Sync,
+    mut fold: impl FnMut(&C),
+) {
+    let wave = (4 * threads).max(1);
+    for group in parts.chunks(wave) {
+        if chunks.len() < group.len() {
+            chunks.resize_with(group.len(), C::default);
+        }
+        let run = |(c, &part): (&mut C, &(usize, usize))| work(c, part);
+        let these = &mut chunks[..group.len()];
+        match pool {
+            Some(pool) => pool.install(|| these.par_iter_mut().zip(group.par_iter()).for_each(run)),
+            None => these.iter_mut().zip(group.iter()).for_each(run),
+        }
+        chunks[..group.len()].iter().for_each(&mut fold);
+    }
+}
+
 /// A rayon pool of `threads` threads, or none for one.
 fn pool(threads: usize) -> Result<Option<rayon::ThreadPool>, EngineError> {
     if threads <= 1 {
@@ -145,32 +170,15 @@ impl Engine {
         targets: &[Vec<f64>],
         idx: &[usize],
         scale: Option<f64>,
-        mut fold: impl FnMut(&Chunk),
+        fold: impl FnMut(&Chunk),
     ) {
         let parts = self.split(idx.len());
-        let wave = (4 * self.threads).max(1);
         let model = &self.model;
-        for group in parts.chunks(wave) {
-            if self.chunks.len() < group.len() {
-                self.chunks.resize_with(group.len(), Chunk::default);
-            }
-            let work = |(c, &(a, b)): (&mut Chunk, &(usize, usize))| {
-                c.run(model, theta, states, targets, &idx[a..b], scale);
-            };
-            match &self.pool {
-                Some(pool) => pool.install(|| {
-                    self.chunks[..group.len()]
-                        .par_iter_mut()
-                        .zip(group.par_iter())
-                        .for_each(work)
-                }),
-                None => self.chunks[..group.len()]
-                    .iter_mut()
-                    .zip(group.iter())
-                    .for_each(work),
-            }
-            self.chunks[..group.len()].iter().for_each(&mut fold);
-        }
+        let work = |c: &mut Chunk, (a, b): (usize, usize)| {
+            c.run(model, theta, states, targets, &idx[a..b], scale);
+        };
+        let pool = (self.pool.as_ref(), self.threads);
+        in_waves(&mut self.chunks, pool, &parts, work, fold);
     }
 
     /// Mean squared error of the accelerations of states `idx` against their
