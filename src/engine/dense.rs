@@ -55,22 +55,28 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// pass over `a` feeds four independent chains.
 #[inline(always)]
 fn dot4(a: &[f64], b: [&[f64]; 4]) -> [f64; 4] {
-    let mut acc = [[0.0; 4]; 4];
     let m = a.len() - a.len() % 4;
-    let ca = a[..m].chunks_exact(4);
-    let cb = b.map(|v| &v[..m]);
-    for (c, x) in ca.enumerate() {
-        for (o, row) in acc.iter_mut().enumerate() {
-            let y = &cb[o][c * 4..c * 4 + 4];
-            for k in 0..4 {
-                row[k] += x[k] * y[k];
-            }
+    // Four accumulators of their own (an array of them compiled to lane
+    // shuffles: 5-spring GNS epoch 135 ms against 120 ms this way).
+    let (mut s0, mut s1, mut s2, mut s3) = ([0.0; 4], [0.0; 4], [0.0; 4], [0.0; 4]);
+    let chunks = a[..m]
+        .chunks_exact(4)
+        .zip(b[0][..m].chunks_exact(4))
+        .zip(b[1][..m].chunks_exact(4))
+        .zip(b[2][..m].chunks_exact(4))
+        .zip(b[3][..m].chunks_exact(4));
+    for ((((x, y0), y1), y2), y3) in chunks {
+        for k in 0..4 {
+            s0[k] += x[k] * y0[k];
+            s1[k] += x[k] * y1[k];
+            s2[k] += x[k] * y2[k];
+            s3[k] += x[k] * y3[k];
         }
     }
     let mut out = [0.0; 4];
-    for (o, (row, v)) in acc.iter().zip(b).enumerate() {
+    for (o, (acc, v)) in [s0, s1, s2, s3].iter().zip(b).enumerate() {
         let tail: f64 = a[m..].iter().zip(&v[m..]).map(|(x, y)| x * y).sum();
-        out[o] = (row[0] + row[1]) + (row[2] + row[3]) + tail;
+        out[o] = (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail;
     }
     out
 }
