@@ -97,7 +97,8 @@ pub fn train_baseline(
         training,
         weights: net.store.weights()?,
     };
-    Ok(TrainedBaseline { file, net })
+    drop(net);
+    TrainedBaseline::from_file(file)
 }
 
 /// The executor's description of a GNS of these settings.

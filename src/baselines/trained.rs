@@ -1,9 +1,11 @@
-//! A trained baseline serving [`Dynamics`]: a candle forward per call (LGN and
-//! HGN differentiate at inference too; they are baselines, speed is secondary).
+//! A trained baseline serving [`Dynamics`]: GNS on the executor's forward
+//! pass; LGN and HGN a candle forward per call (they differentiate at
+//! inference too; they are baselines, speed is secondary).
 
 use super::file::BaselineFile;
 use super::net::{BaselineHyper, BaselineNet, Kind};
 use crate::dynamics::{Dynamics, DynamicsError, Forces};
+use crate::engine::Gns;
 use crate::error::{bail, Result};
 use crate::gnode::arch::ArchError;
 use crate::gnode::batch::Batch;
@@ -12,6 +14,7 @@ use crate::system::{Graph, State};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::path::Path;
+use std::sync::Mutex;
 
 /// A trained baseline ready for rollouts.
 #[derive(Clone, Debug)]
@@ -20,6 +23,35 @@ pub struct TrainedBaseline {
     pub file: BaselineFile,
     /// The network with those weights.
     pub net: BaselineNet,
+    /// GNS: its weights as one vector and the executor of the last graph,
+    /// whose forward pass serves rollouts (candle's per-call cost is
+    /// milliseconds).
+    gns: Option<GnsExecutor>,
+}
+
+/// GNS's weights and an executor for the last graph seen.
+struct GnsExecutor {
+    theta: Vec<f64>,
+    params: Vec<(String, usize)>,
+    last: Mutex<Option<(Graph, Gns)>>,
+}
+
+impl std::fmt::Debug for GnsExecutor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GnsExecutor")
+            .field("parameters", &self.theta.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Clone for GnsExecutor {
+    fn clone(&self) -> Self {
+        Self {
+            theta: self.theta.clone(),
+            params: self.params.clone(),
+            last: Mutex::new(None),
+        }
+    }
 }
 
 impl TrainedBaseline {
@@ -42,12 +74,49 @@ impl TrainedBaseline {
         }
         let net = BaselineNet::new(file.hyper.clone(), &mut ChaCha8Rng::seed_from_u64(0))?;
         net.store.load(&file.weights)?;
-        Ok(Self { file, net })
+        let gns = match file.hyper.kind {
+            Kind::Gns => Some(GnsExecutor {
+                theta: crate::train::flat_params(&net.store)?,
+                params: super::train::param_sizes(&net)?,
+                last: Mutex::new(None),
+            }),
+            _ => None,
+        };
+        Ok(Self { file, net, gns })
+    }
+
+    /// GNS's accelerations of `states` on the executor (`None`: not a GNS).
+    fn gns_accelerations(
+        &self,
+        graph: &Graph,
+        states: &[State],
+    ) -> Option<Result<Vec<Vec<f64>>, DynamicsError>> {
+        let g = self.gns.as_ref()?;
+        let mut last = g
+            .last
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if last.as_ref().is_none_or(|(kept, _)| kept != graph) {
+            let spec = super::train::gns_spec(&self.file.hyper);
+            match Gns::new(spec, &g.params, graph, 1) {
+                Ok(gns) => *last = Some((graph.clone(), gns)),
+                Err(e) => return Some(Err(DynamicsError::Model(e.to_string()))),
+            }
+        }
+        let (_, gns) = last.as_mut()?;
+        let mut acc = gns.accelerations(&g.theta, states);
+        for a in &mut acc {
+            hold_kinematic(graph, a);
+        }
+        Some(Ok(acc))
     }
 
     fn accel(&self, graph: &Graph, state: &State) -> Result<Vec<f64>, DynamicsError> {
         self.supports(graph)?;
         state.validate(graph)?;
+        if let Some(acc) = self.gns_accelerations(graph, std::slice::from_ref(state)) {
+            return Ok(acc?.remove(0));
+        }
         let plan = GraphPlan::new(graph);
         let run = || -> Result<Vec<f64>> {
             let b = Batch::new(&plan, &[state], None, self.net.hyper.types)?;
@@ -119,6 +188,12 @@ impl Dynamics for TrainedBaseline {
             return Ok(());
         }
         self.supports(graph)?;
+        if let Some(acc) = self.gns_accelerations(graph, states) {
+            for (o, a) in out.iter_mut().zip(acc?) {
+                o.copy_from_slice(&a);
+            }
+            return Ok(());
+        }
         let plan = GraphPlan::new(graph);
         let nd = graph.ndof();
         let run = || -> Result<Vec<f64>> {

@@ -180,6 +180,28 @@ impl Gns {
         sse / count
     }
 
+    /// Predicted accelerations of `states` (node-major, one vector each):
+    /// the forward pass alone, for rollouts.
+    pub fn accelerations(&mut self, theta: &[f64], states: &[State]) -> Vec<Vec<f64>> {
+        let (n, d) = (self.plan.n, self.plan.dim);
+        let mut out = vec![vec![0.0; n * d]; states.len()];
+        let idx: Vec<usize> = (0..states.len()).collect();
+        let parts = super::split(idx.len(), n + self.plan.recv.len());
+        let mut at = parts.iter();
+        self.run(theta, states, &[], &idx, None, |c| {
+            let &(a, b) = at.next().expect("one fold per chunk");
+            let nodes = (b - a) * n;
+            for (s, o) in out[a..b].iter_mut().enumerate() {
+                for p in 0..n {
+                    for k in 0..d {
+                        o[p * d + k] = c.out[k * nodes + s * n + p];
+                    }
+                }
+            }
+        });
+        out
+    }
+
     /// The chunks of `idx` across the threads, folded in chunk order.
     fn run(
         &mut self,
@@ -259,6 +281,11 @@ impl Chunk {
         let nodes = sel.len() * plan.n;
         let edges = self.lay_out(net, plan, states, sel);
         self.forward(net, theta, nodes, edges, scale.is_some());
+        if targets.is_empty() {
+            // Inference: the accelerations are in `out`.
+            self.sse = 0.0;
+            return;
+        }
         // The loss, and ∂L/∂q̈ into `gout`.
         let d = plan.dim;
         let gout = room(&mut self.gout, d * nodes);
