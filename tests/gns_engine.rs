@@ -7,7 +7,7 @@
 
 mod common;
 
-use mcgnode::baselines::{gns_spec, param_sizes, BaselineHyper, BaselineNet, Kind};
+use mcgnode::baselines::{BaselineHyper, BaselineNet, Kind};
 use mcgnode::engine::Gns;
 use mcgnode::gnode::batch::Batch;
 use mcgnode::gnode::plan::GraphPlan;
@@ -69,8 +69,8 @@ fn candle(
 
 fn native(net: &BaselineNet, graph: &Graph, threads: usize) -> Gns {
     Gns::new(
-        gns_spec(&net.hyper),
-        &param_sizes(net).unwrap(),
+        net.hyper.gns_spec(),
+        &net.param_sizes().unwrap(),
         graph,
         threads,
     )

@@ -37,6 +37,6 @@ pub mod train;
 pub mod trained;
 
 pub use file::BaselineFile;
+pub use train::train_baseline;
 pub(crate) use train::train_baseline_from_bags;
-pub use train::{gns_spec, param_sizes, train_baseline};
 pub use trained::TrainedBaseline;

@@ -96,6 +96,17 @@ impl BaselineHyper {
         }
     }
 
+    /// The executor's description of a GNS of these settings.
+    pub fn gns_spec(&self) -> crate::engine::GnsSpec {
+        crate::engine::GnsSpec {
+            dim: self.dim,
+            types: self.types,
+            hidden: self.hidden,
+            latent: self.latent,
+            rounds: self.rounds,
+        }
+    }
+
     /// Scalar parameters of the network these settings define, counted as
     /// [`BaselineNet::new`] declares them but without building it; `None` if
     /// the count overflows. For refusing a file whose settings need more
@@ -182,6 +193,16 @@ impl BaselineNet {
             node_out,
             edge_out,
         })
+    }
+
+    /// Every parameter's name and scalar count, in the flat vector's order
+    /// (what [`crate::engine::Gns`] reads its weights by).
+    pub fn param_sizes(&self) -> Result<Vec<(String, usize)>> {
+        self.store
+            .names()
+            .iter()
+            .map(|n| Ok((n.clone(), self.store.get(n)?.elem_count())))
+            .collect()
     }
 
     /// Learned masses per row of the batch, `(B·n, 1)` (LGN/HGN).

@@ -7,7 +7,7 @@
 use super::file::{BaselineFile, FORMAT};
 use super::net::{BaselineHyper, BaselineNet};
 use super::trained::TrainedBaseline;
-use crate::engine::{Gns, GnsSpec};
+use crate::engine::Gns;
 use crate::error::{bail, Result};
 use crate::gnode::batch::Batch;
 use crate::gnode::plan::GraphPlan;
@@ -55,8 +55,8 @@ pub fn train_baseline(
     let mut obj: Box<dyn Objective + '_> = match (net.hyper.kind, cfg.engine) {
         (super::net::Kind::Gns, EngineKind::Native) => {
             let gns = Gns::new(
-                gns_spec(&net.hyper),
-                &param_sizes(&net)?,
+                net.hyper.gns_spec(),
+                &net.param_sizes()?,
                 graph,
                 cfg.threads,
             )?;
@@ -99,26 +99,6 @@ pub fn train_baseline(
     };
     drop(net);
     TrainedBaseline::from_file(file)
-}
-
-/// The executor's description of a GNS of these settings.
-pub fn gns_spec(h: &BaselineHyper) -> GnsSpec {
-    GnsSpec {
-        dim: h.dim,
-        types: h.types,
-        hidden: h.hidden,
-        latent: h.latent,
-        rounds: h.rounds,
-    }
-}
-
-/// Every parameter's name and scalar count, in the flat vector's order.
-pub fn param_sizes(net: &BaselineNet) -> Result<Vec<(String, usize)>> {
-    net.store
-        .names()
-        .iter()
-        .map(|n| Ok((n.clone(), net.store.get(n)?.elem_count())))
-        .collect()
 }
 
 /// Trains a baseline from trajectory bags (on ParticleState topic `topic`

@@ -77,7 +77,7 @@ impl TrainedBaseline {
         let gns = match file.hyper.kind {
             Kind::Gns => Some(GnsExecutor {
                 theta: crate::train::flat_params(&net.store)?,
-                params: super::train::param_sizes(&net)?,
+                params: net.param_sizes()?,
                 last: Mutex::new(None),
             }),
             _ => None,
@@ -97,7 +97,7 @@ impl TrainedBaseline {
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         if last.as_ref().is_none_or(|(kept, _)| kept != graph) {
-            let spec = super::train::gns_spec(&self.file.hyper);
+            let spec = self.file.hyper.gns_spec();
             match Gns::new(spec, &g.params, graph, 1) {
                 Ok(gns) => *last = Some((graph.clone(), gns)),
                 Err(e) => return Some(Err(DynamicsError::Model(e.to_string()))),
