@@ -149,15 +149,61 @@ pub fn contact_packing(side: usize) -> (Graph, State) {
 /// control steps of 10 integration steps (50 steps), through a random MCGNODE
 /// on a chain of 19 links and its gripper (20 particles), on every core.
 pub fn plan_seconds(candidates: usize, repeats: usize) -> Result<f64> {
-    use crate::plan::{plan, Cost, CostKind, Problem, Sampler, Timing};
+    use crate::plan::{plan, Sampler};
+    let (cfg, g, start, m) = plan_setup()?;
+    let problem = plan_problem(&cfg, &g, &start, &m);
+    let sampler = Sampler::Random {
+        candidates,
+        sigma: 0.5,
+    };
+    let mut times = vec![];
+    for k in 0..repeats {
+        let t = Instant::now();
+        plan(&problem, sampler, None, k as u64, |_| true).map_err(crate::error::Error::msg)?;
+        times.push(t.elapsed().as_secs_f64());
+    }
+    Ok(median(times))
+}
+
+/// Median time of one planning gradient (∂cost/∂controls by reverse mode
+/// through the rollout) of the problem [`plan_seconds`] searches.
+pub fn plan_gradient_seconds(repeats: usize) -> Result<f64> {
+    let (cfg, g, start, m) = plan_setup()?;
+    let problem = plan_problem(&cfg, &g, &start, &m);
+    let controls = crate::plan::Controls::zeros(problem.horizon, problem.width());
+    let mut times = vec![];
+    for _ in 0..repeats {
+        let t = Instant::now();
+        problem
+            .gradient(&controls)
+            .map_err(crate::error::Error::msg)?;
+        times.push(t.elapsed().as_secs_f64());
+    }
+    Ok(median(times))
+}
+
+/// The planning benches' system: a 20-particle held chain and an MCGNODE of
+/// random weights.
+fn plan_setup() -> Result<(SystemConfig, Graph, State, crate::kernel::TrainedModel)> {
     let cfg = SystemConfig::new(SystemKind::HeldChain, 19);
     let g = cfg.graph();
     let start = cfg.start_for(&g, 5, 0);
     let (_, m) = random_model(Variant::Mcgnode, &g, 0)?;
-    let problem = Problem {
-        model: &m,
-        graph: &g,
-        start: &start,
+    Ok((cfg, g, start, m))
+}
+
+/// Moving the gripper so that the chain's end reaches a target.
+fn plan_problem<'a>(
+    cfg: &SystemConfig,
+    g: &'a Graph,
+    start: &'a State,
+    m: &'a crate::kernel::TrainedModel,
+) -> crate::plan::Problem<'a> {
+    use crate::plan::{Cost, CostKind, Problem, Timing};
+    Problem {
+        model: m,
+        graph: g,
+        start,
         timing: Timing {
             dt: cfg.dt,
             substeps: 10,
@@ -171,18 +217,7 @@ pub fn plan_seconds(candidates: usize, repeats: usize) -> Result<f64> {
             speed: 0.0,
         },
         max_speed: 1.0,
-    };
-    let sampler = Sampler::Random {
-        candidates,
-        sigma: 0.5,
-    };
-    let mut times = vec![];
-    for k in 0..repeats {
-        let t = Instant::now();
-        plan(&problem, sampler, None, k as u64, |_| true).map_err(crate::error::Error::msg)?;
-        times.push(t.elapsed().as_secs_f64());
     }
-    Ok(median(times))
 }
 
 /// Median time of a kernel rollout of `steps` steps of `variant` (random
@@ -231,7 +266,7 @@ pub fn run_all(quick: bool, only: Option<&str>) -> Result<Vec<Figure>> {
     let mut out = family_epoch_figures(quick, &want)?;
     out.extend(baseline_epoch_figures(quick, &want)?);
     out.extend(rollout_figures(quick, &want)?);
-    out.extend(plan_figure(quick, &want)?);
+    out.extend(plan_figures(quick, &want)?);
     out.extend(contact_figures(quick, &want)?);
     Ok(out)
 }
@@ -379,20 +414,31 @@ fn rollout_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
     Ok(out)
 }
 
-/// One round of planning on a held chain.
-fn plan_figure(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Option<Figure>> {
+/// One round of planning on a held chain, and one planning gradient.
+fn plan_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figure>> {
     let r = repeats(quick);
+    let mut out = vec![];
     let name = "plan: 256 candidates x 50 steps of a 20-particle held chain (MCGNODE, one round)";
-    if !want(name) {
-        return Ok(None);
+    if want(name) {
+        out.push(Figure {
+            name: name.into(),
+            value: plan_seconds(256, r.min(5))?,
+            unit: "s".into(),
+            jax: None,
+            repeats: r.min(5),
+        });
     }
-    Ok(Some(Figure {
-        name: name.into(),
-        value: plan_seconds(256, r.min(5))?,
-        unit: "s".into(),
-        jax: None,
-        repeats: r.min(5),
-    }))
+    let name = "plan gradient: d cost / d controls through 50 steps of the same chain (MCGNODE)";
+    if want(name) {
+        out.push(Figure {
+            name: name.into(),
+            value: plan_gradient_seconds(r)?,
+            unit: "s".into(),
+            jax: None,
+            repeats: r,
+        });
+    }
+    Ok(out)
 }
 
 /// Steps per second of a rollout with contact edges, and the share of a

@@ -623,12 +623,15 @@ impl Chunk {
             }
         }
         self.inputs = true;
-        self.grad.fill(0.0);
+        // No parameter gradients: planning discards them, and an empty
+        // buffer tells every layer to skip them (half the reverse pass).
+        let kept = std::mem::take(&mut self.grad);
         if graph {
             self.backward_graph(m, th, 1);
         } else {
             self.backward_flat(m, th, 1);
         }
+        self.grad = kept;
         self.inputs = false;
         let nm = &m.arch.norm;
         if !graph {
@@ -1048,7 +1051,8 @@ impl Chunk {
                     self.gminv[row] += gm;
                 }
             }
-            for p in 0..n {
+            // None to add without parameter gradients (planning's pass).
+            for p in 0..n * usize::from(!self.grad.is_empty()) {
                 let mi = minv(p);
                 self.grad[lm + m.plan.types[p]] -= self.gminv[base + p] * mi;
             }

@@ -146,8 +146,12 @@ impl Linear {
         mut gx: Option<(&mut [f64], &mut [f64])>,
     ) {
         let na = a.len() / r;
-        for j in 0..self.out {
-            g[self.b + j] += sum(&gy[j * r..(j + 1) * r]);
+        // An empty `g`: input gradients only (planning's reverse pass).
+        let params = !g.is_empty();
+        if params {
+            for j in 0..self.out {
+                g[self.b + j] += sum(&gy[j * r..(j + 1) * r]);
+            }
         }
         let gyj = |j: usize| &gy[j * r..(j + 1) * r];
         for i in 0..self.inp {
@@ -158,17 +162,19 @@ impl Linear {
             };
             // Four outputs per pass over the row: each sum is the one `dot`
             // forms, in its order (the same bits), with four chains in flight.
-            let gw = &mut g[self.w + i * self.out..self.w + (i + 1) * self.out];
-            let mut j = 0;
-            while j + 4 <= self.out {
-                let d = dot4(xi, [gyj(j), gyj(j + 1), gyj(j + 2), gyj(j + 3)]);
-                for (o, dv) in d.iter().enumerate() {
-                    gw[j + o] += dv;
+            if params {
+                let gw = &mut g[self.w + i * self.out..self.w + (i + 1) * self.out];
+                let mut j = 0;
+                while j + 4 <= self.out {
+                    let d = dot4(xi, [gyj(j), gyj(j + 1), gyj(j + 2), gyj(j + 3)]);
+                    for (o, dv) in d.iter().enumerate() {
+                        gw[j + o] += dv;
+                    }
+                    j += 4;
                 }
-                j += 4;
-            }
-            for (jj, gwj) in gw.iter_mut().enumerate().skip(j) {
-                *gwj += dot(xi, gyj(jj));
+                for (jj, gwj) in gw.iter_mut().enumerate().skip(j) {
+                    *gwj += dot(xi, gyj(jj));
+                }
             }
             if let Some((ga, gc)) = gx.as_mut() {
                 let gxi = if i < na {
@@ -478,8 +484,8 @@ impl Mlp {
     }
 
     /// Reverse pass of [`Mlp::forward`]: `gy` (`out × r`) is ∂L/∂y; accumulates
-    /// parameter gradients into `g` and, when `gx` is given, ∂L/∂[a; c] into its
-    /// two parts. `s1`, `s2` are scratch of at least `width() · r`.
+    /// parameter gradients into `g` (none when `g` is empty) and, when `gx` is
+    /// given, ∂L/∂[a; c] into its two parts. `s1`, `s2` are scratch of at least `width() · r`.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn backward(
         &self,

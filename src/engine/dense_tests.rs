@@ -173,3 +173,37 @@ fn vector_build_gives_the_same_bits() {
         assert_eq!(yi, want, "{r} rows, not recording");
     }
 }
+
+/// An empty parameter-gradient buffer skips the parameters and leaves the
+/// input gradients bit for bit as they are with it (planning's reverse pass).
+#[test]
+fn input_gradients_without_parameter_gradients() {
+    let wave =
+        |n: usize, k: f64| -> Vec<f64> { (0..n).map(|i| (k * i as f64 + 0.3).sin()).collect() };
+    let (inp, out, r) = (9usize, 6usize, 37usize);
+    let l = Linear {
+        w: 0,
+        b: inp * out,
+        inp,
+        out,
+    };
+    let th = wave(inp * out + out, 0.37);
+    let (a, c) = (wave(4 * r, 0.11), wave((inp - 4) * r, 0.23));
+    let gy = wave(out * r, 0.19);
+    let run = |with_params: bool| {
+        let mut g = if with_params {
+            vec![0.0; th.len()]
+        } else {
+            vec![]
+        };
+        let (mut ga, mut gc) = (vec![0.0; 4 * r], vec![0.0; (inp - 4) * r]);
+        l.backward(&th, &mut g, &a, &c, r, &gy, Some((&mut ga, &mut gc)));
+        (g, ga, gc)
+    };
+    let (full, skipped) = (run(true), run(false));
+    assert!(full.0.iter().any(|x| *x != 0.0));
+    assert!(skipped.0.is_empty());
+    let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&full.1), bits(&skipped.1));
+    assert_eq!(bits(&full.2), bits(&skipped.2));
+}
