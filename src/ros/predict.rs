@@ -132,8 +132,8 @@ pub fn trajectory_driven(
     substeps: u32,
     drive: &crate::physics::Drive,
 ) -> Result<PredictedTrajectory, PredictError> {
-    let (states, ()) = integrate(dt, steps, substeps, |h, n, every| {
-        Ok((model.rollout_driven(graph, start, h, n, every, drive)?, ()))
+    let states = integrate(dt, steps, substeps, |h, n, every| {
+        model.rollout_driven(graph, start, h, n, every, drive)
     })?;
     Ok(trajectory_of(input, graph, dt, &states[1..]))
 }
@@ -230,10 +230,9 @@ fn rollout(
     steps: u32,
     substeps: u32,
 ) -> Result<Vec<State>, PredictError> {
-    let (states, ()) = integrate(dt, steps, substeps, |h, n, every| {
-        Ok((model.rollout_every(graph, start, h, n, every)?, ()))
-    })?;
-    Ok(states)
+    integrate(dt, steps, substeps, |h, n, every| {
+        model.rollout_every(graph, start, h, n, every)
+    })
 }
 
 /// The integration step, step count and output stride of `steps` steps of
@@ -252,19 +251,19 @@ fn no_states() -> PredictError {
 }
 
 /// Runs `roll(dt / substeps, steps · substeps, substeps)` after checking
-/// `dt`, refusing an empty answer.
-fn integrate<T>(
+/// `dt`, refusing an empty answer (its states).
+fn integrate(
     dt: f64,
     steps: u32,
     substeps: u32,
-    roll: impl FnOnce(f64, usize, usize) -> Result<(Vec<State>, T), DynamicsError>,
-) -> Result<(Vec<State>, T), PredictError> {
+    roll: impl FnOnce(f64, usize, usize) -> Result<Vec<State>, DynamicsError>,
+) -> Result<Vec<State>, PredictError> {
     let (h, n, every) = integration(dt, steps, substeps)?;
-    let (states, extra) = roll(h, n, every).map_err(PredictError::Rollout)?;
+    let states = roll(h, n, every).map_err(PredictError::Rollout)?;
     if states.is_empty() {
         return Err(no_states());
     }
-    Ok((states, extra))
+    Ok(states)
 }
 
 /// The wire message of the predicted `states` from the `skip`-th on, after
