@@ -231,6 +231,18 @@ pub fn graph_rollout_seconds(
     repeats: usize,
 ) -> Result<f64> {
     let (_, m) = random_model(variant, g, 0)?;
+    model_rollout_seconds(&m, g, s0, dt, steps, repeats)
+}
+
+/// Median seconds of `steps`-step rollouts of the model `m` from `s0`.
+fn model_rollout_seconds(
+    m: &crate::kernel::TrainedModel,
+    g: &Graph,
+    s0: &State,
+    dt: f64,
+    steps: usize,
+    repeats: usize,
+) -> Result<f64> {
     let mut ws = m.kernel.workspace(g).map_err(crate::error::Error::msg)?;
     let mut times = vec![];
     for _ in 0..repeats {
@@ -447,12 +459,33 @@ fn contact_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
     let r = repeats(quick);
     let mut out = vec![];
     let (g, s0) = contact_packing(32);
+    let steps = if quick { 200 } else { 2_000 };
+    let wide = crate::train::recipe::edge_blocks(Variant::Mcgnode);
+    let width = wide.first().map_or(0, |(_, w)| w[0]);
+    let wide_name = format!(
+        "{}-particle contact MCGNODE rollout speed, train's edge blocks ({width} wide)",
+        g.n()
+    );
+    if want(&wide_name) {
+        // What `train` makes by default and the node serves.
+        let (_, m) = crate::testing::random_model_with(Variant::Mcgnode, &g, 0, |h| {
+            h.block_hidden
+                .extend(wide.iter().map(|(b, w)| ((*b).to_string(), w.clone())));
+        })?;
+        let s = model_rollout_seconds(&m, &g, &s0, 1e-3, steps, r.min(5))?;
+        out.push(Figure {
+            name: wide_name,
+            value: steps as f64 / s,
+            unit: "steps/s".into(),
+            jax: None,
+            repeats: r.min(5),
+        });
+    }
     let name = format!(
         "{}-particle contact MCGNODE rollout speed (6 neighbours each)",
         g.n()
     );
     if want(&name) {
-        let steps = if quick { 200 } else { 2_000 };
         let s = graph_rollout_seconds(&g, &s0, 1e-3, Variant::Mcgnode, steps, r.min(5))?;
         out.push(Figure {
             name,

@@ -12,6 +12,17 @@ use rand_chacha::ChaCha8Rng;
 /// training). As `train` would configure it: MCGNODE has a body-force branch
 /// only when the graph has anchors (springs are closed systems).
 pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, TrainedModel)> {
+    random_model_with(variant, graph, seed, |_| {})
+}
+
+/// [`random_model`] with its hyperparameters edited by `edit` first (for
+/// example the default recipe's wider edge blocks).
+pub fn random_model_with(
+    variant: Variant,
+    graph: &Graph,
+    seed: u64,
+    edit: impl FnOnce(&mut Hyper),
+) -> Result<(Net, TrainedModel)> {
     let types = graph
         .types
         .iter()
@@ -21,6 +32,7 @@ pub fn random_model(variant: Variant, graph: &Graph, seed: u64) -> Result<(Net, 
     let mut hyper = Hyper::new(variant, graph.dim, types, graph.n());
     hyper.body_force = !graph.anchors.is_empty();
     hyper.interaction_radius = graph.interaction_radius;
+    edit(&mut hyper);
     let net = Net::new(hyper.clone(), &mut ChaCha8Rng::seed_from_u64(seed))?;
     let file = crate::gnode::ModelFile {
         format: crate::gnode::file::FORMAT.into(),

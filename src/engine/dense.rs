@@ -5,7 +5,36 @@
 // (`target_feature`) copies to be compiled for AVX2 at all.
 #![allow(clippy::inline_always)]
 
-use crate::gnode::mlp::squareplus_f64;
+/// The widest vectors this CPU offers the passes below, with fused
+/// multiply-adds (the forward layers use them on every path, so every path
+/// gives the same bits; without FMA hardware the portable path's `mul_add`
+/// is a slow library call, on x86-64 CPUs older than 2013 only).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Simd {
+    /// AVX-512F and FMA.
+    Avx512,
+    /// AVX2 and FMA.
+    Avx2,
+    /// Whatever the target was compiled for.
+    Portable,
+}
+
+/// The [`Simd`] path for this CPU (the detection is cached by std).
+#[inline(always)]
+pub(crate) fn simd() -> Simd {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("fma") {
+            if std::is_x86_feature_detected!("avx512f") {
+                return Simd::Avx512;
+            }
+            if std::is_x86_feature_detected!("avx2") {
+                return Simd::Avx2;
+            }
+        }
+    }
+    Simd::Portable
+}
 
 /// squareplus'(z) from the activation y = squareplus(z): since
 /// z = y − 1/y and √(z² + 4) = y + 1/y, the derivative ½(1 + z/√(z²+4)) is
@@ -16,10 +45,68 @@ pub(crate) fn squareplus_grad_from_output(y: f64) -> f64 {
     y2 / (1.0 + y2)
 }
 
-/// Applies squareplus in place.
-#[inline(always)]
+/// Applies squareplus in place, compiled for the widest vectors the CPU has
+/// (its fused multiply-adds are library calls otherwise). Within an ulp of
+/// [`crate::gnode::mlp::squareplus_f64`]: the root is [`sqrt_via_f32`]'s.
 pub(crate) fn squareplus_in_place(x: &mut [f64]) {
-    x.iter_mut().for_each(|v| *v = squareplus_f64(*v));
+    match simd() {
+        // SAFETY: the CPU supports AVX-512F and FMA (`simd` checked).
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx512 => unsafe { squareplus_avx512(x) },
+        // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx2 => unsafe { squareplus_avx2(x) },
+        _ => squareplus_slice(x),
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,fma")]
+unsafe fn squareplus_avx512(x: &mut [f64]) {
+    squareplus_slice(x);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn squareplus_avx2(x: &mut [f64]) {
+    squareplus_slice(x);
+}
+
+/// [`squareplus_in_place`] for callers already compiled for their vectors.
+#[inline(always)]
+fn squareplus_slice(x: &mut [f64]) {
+    x.iter_mut().for_each(|v| *v = squareplus_fast(*v));
+}
+
+/// squareplus(x) = (x + √(x² + 4)) / 2 with the root by [`sqrt_via_f32`]
+/// (|x| ≥ 1e15: √(x² + 4) is |x| in f64).
+#[inline(always)]
+pub(crate) fn squareplus_fast(x: f64) -> f64 {
+    let ax = x.abs();
+    let root = if ax < 1e15 {
+        sqrt_via_f32(x * x + 4.0)
+    } else {
+        ax
+    };
+    // Halves first (exact), so that x near f64::MAX does not overflow.
+    x.mul_add(0.5, 0.5 * root)
+}
+
+/// √y for 1 ≤ y < 1e30, within an ulp of `y.sqrt()`: the f32 root refined by
+/// two Newton steps in f64 (each squares the relative error, 2⁻²⁴ → 2⁻⁴⁸ →
+/// rounding) with an f32 reciprocal. Square roots were most of an inference
+/// step with 16-wide layers, and f64 roots are the slowest vector
+/// instruction there is; f32 roots and divisions are several times faster.
+/// Every operation is an IEEE one (rounded exactly), so every vector width
+/// gives the same bits.
+#[inline(always)]
+fn sqrt_via_f32(y: f64) -> f64 {
+    #[allow(clippy::cast_possible_truncation)] // the f32 estimate, on purpose
+    let yf = y as f32;
+    let rf = yf.sqrt();
+    let (r0, half_inv) = (f64::from(rf), f64::from(0.5 / rf));
+    let r1 = (-r0).mul_add(r0, y).mul_add(half_inv, r0);
+    (-r1).mul_add(r1, y).mul_add(half_inv, r1)
 }
 
 /// `g ← g ⊙ squareplus'` given the activations `y` of the same shape.
@@ -124,7 +211,7 @@ impl Linear {
             };
             for (j, &wv) in wrow.iter().enumerate() {
                 for (yv, xv) in y[j * r..(j + 1) * r].iter_mut().zip(xi) {
-                    *yv += wv * xv;
+                    *yv = wv.mul_add(*xv, *yv);
                 }
             }
         }
@@ -233,7 +320,7 @@ fn dense_tile<const TILE: usize>(l: &Linear, th: &[f64], x: &[f64], y: &mut [f64
             for (o, row) in acc.iter_mut().enumerate() {
                 let wv = w[i * l.out + j + o];
                 for k in 0..TILE {
-                    row[k] += wv * xi[k];
+                    row[k] = wv.mul_add(xi[k], row[k]);
                 }
             }
         }
@@ -247,7 +334,7 @@ fn dense_tile<const TILE: usize>(l: &Linear, th: &[f64], x: &[f64], y: &mut [f64
         for i in 0..l.inp {
             let (xi, wv) = (lane(x, i), w[i * l.out + j]);
             for k in 0..TILE {
-                row[k] += wv * xi[k];
+                row[k] = wv.mul_add(xi[k], row[k]);
             }
         }
         y[j * TILE..(j + 1) * TILE].copy_from_slice(&row);
@@ -319,7 +406,8 @@ impl Mlp {
     /// `y = mlp([a; c])` over `r` rows, recording hidden activations in
     /// `tape` unless it is an [`Mlp::inference_tape`], compiled for the
     /// widest vectors the CPU has. Every path gives the same bits: each
-    /// output is the same sums in the same order (no fused multiply-adds).
+    /// output is the same sums in the same order (exactly rounded fused
+    /// multiply-adds on every path).
     pub(crate) fn forward(
         &self,
         th: &[f64],
@@ -329,22 +417,19 @@ impl Mlp {
         tape: &mut Tape,
         y: &mut [f64],
     ) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU supports AVX-512F (checked just above).
-                return unsafe { self.forward_avx512(th, a, c, r, tape, y) };
-            }
-            if std::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
-                return unsafe { self.forward_avx2(th, a, c, r, tape, y) };
-            }
+        match simd() {
+            // SAFETY: the CPU supports AVX-512F and FMA (`simd` checked).
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { self.forward_avx512(th, a, c, r, tape, y) },
+            // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { self.forward_avx2(th, a, c, r, tape, y) },
+            _ => self.forward_any(th, a, c, r, tape, y),
         }
-        self.forward_any(th, a, c, r, tape, y);
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
+    #[target_feature(enable = "avx512f,fma")]
     unsafe fn forward_avx512(
         &self,
         th: &[f64],
@@ -358,7 +443,7 @@ impl Mlp {
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     unsafe fn forward_avx2(
         &self,
         th: &[f64],
@@ -432,7 +517,7 @@ impl Mlp {
         for (li, l) in self.layers.iter().enumerate() {
             dense_tile::<T>(l, th, x, h);
             if li + 1 < self.layers.len() {
-                squareplus_in_place(&mut h[..l.out * T]);
+                squareplus_slice(&mut h[..l.out * T]);
                 if record {
                     let kept = &mut tape.hidden[li];
                     for j in 0..l.out {
