@@ -231,10 +231,11 @@ pub fn graph_rollout_seconds(
     repeats: usize,
 ) -> Result<f64> {
     let (_, m) = random_model(variant, g, 0)?;
-    model_rollout_seconds(&m, g, s0, dt, steps, repeats)
+    model_rollout_seconds(&m, g, s0, dt, steps, repeats, false)
 }
 
-/// Median seconds of `steps`-step rollouts of the model `m` from `s0`.
+/// Median seconds of `steps`-step rollouts of the model `m` from `s0`, with
+/// the edge MLPs' rows on two cores when `split` is set (as the node runs).
 fn model_rollout_seconds(
     m: &crate::kernel::TrainedModel,
     g: &Graph,
@@ -242,8 +243,12 @@ fn model_rollout_seconds(
     dt: f64,
     steps: usize,
     repeats: usize,
+    split: bool,
 ) -> Result<f64> {
     let mut ws = m.kernel.workspace(g).map_err(crate::error::Error::msg)?;
+    if split {
+        ws.split_rows();
+    }
     let mut times = vec![];
     for _ in 0..repeats {
         let t = Instant::now();
@@ -466,20 +471,25 @@ fn contact_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
         "{}-particle contact MCGNODE rollout speed, train's edge blocks ({width} wide)",
         g.n()
     );
-    if want(&wide_name) {
+    let split_name = format!("{wide_name}, 2 cores (the node's)");
+    if want(&wide_name) || want(&split_name) {
         // What `train` makes by default and the node serves.
         let (_, m) = crate::testing::random_model_with(Variant::Mcgnode, &g, 0, |h| {
             h.block_hidden
                 .extend(wide.iter().map(|(b, w)| ((*b).to_string(), w.clone())));
         })?;
-        let s = model_rollout_seconds(&m, &g, &s0, 1e-3, steps, r.min(5))?;
-        out.push(Figure {
-            name: wide_name,
-            value: steps as f64 / s,
-            unit: "steps/s".into(),
-            jax: None,
-            repeats: r.min(5),
-        });
+        for (name, split) in [(wide_name, false), (split_name, true)] {
+            if want(&name) {
+                let s = model_rollout_seconds(&m, &g, &s0, 1e-3, steps, r.min(5), split)?;
+                out.push(Figure {
+                    name,
+                    value: steps as f64 / s,
+                    unit: "steps/s".into(),
+                    jax: None,
+                    repeats: r.min(5),
+                });
+            }
+        }
     }
     let name = format!(
         "{}-particle contact MCGNODE rollout speed (6 neighbours each)",
@@ -495,13 +505,21 @@ fn contact_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
             repeats: r.min(5),
         });
         // The share of a step the neighbour search takes (one search per
-        // evaluation, one evaluation per step).
-        let mut search = crate::physics::neighbors::NeighborSearch::new(&g);
+        // evaluation, one evaluation per step), as the rollout searches:
+        // the Verlet list along the rollout's own positions.
+        let (_, m) = random_model(Variant::Mcgnode, &g, 0)?;
+        let mut ws = m.kernel.workspace(&g).map_err(crate::error::Error::msg)?;
+        let mut path = vec![];
+        m.rollout_with(&mut ws, &s0, 1e-3, steps, 1, |_, q, _| {
+            path.push(q.to_vec())
+        })
+        .map_err(crate::error::Error::msg)?;
         let times: Vec<f64> = (0..r.min(5))
             .map(|_| {
+                let mut search = crate::physics::neighbors::NeighborSearch::new(&g);
                 let t = Instant::now();
-                for _ in 0..steps {
-                    std::hint::black_box(search.search(&s0.q, 2, 1.0).len());
+                for q in &path[..steps] {
+                    std::hint::black_box(search.search_moving(q, 2, 1.0).len());
                 }
                 t.elapsed().as_secs_f64()
             })

@@ -18,7 +18,7 @@ use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::ros::input::{Accepted, Input, Inputs};
 use mcgnode::ros::predict::{self, PredictError};
 use mcgnode::ros::NodeParams;
-use mcgnode::system::Sample;
+use mcgnode::system::{Graph, Sample, State};
 
 /// The system allocator, counting the allocations each thread makes.
 struct Counting;
@@ -75,9 +75,24 @@ fn system(
     cfg.states = states;
     let graph = cfg.graph();
     let tr = cfg.simulate_one(&graph, cfg.start_for(&graph, 7, 0), 0);
-    let (_, mut model) = mcgnode::testing::random_model(variant, &graph, 3).expect("random model");
+    let states = tr
+        .samples
+        .iter()
+        .map(|s: &Sample| s.state.clone())
+        .collect();
+    served(&tr.graph, states, variant)
+}
+
+/// Parsed inputs of `states` of `graph`, and a model file of `variant` for
+/// it, loaded as `serve` loads it.
+fn served(
+    graph: &Graph,
+    states: Vec<State>,
+    variant: Variant,
+) -> (Vec<Input>, std::sync::Arc<dyn Dynamics>, NodeParams) {
+    let (_, mut model) = mcgnode::testing::random_model(variant, graph, 3).expect("random model");
     // As `train` records them: the edges it was trained on.
-    model.file.trained_on.edge_params = mcgnode::gnode::file::EdgeParams::of(&graph);
+    model.file.trained_on.edge_params = mcgnode::gnode::file::EdgeParams::of(graph);
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("model.json");
     model.file.save(&path).expect("saving the model file");
@@ -90,12 +105,16 @@ fn system(
         ..Default::default()
     };
     let inputs = Inputs::default();
-    let parsed = tr
-        .samples
-        .iter()
+    let parsed = states
+        .into_iter()
         .enumerate()
-        .map(|(k, s): (usize, &Sample)| {
-            let msg = ParticleState::from_sample(0, k as u32, "test", &tr.graph, s);
+        .map(|(k, state)| {
+            let s = Sample {
+                t: k as f64 * 1e-3,
+                state,
+                acc: None,
+            };
+            let msg = ParticleState::from_sample(0, k as u32, "test", graph, &s);
             match inputs.accept(&params, msg).expect("a valid state") {
                 Accepted::Ready(input) => *input,
                 other @ Accepted::WarmingUp { .. } => {
@@ -112,40 +131,44 @@ fn system(
 /// forces computed apart; the compatibility check ran in full once.
 fn no_allocation_after_warm_up(kind: SystemKind, particles: usize, variant: Variant) {
     let (inputs, model, params) = system(kind, particles, variant, 12);
+    no_allocation_in(&inputs, &model, &params, &format!("{kind:?} {variant}"));
+}
+
+/// [`no_allocation_after_warm_up`] on parsed inputs of one system.
+fn no_allocation_in(
+    inputs: &[Input],
+    model: &std::sync::Arc<dyn Dynamics>,
+    params: &NodeParams,
+    what: &str,
+) {
     let passed = mcgnode::compat::Passed::default();
     let mut kept = Predicted::default();
     let served = (model.as_ref(), 1);
     // Warm-up: buffers sized for this system (contact systems: for every
     // state's neighbours). The first call builds them, and is counted.
     let (first, _) =
-        allocations(|| predict::predict_served(served, &passed, &inputs[0], &params, &mut kept));
-    assert!(
-        first > 0,
-        "{kind:?} {variant}: the first call counted {first}"
-    );
-    for input in &inputs {
-        predict::predict_served(served, &passed, input, &params, &mut kept)
-            .unwrap_or_else(|e| panic!("{kind:?} {variant}: {e}"));
+        allocations(|| predict::predict_served(served, &passed, &inputs[0], params, &mut kept));
+    assert!(first > 0, "{what}: the first call counted {first}");
+    for input in inputs {
+        predict::predict_served(served, &passed, input, params, &mut kept)
+            .unwrap_or_else(|e| panic!("{what}: {e}"));
     }
-    for input in &inputs {
+    for input in inputs {
         let (n, r) =
-            allocations(|| predict::predict_served(served, &passed, input, &params, &mut kept));
-        r.unwrap_or_else(|e| panic!("{kind:?} {variant}: {e}"));
-        assert_eq!(
-            n, 0,
-            "{kind:?} {variant}: {n} allocations in one prediction"
-        );
+            allocations(|| predict::predict_served(served, &passed, input, params, &mut kept));
+        r.unwrap_or_else(|e| panic!("{what}: {e}"));
+        assert_eq!(n, 0, "{what}: {n} allocations in one prediction");
         // The same numbers as the model's own rollout and forces, apart.
         let want = model
             .rollout_every(&input.graph, &input.state, params.dt, 10, 1)
             .unwrap();
-        assert_eq!(kept.states.to_states(), want, "{kind:?} {variant}");
+        assert_eq!(kept.states.to_states(), want, "{what}");
         let f = model.forces(&input.graph, &input.state).unwrap();
         assert_eq!(kept.forces.to_forces(input.graph.dim), f);
         assert!(!f.total.is_empty());
     }
     // One graph, one full check.
-    assert_eq!(passed.full_checks(), 1, "{kind:?} {variant}");
+    assert_eq!(passed.full_checks(), 1, "{what}");
 }
 
 #[test]
@@ -164,6 +187,34 @@ fn bars_with_shake_predict_without_allocating() {
 #[test]
 fn contacts_predict_without_allocating() {
     no_allocation_after_warm_up(SystemKind::SoftSpheres, 100, Variant::Mcgnode);
+}
+
+/// A contact system large enough that the node's workspace runs its edge
+/// MLPs on two cores (a helper thread started in the warm-up) and finds its
+/// contacts with a Verlet list: a 1,024-particle packing, six neighbours
+/// each, moving a little from state to state. Still nothing allocated per
+/// state (the helper's half is the same MLP code; the counter counts this
+/// thread).
+#[test]
+fn large_contact_systems_predict_without_allocating() {
+    let (g, s0) = mcgnode::bench::contact_packing(32);
+    let states: Vec<State> = (0..12)
+        .map(|k| {
+            let mut s = s0.clone();
+            for (i, x) in s.q.iter_mut().enumerate() {
+                *x += 1e-3 * ((k * 7 + i) as f64).sin();
+            }
+            s
+        })
+        .collect();
+    let mut search = mcgnode::physics::neighbors::NeighborSearch::new(&g);
+    let directed = 2 * search.search(&s0.q, g.dim, g.interaction_radius).len();
+    assert!(
+        directed >= mcgnode::engine::SPLIT_ROWS,
+        "{directed} directed edges: too few to split"
+    );
+    let (inputs, model, params) = served(&g, states, Variant::Mcgnode);
+    no_allocation_in(&inputs, &model, &params, "1,024-particle packing");
 }
 
 /// The counter counts: the allocating form of the same prediction is seen,

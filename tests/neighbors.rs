@@ -307,3 +307,49 @@ fn a_thousand_particles_with_six_neighbours_each() {
     let us = t0.elapsed().as_secs_f64() / f64::from(reps) * 1e6;
     println!("{n} particles, {per:.2} neighbours each: {us:.1} µs per search");
 }
+
+/// The Verlet list gives, call after call along a moving system, exactly the
+/// pairs (and order) of a fresh search: small steps that reuse its
+/// candidates, jumps that rebuild them, a changed radius, a diverged (NaN)
+/// state, in 2D and 3D with bonds and kinematic particles; once warm it
+/// allocates nothing while it reuses its candidates.
+#[test]
+fn the_verlet_list_finds_what_a_fresh_search_finds() {
+    let mut rng = ChaCha8Rng::seed_from_u64(33);
+    let mut compared = 0;
+    for dim in [2, 3] {
+        let n = 600;
+        let edges: Vec<Edge> = (0..n / 3).map(|a| spring(3 * a, 3 * a + 1)).collect();
+        let mut g = graph(dim, n, 1.0, edges);
+        g.kinematic = (0..n).map(|i| i % 7 == 0).collect();
+        let mut q = points(&mut rng, n, dim, 9.0, 0);
+        let v: Vec<f64> = (0..n * dim).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let (mut moving, mut fresh) = (NeighborSearch::new(&g), NeighborSearch::new(&g));
+        for step in 0..400 {
+            let radius = if step >= 300 { 1.1 } else { 1.0 };
+            // Small steps (0.005 per call at most), a jump now and then.
+            let h = if step % 97 == 50 { 0.3 } else { 0.005 };
+            for (x, dx) in q.iter_mut().zip(&v) {
+                *x += h * dx;
+            }
+            let want = fresh.search(&q, dim, radius).to_vec();
+            let got = moving.search_moving(&q, dim, radius);
+            assert_eq!(got, &want[..], "{dim}D, step {step}");
+            compared += want.len();
+        }
+        // Warm and moving slowly: the candidates serve, nothing allocated.
+        let before = allocations();
+        for _ in 0..20 {
+            for (x, dx) in q.iter_mut().zip(&v) {
+                *x += 1e-4 * dx;
+            }
+            moving.search_moving(&q, dim, 1.1);
+        }
+        assert_eq!(allocations() - before, 0, "{dim}D");
+        // A diverged state: no stale candidates, the search's answer.
+        q[0] = f64::NAN;
+        let want = fresh.search(&q, dim, 1.1).to_vec();
+        assert_eq!(moving.search_moving(&q, dim, 1.1), &want[..]);
+    }
+    assert!(compared > 100_000, "only {compared} pairs compared");
+}

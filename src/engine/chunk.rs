@@ -5,6 +5,7 @@
 
 use super::dense::{squareplus_in_place, times_squareplus_grad, Mlp, Tape};
 use super::layout::Layout;
+use super::split::Split;
 use crate::gnode::arch::{Arch, Block, Decoder, NodeInput};
 use crate::gnode::plan::{BarEnd, GraphPlan};
 use crate::gnode::solve::lu_solve_in_place;
@@ -157,6 +158,8 @@ pub(crate) struct Chunk {
     pub(crate) grad: Vec<f64>,
     /// Σ squared errors of the last run.
     pub(crate) sse: f64,
+    /// The edge MLPs' rows over two cores (large graphs, inference only).
+    pub(crate) split: Split,
 }
 
 /// The contact pairs of a chunk's states: state `s`'s are
@@ -181,6 +184,18 @@ impl Contacts {
             self.starts.push(self.pairs.len());
         }
         2 * ((self.starts.len() - 1) * plan.n_edges() + self.pairs.len())
+    }
+
+    /// [`Contacts::find`] for one state of a rollout (consecutive calls see
+    /// nearby positions): the same pairs, from a Verlet list.
+    fn find_moving(&mut self, plan: &GraphPlan, q: &[f64]) -> usize {
+        self.pairs.clear();
+        self.starts.clear();
+        self.starts.push(0);
+        let search = self.search.get_or_insert_with(|| plan.contact_search());
+        plan.contacts_moving(search, q, &mut self.pairs);
+        self.starts.push(self.pairs.len());
+        2 * (plan.n_edges() + self.pairs.len())
     }
 }
 
@@ -219,7 +234,9 @@ impl Chunk {
             d * n * bs
         };
         let contacts = std::mem::take(&mut self.contacts);
+        let split = std::mem::take(&mut self.split);
         *self = Chunk {
+            split,
             cap: bs,
             record,
             laid: 0,
@@ -557,7 +574,7 @@ impl Chunk {
     /// [`Chunk::acceleration`], [`Chunk::decoded`] and [`Chunk::edge_outputs`].
     pub(crate) fn forward_one(&mut self, m: &Model, th: &[f64], q: &[f64], v: &[f64]) {
         if m.plan.has_contacts() {
-            let edges = self.contacts.find(&m.plan, std::iter::once(q));
+            let edges = self.contacts.find_moving(&m.plan, q);
             self.reserve(m, 1, edges, false);
             self.lay_out(m, 1);
         } else {
@@ -765,15 +782,9 @@ impl Chunk {
         }
         let i = m.ix(Block::EdgeEmbed).expect("graph model");
         let he0 = &mut self.he[0][..em * edges];
-        m.mlp(i).forward(
-            th,
-            &self.w_in[..a.edge_features() * edges],
-            &[],
-            edges,
-            &mut self.tapes[i],
-            he0,
-        );
-        squareplus_in_place(he0);
+        let w_in = &self.w_in[..a.edge_features() * edges];
+        let tape = &mut self.tapes[i];
+        (self.split).forward(m.mlp(i), th, (w_in, &[]), edges, tape, he0, true);
         // Message passing.
         for l in 0..a.rounds {
             let (hl, hn) = self.h.split_at_mut(l + 1);
@@ -792,8 +803,8 @@ impl Chunk {
                 // h_i ← sqp(h_i + Σ_j W_V(h_j ‖ h_ij)).
                 let i = m.ix(Block::Message(l)).expect("round");
                 let msg = &mut self.msg[..em * edges];
-                m.mlp(i)
-                    .forward(th, hs, hel, edges, &mut self.tapes[i], msg);
+                let tape = &mut self.tapes[i];
+                (self.split).forward(m.mlp(i), th, (hs, hel), edges, tape, msg, false);
                 let agg = &mut self.agg[..em * nodes];
                 agg.fill(0.0);
                 for k in 0..em {
@@ -812,14 +823,17 @@ impl Chunk {
                 // h_ij ← sqp(h_ij + W_E(h_i ‖ h_j)), from the node states before the round.
                 let i = m.ix(Block::EdgeUpdate(l)).expect("round");
                 let tape = &mut self.tapes[i];
+                let split = &mut self.split;
                 match a.edge_input {
-                    EdgeInput::Concat => m.mlp(i).forward(th, hr, hs, edges, tape, hen),
+                    EdgeInput::Concat => {
+                        split.forward(m.mlp(i), th, (hr, hs), edges, tape, hen, false)
+                    }
                     EdgeInput::Product => {
                         let hp = &mut self.hp[l][..em * edges];
                         for ((p, r), s) in hp.iter_mut().zip(hr.iter()).zip(hs.iter()) {
                             *p = r * s;
                         }
-                        m.mlp(i).forward(th, hp, &[], edges, tape, hen);
+                        split.forward(m.mlp(i), th, (hp, &[]), edges, tape, hen, false);
                     }
                 }
                 for (x, old) in hen.iter_mut().zip(hel) {
@@ -855,8 +869,8 @@ impl Chunk {
                 out.fill(0.0);
                 let i = m.ix(Block::EdgeDecoder).expect("pairwise decoder");
                 let fe = &mut self.f_edge[..d * edges];
-                m.mlp(i)
-                    .forward(th, her_, &[], edges, &mut self.tapes[i], fe);
+                let tape = &mut self.tapes[i];
+                (self.split).forward(m.mlp(i), th, (her_, &[]), edges, tape, fe, false);
                 let half = edges / 2;
                 for c in 0..d {
                     let (oc, fc) = (&mut out[c * nodes..(c + 1) * nodes], &fe[c * edges..]);

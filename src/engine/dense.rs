@@ -75,7 +75,11 @@ unsafe fn squareplus_avx2(x: &mut [f64]) {
 /// [`squareplus_in_place`] for callers already compiled for their vectors.
 #[inline(always)]
 fn squareplus_slice(x: &mut [f64]) {
-    x.iter_mut().for_each(|v| *v = squareplus_fast(*v));
+    // A plain loop: `for_each`'s closure was compiled out of line, without
+    // the caller's FMA, into library calls.
+    for v in x.iter_mut() {
+        *v = squareplus_fast(*v);
+    }
 }
 
 /// squareplus(x) = (x + √(x² + 4)) / 2 with the root by [`sqrt_via_f32`]
@@ -341,6 +345,53 @@ fn dense_tile<const TILE: usize>(l: &Linear, th: &[f64], x: &[f64], y: &mut [f64
     }
 }
 
+/// An MLP's output, feature-major (`y[j·r + row]`), written tile by tile
+/// through a pointer, so that two threads can fill disjoint row ranges of
+/// one buffer ([`Mlp::forward_part`]); it borrows the buffer for `'a`.
+#[derive(Clone, Copy)]
+pub(crate) struct Out<'a> {
+    ptr: *mut f64,
+    len: usize,
+    r: usize,
+    _buffer: std::marker::PhantomData<&'a mut [f64]>,
+}
+
+// SAFETY: an `Out` is a mutable borrow of an f64 buffer handed to threads
+// that write disjoint rows of it (each row range has one writer; see
+// `Mlp::forward_part`), and the borrow outlives them (scoped joins).
+unsafe impl Send for Out<'_> {}
+// SAFETY: as for Send: shared, it is only written at disjoint rows.
+unsafe impl Sync for Out<'_> {}
+
+impl<'a> Out<'a> {
+    /// The output buffer `y` of `r` rows per feature.
+    pub(crate) fn new(y: &'a mut [f64], r: usize) -> Self {
+        Self {
+            ptr: y.as_mut_ptr(),
+            len: y.len(),
+            r,
+            _buffer: std::marker::PhantomData,
+        }
+    }
+
+    /// Writes `src` at rows `t0..` of feature `j`.
+    #[inline(always)]
+    fn put(self, j: usize, t0: usize, src: &[f64]) {
+        let at = j * self.r + t0;
+        assert!(
+            at + src.len() <= self.len,
+            "an MLP output out of its buffer"
+        );
+        // SAFETY: in bounds (checked); no other thread writes these rows
+        // (`Mlp::forward_part`'s contract), and the buffer is borrowed.
+        unsafe {
+            self.ptr
+                .add(at)
+                .copy_from_nonoverlapping(src.as_ptr(), src.len())
+        };
+    }
+}
+
 /// An MLP with squareplus between layers and a linear output.
 #[derive(Clone, Debug)]
 pub(crate) struct Mlp {
@@ -402,7 +453,25 @@ impl Mlp {
             tile: vec![0.0; 2 * self.width() * TILE],
         }
     }
+}
 
+impl Tape {
+    /// Whether the forward pass records into this tape.
+    pub(crate) fn records(&self) -> bool {
+        !self.hidden.is_empty()
+    }
+
+    /// Makes the tile scratch big enough for `mlp` (allocates only when
+    /// growing).
+    pub(crate) fn fit(&mut self, mlp: &Mlp) {
+        let want = 2 * mlp.width() * TILE;
+        if self.tile.len() < want {
+            self.tile.resize(want, 0.0);
+        }
+    }
+}
+
+impl Mlp {
     /// `y = mlp([a; c])` over `r` rows, recording hidden activations in
     /// `tape` unless it is an [`Mlp::inference_tape`], compiled for the
     /// widest vectors the CPU has. Every path gives the same bits: each
@@ -417,14 +486,39 @@ impl Mlp {
         tape: &mut Tape,
         y: &mut [f64],
     ) {
+        // SAFETY: one writer, the whole of `y`, borrowed for the call.
+        unsafe { self.forward_part(th, (a, c), r, 0..r, tape, Out::new(y, r), false) };
+    }
+
+    /// [`Mlp::forward`] of the rows `rows` of `r` only, into their rows of
+    /// `y`, with squareplus applied to the outputs too when `activate` is
+    /// set (the same bits as applying it afterwards). Two threads may run
+    /// disjoint row ranges of one output at once (`engine::split`) when
+    /// neither records and each has its own tape; `rows` must then start
+    /// on a multiple of 16, so that the tiles are those of the whole pass.
+    ///
+    /// # Safety
+    /// No other thread writes `rows` of `y` during the call.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) unsafe fn forward_part(
+        &self,
+        th: &[f64],
+        ac: (&[f64], &[f64]),
+        r: usize,
+        rows: std::ops::Range<usize>,
+        tape: &mut Tape,
+        y: Out<'_>,
+        activate: bool,
+    ) {
+        let at = (r, rows, activate);
         match simd() {
             // SAFETY: the CPU supports AVX-512F and FMA (`simd` checked).
             #[cfg(target_arch = "x86_64")]
-            Simd::Avx512 => unsafe { self.forward_avx512(th, a, c, r, tape, y) },
+            Simd::Avx512 => unsafe { self.forward_avx512(th, ac, at, tape, y) },
             // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).
             #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => unsafe { self.forward_avx2(th, a, c, r, tape, y) },
-            _ => self.forward_any(th, a, c, r, tape, y),
+            Simd::Avx2 => unsafe { self.forward_avx2(th, ac, at, tape, y) },
+            _ => self.forward_any(th, ac, at, tape, y),
         }
     }
 
@@ -433,13 +527,12 @@ impl Mlp {
     unsafe fn forward_avx512(
         &self,
         th: &[f64],
-        a: &[f64],
-        c: &[f64],
-        r: usize,
+        ac: (&[f64], &[f64]),
+        at: (usize, std::ops::Range<usize>, bool),
         tape: &mut Tape,
-        y: &mut [f64],
+        y: Out<'_>,
     ) {
-        self.forward_any(th, a, c, r, tape, y);
+        self.forward_any(th, ac, at, tape, y);
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -447,59 +540,58 @@ impl Mlp {
     unsafe fn forward_avx2(
         &self,
         th: &[f64],
-        a: &[f64],
-        c: &[f64],
-        r: usize,
+        ac: (&[f64], &[f64]),
+        at: (usize, std::ops::Range<usize>, bool),
         tape: &mut Tape,
-        y: &mut [f64],
+        y: Out<'_>,
     ) {
-        self.forward_any(th, a, c, r, tape, y);
+        self.forward_any(th, ac, at, tape, y);
     }
 
-    /// [`Mlp::forward`] a tile of [`TILE`] rows at a time: the tile's inputs
-    /// are gathered (zero-padded at the end) and pass through every layer in
-    /// the tape's scratch; the valid rows of each hidden layer go to the tape
-    /// (when it records), those of the output to `y`. Layer by layer over all
-    /// rows ([`Mlp::layerwise`]) would stream every hidden row through memory
-    /// once per weight instead.
+    /// [`Mlp::forward_part`] a tile of [`TILE`] rows at a time: the tile's
+    /// inputs are gathered (zero-padded at the end) and pass through every
+    /// layer in the tape's scratch; the valid rows of each hidden layer go
+    /// to the tape (when it records), those of the output to `y`. Layer by
+    /// layer over all rows ([`Mlp::layerwise`]) would stream every hidden
+    /// row through memory once per weight instead.
     #[inline(always)]
     fn forward_any(
         &self,
         th: &[f64],
-        a: &[f64],
-        c: &[f64],
-        r: usize,
+        (a, c): (&[f64], &[f64]),
+        (r, rows, activate): (usize, std::ops::Range<usize>, bool),
         tape: &mut Tape,
-        y: &mut [f64],
+        y: Out<'_>,
     ) {
         if self.layers.is_empty() || r == 0 {
             return;
         }
         let na = a.len() / r;
-        let mut t0 = 0;
-        while t0 < r {
-            let len = match tile_for(r - t0) {
-                TILE => self.tile::<TILE>(th, (a, c, na), r, t0, tape, y),
-                8 => self.tile::<8>(th, (a, c, na), r, t0, tape, y),
-                _ => self.tile::<4>(th, (a, c, na), r, t0, tape, y),
+        let mut t0 = rows.start;
+        while t0 < rows.end {
+            let rest = rows.end - t0;
+            let at = (r, t0, rest, activate);
+            t0 += match tile_for(rest) {
+                TILE => self.tile::<TILE>(th, (a, c, na), at, tape, y),
+                8 => self.tile::<8>(th, (a, c, na), at, tape, y),
+                _ => self.tile::<4>(th, (a, c, na), at, tape, y),
             };
-            t0 += len;
         }
     }
 
-    /// One tile of up to `T` rows from row `t0` through every layer (see
-    /// [`Mlp::forward_any`]); returns the rows done.
+    /// One tile of up to `T` rows from row `t0` (of `r`, `rest` left in the
+    /// range) through every layer (see [`Mlp::forward_any`]); returns the
+    /// rows done.
     #[inline(always)]
     fn tile<const T: usize>(
         &self,
         th: &[f64],
         (a, c, na): (&[f64], &[f64], usize),
-        r: usize,
-        t0: usize,
+        (r, t0, rest, activate): (usize, usize, usize, bool),
         tape: &mut Tape,
-        y: &mut [f64],
+        y: Out<'_>,
     ) -> usize {
-        let len = T.min(r - t0);
+        let len = T.min(rest);
         let record = !tape.hidden.is_empty();
         let half = tape.tile.len() / 2;
         let (mut x, mut h) = tape.tile.split_at_mut(half);
@@ -528,8 +620,11 @@ impl Mlp {
             std::mem::swap(&mut x, &mut h);
         }
         let last = &self.layers[self.layers.len() - 1];
+        if activate {
+            squareplus_slice(&mut x[..last.out * T]);
+        }
         for j in 0..last.out {
-            y[j * r + t0..j * r + t0 + len].copy_from_slice(&x[j * T..j * T + len]);
+            y.put(j, t0, &x[j * T..j * T + len]);
         }
         len
     }

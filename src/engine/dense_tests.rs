@@ -134,7 +134,7 @@ fn vector_build_gives_the_same_bits() {
         },
     );
     let portable = run(
-        &|t, y| mlp.forward_any(&th, &a, &c, r, t, y),
+        &|t, y| mlp.forward_any(&th, (&a, &c), (r, 0..r, false), t, Out::new(y, r)),
         &|t, g, ga, gc| {
             let (mut s1, mut s2) = (vec![0.0; w], vec![0.0; w]);
             mlp.backward_any(&th, g, &a, &c, r, t, &gy, Some((ga, gc)), &mut s1, &mut s2)

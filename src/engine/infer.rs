@@ -26,6 +26,14 @@ impl Forward {
         Self { model, chunk }
     }
 
+    /// From now on, runs the edge MLPs of large graphs (over 1,024 directed
+    /// edges) on two cores: a helper thread, started on first need and kept
+    /// with these buffers, takes half of each one's rows (the same bits).
+    /// For one rollout at a time; a clone does not split.
+    pub fn split_rows(&mut self) {
+        self.chunk.split.enable();
+    }
+
     /// The graph as the engine sees it.
     pub fn plan(&self) -> &GraphPlan {
         &self.model.plan

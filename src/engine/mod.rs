@@ -17,11 +17,13 @@ mod gns;
 mod infer;
 mod layout;
 mod reverse;
+mod split;
 
 pub use gns::{Gns, GnsSpec};
 pub use infer::Forward;
 pub use layout::{Layout, LayoutError};
 pub use reverse::Reverse;
+pub use split::SPLIT_ROWS;
 
 use crate::gnode::arch::Arch;
 use crate::gnode::plan::GraphPlan;

@@ -166,6 +166,20 @@ impl GraphPlan {
         }
     }
 
+    /// [`GraphPlan::contacts`] along a rollout, whose positions move a
+    /// little between calls: the same pairs, from a Verlet list
+    /// ([`NeighborSearch::search_moving`]).
+    pub fn contacts_moving(
+        &self,
+        search: &mut NeighborSearch,
+        q: &[f64],
+        out: &mut Vec<(usize, usize)>,
+    ) {
+        if self.has_contacts() {
+            out.extend_from_slice(search.search_moving(q, self.dim, self.radius));
+        }
+    }
+
     /// The directed edges of `states` states side by side (state `s`'s
     /// particles at rows `s·n..`), whose contact pairs are
     /// `pairs[starts[s]..starts[s + 1]]`: first every state's edges one way

@@ -54,6 +54,13 @@ impl Workspace {
         self.forward.plan()
     }
 
+    /// Runs the edge MLPs of large graphs on two cores from now on (see
+    /// [`Forward::split_rows`]): for a workspace that serves one rollout at
+    /// a time, not for one per core.
+    pub fn split_rows(&mut self) {
+        self.forward.split_rows();
+    }
+
     /// The edges of the last evaluation as (a, b) pairs: fixed, then contacts.
     pub fn edge_pairs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         self.forward.edge_pairs()

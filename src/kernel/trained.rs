@@ -24,7 +24,8 @@ pub struct TrainedModel {
 
 /// A graph and its workspace, kept between calls: a call on the same graph
 /// takes it (no allocation), another graph builds its own; calls at the same
-/// time each get one.
+/// time each get one. These serve one rollout at a time (the node's), so a
+/// large graph's edge MLPs run on two cores ([`Workspace::split_rows`]).
 #[derive(Debug, Default)]
 struct Cache(Mutex<Option<(Graph, Workspace)>>);
 
@@ -40,7 +41,11 @@ impl Cache {
         let kept = self.0.lock().ok().and_then(|mut c| c.take());
         match kept {
             Some((g, ws)) if g == *graph => Ok((g, ws)),
-            _ => Ok((graph.clone(), kernel.workspace(graph)?)),
+            _ => {
+                let mut ws = kernel.workspace(graph)?;
+                ws.split_rows();
+                Ok((graph.clone(), ws))
+            }
         }
     }
 
