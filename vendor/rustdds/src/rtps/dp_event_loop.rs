@@ -303,6 +303,13 @@ impl DPEventLoop {
         Duration::from_millis(2)
       };
       let poll_timeout = timeout_until(ev_wrapper.shared_timer.borrow().next_deadline(), idle_cap);
+      // mcgnode patch (precise pacing): epoll waits whole milliseconds (mio
+      // rounds up), so a paced push's 0.5 ms pause took 1 ms and a 5 MB
+      // sample twice as long as its pacing intends. A deadline under 1 ms
+      // away is met by a short sleep after a look at the sockets (events
+      // that arrive meanwhile wait at most that long).
+      let sub_ms = poll_timeout > Duration::ZERO && poll_timeout < Duration::from_millis(1);
+      let poll_timeout = if sub_ms { Duration::ZERO } else { poll_timeout };
       match ev_wrapper.poll.poll(&mut events, Some(poll_timeout)) {
         Ok(_) => {}
         Err(e) => {
@@ -319,6 +326,13 @@ impl DPEventLoop {
       }
 
       if events.is_empty() {
+        if sub_ms {
+          // mcgnode patch (precise pacing): see above.
+          std::thread::sleep(timeout_until(
+            ev_wrapper.shared_timer.borrow().next_deadline(),
+            Duration::from_millis(1),
+          ));
+        }
         debug!("dp_event_loop idling.");
       } else {
         for event in events.iter() {
