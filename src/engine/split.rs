@@ -154,6 +154,11 @@ impl Drop for Helper {
     }
 }
 
+/// Whether the machine has a second core for the helper.
+fn second_core() -> bool {
+    std::thread::available_parallelism().is_ok_and(|n| n.get() > 1)
+}
+
 /// A chunk's means of splitting: off unless enabled, the helper started on
 /// the first large MLP. A clone is off: batched rollouts clone a workspace
 /// per core, which are busy already.
@@ -183,7 +188,7 @@ impl std::fmt::Debug for Split {
 impl Split {
     /// Splits large MLPs from now on (when the machine has a second core).
     pub(crate) fn enable(&mut self) {
-        self.enabled = super::all_cores() > 1;
+        self.enabled = second_core();
     }
 
     /// `y = mlp([a; c])` over `r` rows without recording, then squareplus
@@ -287,7 +292,7 @@ mod tests {
                 }
             }
         }
-        assert_eq!(split.helper.is_some(), super::super::all_cores() > 1);
+        assert_eq!(split.helper.is_some(), second_core());
         // A clone does not split (one per core would oversubscribe them).
         assert!(!split.clone().enabled);
     }
