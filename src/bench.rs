@@ -26,6 +26,20 @@ pub struct Figure {
     pub repeats: usize,
 }
 
+impl Figure {
+    /// A rollout speed: `steps` steps in a median of `seconds`, over
+    /// `repeats` repeats.
+    fn speed(name: String, steps: usize, seconds: f64, repeats: usize) -> Self {
+        Self {
+            name,
+            value: steps as f64 / seconds,
+            unit: "steps/s".into(),
+            jax: None,
+            repeats,
+        }
+    }
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -420,13 +434,7 @@ fn rollout_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
         }
         let steps = 2_000_000 / n.max(1) / if quick { 10 } else { 1 };
         let s = rollout_seconds(SystemKind::Spring, n, Variant::Mcgnode, steps, r.min(5))?;
-        out.push(Figure {
-            name,
-            value: steps as f64 / s,
-            unit: "steps/s".into(),
-            jax: None,
-            repeats: r.min(5),
-        });
+        out.push(Figure::speed(name, steps, s, r.min(5)));
     }
     Ok(out)
 }
@@ -481,13 +489,7 @@ fn contact_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
         for (name, split) in [(wide_name, false), (split_name, true)] {
             if want(&name) {
                 let s = model_rollout_seconds(&m, &g, &s0, 1e-3, steps, r.min(5), split)?;
-                out.push(Figure {
-                    name,
-                    value: steps as f64 / s,
-                    unit: "steps/s".into(),
-                    jax: None,
-                    repeats: r.min(5),
-                });
+                out.push(Figure::speed(name, steps, s, r.min(5)));
             }
         }
     }
@@ -497,13 +499,7 @@ fn contact_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
     );
     if want(&name) {
         let s = graph_rollout_seconds(&g, &s0, 1e-3, Variant::Mcgnode, steps, r.min(5))?;
-        out.push(Figure {
-            name,
-            value: steps as f64 / s,
-            unit: "steps/s".into(),
-            jax: None,
-            repeats: r.min(5),
-        });
+        out.push(Figure::speed(name, steps, s, r.min(5)));
         // The share of a step the neighbour search takes (one search per
         // evaluation, one evaluation per step), as the rollout searches:
         // the Verlet list along the rollout's own positions.

@@ -455,6 +455,27 @@ impl Mlp {
     }
 }
 
+/// An MLP of these layer sizes over one flat parameter vector, and that
+/// vector's length (tests).
+#[cfg(test)]
+pub(crate) fn mlp_of_sizes(sizes: &[usize]) -> (Mlp, usize) {
+    let mut off = 0;
+    let layers = sizes
+        .windows(2)
+        .map(|s| {
+            let l = Linear {
+                w: off,
+                b: off + s[0] * s[1],
+                inp: s[0],
+                out: s[1],
+            };
+            off += s[0] * s[1] + s[1];
+            l
+        })
+        .collect();
+    (Mlp { layers }, off)
+}
+
 impl Tape {
     /// Whether the forward pass records into this tape.
     pub(crate) fn records(&self) -> bool {

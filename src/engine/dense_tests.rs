@@ -95,22 +95,7 @@ fn blocked_backward_gives_the_same_bits() {
 /// as the portable build of the same code: vectors only widen the loops.
 #[test]
 fn vector_build_gives_the_same_bits() {
-    let sizes = [7usize, 16, 16, 3];
-    let mut off = 0;
-    let layers = sizes
-        .windows(2)
-        .map(|s| {
-            let l = Linear {
-                w: off,
-                b: off + s[0] * s[1],
-                inp: s[0],
-                out: s[1],
-            };
-            off += s[0] * s[1] + s[1];
-            l
-        })
-        .collect();
-    let mlp = Mlp { layers };
+    let (mlp, off) = mlp_of_sizes(&[7, 16, 16, 3]);
     let wave =
         |n: usize, k: f64| -> Vec<f64> { (0..n).map(|i| (k * i as f64 + 0.3).sin()).collect() };
     let th = wave(off, 0.37);

@@ -244,26 +244,12 @@ impl Split {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::engine::dense::Linear;
+    use crate::engine::dense::mlp_of_sizes;
 
-    /// An MLP of these sizes over a flat parameter vector of smooth values.
+    /// An MLP of these sizes and smooth parameter values.
     fn mlp(sizes: &[usize]) -> (Mlp, Vec<f64>) {
-        let mut off = 0;
-        let layers = sizes
-            .windows(2)
-            .map(|s| {
-                let l = Linear {
-                    w: off,
-                    b: off + s[0] * s[1],
-                    inp: s[0],
-                    out: s[1],
-                };
-                off += s[0] * s[1] + s[1];
-                l
-            })
-            .collect();
-        let th = (0..off).map(|i| (0.37 * i as f64 + 0.3).sin()).collect();
-        (Mlp { layers }, th)
+        let (m, len) = mlp_of_sizes(sizes);
+        (m, (0..len).map(|i| (0.37 * i as f64 + 0.3).sin()).collect())
     }
 
     /// Split or not, with the activation or without, the same bits as the
