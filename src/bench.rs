@@ -498,12 +498,12 @@ fn contact_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
         g.n()
     );
     if want(&name) {
-        let s = graph_rollout_seconds(&g, &s0, 1e-3, Variant::Mcgnode, steps, r.min(5))?;
+        let (_, m) = random_model(Variant::Mcgnode, &g, 0)?;
+        let s = model_rollout_seconds(&m, &g, &s0, 1e-3, steps, r.min(5), false)?;
         out.push(Figure::speed(name, steps, s, r.min(5)));
         // The share of a step the neighbour search takes (one search per
         // evaluation, one evaluation per step), as the rollout searches:
         // the Verlet list along the rollout's own positions.
-        let (_, m) = random_model(Variant::Mcgnode, &g, 0)?;
         let mut ws = m.kernel.workspace(&g).map_err(crate::error::Error::msg)?;
         let mut path = vec![];
         m.rollout_with(&mut ws, &s0, 1e-3, steps, 1, |_, q, _| {

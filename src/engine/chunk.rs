@@ -3,7 +3,7 @@
 //! graph, feature-major), the squared error against the targets, and the
 //! hand-written reverse pass. Every buffer lives here and is reused.
 
-use super::dense::{squareplus_in_place, times_squareplus_grad, Mlp, Tape};
+use super::dense::{simd, squareplus_in_place, times_squareplus_grad, Mlp, Simd, Tape};
 use super::layout::Layout;
 use super::split::Split;
 use crate::gnode::arch::{Arch, Block, Decoder, NodeInput};
@@ -699,28 +699,25 @@ impl Chunk {
     /// CPU has (the activations and gathers between the MLPs are a third of
     /// an inference step); the same bits on every path.
     fn forward_graph(&mut self, m: &Model, th: &[f64]) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the CPU supports AVX-512F (checked just above).
-                return unsafe { self.forward_graph_avx512(m, th) };
-            }
-            if std::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
-                return unsafe { self.forward_graph_avx2(m, th) };
-            }
+        match simd() {
+            // SAFETY: the CPU supports AVX-512F and FMA (`simd` checked).
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { self.forward_graph_avx512(m, th) },
+            // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { self.forward_graph_avx2(m, th) },
+            _ => self.forward_graph_any(m, th),
         }
-        self.forward_graph_any(m, th);
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
+    #[target_feature(enable = "avx512f,fma")]
     unsafe fn forward_graph_avx512(&mut self, m: &Model, th: &[f64]) {
         self.forward_graph_any(m, th);
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     unsafe fn forward_graph_avx2(&mut self, m: &Model, th: &[f64]) {
         self.forward_graph_any(m, th);
     }

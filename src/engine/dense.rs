@@ -448,51 +448,11 @@ impl Mlp {
 
     /// A tape that records nothing (inference): only a tile's scratch.
     pub(crate) fn inference_tape(&self) -> Tape {
-        Tape {
-            hidden: vec![],
-            tile: vec![0.0; 2 * self.width() * TILE],
-        }
-    }
-}
-
-/// An MLP of these layer sizes over one flat parameter vector, and that
-/// vector's length (tests).
-#[cfg(test)]
-pub(crate) fn mlp_of_sizes(sizes: &[usize]) -> (Mlp, usize) {
-    let mut off = 0;
-    let layers = sizes
-        .windows(2)
-        .map(|s| {
-            let l = Linear {
-                w: off,
-                b: off + s[0] * s[1],
-                inp: s[0],
-                out: s[1],
-            };
-            off += s[0] * s[1] + s[1];
-            l
-        })
-        .collect();
-    (Mlp { layers }, off)
-}
-
-impl Tape {
-    /// Whether the forward pass records into this tape.
-    pub(crate) fn records(&self) -> bool {
-        !self.hidden.is_empty()
+        let mut tape = Tape::default();
+        tape.fit(self);
+        tape
     }
 
-    /// Makes the tile scratch big enough for `mlp` (allocates only when
-    /// growing).
-    pub(crate) fn fit(&mut self, mlp: &Mlp) {
-        let want = 2 * mlp.width() * TILE;
-        if self.tile.len() < want {
-            self.tile.resize(want, 0.0);
-        }
-    }
-}
-
-impl Mlp {
     /// `y = mlp([a; c])` over `r` rows, recording hidden activations in
     /// `tape` unless it is an [`Mlp::inference_tape`], compiled for the
     /// widest vectors the CPU has. Every path gives the same bits: each
@@ -768,6 +728,43 @@ impl Mlp {
                 times_squareplus_grad(gxl, x);
                 std::mem::swap(&mut cur, &mut next);
             }
+        }
+    }
+}
+
+/// An MLP of these layer sizes over one flat parameter vector, and that
+/// vector's length (tests).
+#[cfg(test)]
+pub(crate) fn mlp_of_sizes(sizes: &[usize]) -> (Mlp, usize) {
+    let mut off = 0;
+    let layers = sizes
+        .windows(2)
+        .map(|s| {
+            let l = Linear {
+                w: off,
+                b: off + s[0] * s[1],
+                inp: s[0],
+                out: s[1],
+            };
+            off += s[0] * s[1] + s[1];
+            l
+        })
+        .collect();
+    (Mlp { layers }, off)
+}
+
+impl Tape {
+    /// Whether the forward pass records into this tape.
+    pub(crate) fn records(&self) -> bool {
+        !self.hidden.is_empty()
+    }
+
+    /// Makes the tile scratch big enough for `mlp` (allocates only when
+    /// growing).
+    pub(crate) fn fit(&mut self, mlp: &Mlp) {
+        let want = 2 * mlp.width() * TILE;
+        if self.tile.len() < want {
+            self.tile.resize(want, 0.0);
         }
     }
 }

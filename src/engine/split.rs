@@ -124,7 +124,8 @@ fn serve(sh: &Shared) {
             if spins % 64 != 0 || t.elapsed() < SPIN {
                 std::hint::spin_loop();
             } else {
-                std::thread::park_timeout(Duration::from_millis(50));
+                // Woken by the next post or by `Drop` (both unpark).
+                std::thread::park();
             }
         }
         seen = sh.posted.load(Ordering::Acquire);
@@ -166,7 +167,7 @@ fn second_core() -> bool {
 pub(crate) struct Split {
     enabled: bool,
     helper: Option<Helper>,
-    /// The helper's tile scratch.
+    /// The helper's tile scratch (sized by `Tape::fit`).
     tape: Tape,
 }
 
@@ -214,7 +215,6 @@ impl Split {
         }
         if self.helper.is_none() {
             self.helper = Helper::start();
-            self.tape = mlp.inference_tape();
         }
         let Some(helper) = &self.helper else {
             self.enabled = false;
