@@ -7,6 +7,7 @@ use mcgnode::dynamics::Dynamics;
 use mcgnode::gnode::batch::Batch;
 use mcgnode::gnode::plan::GraphPlan;
 use mcgnode::gnode::solve::solve;
+use mcgnode::gnode::variant::EdgeInput;
 use mcgnode::gnode::{Hyper, ModelFile, Net, Variant};
 use mcgnode::kernel::TrainedModel;
 use mcgnode::models::ModelRef;
@@ -178,23 +179,37 @@ fn model_gradients_match_finite_differences() {
 }
 
 /// The hand-written kernel equals candle's forward to 1e-12, for every variant,
-/// on springs and pendulums, including a graph size the model was not built on.
+/// on springs and pendulums, including a graph size the model was not built on;
+/// with one round and two (the kernel runs round 0's edge update once per type
+/// pair), both edge inputs, and two particle types in no symmetric order.
 #[test]
 fn kernel_matches_candle() {
-    for (kind, n) in [
-        (SystemKind::Spring, 5),
-        (SystemKind::Spring, 12),
-        (SystemKind::Pendulum, 5),
-        (SystemKind::Pendulum, 4),
+    for (kind, n, mixed) in [
+        (SystemKind::Spring, 5, false),
+        (SystemKind::Spring, 12, false),
+        (SystemKind::Spring, 7, true),
+        (SystemKind::Pendulum, 5, false),
+        (SystemKind::Pendulum, 4, true),
     ] {
-        let (c, g) = system(kind, n);
+        let (c, mut g) = system(kind, n);
+        if mixed {
+            g.types = (0..n).map(|i| u32::from(i % 3 == 1)).collect();
+        }
         let st = states(&c, &g, 6, 21);
         let plan = GraphPlan::new(&g);
         let sr: Vec<&State> = st.iter().collect();
         let batch = Batch::new(&plan, &sr, None, 2).unwrap();
-        for v in Variant::ALL {
+        let settings = [
+            (1, EdgeInput::Product),
+            (2, EdgeInput::Product),
+            (1, EdgeInput::Concat),
+        ];
+        for (v, (rounds, edge_input)) in Variant::ALL
+            .into_iter()
+            .flat_map(|v| settings.map(|s| (v, s)))
+        {
             let mut hy = Hyper::new(v, 2, 2, n);
-            hy.rounds = 2; // exercise more than one round
+            (hy.rounds, hy.edge_input) = (rounds, edge_input);
             let net = Net::new(hy, &mut ChaCha8Rng::seed_from_u64(7)).unwrap();
             let out = net.forward(&batch).unwrap();
             let acc_c = out.acc.flatten_all().unwrap().to_vec1::<f64>().unwrap();
@@ -209,7 +224,7 @@ fn kernel_matches_candle() {
                     assert!(x.is_finite());
                     assert!(
                         (x - y).abs() <= 1e-12 * (1.0 + y.abs()),
-                        "{v} {kind:?} n={n}: kernel {x} vs candle {y}"
+                        "{v} {kind:?} n={n} rounds {rounds} {edge_input:?}: kernel {x} vs candle {y}"
                     );
                 }
             }

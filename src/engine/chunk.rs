@@ -152,6 +152,15 @@ pub(crate) struct Chunk {
     /// their node embeddings `embed × types` (inference).
     eye: Vec<f64>,
     type_embed: Vec<f64>,
+    /// Each row's particle type (`types[row % n]`, without the division).
+    node_ty: Vec<usize>,
+    /// Inference with one-hot node inputs: round 0's edge update reads only
+    /// the two ends' types, so it runs once per ordered type pair
+    /// (`pair_in`: its inputs, `pair_out`: its outputs, `types² ` rows) and
+    /// each edge reads its pair's row (`pair`: recv type · types + send type).
+    pair: Vec<usize>,
+    pair_in: Vec<f64>,
+    pair_out: Vec<f64>,
     s1: Vec<f64>,
     s2: Vec<f64>,
     /// ∂(Σ squared errors · scale)/∂θ of the last [`Chunk::run`] with gradients.
@@ -315,6 +324,17 @@ impl Chunk {
                 .map(|k| if k / types == k % types { 1.0 } else { 0.0 })
                 .collect(),
             type_embed: z(em * types),
+            node_ty: (0..if a.biases.graph { nodes } else { 0 })
+                .map(|r| m.plan.types[r % n])
+                .collect(),
+            // (`em`, `types`: 0 for NODE.)
+            pair: if record || !a.biases.graph {
+                vec![]
+            } else {
+                vec![0; edges]
+            },
+            pair_in: z(if record { 0 } else { 2 * em * types * types }),
+            pair_out: z(if record { 0 } else { em * types * types }),
             s1: g(width * rmax),
             s2: g(width * rmax),
             grad: g(m.layout.len()),
@@ -341,6 +361,7 @@ impl Chunk {
             bs * m.plan.recv.len()
         };
         let (recv, send, w_in) = (&mut self.recv, &mut self.send, &mut self.w_in);
+        let (pair, node_ty, t) = (&mut self.pair, &self.node_ty, a.types);
         let (pairs, starts) = if contacts {
             (&self.contacts.pairs[..], &self.contacts.starts[..])
         } else {
@@ -350,6 +371,9 @@ impl Chunk {
         m.plan.directed_edges(bs, pairs, starts, |k, e| {
             recv[k] = e.recv;
             send[k] = e.send;
+            if let Some(p) = pair.get_mut(k) {
+                *p = node_ty[e.recv] * t + node_ty[e.send];
+            }
             let mut f = a.dim;
             for c in a.edge_consts() {
                 let x = &mut x[..c.width()];
@@ -742,20 +766,32 @@ impl Chunk {
         };
         let i = m.ix(Block::NodeEmbed).expect("graph model");
         let h0 = &mut self.h[0][..em * nodes];
-        if !self.record && matches!(a.node_input, NodeInput::TypeOnly) {
-            // One-hot inputs: one embedding per type, the same bits as per
-            // node, a sixth of an inference step's square roots fewer.
+        // One-hot inputs at inference: node states before round 1 depend on
+        // the type alone, so round 0's edge update runs per type pair.
+        let by_type = !self.record && matches!(a.node_input, NodeInput::TypeOnly);
+        // Whether any stage reads node states: not MCGNODE's one round,
+        // whose edge update reads type pairs and whose decoder reads edges.
+        let nodes_read = !by_type
+            || a.rounds > 1
+            || (0..a.rounds).any(|l| a.updates_nodes(l))
+            || matches!(a.decoder, Decoder::Node { .. });
+        if by_type {
+            // One embedding per type, the same bits as per node, a sixth of
+            // an inference step's square roots fewer.
             let emb = &mut self.type_embed[..em * t];
             m.mlp(i)
                 .forward(th, &self.eye[..t * t], &[], t, &mut self.tapes[i], emb);
             squareplus_in_place(emb);
-            for k in 0..em {
-                let (hk, ek) = (
-                    &mut h0[k * nodes..(k + 1) * nodes],
-                    &emb[k * t..(k + 1) * t],
-                );
-                for (row, h) in hk.iter_mut().enumerate() {
-                    *h = ek[m.plan.types[row % m.plan.n]];
+            if nodes_read {
+                let ty = &self.node_ty[..nodes];
+                for k in 0..em {
+                    let (hk, ek) = (
+                        &mut h0[k * nodes..(k + 1) * nodes],
+                        &emb[k * t..(k + 1) * t],
+                    );
+                    for (h, &y) in hk.iter_mut().zip(ty) {
+                        *h = ek[y];
+                    }
                 }
             }
         } else {
@@ -789,11 +825,14 @@ impl Chunk {
             let (hel, hen) = self.he.split_at_mut(l + 1);
             let (hel, hen) = (&hel[l][..em * edges], &mut hen[0][..em * edges]);
             let (hs, hr) = (&mut self.hs[l][..em * edges], &mut self.hr[l][..em * edges]);
-            for k in 0..em {
-                let hk = &hl[k * nodes..(k + 1) * nodes];
-                for e in 0..edges {
-                    hs[k * edges + e] = hk[self.send[e]];
-                    hr[k * edges + e] = hk[self.recv[e]];
+            let by_pair = by_type && l == 0;
+            if !by_pair || a.updates_nodes(l) {
+                for k in 0..em {
+                    let hk = &hl[k * nodes..(k + 1) * nodes];
+                    for e in 0..edges {
+                        hs[k * edges + e] = hk[self.send[e]];
+                        hr[k * edges + e] = hk[self.recv[e]];
+                    }
                 }
             }
             if a.updates_nodes(l) {
@@ -813,10 +852,42 @@ impl Chunk {
                     *x = h + g;
                 }
                 squareplus_in_place(hn);
-            } else {
+            } else if nodes_read {
                 hn.copy_from_slice(hl);
             }
-            if a.updates_edges(l) {
+            if a.updates_edges(l) && by_pair {
+                // The same MLP on the types² pairs' inputs, read per edge.
+                let i = m.ix(Block::EdgeUpdate(l)).expect("round");
+                let (tt, emb) = (t * t, &self.type_embed[..em * t]);
+                let (pr, ps) = self.pair_in[..2 * em * tt].split_at_mut(em * tt);
+                for k in 0..em {
+                    for p in 0..tt {
+                        let (r, s) = (emb[k * t + p / t], emb[k * t + p % t]);
+                        match a.edge_input {
+                            EdgeInput::Concat => (pr[k * tt + p], ps[k * tt + p]) = (r, s),
+                            EdgeInput::Product => pr[k * tt + p] = r * s,
+                        }
+                    }
+                }
+                let ps: &[f64] = match a.edge_input {
+                    EdgeInput::Concat => ps,
+                    EdgeInput::Product => &[],
+                };
+                let po = &mut self.pair_out[..em * tt];
+                m.mlp(i).forward(th, pr, ps, tt, &mut self.tapes[i], po);
+                let pair = &self.pair[..edges];
+                for k in 0..em {
+                    let (x, old, pk) = (
+                        &mut hen[k * edges..(k + 1) * edges],
+                        &hel[k * edges..(k + 1) * edges],
+                        &po[k * tt..(k + 1) * tt],
+                    );
+                    for ((x, old), &p) in x.iter_mut().zip(old).zip(pair) {
+                        *x = pk[p] + old;
+                    }
+                }
+                squareplus_in_place(hen);
+            } else if a.updates_edges(l) {
                 // h_ij ← sqp(h_ij + W_E(h_i ‖ h_j)), from the node states before the round.
                 let i = m.ix(Block::EdgeUpdate(l)).expect("round");
                 let tape = &mut self.tapes[i];
