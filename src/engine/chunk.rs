@@ -23,6 +23,13 @@ pub(crate) struct Model {
     pub(crate) plan: GraphPlan,
     /// Bars at each particle with their sign in A: (bar, ±1).
     incid: Vec<Vec<(usize, f64)>>,
+    /// One-hot node inputs: node states before round 1 depend on the type
+    /// alone, so the node embedding runs once per type and round 0's edge
+    /// update once per ordered type pair (each edge reads its pair's row).
+    by_type: bool,
+    /// Whether any stage reads per-node states: not MCGNODE's one round
+    /// by type, whose edge update reads type pairs and whose decoder edges.
+    nodes_read: bool,
 }
 
 impl Model {
@@ -40,8 +47,15 @@ impl Model {
                 incid[b].push((r, -1.0));
             }
         }
+        let by_type = arch.biases.graph && matches!(arch.node_input, NodeInput::TypeOnly);
+        let nodes_read = !by_type
+            || arch.rounds > 1
+            || (0..arch.rounds).any(|l| arch.updates_nodes(l))
+            || matches!(arch.decoder, Decoder::Node { .. });
         Self {
             log_mass: layout.log_mass(),
+            by_type,
+            nodes_read,
             arch,
             layout,
             mlps,
@@ -154,13 +168,16 @@ pub(crate) struct Chunk {
     type_embed: Vec<f64>,
     /// Each row's particle type (`types[row % n]`, without the division).
     node_ty: Vec<usize>,
-    /// Inference with one-hot node inputs: round 0's edge update reads only
-    /// the two ends' types, so it runs once per ordered type pair
-    /// (`pair_in`: its inputs, `pair_out`: its outputs, `types² ` rows) and
-    /// each edge reads its pair's row (`pair`: recv type · types + send type).
+    /// Round 0's edge update by type pair ([`Model::by_type`]): its inputs
+    /// and outputs (`types²` rows), each edge's pair (recv type · types +
+    /// send type), and the reverse pass's ∂L/∂ of its outputs, its inputs
+    /// and the type embeddings.
     pair: Vec<usize>,
     pair_in: Vec<f64>,
     pair_out: Vec<f64>,
+    g_pair_out: Vec<f64>,
+    g_pair_in: Vec<f64>,
+    g_type: Vec<f64>,
     s1: Vec<f64>,
     s2: Vec<f64>,
     /// ∂(Σ squared errors · scale)/∂θ of the last [`Chunk::run`] with gradients.
@@ -232,7 +249,7 @@ impl Chunk {
         };
         let (n, d) = (m.plan.n, m.plan.dim);
         let nodes = bs * n;
-        let rmax = nodes.max(edges).max(bs).max(1);
+        let rmax = nodes.max(edges).max(bs).max(types * types).max(1);
         let width = m.mlps.iter().map(|(_, x)| x.width()).max().unwrap_or(1);
         let z = |len: usize| vec![0.0; len];
         // Buffers only the reverse pass reads: none for inference.
@@ -328,13 +345,12 @@ impl Chunk {
                 .map(|r| m.plan.types[r % n])
                 .collect(),
             // (`em`, `types`: 0 for NODE.)
-            pair: if record || !a.biases.graph {
-                vec![]
-            } else {
-                vec![0; edges]
-            },
-            pair_in: z(if record { 0 } else { 2 * em * types * types }),
-            pair_out: z(if record { 0 } else { em * types * types }),
+            pair: if m.by_type { vec![0; edges] } else { vec![] },
+            pair_in: z(2 * em * types * types),
+            pair_out: z(em * types * types),
+            g_pair_out: g(em * types * types),
+            g_pair_in: g(2 * em * types * types),
+            g_type: g(em * types),
             s1: g(width * rmax),
             s2: g(width * rmax),
             grad: g(m.layout.len()),
@@ -766,15 +782,7 @@ impl Chunk {
         };
         let i = m.ix(Block::NodeEmbed).expect("graph model");
         let h0 = &mut self.h[0][..em * nodes];
-        // One-hot inputs at inference: node states before round 1 depend on
-        // the type alone, so round 0's edge update runs per type pair.
-        let by_type = !self.record && matches!(a.node_input, NodeInput::TypeOnly);
-        // Whether any stage reads node states: not MCGNODE's one round,
-        // whose edge update reads type pairs and whose decoder reads edges.
-        let nodes_read = !by_type
-            || a.rounds > 1
-            || (0..a.rounds).any(|l| a.updates_nodes(l))
-            || matches!(a.decoder, Decoder::Node { .. });
+        let (by_type, nodes_read) = (m.by_type, m.nodes_read);
         if by_type {
             // One embedding per type, the same bits as per node, a sixth of
             // an inference step's square roots fewer.
@@ -1170,6 +1178,7 @@ impl Chunk {
         gh.fill(0.0);
         ghe.fill(0.0);
         gglob.fill(0.0);
+        self.g_type.fill(0.0);
         let gout = &self.gout[..d * nodes];
         let (hr_, her_) = (
             &self.h[a.rounds][..em * nodes],
@@ -1284,33 +1293,78 @@ impl Chunk {
                 for (x, g) in ghep.iter_mut().zip(gz.iter()) {
                     *x += g;
                 }
-                gs.fill(0.0);
-                gr.fill(0.0);
                 let i = m.ix(Block::EdgeUpdate(l)).expect("round");
                 let (tape, grad) = (&self.tapes[i], &mut self.grad);
-                match a.edge_input {
-                    EdgeInput::Concat => {
-                        let gx = Some((&mut gr[..], &mut gs[..]));
-                        m.mlp(i)
-                            .backward(th, grad, hr, hs, edges, tape, gz, gx, s1, s2);
-                    }
-                    EdgeInput::Product => {
-                        // ∂(h_i ⊙ h_j): ḡ_i = ḡ ⊙ h_j, ḡ_j = ḡ ⊙ h_i.
-                        let (hp, gp) = (&self.hp[l][..em * edges], &mut self.gp[..em * edges]);
-                        gp.fill(0.0);
-                        let gx = Some((&mut gp[..], &mut [][..]));
-                        m.mlp(i)
-                            .backward(th, grad, hp, &[], edges, tape, gz, gx, s1, s2);
-                        for (k, g) in gp.iter().enumerate() {
-                            gr[k] = g * hs[k];
-                            gs[k] = g * hr[k];
+                if m.by_type && l == 0 {
+                    // By type pair: each pair's ∂L/∂output is its edges' sum.
+                    let tt = t * t;
+                    let gpo = &mut self.g_pair_out[..em * tt];
+                    gpo.fill(0.0);
+                    for k in 0..em {
+                        let (gk, zk) = (&mut gpo[k * tt..(k + 1) * tt], &gz[k * edges..]);
+                        for (&p, z) in self.pair[..edges].iter().zip(zk) {
+                            gk[p] += z;
                         }
                     }
-                }
-                for k in 0..em {
-                    for e in 0..edges {
-                        ghp[k * nodes + self.recv[e]] += gr[k * edges + e];
-                        ghp[k * nodes + self.send[e]] += gs[k * edges + e];
+                    let emb = &self.type_embed[..em * t];
+                    let (pr, ps) = self.pair_in[..2 * em * tt].split_at(em * tt);
+                    let (gpr, gps) = self.g_pair_in[..2 * em * tt].split_at_mut(em * tt);
+                    gpr.fill(0.0);
+                    gps.fill(0.0);
+                    match a.edge_input {
+                        EdgeInput::Concat => {
+                            let gx = Some((&mut gpr[..], &mut gps[..]));
+                            m.mlp(i)
+                                .backward(th, grad, pr, ps, tt, tape, gpo, gx, s1, s2);
+                        }
+                        EdgeInput::Product => {
+                            let gx = Some((&mut gpr[..], &mut [][..]));
+                            m.mlp(i)
+                                .backward(th, grad, pr, &[], tt, tape, gpo, gx, s1, s2);
+                            // ∂(h_i ⊙ h_j): ḡ_i = ḡ ⊙ h_j, ḡ_j = ḡ ⊙ h_i.
+                            for k in 0..em {
+                                for p in 0..tt {
+                                    let g = gpr[k * tt + p];
+                                    gpr[k * tt + p] = g * emb[k * t + p % t];
+                                    gps[k * tt + p] = g * emb[k * t + p / t];
+                                }
+                            }
+                        }
+                    }
+                    let gty = &mut self.g_type[..em * t];
+                    for k in 0..em {
+                        for p in 0..tt {
+                            gty[k * t + p / t] += gpr[k * tt + p];
+                            gty[k * t + p % t] += gps[k * tt + p];
+                        }
+                    }
+                } else {
+                    gs.fill(0.0);
+                    gr.fill(0.0);
+                    match a.edge_input {
+                        EdgeInput::Concat => {
+                            let gx = Some((&mut gr[..], &mut gs[..]));
+                            m.mlp(i)
+                                .backward(th, grad, hr, hs, edges, tape, gz, gx, s1, s2);
+                        }
+                        EdgeInput::Product => {
+                            // ∂(h_i ⊙ h_j): ḡ_i = ḡ ⊙ h_j, ḡ_j = ḡ ⊙ h_i.
+                            let (hp, gp) = (&self.hp[l][..em * edges], &mut self.gp[..em * edges]);
+                            gp.fill(0.0);
+                            let gx = Some((&mut gp[..], &mut [][..]));
+                            m.mlp(i)
+                                .backward(th, grad, hp, &[], edges, tape, gz, gx, s1, s2);
+                            for (k, g) in gp.iter().enumerate() {
+                                gr[k] = g * hs[k];
+                                gs[k] = g * hr[k];
+                            }
+                        }
+                    }
+                    for k in 0..em {
+                        for e in 0..edges {
+                            ghp[k * nodes + self.recv[e]] += gr[k * edges + e];
+                            ghp[k * nodes + self.send[e]] += gs[k * edges + e];
+                        }
                     }
                 }
             } else {
@@ -1365,24 +1419,42 @@ impl Chunk {
             NodeInput::Full => nf,
         };
         let gh = &mut self.gh[..em * nodes];
-        times_squareplus_grad(gh, &self.h[0][..em * nodes]);
         let i = m.ix(Block::NodeEmbed).expect("graph model");
-        let x = &self.xn[..node_in * nodes];
-        // Type-only inputs carry no q or q̇: nothing to pass down.
-        let gx = (self.inputs && matches!(a.node_input, NodeInput::Full))
-            .then(|| (&mut self.gxn[..node_in * nodes], &mut [][..]));
-        m.mlp(i).backward(
-            th,
-            &mut self.grad,
-            x,
-            &[],
-            nodes,
-            &self.tapes[i],
-            gh,
-            gx,
-            s1,
-            s2,
-        );
+        if m.by_type {
+            // Per type: the sum over its nodes, through the embedding once.
+            let gty = &mut self.g_type[..em * t];
+            if m.nodes_read {
+                let ty = &self.node_ty[..nodes];
+                for k in 0..em {
+                    let gk = &mut gty[k * t..(k + 1) * t];
+                    for (g, &y) in gh[k * nodes..(k + 1) * nodes].iter().zip(ty) {
+                        gk[y] += g;
+                    }
+                }
+            }
+            times_squareplus_grad(gty, &self.type_embed[..em * t]);
+            let (eye, tape) = (&self.eye[..t * t], &self.tapes[i]);
+            m.mlp(i)
+                .backward(th, &mut self.grad, eye, &[], t, tape, gty, None, s1, s2);
+        } else {
+            times_squareplus_grad(gh, &self.h[0][..em * nodes]);
+            let x = &self.xn[..node_in * nodes];
+            // Type-only inputs carry no q or q̇: nothing to pass down.
+            let gx = (self.inputs && matches!(a.node_input, NodeInput::Full))
+                .then(|| (&mut self.gxn[..node_in * nodes], &mut [][..]));
+            m.mlp(i).backward(
+                th,
+                &mut self.grad,
+                x,
+                &[],
+                nodes,
+                &self.tapes[i],
+                gh,
+                gx,
+                s1,
+                s2,
+            );
+        }
         let ghe = &mut self.ghe[..em * edges];
         times_squareplus_grad(ghe, &self.he[0][..em * edges]);
         let i = m.ix(Block::EdgeEmbed).expect("graph model");
