@@ -39,6 +39,10 @@ pub const REPAIR_INTERVAL_MAX: Duration = Duration::from_millis(100);
 // one reader. A round always sends at least one sample, even a larger one.
 pub const REPAIR_BATCH_MAX_BYTES: usize = 8192;
 
+// mcgnode patch (batched fragment repair): most fragment bytes one
+// NACK_FRAG repair round sends to one reader (a paced push's burst).
+pub const REPAIR_FRAGS_MAX_BYTES: usize = PUSH_BURST_BYTES;
+
 // Periodic HEARTBEAT period for reliable Writers. The period is adaptive: while
 // some matched reader is behind (has unacknowledged samples), heartbeats are
 // sent at the FAST period to prompt prompt repair (some peers rely on a

@@ -31,7 +31,7 @@ use crate::{
       DEFAULT_WRITER_MAX_SAMPLES, FALLBACK_MAX_AGGREGATED_DATAGRAM_SIZE, FRAGMENT_SIZE,
       HEARTBEAT_PERIOD_FAST, HEARTBEAT_PERIOD_SLOW, HEARTBEAT_SUBMESSAGE_SERIALIZED_SIZE,
       NACK_RESPONSE_DELAY, NACK_SUPPRESSION_DURATION, PUSH_BURST_BYTES, PUSH_PACE_INTERVAL,
-      REPAIR_BATCH_MAX_BYTES, WRITER_CACHE_CLEANING_PERIOD_MS,
+      REPAIR_BATCH_MAX_BYTES, REPAIR_FRAGS_MAX_BYTES, WRITER_CACHE_CLEANING_PERIOD_MS,
       REPAIR_INTERVAL_DEFAULT, REPAIR_INTERVAL_MAX, REPAIR_INTERVAL_MIN,
     },
     outbound::{SocketId, TrafficClass},
@@ -1627,74 +1627,86 @@ impl Writer {
     reader_proxy: &mut RtpsReaderProxy, /* This is mutable proxy temporarily detached from the
                                          * set of reader proxies */
   ) {
-    // Decide the (max) number of frags to be sent
-    let max_send_count = 8;
-
     let reader_guid = reader_proxy.remote_reader_guid;
-
-    // Get (an iterator to) frags requested but not yet sent
-    // reader_proxy.
-    // Iterate over frags to be sent
-    for (seq_num, frag_num) in reader_proxy.frags_requested_iterator().take(max_send_count) {
-      // Sanity check request
-      // ^^^ TODO
-
-      if let Some(cache_change) = self.send_buffer.get_by_sn(seq_num) {
-        // If the data is meant for a single reader only, make sure it is the one we're
-        // about to send frags to.
-        if let Some(single_reader_guid) = cache_change.write_options.to_single_reader() {
-          if single_reader_guid != reader_guid {
-            error!(
-              "We were asked to send datafrags meant for the reader {single_reader_guid:?} to a \
-               different reader {reader_guid:?}. Not gonna happen."
-            );
-            return;
-          }
-        }
-
-        // Generate datafrag message
-        let mut message_builder = MessageBuilder::new();
-        if let Some(src_ts) = cache_change.write_options.source_timestamp() {
-          message_builder = message_builder.ts_msg(self.endianness, Some(src_ts));
-        }
-
-        let fragment_size: u32 = FRAGMENT_SIZE as u32;
-        let data_size: u32 = cache_change.data_value.payload_size() as u32; // TODO: overflow check
-
-        message_builder = message_builder.data_frag_msg(
-          &cache_change,
-          reader_guid.entity_id, // reader
-          self.my_guid,          // writer
-          frag_num,
-          // Repair responds to specifically-NACKed fragment numbers (possibly
-          // non-contiguous), so retransmit one fragment per submessage.
-          1,
-          fragment_size as u16, // TODO: overflow check
-          data_size,
-          self.endianness,
-          self.security_plugins.as_ref(),
-        );
-
-        // Repair frags are a reliability action (response to a NACK_FRAG), so
-        // they must actually reach the reader. Use the never-dropped `Control`
-        // queue: dropping repair on WouldBlock livelocks under sustained send
-        // congestion (reader re-NACKs, retransmit dropped again, forever).
-        let _blocked = self.send_message_to_readers(
-          DeliveryMode::Unicast,
-          message_builder.add_header_and_build(self.my_guid.prefix),
-          &mut std::iter::once(&*reader_proxy),
-          TrafficClass::Control,
-        );
-      } else {
-        error!(
-          "handle_repair_frags_send_worker: {:?} missing from send buffer. topic={:?}",
-          seq_num, self.my_topic_name
-        );
-        // TODO: Should we send a GAP message then?
+    // mcgnode patch (batched fragment repair): upstream sent 8 fragments (of
+    // 256 bytes) per round, one DATAFRAG each, a round every 10 ms, so a lost
+    // 64 KB datagram of a paced push (256 fragments) took 32 rounds and a
+    // few of them seconds. Now each run of contiguous requested fragments
+    // goes out as few DATAFRAGs as the reader's datagram budget allows, up to
+    // REPAIR_FRAGS_MAX_BYTES a round (one paced burst).
+    let requested: Vec<(SequenceNumber, FragmentNumber)> =
+      reader_proxy.frags_requested_iterator().collect();
+    let numbers: Vec<u32> = requested.iter().map(|(_, f)| u32::from(*f)).collect();
+    let Some(&(seq_num, _)) = requested.first() else {
+      return;
+    };
+    let Some(cache_change) = self.send_buffer.get_by_sn(seq_num) else {
+      error!(
+        "handle_repair_frags_send_worker: {:?} missing from send buffer. topic={:?}",
+        seq_num, self.my_topic_name
+      );
+      // TODO: Should we send a GAP message then?
+      for (sn, f) in &requested {
+        reader_proxy.mark_frag_sent(*sn, f);
       }
-
-      reader_proxy.mark_frag_sent(seq_num, &frag_num);
-    } // for
+      return;
+    };
+    // If the data is meant for a single reader only, make sure it is the one we're
+    // about to send frags to.
+    if let Some(single_reader_guid) = cache_change.write_options.to_single_reader() {
+      if single_reader_guid != reader_guid {
+        error!(
+          "We were asked to send datafrags meant for the reader {single_reader_guid:?} to a \
+           different reader {reader_guid:?}. Not gonna happen."
+        );
+        return;
+      }
+    }
+    let fragment_size = FRAGMENT_SIZE as u16;
+    let data_size = cache_change.data_value.payload_size();
+    let Ok(data_size_u32) = u32::try_from(data_size) else {
+      error!("handle_repair_frags_send_worker: data_size {data_size} does not fit in u32");
+      return;
+    };
+    let num_frags = data_size.div_ceil(FRAGMENT_SIZE) as u32;
+    let budget = reader_proxy.max_datagram_payload();
+    let header = |cc: &CacheChange| {
+      let mb = MessageBuilder::new();
+      match cc.write_options.source_timestamp() {
+        Some(src_ts) => mb.ts_msg(self.endianness, Some(src_ts)),
+        None => mb,
+      }
+    };
+    let header_len = header(&cache_change).len_serialized();
+    let runs = repair_runs(&numbers, REPAIR_FRAGS_MAX_BYTES / FRAGMENT_SIZE, |start| {
+      frags_per_datafrag(header_len, budget, start, num_frags, fragment_size, data_size)
+    });
+    for (start, count) in runs {
+      let message_builder = header(&cache_change).data_frag_msg(
+        &cache_change,
+        reader_guid.entity_id, // reader
+        self.my_guid,          // writer
+        FragmentNumber::new(start),
+        count as u16,
+        fragment_size,
+        data_size_u32,
+        self.endianness,
+        self.security_plugins.as_ref(),
+      );
+      // Repair frags are a reliability action (response to a NACK_FRAG), so
+      // they must actually reach the reader. Use the never-dropped `Control`
+      // queue: dropping repair on WouldBlock livelocks under sustained send
+      // congestion (reader re-NACKs, retransmit dropped again, forever).
+      let _blocked = self.send_message_to_readers(
+        DeliveryMode::Unicast,
+        message_builder.add_header_and_build(self.my_guid.prefix),
+        &mut std::iter::once(&*reader_proxy),
+        TrafficClass::Control,
+      );
+      for f in start..start + count {
+        reader_proxy.mark_frag_sent(seq_num, &FragmentNumber::new(f));
+      }
+    }
   } // fn
 
   /// Removes permanently cacheChanges from DDSCache.
@@ -2354,6 +2366,28 @@ fn frags_per_datafrag(
   k.min(remaining_frags)
 }
 
+// mcgnode patch (batched fragment repair): the DATAFRAGs of one repair round
+// as (first fragment, count), from the requested fragment numbers (ascending,
+// 1-based): each run of contiguous numbers split where `fits(start)` (how many
+// fragments from `start` fit one datagram) says, at most `max_frags` in all
+// (at least one DATAFRAG).
+fn repair_runs(requested: &[u32], max_frags: usize, fits: impl Fn(u32) -> u32) -> Vec<(u32, u32)> {
+  let mut out = vec![];
+  let (mut i, mut sent) = (0, 0);
+  while i < requested.len() && (sent < max_frags || out.is_empty()) {
+    let start = requested[i];
+    let mut run = 1;
+    while i + run < requested.len() && requested[i + run] == start + run as u32 {
+      run += 1;
+    }
+    let count = fits(start).clamp(1, run as u32);
+    out.push((start, count));
+    i += count as usize;
+    sent += count as usize;
+  }
+  out
+}
+
 struct FragmentationIter<'a> {
   writer: &'a Writer,
   cache_change: &'a CacheChange,
@@ -2657,6 +2691,20 @@ mod tests {
   // At a 1500-byte-MTU budget, a two-fragment "1 KB" sample (its serialized form
   // is slightly over the 1024-byte fragment size) packs BOTH fragments into one
   // DATAFRAG submessage, so it goes out in a single datagram instead of two.
+  #[test]
+  fn repair_runs_pack_contiguous_fragments() {
+    use super::repair_runs;
+    // Runs split at gaps and where a datagram is full (4 fragments here).
+    assert_eq!(
+      repair_runs(&[1, 2, 3, 7, 8, 9, 10, 11, 20], 100, |_| 4),
+      vec![(1, 3), (7, 4), (11, 1), (20, 1)]
+    );
+    // At most `max_frags` a round, but never nothing.
+    assert_eq!(repair_runs(&[1, 2, 3, 4, 5, 6], 4, |_| 2), vec![(1, 2), (3, 2)]);
+    assert_eq!(repair_runs(&[5, 6], 0, |_| 8), vec![(5, 2)]);
+    assert_eq!(repair_runs(&[], 8, |_| 8), vec![]);
+  }
+
   #[test]
   fn small_mtu_packs_1k_sample_into_one_datafrag() {
     // header_len 20 (RTPS header only), budget 1452, fragment size 1024,
