@@ -14,7 +14,8 @@
 # contacts each inside); serve a model trained with --radius 1 (--model FILE).
 #
 # Needs the release binary (cargo build --release; $CARGO_TARGET_DIR is
-# honoured) and the rclpy venv (scripts/setup_venv.sh).
+# honoured) and the rclpy venv (scripts/setup_venv.sh). NODE_LOG=FILE keeps
+# the node's log (stderr) there instead of a temporary file.
 set -euo pipefail
 ROOT="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$ROOT"
@@ -36,7 +37,7 @@ done
 scripts/build_msgs.sh >/dev/null
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
-export BIN MODEL LOG="$work/node.log" ENV_SH="$ROOT/build/msgs/env.sh" BENCH_ARGS="${args[*]:-}"
+export BIN MODEL LOG="${NODE_LOG:-$work/node.log}" ENV_SH="$ROOT/build/msgs/env.sh" BENCH_ARGS="${args[*]:-}"
 set +e
 timeout 900 scripts/netns.sh bash -c '
     . "$ENV_SH"

@@ -324,19 +324,23 @@ fn describe(f: &Field) -> String {
     }
 }
 
-/// The last system a [`TrainedFor::check`] passed for (the graph, the field
-/// and a key naming the model), so that a stream of states of one system is
-/// checked once, not once per state: the next state of the same system costs
-/// a comparison. A different graph, field or key is checked in full.
+/// The last few systems a [`TrainedFor::check`] passed for (each a graph, a
+/// field and a key naming the model), so that a stream of states of one
+/// system is checked once, not once per state, even between another
+/// stream's: the next state of a system passed costs a comparison. Any
+/// other graph, field or key is checked in full.
 #[derive(Debug, Default)]
 pub struct Passed {
-    last: std::sync::Mutex<Option<(u64, Graph, Option<Field>)>>,
+    last: std::sync::Mutex<Vec<(u64, Graph, Option<Field>)>>,
     full: std::sync::atomic::AtomicU64,
 }
 
 impl Passed {
+    /// Systems remembered (a node's streams, as the kernel's workspaces).
+    const SYSTEMS: usize = 4;
+
     /// [`TrainedFor::check`] of `graph` and `field` for the model `key`
-    /// names, skipped when the last one that passed was the same.
+    /// names, skipped when one of the last that passed was the same.
     pub fn check(
         &self,
         key: u64,
@@ -344,17 +348,17 @@ impl Passed {
         graph: &Graph,
         field: Option<&Field>,
     ) -> Result<(), Mismatch> {
-        let same = |last: &Option<(u64, Graph, Option<Field>)>| {
-            last.as_ref()
-                .is_some_and(|(k, g, f)| *k == key && g == graph && f.as_ref() == field)
+        let same = |(k, g, f): &(u64, Graph, Option<Field>)| {
+            *k == key && g == graph && f.as_ref() == field
         };
-        if self.last.lock().is_ok_and(|l| same(&l)) {
+        if self.last.lock().is_ok_and(|l| l.iter().any(same)) {
             return Ok(());
         }
         self.full.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         trained.check(graph, field)?;
         if let Ok(mut l) = self.last.lock() {
-            *l = Some((key, graph.clone(), field.cloned()));
+            l.insert(0, (key, graph.clone(), field.cloned()));
+            l.truncate(Self::SYSTEMS);
         }
         Ok(())
     }

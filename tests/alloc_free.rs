@@ -90,22 +90,39 @@ fn served(
     states: Vec<State>,
     variant: Variant,
 ) -> (Vec<Input>, std::sync::Arc<dyn Dynamics>, NodeParams) {
+    let params = short_predictions();
+    (
+        parse(graph, states, &params),
+        model_for(graph, variant),
+        params,
+    )
+}
+
+/// Short predictions of untrained weights, which stay finite.
+fn short_predictions() -> NodeParams {
+    NodeParams {
+        horizon: 10,
+        dt: 1e-3,
+        ..Default::default()
+    }
+}
+
+/// A random model file of `variant` for `graph`, loaded as `serve` loads it.
+fn model_for(graph: &Graph, variant: Variant) -> std::sync::Arc<dyn Dynamics> {
     let (_, mut model) = mcgnode::testing::random_model(variant, graph, 3).expect("random model");
     // As `train` records them: the edges it was trained on.
     model.file.trained_on.edge_params = mcgnode::gnode::file::EdgeParams::of(graph);
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("model.json");
     model.file.save(&path).expect("saving the model file");
-    let model = load_model(&ModelRef::from_path(&path).expect("a model file"))
-        .expect("loading the model as serve does");
-    // Short predictions of untrained weights, which stay finite.
-    let params = NodeParams {
-        horizon: 10,
-        dt: 1e-3,
-        ..Default::default()
-    };
+    load_model(&ModelRef::from_path(&path).expect("a model file"))
+        .expect("loading the model as serve does")
+}
+
+/// `states` of `graph` parsed once each, as the node's input stage does.
+fn parse(graph: &Graph, states: Vec<State>, params: &NodeParams) -> Vec<Input> {
     let inputs = Inputs::default();
-    let parsed = states
+    states
         .into_iter()
         .enumerate()
         .map(|(k, state)| {
@@ -115,15 +132,14 @@ fn served(
                 acc: None,
             };
             let msg = ParticleState::from_sample(0, k as u32, "test", graph, &s);
-            match inputs.accept(&params, msg).expect("a valid state") {
+            match inputs.accept(params, msg).expect("a valid state") {
                 Accepted::Ready(input) => *input,
                 other @ Accepted::WarmingUp { .. } => {
                     panic!("a full state is ready, got {other:?}")
                 }
             }
         })
-        .collect();
-    (parsed, model, params)
+        .collect()
 }
 
 /// After one warm-up state, every further state of the system is predicted
@@ -215,6 +231,45 @@ fn large_contact_systems_predict_without_allocating() {
     );
     let (inputs, model, params) = served(&g, states, Variant::Mcgnode);
     no_allocation_in(&inputs, &model, &params, "1,024-particle packing");
+}
+
+/// A node serving two systems in turn (two streams, or a large system
+/// between small ones) keeps each one's workspace: once both have been seen,
+/// no prediction of either allocates.
+#[test]
+fn two_systems_in_turn_predict_without_allocating() {
+    let ring = |n: usize| {
+        let mut cfg = SystemConfig::new(SystemKind::Spring, n);
+        cfg.states = 6;
+        let g = cfg.graph();
+        let tr = cfg.simulate_one(&g, cfg.start_for(&g, 7, 0), 0);
+        let states: Vec<State> = tr.samples.iter().map(|s| s.state.clone()).collect();
+        (tr.graph, states)
+    };
+    let ((small, s_small), (large, s_large)) = (ring(5), ring(40));
+    let model = model_for(&small, Variant::Mcgnode);
+    let params = short_predictions();
+    let (a, b) = (
+        parse(&small, s_small, &params),
+        parse(&large, s_large, &params),
+    );
+    let passed = mcgnode::compat::Passed::default();
+    let mut kept = Predicted::default();
+    let served = (model.as_ref(), 1);
+    for input in [&a[0], &b[0]] {
+        predict::predict_served(served, &passed, input, &params, &mut kept).expect("warm-up");
+    }
+    for (x, y) in a.iter().zip(&b) {
+        for (input, what) in [(x, "5 springs"), (y, "40 springs")] {
+            let (n, r) =
+                allocations(|| predict::predict_served(served, &passed, input, &params, &mut kept));
+            r.unwrap_or_else(|e| panic!("{what}: {e}"));
+            assert_eq!(
+                n, 0,
+                "{what}: {n} allocations in one prediction between the other's"
+            );
+        }
+    }
 }
 
 /// The counter counts: the allocating form of the same prediction is seen,

@@ -22,12 +22,15 @@ pub struct TrainedModel {
     cache: Cache,
 }
 
-/// A graph and its workspace, kept between calls: a call on the same graph
-/// takes it (no allocation), another graph builds its own; calls at the same
-/// time each get one. These serve one rollout at a time (the node's), so a
-/// large graph's edge MLPs run on two cores ([`Workspace::split_rows`]).
+/// The workspaces of the last few graphs, kept between calls: a call on one
+/// of them takes its workspace (no allocation), another graph builds its own
+/// (and the least recently used beyond [`Cache::GRAPHS`] is dropped); calls
+/// at the same time each get one. A node serving several streams (or a large
+/// system between small ones) thus keeps each warm. These serve one rollout
+/// at a time (the node's), so a large graph's edge MLPs run on two cores
+/// ([`Workspace::split_rows`]).
 #[derive(Debug, Default)]
-struct Cache(Mutex<Option<(Graph, Workspace)>>);
+struct Cache(Mutex<Vec<(Graph, Workspace)>>);
 
 impl Clone for Cache {
     fn clone(&self) -> Self {
@@ -36,12 +39,18 @@ impl Clone for Cache {
 }
 
 impl Cache {
-    /// The workspace for `graph`: the kept one if it was made for it.
+    /// Graphs whose workspaces are kept.
+    const GRAPHS: usize = 4;
+
+    /// The workspace for `graph`: a kept one if it was made for it.
     fn take(&self, kernel: &Kernel, graph: &Graph) -> Result<(Graph, Workspace), DynamicsError> {
-        let kept = self.0.lock().ok().and_then(|mut c| c.take());
+        let kept = self.0.lock().ok().and_then(|mut c| {
+            let i = c.iter().position(|(g, _)| g == graph)?;
+            Some(c.remove(i))
+        });
         match kept {
-            Some((g, ws)) if g == *graph => Ok((g, ws)),
-            _ => {
+            Some(kept) => Ok(kept),
+            None => {
                 let mut ws = kernel.workspace(graph)?;
                 ws.split_rows();
                 Ok((graph.clone(), ws))
@@ -49,9 +58,11 @@ impl Cache {
         }
     }
 
+    /// Keeps a workspace, most recent first.
     fn put(&self, kept: (Graph, Workspace)) {
         if let Ok(mut c) = self.0.lock() {
-            *c = Some(kept);
+            c.insert(0, kept);
+            c.truncate(Self::GRAPHS);
         }
     }
 }
