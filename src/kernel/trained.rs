@@ -48,14 +48,12 @@ impl Cache {
             let i = c.iter().position(|(g, _)| g == graph)?;
             Some(c.remove(i))
         });
-        match kept {
-            Some(kept) => Ok(kept),
-            None => {
-                let mut ws = kernel.workspace(graph)?;
-                ws.split_rows();
-                Ok((graph.clone(), ws))
-            }
+        if let Some(kept) = kept {
+            return Ok(kept);
         }
+        let mut ws = kernel.workspace(graph)?;
+        ws.split_rows();
+        Ok((graph.clone(), ws))
     }
 
     /// Keeps a workspace, most recent first.
