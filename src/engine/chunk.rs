@@ -346,10 +346,10 @@ impl Chunk {
                 .collect(),
             // (`em`, `types`: 0 for NODE.)
             pair: if m.by_type { vec![0; edges] } else { vec![] },
-            pair_in: z(2 * em * types * types),
+            pair_in: z(3 * em * types * types),
             pair_out: z(em * types * types),
             g_pair_out: g(em * types * types),
-            g_pair_in: g(2 * em * types * types),
+            g_pair_in: g(3 * em * types * types),
             g_type: g(em * types),
             s1: g(width * rmax),
             s2: g(width * rmax),
@@ -867,22 +867,20 @@ impl Chunk {
                 // The same MLP on the types² pairs' inputs, read per edge.
                 let i = m.ix(Block::EdgeUpdate(l)).expect("round");
                 let (tt, emb) = (t * t, &self.type_embed[..em * t]);
-                let (pr, ps) = self.pair_in[..2 * em * tt].split_at_mut(em * tt);
+                let (pr, rest) = self.pair_in[..3 * em * tt].split_at_mut(em * tt);
+                let (ps, pp) = rest.split_at_mut(em * tt);
                 for k in 0..em {
                     for p in 0..tt {
                         let (r, s) = (emb[k * t + p / t], emb[k * t + p % t]);
-                        match a.edge_input {
-                            EdgeInput::Concat => (pr[k * tt + p], ps[k * tt + p]) = (r, s),
-                            EdgeInput::Product => pr[k * tt + p] = r * s,
-                        }
+                        (pr[k * tt + p], ps[k * tt + p], pp[k * tt + p]) = (r, s, r * s);
                     }
                 }
-                let ps: &[f64] = match a.edge_input {
-                    EdgeInput::Concat => ps,
-                    EdgeInput::Product => &[],
+                let (x, c): (&[f64], &[f64]) = match a.edge_input {
+                    EdgeInput::Concat => (pr, ps),
+                    EdgeInput::Product => (pp, &[]),
                 };
                 let po = &mut self.pair_out[..em * tt];
-                m.mlp(i).forward(th, pr, ps, tt, &mut self.tapes[i], po);
+                m.mlp(i).forward(th, x, c, tt, &mut self.tapes[i], po);
                 let pair = &self.pair[..edges];
                 for k in 0..em {
                     let (x, old, pk) = (
@@ -1306,31 +1304,14 @@ impl Chunk {
                             gk[p] += z;
                         }
                     }
-                    let emb = &self.type_embed[..em * t];
-                    let (pr, ps) = self.pair_in[..2 * em * tt].split_at(em * tt);
-                    let (gpr, gps) = self.g_pair_in[..2 * em * tt].split_at_mut(em * tt);
-                    gpr.fill(0.0);
-                    gps.fill(0.0);
-                    match a.edge_input {
-                        EdgeInput::Concat => {
-                            let gx = Some((&mut gpr[..], &mut gps[..]));
-                            m.mlp(i)
-                                .backward(th, grad, pr, ps, tt, tape, gpo, gx, s1, s2);
-                        }
-                        EdgeInput::Product => {
-                            let gx = Some((&mut gpr[..], &mut [][..]));
-                            m.mlp(i)
-                                .backward(th, grad, pr, &[], tt, tape, gpo, gx, s1, s2);
-                            // ∂(h_i ⊙ h_j): ḡ_i = ḡ ⊙ h_j, ḡ_j = ḡ ⊙ h_i.
-                            for k in 0..em {
-                                for p in 0..tt {
-                                    let g = gpr[k * tt + p];
-                                    gpr[k * tt + p] = g * emb[k * t + p % t];
-                                    gps[k * tt + p] = g * emb[k * t + p / t];
-                                }
-                            }
-                        }
-                    }
+                    let (pr, rest) = self.pair_in[..3 * em * tt].split_at(em * tt);
+                    let (ps, pp) = rest.split_at(em * tt);
+                    let (gpr, rest) = self.g_pair_in[..3 * em * tt].split_at_mut(em * tt);
+                    let (gps, gpp) = rest.split_at_mut(em * tt);
+                    let ends = (&mut gpr[..], &mut gps[..], &mut gpp[..]);
+                    let mlp = (m.mlp(i), a.edge_input);
+                    let x = (pr, ps, pp, tt);
+                    edge_update_backward(mlp, th, grad, x, tape, gpo, ends, (s1, s2));
                     let gty = &mut self.g_type[..em * t];
                     for k in 0..em {
                         for p in 0..tt {
@@ -1339,27 +1320,11 @@ impl Chunk {
                         }
                     }
                 } else {
-                    gs.fill(0.0);
-                    gr.fill(0.0);
-                    match a.edge_input {
-                        EdgeInput::Concat => {
-                            let gx = Some((&mut gr[..], &mut gs[..]));
-                            m.mlp(i)
-                                .backward(th, grad, hr, hs, edges, tape, gz, gx, s1, s2);
-                        }
-                        EdgeInput::Product => {
-                            // ∂(h_i ⊙ h_j): ḡ_i = ḡ ⊙ h_j, ḡ_j = ḡ ⊙ h_i.
-                            let (hp, gp) = (&self.hp[l][..em * edges], &mut self.gp[..em * edges]);
-                            gp.fill(0.0);
-                            let gx = Some((&mut gp[..], &mut [][..]));
-                            m.mlp(i)
-                                .backward(th, grad, hp, &[], edges, tape, gz, gx, s1, s2);
-                            for (k, g) in gp.iter().enumerate() {
-                                gr[k] = g * hs[k];
-                                gs[k] = g * hr[k];
-                            }
-                        }
-                    }
+                    let hp = &self.hp[l][..em * edges];
+                    let ends = (&mut gr[..], &mut gs[..], &mut self.gp[..em * edges]);
+                    let mlp = (m.mlp(i), a.edge_input);
+                    let x = (hr, hs, hp, edges);
+                    edge_update_backward(mlp, th, grad, x, tape, gz, ends, (s1, s2));
                     for k in 0..em {
                         for e in 0..edges {
                             ghp[k * nodes + self.recv[e]] += gr[k * edges + e];
@@ -1475,6 +1440,43 @@ impl Chunk {
             s1,
             s2,
         );
+    }
+}
+
+/// The reverse pass of an edge update W_E over rows whose end states are
+/// `hr`, `hs` (and `hp` = hr ⊙ hs): W_E(h_i ‖ h_j) or W_E(h_i ⊙ h_j) as the
+/// architecture's edge input says. ∂L/∂θ is added into `grad`; ∂L/∂h_i and
+/// ∂L/∂h_j are written into `gr`, `gs` (`gp`: the product's, scratch).
+#[allow(clippy::too_many_arguments)]
+fn edge_update_backward(
+    (mlp, input): (&Mlp, EdgeInput),
+    th: &[f64],
+    grad: &mut [f64],
+    (hr, hs, hp, r): (&[f64], &[f64], &[f64], usize),
+    tape: &Tape,
+    gz: &[f64],
+    (gr, gs, gp): (&mut [f64], &mut [f64], &mut [f64]),
+    (s1, s2): (&mut [f64], &mut [f64]),
+) {
+    match input {
+        EdgeInput::Concat => {
+            gr.fill(0.0);
+            gs.fill(0.0);
+            mlp.backward(th, grad, hr, hs, r, tape, gz, Some((gr, gs)), s1, s2);
+        }
+        EdgeInput::Product => {
+            // ∂(h_i ⊙ h_j): ḡ_i = ḡ ⊙ h_j, ḡ_j = ḡ ⊙ h_i.
+            gp.fill(0.0);
+            mlp.backward(th, grad, hp, &[], r, tape, gz, Some((gp, &mut [])), s1, s2);
+            for (((g, r), s), (x, y)) in gp
+                .iter()
+                .zip(gr.iter_mut())
+                .zip(gs.iter_mut())
+                .zip(hs.iter().zip(hr))
+            {
+                (*r, *s) = (g * x, g * y);
+            }
+        }
     }
 }
 
