@@ -244,3 +244,25 @@ fn fast_squareplus_is_within_an_ulp() {
     let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&v), bits(&portable));
 }
+
+/// [`dot4`] (AVX2 registers where the CPU has them) gives the bits of four
+/// portable [`dot`]s, at every length (the tail included).
+#[test]
+fn dot4_gives_the_bits_of_dot() {
+    for n in 0..41 {
+        let v = |k: usize| -> Vec<f64> {
+            (0..n)
+                .map(|i| ((i * 7 + k * 13) as f64 * 0.37).sin() * 10f64.powi((i % 5) as i32 - 2))
+                .collect()
+        };
+        let (a, b) = (v(0), [v(1), v(2), v(3), v(4)]);
+        let got = dot4(&a, [&b[0], &b[1], &b[2], &b[3]]);
+        for (j, bj) in b.iter().enumerate() {
+            assert_eq!(
+                got[j].to_bits(),
+                dot(&a, bj).to_bits(),
+                "length {n}, output {j}"
+            );
+        }
+    }
+}
