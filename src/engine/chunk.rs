@@ -775,11 +775,8 @@ impl Chunk {
         let nodes = bs * m.plan.n;
         let edges = self.edges;
         let nf = a.node_features();
-        // Encode: nodes from (one-hot[, q, q̇]), edges from w_ij = q_i − q_j.
-        let node_in = match a.node_input {
-            NodeInput::TypeOnly => t,
-            NodeInput::Full => nf,
-        };
+        // Encode: nodes from the type (by type) or (one-hot, q, q̇), edges
+        // from w_ij = q_i − q_j.
         let i = m.ix(Block::NodeEmbed).expect("graph model");
         let h0 = &mut self.h[0][..em * nodes];
         let (by_type, nodes_read) = (m.by_type, m.nodes_read);
@@ -803,14 +800,8 @@ impl Chunk {
                 }
             }
         } else {
-            m.mlp(i).forward(
-                th,
-                &self.xn[..node_in * nodes],
-                &[],
-                nodes,
-                &mut self.tapes[i],
-                h0,
-            );
+            let (x, tape) = (&self.xn[..nf * nodes], &mut self.tapes[i]);
+            m.mlp(i).forward(th, x, &[], nodes, tape, h0);
             squareplus_in_place(h0);
         }
         for c in 0..d {
@@ -1251,22 +1242,12 @@ impl Chunk {
         }
         if let Some(i) = m.ix(Block::GlobalEmbed) {
             times_squareplus_grad(gglob, glob);
-            let x = &self.xn[..nf * nodes];
+            let (x, tape) = (&self.xn[..nf * nodes], &self.tapes[i]);
             let gx = self
                 .inputs
                 .then(|| (&mut self.gxn[..nf * nodes], &mut [][..]));
-            m.mlp(i).backward(
-                th,
-                &mut self.grad,
-                x,
-                &[],
-                nodes,
-                &self.tapes[i],
-                gglob,
-                gx,
-                s1,
-                s2,
-            );
+            m.mlp(i)
+                .backward(th, &mut self.grad, x, &[], nodes, tape, gglob, gx, s1, s2);
         }
         // Message passing, last round first.
         for l in (0..a.rounds).rev() {
@@ -1379,10 +1360,6 @@ impl Chunk {
             std::mem::swap(&mut self.ghe, &mut self.ghe_prev);
         }
         // Embeddings.
-        let node_in = match a.node_input {
-            NodeInput::TypeOnly => t,
-            NodeInput::Full => nf,
-        };
         let gh = &mut self.gh[..em * nodes];
         let i = m.ix(Block::NodeEmbed).expect("graph model");
         if m.by_type {
@@ -1402,23 +1379,14 @@ impl Chunk {
             m.mlp(i)
                 .backward(th, &mut self.grad, eye, &[], t, tape, gty, None, s1, s2);
         } else {
+            // (One-hot node inputs went by type above: these carry q and q̇.)
             times_squareplus_grad(gh, &self.h[0][..em * nodes]);
-            let x = &self.xn[..node_in * nodes];
-            // Type-only inputs carry no q or q̇: nothing to pass down.
-            let gx = (self.inputs && matches!(a.node_input, NodeInput::Full))
-                .then(|| (&mut self.gxn[..node_in * nodes], &mut [][..]));
-            m.mlp(i).backward(
-                th,
-                &mut self.grad,
-                x,
-                &[],
-                nodes,
-                &self.tapes[i],
-                gh,
-                gx,
-                s1,
-                s2,
-            );
+            let (x, tape) = (&self.xn[..nf * nodes], &self.tapes[i]);
+            let gx = self
+                .inputs
+                .then(|| (&mut self.gxn[..nf * nodes], &mut [][..]));
+            m.mlp(i)
+                .backward(th, &mut self.grad, x, &[], nodes, tape, gh, gx, s1, s2);
         }
         let ghe = &mut self.ghe[..em * edges];
         times_squareplus_grad(ghe, &self.he[0][..em * edges]);
