@@ -16,8 +16,10 @@
 #  - copies the scripts it runs into REF_DIR/.mcgnode-bench/ and edits the
 #    copies, printing each edit and why (scripts/bench_reference.py, EDITS),
 #    with shims for jax API changes applied at import (SHIMS there);
-#  - times their MCGNODE spring and pendulum scripts and their spring LGN
-#    script (their HGN scripts call functions their code does not define);
+#  - times their MCGNODE spring and pendulum scripts (not their LGN or HGN:
+#    their "LGN" script trains a graph network that outputs accelerations,
+#    and their HGN scripts call functions their code does not define; see
+#    NEEDED in scripts/bench_reference.py);
 #  - generates their 5-spring and 5-pendulum data sets once with their data
 #    scripts, then per round and per row: `mcgnode bench --json --only <figure>`,
 #    their script with 1 thread, their script with 2 threads.

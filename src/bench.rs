@@ -20,8 +20,6 @@ pub struct Figure {
     pub value: f64,
     /// Unit of `value`.
     pub unit: String,
-    /// The JAX reference on this machine, if there is one (same unit).
-    pub jax: Option<String>,
     /// Repeats.
     pub repeats: usize,
 }
@@ -34,7 +32,6 @@ impl Figure {
             name,
             value: steps as f64 / seconds,
             unit: "steps/s".into(),
-            jax: None,
             repeats,
         }
     }
@@ -278,13 +275,11 @@ fn epoch_figure(
     trainee: Trainee,
     data: &(Graph, Vec<State>, Vec<Vec<f64>>),
     epochs: usize,
-    jax: Option<&str>,
 ) -> Result<Figure> {
     Ok(Figure {
         name,
         value: epoch_seconds(trainee, data, epochs)? * 1e3,
         unit: "ms".into(),
-        jax: jax.map(str::to_string),
         repeats: epochs,
     })
 }
@@ -328,15 +323,15 @@ fn family_epoch_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<
     let cores = crate::engine::all_cores();
     let mut out = vec![];
     // The paper's data sets: 100 trajectories of 100 states (75 % trained on).
-    for (system, label, jax) in [
-        (SystemKind::Spring, "5-spring", "174-189"),
-        (SystemKind::Pendulum, "5-pendulum", "377-389"),
+    for (system, label) in [
+        (SystemKind::Spring, "5-spring"),
+        (SystemKind::Pendulum, "5-pendulum"),
     ] {
         let data = training_set(system, 5, 100);
-        for (engine, threads, jax) in [
-            (EngineKind::Native, cores, Some(jax)),
-            (EngineKind::Native, 1, None),
-            (EngineKind::Candle, 1, None),
+        for (engine, threads) in [
+            (EngineKind::Native, cores),
+            (EngineKind::Native, 1),
+            (EngineKind::Candle, 1),
         ] {
             let name = format!(
                 "{label} MCGNODE epoch, 10,000 states, {engine:?} engine, {threads} thread(s)"
@@ -344,7 +339,7 @@ fn family_epoch_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<
             .to_lowercase();
             let t = Trainee::Family(Variant::Mcgnode, engine, threads);
             if want(&name) {
-                out.push(epoch_figure(name, t, &data, ep, jax)?);
+                out.push(epoch_figure(name, t, &data, ep)?);
             }
         }
     }
@@ -358,7 +353,7 @@ fn family_epoch_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<
         .to_lowercase();
         let t = Trainee::Family(Variant::Mcgnode, engine, threads);
         if want(&name) {
-            out.push(epoch_figure(name, t, &cube, ep.min(3), None)?);
+            out.push(epoch_figure(name, t, &cube, ep.min(3))?);
         }
     }
     Ok(out)
@@ -372,12 +367,11 @@ fn baseline_epoch_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Ve
     let data = training_set(SystemKind::Spring, 5, if quick { 10 } else { 100 });
     let states = data.1.len();
     let candle = (EngineKind::Candle, 1);
-    for (kind, jax) in [(Kind::Lgn, "960"), (Kind::Hgn, "320-410")] {
+    for kind in [Kind::Lgn, Kind::Hgn] {
         let name = format!("5-spring {kind} epoch, {states} states (candle)");
         if want(&name) {
             let t = Trainee::Baseline(kind, candle.0, candle.1);
-            let jax = (!quick).then_some(jax);
-            out.push(epoch_figure(name, t, &data, ep.min(3), jax)?);
+            out.push(epoch_figure(name, t, &data, ep.min(3))?);
         }
     }
     // GNS on both engines, one thread each: on the springs, and on the
@@ -396,7 +390,7 @@ fn baseline_epoch_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Ve
         );
         if want(&name) {
             let t = Trainee::Baseline(Kind::Gns, engine, threads);
-            out.push(epoch_figure(name, t, set, ep.min(3), None)?);
+            out.push(epoch_figure(name, t, set, ep.min(3))?);
         }
     }
     Ok(out)
@@ -413,7 +407,6 @@ fn rollout_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
             name: name.into(),
             value: rollout_seconds(SystemKind::Spring, 5, Variant::Mcgnode, 20_000, r)?,
             unit: "s".into(),
-            jax: Some("0.25".into()),
             repeats: r,
         });
     }
@@ -423,7 +416,6 @@ fn rollout_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
             name: name.into(),
             value: rollout_seconds(SystemKind::Pendulum, 5, Variant::Mcgnode, 100_000, r.min(7))?,
             unit: "s".into(),
-            jax: Some("2.75".into()),
             repeats: r.min(7),
         });
     }
@@ -449,7 +441,6 @@ fn plan_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figure>>
             name: name.into(),
             value: plan_seconds(256, r.min(5))?,
             unit: "s".into(),
-            jax: None,
             repeats: r.min(5),
         });
     }
@@ -459,7 +450,6 @@ fn plan_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figure>>
             name: name.into(),
             value: plan_gradient_seconds(r)?,
             unit: "s".into(),
-            jax: None,
             repeats: r,
         });
     }
@@ -524,7 +514,6 @@ fn contact_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
             name: format!("{}-particle contact rollout: neighbour search share", g.n()),
             value: 100.0 * median(times) / s,
             unit: "% of a step".into(),
-            jax: None,
             repeats: r.min(5),
         });
     }
