@@ -122,59 +122,75 @@ pub(crate) fn times_squareplus_grad(g: &mut [f64], y: &[f64]) {
 }
 
 /// Σ a_i b_i with four partial sums, so the loop vectorises (a fixed order:
-/// results are reproducible).
+/// results are reproducible), in fused multiply-adds (exactly rounded, so
+/// every path gives the same bits; one instruction where a multiply and an
+/// add took two of the two floating-point ports' slots).
 #[inline(always)]
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     let mut acc = [0.0; 4];
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
-    let tail: f64 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
+    let tail = dot_tail(ca.remainder(), cb.remainder());
     for (x, y) in ca.zip(cb) {
         for k in 0..4 {
-            acc[k] += x[k] * y[k];
+            acc[k] = x[k].mul_add(y[k], acc[k]);
         }
     }
     (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
-/// [`dot`] of `a` with four vectors at once: each result is computed as
-/// `dot` computes it (the same bits); the four sums run side by side, so a
-/// pass over `a` feeds four independent chains.
+/// The last (fewer than four) products of a [`dot`].
 #[inline(always)]
-fn dot4(a: &[f64], b: [&[f64]; 4]) -> [f64; 4] {
-    #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { dot4_avx2(a, b) };
-    }
-    dot4_any(a, b)
+fn dot_tail(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).fold(0.0, |t, (x, y)| x.mul_add(*y, t))
 }
 
-/// [`dot4`] in AVX2 registers: the same multiplies and adds in the same
-/// order as [`dot4_any`] (no fused multiply-add), so the same bits. The
-/// compiler vectorised the portable form into 2-wide registers and lane
-/// shuffles, about half of a GNS reverse pass.
+/// [`dot`] of `a` with `N` vectors at once (4 or 8): each result is
+/// computed as `dot` computes it (the same bits); the sums run side by side,
+/// so a pass over `a` feeds `N` independent chains. Eight chains hide the
+/// adds' latency that four leave exposed (4-cycle adds, one per chain per
+/// pass).
+#[inline(always)]
+fn dots<const N: usize>(a: &[f64], b: [&[f64]; N]) -> [f64; N] {
+    #[cfg(target_arch = "x86_64")]
+    if simd() != Simd::Portable {
+        // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).
+        return unsafe { dots_avx2(a, b) };
+    }
+    const { assert!(N % 4 == 0, "dots takes 4 or 8 vectors") };
+    let mut out = [0.0; N];
+    for k in (0..N).step_by(4) {
+        out[k..k + 4].copy_from_slice(&dot4_any(a, [b[k], b[k + 1], b[k + 2], b[k + 3]]));
+    }
+    out
+}
+
+/// [`dots`] of four vectors.
+#[cfg(test)]
+fn dot4(a: &[f64], b: [&[f64]; 4]) -> [f64; 4] {
+    dots(a, b)
+}
+
+/// [`dots`] in AVX2 registers: the same fused multiply-adds in the same
+/// order as [`dot4_any`], so the same bits. The compiler vectorised the
+/// portable form into 2-wide registers and lane shuffles, about half of a
+/// GNS reverse pass.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 #[inline]
-unsafe fn dot4_avx2(a: &[f64], b: [&[f64]; 4]) -> [f64; 4] {
+unsafe fn dots_avx2<const N: usize>(a: &[f64], b: [&[f64]; N]) -> [f64; N] {
     use std::arch::x86_64::{__m256d, _mm256_storeu_pd};
-    use std::arch::x86_64::{_mm256_add_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_setzero_pd};
+    use std::arch::x86_64::{_mm256_fmadd_pd, _mm256_loadu_pd, _mm256_setzero_pd};
     let n = a.len();
     let m = n - n % 4;
     let b = b.map(|v| &v[..n]);
-    let mut s = [_mm256_setzero_pd(); 4];
+    let mut s = [_mm256_setzero_pd(); N];
     let mut i = 0;
     while i < m {
         // SAFETY: i + 4 <= m <= n, the length of `a` and of each `b`.
         unsafe {
             let x = _mm256_loadu_pd(a.as_ptr().add(i));
             for (acc, v) in s.iter_mut().zip(b) {
-                *acc = _mm256_add_pd(*acc, _mm256_mul_pd(x, _mm256_loadu_pd(v.as_ptr().add(i))));
+                *acc = _mm256_fmadd_pd(x, _mm256_loadu_pd(v.as_ptr().add(i)), *acc);
             }
         }
         i += 4;
@@ -185,16 +201,15 @@ unsafe fn dot4_avx2(a: &[f64], b: [&[f64]; 4]) -> [f64; 4] {
         unsafe { _mm256_storeu_pd(l.as_mut_ptr(), v) };
         l
     };
-    let mut out = [0.0; 4];
+    let mut out = [0.0; N];
     for (o, (acc, v)) in s.into_iter().zip(b).enumerate() {
         let acc = lanes(acc);
-        let tail: f64 = a[m..].iter().zip(&v[m..]).map(|(x, y)| x * y).sum();
-        out[o] = (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail;
+        out[o] = (acc[0] + acc[1]) + (acc[2] + acc[3]) + dot_tail(&a[m..], &v[m..]);
     }
     out
 }
 
-/// [`dot4`]'s portable form.
+/// Four [`dot`]s side by side, portably.
 #[inline(always)]
 fn dot4_any(a: &[f64], b: [&[f64]; 4]) -> [f64; 4] {
     let m = a.len() - a.len() % 4;
@@ -209,16 +224,15 @@ fn dot4_any(a: &[f64], b: [&[f64]; 4]) -> [f64; 4] {
         .zip(b[3][..m].chunks_exact(4));
     for ((((x, y0), y1), y2), y3) in chunks {
         for k in 0..4 {
-            s0[k] += x[k] * y0[k];
-            s1[k] += x[k] * y1[k];
-            s2[k] += x[k] * y2[k];
-            s3[k] += x[k] * y3[k];
+            s0[k] = x[k].mul_add(y0[k], s0[k]);
+            s1[k] = x[k].mul_add(y1[k], s1[k]);
+            s2[k] = x[k].mul_add(y2[k], s2[k]);
+            s3[k] = x[k].mul_add(y3[k], s3[k]);
         }
     }
     let mut out = [0.0; 4];
     for (o, (acc, v)) in [s0, s1, s2, s3].iter().zip(b).enumerate() {
-        let tail: f64 = a[m..].iter().zip(&v[m..]).map(|(x, y)| x * y).sum();
-        out[o] = (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail;
+        out[o] = (acc[0] + acc[1]) + (acc[2] + acc[3]) + dot_tail(&a[m..], &v[m..]);
     }
     out
 }
@@ -302,13 +316,20 @@ impl Linear {
             } else {
                 &c[(i - na) * r..(i - na + 1) * r]
             };
-            // Four outputs per pass over the row: each sum is the one `dot`
-            // forms, in its order (the same bits), with four chains in flight.
+            // Eight (then four) outputs per pass over the row: each sum is
+            // the one `dot` forms, in its order (the same bits).
             if params {
                 let gw = &mut g[self.w + i * self.out..self.w + (i + 1) * self.out];
                 let mut j = 0;
+                while j + 8 <= self.out {
+                    let d: [f64; 8] = dots(xi, std::array::from_fn(|o| gyj(j + o)));
+                    for (o, dv) in d.iter().enumerate() {
+                        gw[j + o] += dv;
+                    }
+                    j += 8;
+                }
                 while j + 4 <= self.out {
-                    let d = dot4(xi, [gyj(j), gyj(j + 1), gyj(j + 2), gyj(j + 3)]);
+                    let d: [f64; 4] = dots(xi, std::array::from_fn(|o| gyj(j + o)));
                     for (o, dv) in d.iter().enumerate() {
                         gw[j + o] += dv;
                     }
@@ -325,25 +346,38 @@ impl Linear {
                     &mut gc[(i - na) * r..(i - na + 1) * r]
                 };
                 let w = &th[self.w + i * self.out..self.w + (i + 1) * self.out];
-                // Four outputs per pass over ∂L/∂x_i, each element added to
-                // in the order of one output at a time (the same bits).
+                // Eight (then four) outputs per pass over ∂L/∂x_i, each
+                // element added to in the order of one output at a time (the
+                // same bits).
                 let mut j = 0;
+                while j + 8 <= self.out {
+                    let gs: [&[f64]; 8] = std::array::from_fn(|o| gyj(j + o));
+                    let ws: [f64; 8] = std::array::from_fn(|o| w[j + o]);
+                    for (k, gv) in gxi.iter_mut().enumerate() {
+                        let mut v = *gv;
+                        for o in 0..8 {
+                            v = ws[o].mul_add(gs[o][k], v);
+                        }
+                        *gv = v;
+                    }
+                    j += 8;
+                }
                 while j + 4 <= self.out {
                     let (g0, g1, g2, g3) = (gyj(j), gyj(j + 1), gyj(j + 2), gyj(j + 3));
                     let (w0, w1, w2, w3) = (w[j], w[j + 1], w[j + 2], w[j + 3]);
                     for (k, gv) in gxi.iter_mut().enumerate() {
                         let mut v = *gv;
-                        v += w0 * g0[k];
-                        v += w1 * g1[k];
-                        v += w2 * g2[k];
-                        v += w3 * g3[k];
+                        v = w0.mul_add(g0[k], v);
+                        v = w1.mul_add(g1[k], v);
+                        v = w2.mul_add(g2[k], v);
+                        v = w3.mul_add(g3[k], v);
                         *gv = v;
                     }
                     j += 4;
                 }
                 for (jj, &wv) in w.iter().enumerate().skip(j) {
                     for (gv, yv) in gxi.iter_mut().zip(gyj(jj)) {
-                        *gv += wv * yv;
+                        *gv = wv.mul_add(*yv, *gv);
                     }
                 }
             }
@@ -425,20 +459,21 @@ impl<'a> Out<'a> {
         }
     }
 
-    /// Writes `src` at rows `t0..` of feature `j`.
+    /// Writes `src` (at most `T` values) at rows `t0..` of feature `j`.
     #[inline(always)]
-    fn put(self, j: usize, t0: usize, src: &[f64]) {
+    fn put<const T: usize>(self, j: usize, t0: usize, src: &[f64]) {
         let at = j * self.r + t0;
         assert!(
-            at + src.len() <= self.len,
+            at + src.len() <= self.len && src.len() <= T,
             "an MLP output out of its buffer"
         );
         // SAFETY: in bounds (checked); no other thread writes these rows
         // (`Mlp::forward_part`'s contract), and the buffer is borrowed.
         unsafe {
-            self.ptr
-                .add(at)
-                .copy_from_nonoverlapping(src.as_ptr(), src.len())
+            // A full tile's length known when compiling: moves in registers,
+            // not a memcpy call per 16 values.
+            let n = if src.len() == T { T } else { src.len() };
+            self.ptr.add(at).copy_from_nonoverlapping(src.as_ptr(), n)
         };
     }
 }
@@ -471,6 +506,31 @@ fn tile_for(rest: usize) -> usize {
         _ => 4,
     }
 }
+/// `dst` (`T` long) ← `src` (at most `T` long), zero-padded. A full tile's
+/// length is known when compiling, so it copies in registers: a memcpy and a
+/// memset call per input feature and tile cost a GNS epoch 10 %.
+#[inline(always)]
+fn copy_padded<const T: usize>(dst: &mut [f64], src: &[f64]) {
+    let dst: &mut [f64; T] = dst.try_into().expect("a tile");
+    if let Ok(full) = <&[f64; T]>::try_from(src) {
+        *dst = *full;
+    } else {
+        dst[..src.len()].copy_from_slice(src);
+        dst[src.len()..].fill(0.0);
+    }
+}
+
+/// `dst` ← the first `dst.len()` (at most `T`) values of `src`, as
+/// [`copy_padded`] copies.
+#[inline(always)]
+fn copy_tile<const T: usize>(dst: &mut [f64], src: &[f64]) {
+    if let Ok(full) = <&mut [f64; T]>::try_from(&mut *dst) {
+        *full = src[..T].try_into().expect("a tile");
+    } else {
+        dst.copy_from_slice(&src[..dst.len()]);
+    }
+}
+
 /// Outputs computed together, so that each input tile loaded serves four
 /// independent accumulator chains (a chain alone waits on its adds).
 const OUTS: usize = 4;
@@ -634,9 +694,7 @@ impl Mlp {
             } else {
                 &c[(i - na) * r + t0..(i - na) * r + t0 + len]
             };
-            let dst = &mut x[i * T..(i + 1) * T];
-            dst[..len].copy_from_slice(src);
-            dst[len..].fill(0.0);
+            copy_padded::<T>(&mut x[i * T..(i + 1) * T], src);
         }
         for (li, l) in self.layers.iter().enumerate() {
             dense_tile::<T>(l, th, x, h);
@@ -645,7 +703,7 @@ impl Mlp {
                 if record {
                     let kept = &mut tape.hidden[li];
                     for j in 0..l.out {
-                        kept[j * r + t0..j * r + t0 + len].copy_from_slice(&h[j * T..j * T + len]);
+                        copy_tile::<T>(&mut kept[j * r + t0..j * r + t0 + len], &h[j * T..]);
                     }
                 }
             }
@@ -656,7 +714,7 @@ impl Mlp {
             squareplus_slice(&mut x[..last.out * T]);
         }
         for j in 0..last.out {
-            y.put(j, t0, &x[j * T..j * T + len]);
+            y.put::<T>(j, t0, &x[j * T..j * T + len]);
         }
         len
     }
@@ -713,16 +771,17 @@ impl Mlp {
         s2: &mut [f64],
     ) {
         #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
+        if simd() != Simd::Portable {
+            // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).
             return unsafe { self.backward_avx2(th, g, a, c, r, tape, gy, gx, s1, s2) };
         }
         self.backward_any(th, g, a, c, r, tape, gy, gx, s1, s2);
     }
 
-    /// [`Mlp::backward`] compiled for AVX2, as [`Mlp::forward_avx2`].
+    /// [`Mlp::backward`] compiled for AVX2 and FMA (its fused multiply-adds
+    /// are library calls otherwise), as [`Mlp::forward_avx2`].
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     #[allow(clippy::too_many_arguments)]
     unsafe fn backward_avx2(
         &self,

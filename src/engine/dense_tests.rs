@@ -3,7 +3,7 @@
 
 use super::*;
 
-/// The reverse pass as it was written before [`dot4`], one output at a
+/// The reverse pass as it was written before [`dots`], one output at a
 /// time: the reference the blocked one is tested against, bit for bit.
 #[allow(clippy::too_many_arguments)]
 fn backward_one_at_a_time(
@@ -38,7 +38,7 @@ fn backward_one_at_a_time(
             for j in 0..l.out {
                 let wv = th[l.w + i * l.out + j];
                 for (gv, yv) in gxi.iter_mut().zip(&gy[j * r..(j + 1) * r]) {
-                    *gv += wv * yv;
+                    *gv = wv.mul_add(*yv, *gv);
                 }
             }
         }
@@ -245,24 +245,31 @@ fn fast_squareplus_is_within_an_ulp() {
     assert_eq!(bits(&v), bits(&portable));
 }
 
-/// [`dot4`] (AVX2 registers where the CPU has them) gives the bits of four
-/// portable [`dot`]s, at every length (the tail included).
+/// [`dots`] of 4 and of 8 vectors (AVX2 registers where the CPU has them)
+/// gives the bits of as many portable [`dot`]s, at every length (the tail
+/// included).
 #[test]
-fn dot4_gives_the_bits_of_dot() {
+fn dots_give_the_bits_of_dot() {
     for n in 0..41 {
         let v = |k: usize| -> Vec<f64> {
             (0..n)
                 .map(|i| ((i * 7 + k * 13) as f64 * 0.37).sin() * 10f64.powi((i % 5) as i32 - 2))
                 .collect()
         };
-        let (a, b) = (v(0), [v(1), v(2), v(3), v(4)]);
-        let got = dot4(&a, [&b[0], &b[1], &b[2], &b[3]]);
+        let a = v(0);
+        let b: Vec<Vec<f64>> = (1..9).map(v).collect();
+        let four = dot4(&a, std::array::from_fn(|j| &b[j][..]));
+        let eight: [f64; 8] = dots(&a, std::array::from_fn(|j| &b[j][..]));
         for (j, bj) in b.iter().enumerate() {
+            let want = dot(&a, bj).to_bits();
             assert_eq!(
-                got[j].to_bits(),
-                dot(&a, bj).to_bits(),
-                "length {n}, output {j}"
+                eight[j].to_bits(),
+                want,
+                "8 vectors, length {n}, output {j}"
             );
+            if j < 4 {
+                assert_eq!(four[j].to_bits(), want, "4 vectors, length {n}, output {j}");
+            }
         }
     }
 }
