@@ -266,19 +266,27 @@ enum Gather {
     Add,
 }
 
+/// The node count per feature row of feature-major buffers of `per_edge`
+/// and `per_node` values with one edge per index, every index checked to
+/// be below it; None without edges.
+fn nodes_per_row(idx: &[usize], per_edge: usize, per_node: usize) -> Option<usize> {
+    if idx.is_empty() {
+        return None;
+    }
+    let n = per_node / (per_edge / idx.len()).max(1);
+    assert!(idx.iter().all(|&i| i < n), "an edge end outside the nodes");
+    Some(n)
+}
+
 /// Per feature row: `dst[k][j] (=|+=) src[k][idx[j]]`, feature-major
 /// (`dst`: rows × idx.len(), `src`: rows × its own width; rows from
 /// `dst`'s length). The indices are checked once, not at every element:
 /// the checks made these loops a fifth of a GNS epoch.
 fn gather_rows(dst: &mut [f64], src: &[f64], idx: &[usize], how: Gather) {
-    let e = idx.len();
-    if e == 0 {
+    let Some(n) = nodes_per_row(idx, dst.len(), src.len()) else {
         return;
-    }
-    let rows = dst.len() / e;
-    let n = src.len() / rows.max(1);
-    assert!(idx.iter().all(|&i| i < n), "an edge end outside the nodes");
-    for (d, s) in dst.chunks_exact_mut(e).zip(src.chunks_exact(n)) {
+    };
+    for (d, s) in dst.chunks_exact_mut(idx.len()).zip(src.chunks_exact(n)) {
         for (dv, &i) in d.iter_mut().zip(idx) {
             // SAFETY: i < n = s.len(), checked above.
             let v = unsafe { *s.get_unchecked(i) };
@@ -290,14 +298,10 @@ fn gather_rows(dst: &mut [f64], src: &[f64], idx: &[usize], how: Gather) {
 /// Per feature row: `dst[k][idx[j]] += src[k][j]`, in `j` order (as
 /// [`gather_rows`] lays rows out; indices checked once).
 fn scatter_add_rows(dst: &mut [f64], src: &[f64], idx: &[usize]) {
-    let e = idx.len();
-    if e == 0 {
+    let Some(n) = nodes_per_row(idx, src.len(), dst.len()) else {
         return;
-    }
-    let rows = src.len() / e;
-    let n = dst.len() / rows.max(1);
-    assert!(idx.iter().all(|&i| i < n), "an edge end outside the nodes");
-    for (d, s) in dst.chunks_exact_mut(n).zip(src.chunks_exact(e)) {
+    };
+    for (d, s) in dst.chunks_exact_mut(n).zip(src.chunks_exact(idx.len())) {
         for (&v, &i) in s.iter().zip(idx) {
             // SAFETY: i < n = d.len(), checked above.
             unsafe { *d.get_unchecked_mut(i) += v };
