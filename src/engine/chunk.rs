@@ -8,7 +8,7 @@ use super::layout::Layout;
 use super::split::Split;
 use crate::gnode::arch::{Arch, Block, Decoder, NodeInput};
 use crate::gnode::plan::{BarEnd, GraphPlan};
-use crate::gnode::solve::lu_solve_in_place;
+use crate::gnode::solve::{lu_factor_in_place, lu_solve_factored};
 use crate::gnode::variant::EdgeInput;
 use crate::physics::neighbors::NeighborSearch;
 use crate::system::State;
@@ -130,9 +130,11 @@ pub(crate) struct Chunk {
     tgt: Vec<f64>,
     tapes: Vec<Tape>,
     dq: Vec<f64>,
+    /// Per state: K = A M⁻¹ Aᵀ, LU-factored in place by the forward pass,
+    /// and its pivots.
     kmat: Vec<f64>,
     lam: Vec<f64>,
-    lu: Vec<f64>,
+    piv: Vec<usize>,
     rhs: Vec<f64>,
     solved: Vec<bool>,
     gacc: Vec<f64>,
@@ -311,7 +313,7 @@ impl Chunk {
             dq: z(bs * m.plan.bars.len() * d),
             kmat: z(bs * m.plan.bars.len().pow(2)),
             lam: z(bs * m.plan.bars.len()),
-            lu: z(m.plan.bars.len().pow(2)),
+            piv: vec![0; bs * m.plan.bars.len()],
             rhs: z(m.plan.bars.len()),
             solved: vec![false; bs],
             gacc: g(outs),
@@ -1029,8 +1031,13 @@ impl Chunk {
                         }
                     }
                 }
-                self.lu[..k * k].copy_from_slice(kmat);
-                ok = lu_solve_in_place(&mut self.lu[..k * k], lam, k, 1).is_ok();
+                // Factored in place and kept: the reverse pass solves with
+                // the same K again.
+                let piv = &mut self.piv[s * k..(s + 1) * k];
+                ok = lu_factor_in_place(kmat, piv, k).is_ok();
+                if ok {
+                    lu_solve_factored(kmat, piv, lam, k, 1);
+                }
             }
             self.solved[s] = ok;
             for p in 0..n {
@@ -1095,10 +1102,12 @@ impl Chunk {
                     }
                     rbar[r] = x;
                 }
-                self.lu[..k * k].copy_from_slice(&self.kmat[s * k * k..(s + 1) * k * k]);
-                if lu_solve_in_place(&mut self.lu[..k * k], rbar, k, 1).is_err() {
-                    rbar.fill(f64::NAN);
-                }
+                // K's factors from the forward pass (it solved, so they are).
+                let (kf, piv) = (
+                    &self.kmat[s * k * k..(s + 1) * k * k],
+                    &self.piv[s * k..(s + 1) * k],
+                );
+                lu_solve_factored(kf, piv, rbar, k, 1);
                 if self.inputs {
                     let into = (&mut self.gdq[s * k * d..(s + 1) * k * d], &mut self.gqv[..]);
                     constraint_input_grads(
