@@ -4,6 +4,7 @@
 //! hand-written reverse pass. Every buffer lives here and is reused.
 
 use super::dense::{simd, squareplus_in_place, times_squareplus_grad, Mlp, Simd, Tape};
+use super::gather::{gather_rows, scatter_add_rows, Gather};
 use super::layout::Layout;
 use super::split::Split;
 use crate::gnode::arch::{Arch, Block, Decoder, NodeInput};
@@ -828,13 +829,8 @@ impl Chunk {
             let (hs, hr) = (&mut self.hs[l][..em * edges], &mut self.hr[l][..em * edges]);
             let by_pair = by_type && l == 0;
             if !by_pair || a.updates_nodes(l) {
-                for k in 0..em {
-                    let hk = &hl[k * nodes..(k + 1) * nodes];
-                    for e in 0..edges {
-                        hs[k * edges + e] = hk[self.send[e]];
-                        hr[k * edges + e] = hk[self.recv[e]];
-                    }
-                }
+                gather_rows(hs, hl, &self.send[..edges], Gather::Set);
+                gather_rows(hr, hl, &self.recv[..edges], Gather::Set);
             }
             if a.updates_nodes(l) {
                 // h_i ← sqp(h_i + Σ_j W_V(h_j ‖ h_ij)).
@@ -844,11 +840,7 @@ impl Chunk {
                 (self.split).forward(m.mlp(i), th, (hs, hel), edges, tape, msg, false);
                 let agg = &mut self.agg[..em * nodes];
                 agg.fill(0.0);
-                for k in 0..em {
-                    for e in 0..edges {
-                        agg[k * nodes + self.recv[e]] += msg[k * edges + e];
-                    }
-                }
+                scatter_add_rows(agg, msg, &self.recv[..edges]);
                 for ((x, h), g) in hn.iter_mut().zip(hl).zip(agg.iter()) {
                     *x = h + g;
                 }
@@ -1315,6 +1307,8 @@ impl Chunk {
                     let mlp = (m.mlp(i), a.edge_input);
                     let x = (hr, hs, hp, edges);
                     edge_update_backward(mlp, th, grad, x, tape, gz, ends, (s1, s2));
+                    // Both ends in one pass, edge by edge: two scatter_add_rows
+                    // would sum each node's terms in another order.
                     for k in 0..em {
                         for e in 0..edges {
                             ghp[k * nodes + self.recv[e]] += gr[k * edges + e];
@@ -1335,11 +1329,7 @@ impl Chunk {
                     *x += g;
                 }
                 let gmsg = &mut self.gmsg[..em * edges];
-                for k in 0..em {
-                    for e in 0..edges {
-                        gmsg[k * edges + e] = gz[k * nodes + self.recv[e]];
-                    }
-                }
+                gather_rows(gmsg, gz, &self.recv[..edges], Gather::Set);
                 gs.fill(0.0);
                 let i = m.ix(Block::Message(l)).expect("round");
                 let gx = Some((&mut gs[..], &mut ghep[..]));
@@ -1355,11 +1345,7 @@ impl Chunk {
                     s1,
                     s2,
                 );
-                for k in 0..em {
-                    for e in 0..edges {
-                        ghp[k * nodes + self.send[e]] += gs[k * edges + e];
-                    }
-                }
+                scatter_add_rows(ghp, gs, &self.send[..edges]);
             } else {
                 for (x, g) in ghp.iter_mut().zip(gh.iter()) {
                     *x += g;

@@ -14,6 +14,7 @@
 //! (`tests/gns_engine.rs`).
 
 use super::dense::{squareplus_in_place, times_squareplus_grad, Linear, Mlp, Tape};
+use super::gather::{gather_rows, scatter_add_rows, Gather};
 use super::EngineError;
 use crate::gnode::plan::GraphPlan;
 use crate::physics::neighbors::NeighborSearch;
@@ -257,56 +258,6 @@ struct Chunk {
     s2: Vec<f64>,
     sse: f64,
     grad: Vec<f64>,
-}
-
-/// Whether [`gather_rows`] overwrites or adds.
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Gather {
-    Set,
-    Add,
-}
-
-/// The node count per feature row of feature-major buffers of `per_edge`
-/// and `per_node` values with one edge per index, every index checked to
-/// be below it; None without edges.
-fn nodes_per_row(idx: &[usize], per_edge: usize, per_node: usize) -> Option<usize> {
-    if idx.is_empty() {
-        return None;
-    }
-    let n = per_node / (per_edge / idx.len()).max(1);
-    assert!(idx.iter().all(|&i| i < n), "an edge end outside the nodes");
-    Some(n)
-}
-
-/// Per feature row: `dst[k][j] (=|+=) src[k][idx[j]]`, feature-major
-/// (`dst`: rows × idx.len(), `src`: rows × its own width; rows from
-/// `dst`'s length). The indices are checked once, not at every element:
-/// the checks made these loops a fifth of a GNS epoch.
-fn gather_rows(dst: &mut [f64], src: &[f64], idx: &[usize], how: Gather) {
-    let Some(n) = nodes_per_row(idx, dst.len(), src.len()) else {
-        return;
-    };
-    for (d, s) in dst.chunks_exact_mut(idx.len()).zip(src.chunks_exact(n)) {
-        for (dv, &i) in d.iter_mut().zip(idx) {
-            // SAFETY: i < n = s.len(), checked above.
-            let v = unsafe { *s.get_unchecked(i) };
-            *dv = if how == Gather::Add { *dv + v } else { v };
-        }
-    }
-}
-
-/// Per feature row: `dst[k][idx[j]] += src[k][j]`, in `j` order (as
-/// [`gather_rows`] lays rows out; indices checked once).
-fn scatter_add_rows(dst: &mut [f64], src: &[f64], idx: &[usize]) {
-    let Some(n) = nodes_per_row(idx, src.len(), dst.len()) else {
-        return;
-    };
-    for (d, s) in dst.chunks_exact_mut(n).zip(src.chunks_exact(idx.len())) {
-        for (&v, &i) in s.iter().zip(idx) {
-            // SAFETY: i < n = d.len(), checked above.
-            unsafe { *d.get_unchecked_mut(i) += v };
-        }
-    }
 }
 
 /// `v` at least `len` long (zeros when it grows).

@@ -13,6 +13,7 @@
 
 mod chunk;
 mod dense;
+mod gather;
 mod gns;
 mod infer;
 mod layout;
