@@ -110,8 +110,7 @@ pub struct Gns {
     net: Net,
     plan: GraphPlan,
     chunks: Vec<Chunk>,
-    pool: Option<rayon::ThreadPool>,
-    threads: usize,
+    crew: Option<super::crew::Crew>,
 }
 
 impl Gns {
@@ -135,13 +134,11 @@ impl Gns {
                 spec.dim, spec.types, graph.dim
             )));
         }
-        let threads = threads.max(1);
         Ok(Self {
             net: Net::new(spec, params)?,
             plan: GraphPlan::new(graph),
             chunks: vec![],
-            pool: super::pool(threads)?,
-            threads,
+            crew: super::crew(threads)?,
         })
     }
 
@@ -218,8 +215,7 @@ impl Gns {
         let work = |c: &mut Chunk, (a, b): (usize, usize)| {
             c.run(net, plan, theta, (states, targets, &idx[a..b]), scale);
         };
-        let pool = (self.pool.as_ref(), self.threads);
-        super::in_waves(&mut self.chunks, pool, &parts, work, fold);
+        super::in_waves(&mut self.chunks, self.crew.as_ref(), &parts, work, fold);
     }
 }
 

@@ -12,6 +12,7 @@
 //! chunk. Checked against candle and finite differences (tests/engine.rs).
 
 mod chunk;
+mod crew;
 mod dense;
 mod gather;
 mod gns;
@@ -31,7 +32,7 @@ use crate::gnode::plan::GraphPlan;
 use crate::gnode::variant::Hyper;
 use crate::system::{Graph, State};
 use chunk::{Chunk, Model};
-use rayon::prelude::*;
+use crew::Crew;
 use thiserror::Error;
 
 /// Rows (particles + directed edges, or NODE states) a chunk aims at: enough
@@ -48,12 +49,12 @@ pub enum EngineError {
     /// Parameters that do not fit the network.
     #[error("{0}")]
     Parameters(String),
-    /// A thread pool could not be started.
+    /// Training threads could not be started.
     #[error("cannot start {threads} training threads: {reason}")]
     Threads {
         /// Threads asked for.
         threads: usize,
-        /// The pool's error.
+        /// The system's error.
         reason: String,
     },
 }
@@ -64,8 +65,7 @@ crate::error::typed_errors!(EngineError);
 pub struct Engine {
     model: Model,
     chunks: Vec<Chunk>,
-    pool: Option<rayon::ThreadPool>,
-    threads: usize,
+    crew: Option<Crew>,
 }
 
 /// How a selection of `len` states of `rows` rows each (particles and
@@ -90,43 +90,36 @@ fn split(len: usize, rows: usize) -> Vec<(usize, usize)> {
 }
 
 /// Runs `work` on the chunks `parts` (a chunk's buffers each), wave by wave
-/// across the pool's `threads` threads, and folds the results in chunk order
-/// with `fold`: the order, and so the sums, do not depend on the threads.
+/// across the crew's threads, and folds the results in chunk order with
+/// `fold`: the order, and so the sums, do not depend on the threads.
 fn in_waves<C: Default + Send>(
     chunks: &mut Vec<C>,
-    (pool, threads): (Option<&rayon::ThreadPool>, usize),
+    crew: Option<&Crew>,
     parts: &[(usize, usize)],
     work: impl Fn(&mut C, (usize, usize)) + Sync,
     mut fold: impl FnMut(&C),
 ) {
-    let wave = (4 * threads).max(1);
+    let wave = 4 * crew.map_or(1, Crew::threads);
     for group in parts.chunks(wave) {
         if chunks.len() < group.len() {
             chunks.resize_with(group.len(), C::default);
         }
-        let run = |(c, &part): (&mut C, &(usize, usize))| work(c, part);
         let these = &mut chunks[..group.len()];
-        match pool {
-            Some(pool) => pool.install(|| these.par_iter_mut().zip(group.par_iter()).for_each(run)),
-            None => these.iter_mut().zip(group.iter()).for_each(run),
+        match crew {
+            Some(crew) => crew.for_each(these, |c, i| work(c, group[i])),
+            None => these.iter_mut().zip(group).for_each(|(c, &p)| work(c, p)),
         }
         chunks[..group.len()].iter().for_each(&mut fold);
     }
 }
 
-/// A rayon pool of `threads` threads, or none for one.
-fn pool(threads: usize) -> Result<Option<rayon::ThreadPool>, EngineError> {
-    if threads <= 1 {
-        return Ok(None);
-    }
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map(Some)
-        .map_err(|e| EngineError::Threads {
-            threads,
-            reason: e.to_string(),
-        })
+/// The threads of an engine running on `threads` threads (none beside the
+/// caller for one).
+fn crew(threads: usize) -> Result<Option<Crew>, EngineError> {
+    Crew::new(threads).map_err(|e| EngineError::Threads {
+        threads,
+        reason: e.to_string(),
+    })
 }
 
 /// The number of cores, for `--threads` defaults.
@@ -139,13 +132,11 @@ impl Engine {
     pub fn new(hyper: &Hyper, graph: &Graph, threads: usize) -> Result<Self, EngineError> {
         let arch = Arch::new(hyper);
         arch.supports(graph)?;
-        let threads = threads.max(1);
-        let pool = pool(threads)?;
+        let crew = crew(threads)?;
         Ok(Self {
             model: Model::new(arch, GraphPlan::new(graph)),
             chunks: vec![],
-            pool,
-            threads,
+            crew,
         })
     }
 
@@ -180,8 +171,7 @@ impl Engine {
         let work = |c: &mut Chunk, (a, b): (usize, usize)| {
             c.run(model, theta, states, targets, &idx[a..b], scale);
         };
-        let pool = (self.pool.as_ref(), self.threads);
-        in_waves(&mut self.chunks, pool, &parts, work, fold);
+        in_waves(&mut self.chunks, self.crew.as_ref(), &parts, work, fold);
     }
 
     /// Mean squared error of the accelerations of states `idx` against their
