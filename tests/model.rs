@@ -243,6 +243,52 @@ fn kernel_matches_candle() {
     }
 }
 
+/// A workspace keeps values that depend on the parameters alone (the type
+/// embeddings, round 0's edge update by type pair) from one step to the
+/// next; given other parameters (another model of the same shape, as a node
+/// swapping models does), it computes them again: the same bits as a fresh
+/// workspace, model after model, state after state.
+#[test]
+fn a_workspace_follows_the_parameters_it_is_given() {
+    for (kind, n, mixed) in [
+        (SystemKind::Spring, 5, false),
+        (SystemKind::Spring, 7, true),
+        (SystemKind::Pendulum, 4, true),
+    ] {
+        let (c, mut g) = system(kind, n);
+        if mixed {
+            g.types = (0..n).map(|i| u32::from(i % 3 == 1)).collect();
+        }
+        let st = states(&c, &g, 4, 5);
+        for v in [Variant::Mcgnode, Variant::Cdgnode, Variant::Gnode] {
+            let models: Vec<TrainedModel> = [7, 8]
+                .map(|seed| {
+                    let net =
+                        Net::new(Hyper::new(v, 2, 2, n), &mut ChaCha8Rng::seed_from_u64(seed));
+                    TrainedModel::from_file(model_file(&net.unwrap())).unwrap()
+                })
+                .into();
+            let mut shared = models[0].kernel.workspace(&g).unwrap();
+            let bits = |a: &[f64]| a.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            for (k, s) in st.iter().enumerate() {
+                for m in [&models[k % 2], &models[1 - k % 2], &models[k % 2]] {
+                    let (mut got, mut want) = (vec![0.0; g.ndof()], vec![0.0; g.ndof()]);
+                    m.kernel.acceleration(&mut shared, &s.q, &s.v, &mut got);
+                    let mut fresh = m.kernel.workspace(&g).unwrap();
+                    m.kernel.acceleration(&mut fresh, &s.q, &s.v, &mut want);
+                    assert_eq!(bits(&got), bits(&want), "{v} {kind:?} n={n} state {k}");
+                }
+            }
+            // The two models differ, so a stale value would have shown.
+            let mut a = [vec![0.0; g.ndof()], vec![0.0; g.ndof()]];
+            for (m, a) in models.iter().zip(&mut a) {
+                m.kernel.acceleration(&mut shared, &st[0].q, &st[0].v, a);
+            }
+            assert_ne!(bits(&a[0]), bits(&a[1]));
+        }
+    }
+}
+
 /// Constrained variants satisfy A q̈ + Ȧ q̇ = 0 whatever their weights.
 #[test]
 fn constrained_accelerations_respect_bars() {

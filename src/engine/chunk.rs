@@ -181,6 +181,10 @@ pub(crate) struct Chunk {
     g_pair_out: Vec<f64>,
     g_pair_in: Vec<f64>,
     g_type: Vec<f64>,
+    /// The parameters the type embeddings and pair outputs above were last
+    /// computed from, in inference (empty: none yet). They read nothing
+    /// else, so a rollout computes them once, not once a step.
+    by_type_from: Vec<f64>,
     s1: Vec<f64>,
     s2: Vec<f64>,
     /// ∂(Σ squared errors · scale)/∂θ of the last [`Chunk::run`] with gradients.
@@ -354,6 +358,7 @@ impl Chunk {
             g_pair_out: g(em * types * types),
             g_pair_in: g(3 * em * types * types),
             g_type: g(em * types),
+            by_type_from: vec![],
             s1: g(width * rmax),
             s2: g(width * rmax),
             grad: g(m.layout.len()),
@@ -780,6 +785,10 @@ impl Chunk {
         let nf = a.node_features();
         // Encode: nodes from the type (by type) or (one-hot, q, q̇), edges
         // from w_ij = q_i − q_j.
+        // The type embeddings and round 0's pair outputs are functions of
+        // the parameters alone: kept from the last step when those are the
+        // same (inference records no tape that would need them again).
+        let kept = m.by_type && !self.record && self.by_type_kept(m, th);
         let i = m.ix(Block::NodeEmbed).expect("graph model");
         let h0 = &mut self.h[0][..em * nodes];
         let (by_type, nodes_read) = (m.by_type, m.nodes_read);
@@ -787,9 +796,11 @@ impl Chunk {
             // One embedding per type, the same bits as per node, a sixth of
             // an inference step's square roots fewer.
             let emb = &mut self.type_embed[..em * t];
-            m.mlp(i)
-                .forward(th, &self.eye[..t * t], &[], t, &mut self.tapes[i], emb);
-            squareplus_in_place(emb);
+            if !kept {
+                m.mlp(i)
+                    .forward(th, &self.eye[..t * t], &[], t, &mut self.tapes[i], emb);
+                squareplus_in_place(emb);
+            }
             if nodes_read {
                 let ty = &self.node_ty[..nodes];
                 for k in 0..em {
@@ -865,7 +876,9 @@ impl Chunk {
                     EdgeInput::Product => (pp, &[]),
                 };
                 let po = &mut self.pair_out[..em * tt];
-                m.mlp(i).forward(th, x, c, tt, &mut self.tapes[i], po);
+                if !kept {
+                    m.mlp(i).forward(th, x, c, tt, &mut self.tapes[i], po);
+                }
                 let pair = &self.pair[..edges];
                 for k in 0..em {
                     let (x, old, pk) = (
@@ -967,6 +980,33 @@ impl Chunk {
         } else {
             self.acc[..d * nodes].copy_from_slice(&self.out[..d * nodes]);
         }
+    }
+
+    /// Whether the type embeddings and pair outputs were computed from the
+    /// parameters `th` holds now (those of the node embedding and round 0's
+    /// edge update); if not, remembers these for the next call.
+    fn by_type_kept(&mut self, m: &Model, th: &[f64]) -> bool {
+        let mut kept = !self.by_type_from.is_empty();
+        let mut at = 0;
+        for i in [Block::NodeEmbed, Block::EdgeUpdate(0)]
+            .into_iter()
+            .filter_map(|b| m.ix(b))
+        {
+            for l in &m.mlp(i).layers {
+                for r in [l.w..l.w + l.inp * l.out, l.b..l.b + l.out] {
+                    let (now, len) = (&th[r.clone()], r.len());
+                    if kept {
+                        kept = self.by_type_from.get(at..at + len) == Some(now);
+                    }
+                    if !kept {
+                        self.by_type_from.truncate(at);
+                        self.by_type_from.extend_from_slice(now);
+                    }
+                    at += len;
+                }
+            }
+        }
+        kept
     }
 
     /// q̈ = M⁻¹(N − Aᵀλ), λ = (A M⁻¹ Aᵀ)⁻¹(A M⁻¹ N + Ȧq̇), per state, on the
