@@ -232,6 +232,16 @@ impl Contacts {
     }
 }
 
+/// Whether `a` and `b` hold the same bits: every pair is looked at (no early
+/// exit), so the loop vectorises; a rollout asks this every step.
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .fold(0, |d, (x, y)| d | (x.to_bits() ^ y.to_bits()))
+            == 0
+}
+
 impl Chunk {
     /// Makes room for `bs` states with `edges` directed edges in all
     /// (allocates only when growing; contact counts grow with headroom, so a
@@ -996,7 +1006,10 @@ impl Chunk {
                 for r in [l.w..l.w + l.inp * l.out, l.b..l.b + l.out] {
                     let (now, len) = (&th[r.clone()], r.len());
                     if kept {
-                        kept = self.by_type_from.get(at..at + len) == Some(now);
+                        kept = self
+                            .by_type_from
+                            .get(at..at + len)
+                            .is_some_and(|was| same_bits(was, now));
                     }
                     if !kept {
                         self.by_type_from.truncate(at);
