@@ -245,9 +245,10 @@ fn kernel_matches_candle() {
 
 /// A workspace keeps values that depend on the parameters alone (the type
 /// embeddings, round 0's edge update by type pair) from one step to the
-/// next; given other parameters (another model of the same shape, as a node
-/// swapping models does), it computes them again: the same bits as a fresh
-/// workspace, model after model, state after state.
+/// next while the same model's parameters come back; given another model's
+/// (of the same shape, as a node swapping models does), it computes them
+/// again: the same bits as a fresh workspace, model after model, state
+/// after state.
 #[test]
 fn a_workspace_follows_the_parameters_it_is_given() {
     for (kind, n, mixed) in [

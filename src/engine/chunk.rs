@@ -181,10 +181,13 @@ pub(crate) struct Chunk {
     g_pair_out: Vec<f64>,
     g_pair_in: Vec<f64>,
     g_type: Vec<f64>,
-    /// The parameters the type embeddings and pair outputs above were last
-    /// computed from, in inference (empty: none yet). They read nothing
-    /// else, so a rollout computes them once, not once a step.
-    by_type_from: Vec<f64>,
+    /// Whether the type embeddings and pair outputs above hold an inference
+    /// pass's values (cleared when the buffers are made), and whether the
+    /// caller of [`Chunk::forward_one`] passed the parameters of the pass
+    /// before: then they are still right (they read the parameters alone),
+    /// and a rollout computes them once, not once a step.
+    by_type_done: bool,
+    same_params: bool,
     s1: Vec<f64>,
     s2: Vec<f64>,
     /// ∂(Σ squared errors · scale)/∂θ of the last [`Chunk::run`] with gradients.
@@ -230,16 +233,6 @@ impl Contacts {
         self.starts.push(self.pairs.len());
         2 * (plan.n_edges() + self.pairs.len())
     }
-}
-
-/// Whether `a` and `b` hold the same bits: every pair is looked at (no early
-/// exit), so the loop vectorises; a rollout asks this every step.
-fn same_bits(a: &[f64], b: &[f64]) -> bool {
-    a.len() == b.len()
-        && a.iter()
-            .zip(b)
-            .fold(0, |d, (x, y)| d | (x.to_bits() ^ y.to_bits()))
-            == 0
 }
 
 impl Chunk {
@@ -368,7 +361,8 @@ impl Chunk {
             g_pair_out: g(em * types * types),
             g_pair_in: g(3 * em * types * types),
             g_type: g(em * types),
-            by_type_from: vec![],
+            by_type_done: false,
+            same_params: false,
             s1: g(width * rmax),
             s2: g(width * rmax),
             grad: g(m.layout.len()),
@@ -630,7 +624,8 @@ impl Chunk {
     /// Forward pass of one state given as node-major slices, for inference:
     /// no targets, no loss, no reverse pass. Read the results with
     /// [`Chunk::acceleration`], [`Chunk::decoded`] and [`Chunk::edge_outputs`].
-    pub(crate) fn forward_one(&mut self, m: &Model, th: &[f64], q: &[f64], v: &[f64]) {
+    pub(crate) fn forward_one(&mut self, m: &Model, th: &[f64], q: &[f64], v: &[f64], same: bool) {
+        self.same_params = same;
         if m.plan.has_contacts() {
             let edges = self.contacts.find_moving(&m.plan, q);
             self.reserve(m, 1, edges, false);
@@ -798,7 +793,8 @@ impl Chunk {
         // The type embeddings and round 0's pair outputs are functions of
         // the parameters alone: kept from the last step when those are the
         // same (inference records no tape that would need them again).
-        let kept = m.by_type && !self.record && self.by_type_kept(m, th);
+        let kept = m.by_type && !self.record && self.by_type_done && self.same_params;
+        self.by_type_done = m.by_type && !self.record;
         let i = m.ix(Block::NodeEmbed).expect("graph model");
         let h0 = &mut self.h[0][..em * nodes];
         let (by_type, nodes_read) = (m.by_type, m.nodes_read);
@@ -990,36 +986,6 @@ impl Chunk {
         } else {
             self.acc[..d * nodes].copy_from_slice(&self.out[..d * nodes]);
         }
-    }
-
-    /// Whether the type embeddings and pair outputs were computed from the
-    /// parameters `th` holds now (those of the node embedding and round 0's
-    /// edge update); if not, remembers these for the next call.
-    fn by_type_kept(&mut self, m: &Model, th: &[f64]) -> bool {
-        let mut kept = !self.by_type_from.is_empty();
-        let mut at = 0;
-        for i in [Block::NodeEmbed, Block::EdgeUpdate(0)]
-            .into_iter()
-            .filter_map(|b| m.ix(b))
-        {
-            for l in &m.mlp(i).layers {
-                for r in [l.w..l.w + l.inp * l.out, l.b..l.b + l.out] {
-                    let (now, len) = (&th[r.clone()], r.len());
-                    if kept {
-                        kept = self
-                            .by_type_from
-                            .get(at..at + len)
-                            .is_some_and(|was| same_bits(was, now));
-                    }
-                    if !kept {
-                        self.by_type_from.truncate(at);
-                        self.by_type_from.extend_from_slice(now);
-                    }
-                    at += len;
-                }
-            }
-        }
-        kept
     }
 
     /// q̈ = M⁻¹(N − Aᵀλ), λ = (A M⁻¹ Aᵀ)⁻¹(A M⁻¹ N + Ȧq̇), per state, on the

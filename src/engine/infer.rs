@@ -7,12 +7,17 @@
 use super::chunk::{Chunk, Model};
 use crate::gnode::arch::{Arch, Decoder};
 use crate::gnode::plan::GraphPlan;
+use std::sync::Arc;
 
 /// One graph's forward pass and its buffers.
 #[derive(Clone, Debug)]
 pub struct Forward {
     model: Model,
     chunk: Chunk,
+    /// The parameters of the last run, kept alive so that their address
+    /// names them: values that read the parameters alone are kept while
+    /// the same ones come back.
+    params: Option<Arc<[f64]>>,
 }
 
 impl Forward {
@@ -23,7 +28,11 @@ impl Forward {
         let mut chunk = Chunk::default();
         // Sizes every buffer now, so that the first step allocates nothing.
         chunk.reserve_one(&model);
-        Self { model, chunk }
+        Self {
+            model,
+            chunk,
+            params: None,
+        }
     }
 
     /// From now on, runs the edge MLPs of large graphs (over 1,024 directed
@@ -42,8 +51,12 @@ impl Forward {
     /// Accelerations at (q, v) under the parameters `theta`, node-major into
     /// `acc`; kinematic particles' are 0 (their motion is given, not
     /// predicted: held at their velocity unless a caller moves them).
-    pub fn run(&mut self, theta: &[f64], q: &[f64], v: &[f64], acc: &mut [f64]) {
-        self.chunk.forward_one(&self.model, theta, q, v);
+    pub fn run(&mut self, theta: &Arc<[f64]>, q: &[f64], v: &[f64], acc: &mut [f64]) {
+        let same = self.params.as_ref().is_some_and(|p| Arc::ptr_eq(p, theta));
+        if !same {
+            self.params = Some(Arc::clone(theta));
+        }
+        self.chunk.forward_one(&self.model, theta, q, v, same);
         self.chunk.acceleration(self.model.shape(), 1, 0, acc);
         let plan = &self.model.plan;
         if !plan.kinematic.is_empty() {

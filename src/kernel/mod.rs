@@ -19,13 +19,16 @@ pub use gradient::KernelGradient;
 use rand::SeedableRng;
 pub use trained::TrainedModel;
 
+use std::sync::Arc;
+
 /// A trained model's forward pass, ready to run.
 #[derive(Clone, Debug)]
 pub struct Kernel {
     hyper: Hyper,
     arch: Arch,
-    /// Every parameter, flat, at the engine's offsets.
-    theta: Vec<f64>,
+    /// Every parameter, flat, at the engine's offsets; shared and never
+    /// changed, so that a workspace knows them again by their address.
+    theta: Arc<[f64]>,
     inv_mass: Option<Vec<f64>>,
     project_bars: bool,
 }
@@ -133,7 +136,7 @@ impl Kernel {
         )?;
         reference.store.load(w)?;
         let arch = Arch::new(hyper);
-        let theta = Layout::new(&arch).flatten(w)?;
+        let theta = Layout::new(&arch).flatten(w)?.into();
         let inv_mass = w
             .get(LOG_MASS)
             .map(|a| a.data.iter().map(|x| (-x).exp()).collect());
