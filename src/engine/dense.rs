@@ -472,8 +472,14 @@ impl<'a> Out<'a> {
         unsafe {
             // A full tile's length known when compiling: moves in registers,
             // not a memcpy call per 16 values.
-            let n = if src.len() == T { T } else { src.len() };
-            self.ptr.add(at).copy_from_nonoverlapping(src.as_ptr(), n)
+            if src.len() == T {
+                self.ptr.add(at).copy_from_nonoverlapping(src.as_ptr(), T);
+            } else {
+                // Value by value: a memcpy call costs a short copy more.
+                for (k, &x) in src.iter().enumerate() {
+                    self.ptr.add(at + k).write_volatile(x);
+                }
+            }
         };
     }
 }
@@ -518,8 +524,11 @@ fn copy_padded<const T: usize>(dst: &mut [f64], src: &[f64]) {
     if let Ok(full) = <&[f64; T]>::try_from(src) {
         *dst = *full;
     } else {
-        dst[..src.len()].copy_from_slice(src);
-        dst[src.len()..].fill(0.0);
+        // Lane by lane: a memcpy and a memset call per feature cost a small
+        // graph's step more than the copy.
+        for (k, x) in dst.iter_mut().enumerate() {
+            *x = src.get(k).copied().unwrap_or(0.0);
+        }
     }
 }
 
