@@ -982,7 +982,7 @@ impl Chunk {
         self.out[..d * nodes].iter_mut().for_each(|o| *o *= k);
         // Constrain.
         if a.constrained {
-            self.constrain(m, th, bs);
+            self.constrain(m, th, bs, kept);
         } else {
             self.acc[..d * nodes].copy_from_slice(&self.out[..d * nodes]);
         }
@@ -990,14 +990,17 @@ impl Chunk {
 
     /// q̈ = M⁻¹(N − Aᵀλ), λ = (A M⁻¹ Aᵀ)⁻¹(A M⁻¹ N + Ȧq̇), per state, on the
     /// sparse bar incidence. K and λ are kept for the reverse pass.
-    fn constrain(&mut self, m: &Model, th: &[f64], bs: usize) {
+    fn constrain(&mut self, m: &Model, th: &[f64], bs: usize, kept: bool) {
         let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
         let nodes = bs * n;
         let k = m.plan.bars.len();
         let lm = m.log_mass.expect("constrained model has masses");
-        // 1/m per type, once per call (not in the per-bar loops).
-        for (t, x) in self.inv_m.iter_mut().enumerate() {
-            *x = (-th[lm + t]).exp();
+        // 1/m per type, once per call (not in the per-bar loops), or kept
+        // with the by-type values (the parameters have not changed).
+        if !kept {
+            for (t, x) in self.inv_m.iter_mut().enumerate() {
+                *x = (-th[lm + t]).exp();
+            }
         }
         let inv_m = &self.inv_m;
         let minv = |p: usize| inv_m[m.plan.types[p]];
