@@ -290,6 +290,35 @@ fn a_workspace_follows_the_parameters_it_is_given() {
     }
 }
 
+/// A contact workspace reuses its edge layout while the contacts stay those
+/// of the step before, and lays them out again when they change: along a
+/// soft-sphere trajectory whose contacts come and go (each state twice in a
+/// row, then the next), every acceleration has a fresh workspace's bits.
+#[test]
+fn a_contact_workspace_follows_its_contacts() {
+    let cfg = SystemConfig::new(SystemKind::SoftSpheres, 9);
+    let tr = cfg.simulate(1, 3).remove(0);
+    let g = &tr.graph;
+    for v in [Variant::Mcgnode, Variant::Gnode] {
+        let (_, m) = mcgnode::testing::random_model(v, g, 4).unwrap();
+        let mut shared = m.kernel.workspace(g).unwrap();
+        let bits = |a: &[f64]| a.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let mut sets = vec![];
+        for (k, s) in tr.samples.iter().map(|x| &x.state).enumerate() {
+            for _ in 0..2 {
+                let (mut got, mut want) = (vec![0.0; g.ndof()], vec![0.0; g.ndof()]);
+                m.kernel.acceleration(&mut shared, &s.q, &s.v, &mut got);
+                let mut fresh = m.kernel.workspace(g).unwrap();
+                m.kernel.acceleration(&mut fresh, &s.q, &s.v, &mut want);
+                assert_eq!(bits(&got), bits(&want), "{v} state {k}");
+            }
+            sets.push(shared.edge_pairs().collect::<Vec<_>>());
+        }
+        sets.dedup();
+        assert!(sets.len() > 2, "the contacts changed along the trajectory");
+    }
+}
+
 /// Constrained variants satisfy A q̈ + Ȧ q̇ = 0 whatever their weights.
 #[test]
 fn constrained_accelerations_respect_bars() {

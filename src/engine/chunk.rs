@@ -205,6 +205,24 @@ struct Contacts {
     search: Option<NeighborSearch>,
     pairs: Vec<(usize, usize)>,
     starts: Vec<usize>,
+    /// The pairs and starts the edge arrays were last laid out for: a
+    /// rollout step whose contacts are those of the step before (a resting
+    /// pile, a held object) reuses the layout.
+    laid_pairs: Vec<(usize, usize)>,
+    laid_starts: Vec<usize>,
+}
+
+impl Contacts {
+    /// Whether the pairs found are those last laid out; if not, remembers
+    /// them as laid out now.
+    fn laid_again(&mut self) -> bool {
+        if self.pairs == self.laid_pairs && self.starts == self.laid_starts {
+            return true;
+        }
+        self.laid_pairs.clone_from(&self.pairs);
+        self.laid_starts.clone_from(&self.starts);
+        false
+    }
 }
 
 impl Contacts {
@@ -379,7 +397,10 @@ impl Chunk {
     /// depends on `bs` alone and is kept.
     fn lay_out(&mut self, m: &Model, bs: usize) {
         let contacts = m.plan.has_contacts();
-        if self.laid == bs && !contacts {
+        // Remembers this layout's pairs either way; `laid` is 0 after the
+        // buffers were made anew.
+        let same_pairs = contacts && self.contacts.laid_again();
+        if self.laid == bs && (!contacts || same_pairs) {
             return;
         }
         let a = &m.arch;
