@@ -22,6 +22,15 @@ fn system(kind: SystemKind, n: usize) -> (SystemConfig, Graph) {
     (c, g)
 }
 
+/// [`system`], with two particle types in no symmetric order when `mixed`.
+fn system_of_types(kind: SystemKind, n: usize, mixed: bool) -> (SystemConfig, Graph) {
+    let (c, mut g) = system(kind, n);
+    if mixed {
+        g.types = (0..n).map(|i| u32::from(i % 3 == 1)).collect();
+    }
+    (c, g)
+}
+
 fn states(c: &SystemConfig, g: &Graph, k: usize, seed: u64) -> Vec<State> {
     (0..k).map(|i| c.start_for(g, seed, i)).collect()
 }
@@ -191,10 +200,7 @@ fn kernel_matches_candle() {
         (SystemKind::Pendulum, 5, false),
         (SystemKind::Pendulum, 4, true),
     ] {
-        let (c, mut g) = system(kind, n);
-        if mixed {
-            g.types = (0..n).map(|i| u32::from(i % 3 == 1)).collect();
-        }
+        let (c, g) = system_of_types(kind, n, mixed);
         let st = states(&c, &g, 6, 21);
         let plan = GraphPlan::new(&g);
         let sr: Vec<&State> = st.iter().collect();
@@ -256,10 +262,7 @@ fn a_workspace_follows_the_parameters_it_is_given() {
         (SystemKind::Spring, 7, true),
         (SystemKind::Pendulum, 4, true),
     ] {
-        let (c, mut g) = system(kind, n);
-        if mixed {
-            g.types = (0..n).map(|i| u32::from(i % 3 == 1)).collect();
-        }
+        let (c, g) = system_of_types(kind, n, mixed);
         let st = states(&c, &g, 4, 5);
         for v in [Variant::Mcgnode, Variant::Cdgnode, Variant::Gnode] {
             let models: Vec<TrainedModel> = [7, 8]

@@ -66,9 +66,8 @@ impl Helper {
         })
     }
 
-    /// Hands `job` to the thread; returns the post's number for
-    /// [`Helper::wait`].
-    fn post(&self, job: &(dyn Fn() + Sync)) -> u64 {
+    /// Hands `job` to the thread.
+    fn post(&self, job: &(dyn Fn() + Sync)) {
         let sh = &self.shared;
         let job: *const (dyn Fn() + Sync + '_) = job;
         // Only the lifetime changes, which a pointer cast cannot do.
@@ -79,15 +78,16 @@ impl Helper {
         *sh.job.lock().unwrap_or_else(PoisonError::into_inner) = Some(job);
         // A panic of a join the caller unwound from is not this one's.
         sh.panicked.store(false, Ordering::Release);
-        let n = sh.posted.fetch_add(1, Ordering::Release) + 1;
+        sh.posted.fetch_add(1, Ordering::Release);
         if let Some(t) = &self.thread {
             t.thread().unpark();
         }
-        n
     }
 
-    /// Returns once post `n` is done.
-    fn wait(&self, n: u64) {
+    /// Returns once the latest post is done (at once if there is none
+    /// pending: only the caller posts, so `posted` stands still meanwhile).
+    fn wait(&self) {
+        let n = self.shared.posted.load(Ordering::Acquire);
         let mut spins = 0u32;
         while self.shared.finished.load(Ordering::Acquire) < n {
             spins += 1;
@@ -107,35 +107,23 @@ impl Helper {
     }
 }
 
-/// Waits, on drop, for the posts it holds: the closure they point at stays
-/// alive until every helper is done, even if the caller's share panics.
-struct Waiter<'a> {
-    helpers: &'a [Helper],
-    posts: [u64; MAX_HELPERS],
-}
+/// Waits, on drop, for its helpers' latest posts: the closure they point at
+/// stays alive until every helper is done, even if the caller's share
+/// panics.
+struct Waiter<'a>(&'a [Helper]);
 
 impl Drop for Waiter<'_> {
     fn drop(&mut self) {
-        for (h, &n) in self.helpers.iter().zip(&self.posts) {
-            h.wait(n);
-        }
+        self.0.iter().for_each(Helper::wait);
     }
 }
-
-/// Helpers a crew keeps at most (`--threads` beyond this runs on this many
-/// plus the caller).
-const MAX_HELPERS: usize = 63;
 
 /// Runs `mine` here and `theirs` on every helper at once; returns when all
 /// are done, raising a helper's panic here.
 fn join_all(helpers: &[Helper], mine: impl FnOnce(), theirs: &(dyn Fn() + Sync)) {
-    let helpers = &helpers[..helpers.len().min(MAX_HELPERS)];
-    let mut waiter = Waiter {
-        helpers,
-        posts: [0; MAX_HELPERS],
-    };
-    for (h, n) in helpers.iter().zip(&mut waiter.posts) {
-        *n = h.post(theirs);
+    let waiter = Waiter(helpers);
+    for h in helpers {
+        h.post(theirs);
     }
     mine();
     drop(waiter);
@@ -199,7 +187,7 @@ impl Crew {
         if threads <= 1 {
             return Ok(None);
         }
-        let helpers = (1..threads.min(MAX_HELPERS + 1))
+        let helpers = (1..threads)
             .map(|_| Helper::start())
             .collect::<std::io::Result<_>>()?;
         Ok(Some(Self { helpers }))
