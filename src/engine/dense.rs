@@ -19,9 +19,24 @@ pub(crate) enum Simd {
     Portable,
 }
 
-/// The [`Simd`] path for this CPU (the detection is cached by std).
+/// The [`Simd`] path for this CPU, or a narrower one named by the
+/// environment variable `MCGNODE_SIMD` (`avx2`, `portable`): every path
+/// gives the same bits, so this only compares their speeds on one machine.
 #[inline(always)]
 pub(crate) fn simd() -> Simd {
+    static PATH: std::sync::OnceLock<Simd> = std::sync::OnceLock::new();
+    *PATH.get_or_init(|| {
+        let best = detected();
+        match std::env::var("MCGNODE_SIMD").as_deref() {
+            Ok("avx2") if best != Simd::Portable => Simd::Avx2,
+            Ok("portable") => Simd::Portable,
+            _ => best,
+        }
+    })
+}
+
+/// The widest [`Simd`] path this CPU supports.
+fn detected() -> Simd {
     #[cfg(target_arch = "x86_64")]
     {
         if std::is_x86_feature_detected!("fma") {
