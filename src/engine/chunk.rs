@@ -9,7 +9,7 @@ use super::layout::Layout;
 use super::split::Split;
 use crate::gnode::arch::{Arch, Block, Decoder, NodeInput};
 use crate::gnode::plan::{BarEnd, GraphPlan};
-use crate::gnode::solve::{lu_factor_in_place, lu_solve_factored};
+use crate::gnode::solve::{lu_factor_in_place, lu_solve_one};
 use crate::gnode::variant::EdgeInput;
 use crate::physics::neighbors::NeighborSearch;
 use crate::system::State;
@@ -1147,7 +1147,7 @@ impl Chunk {
                 let piv = &mut self.piv[s * k..(s + 1) * k];
                 ok = lu_factor_in_place(kmat, piv, k).is_ok();
                 if ok {
-                    lu_solve_factored(kmat, piv, lam, k, 1);
+                    lu_solve_one(kmat, piv, lam, k);
                 }
             }
             self.solved[s] = ok;
@@ -1218,7 +1218,7 @@ impl Chunk {
                     &self.kmat[s * k * k..(s + 1) * k * k],
                     &self.piv[s * k..(s + 1) * k],
                 );
-                lu_solve_factored(kf, piv, rbar, k, 1);
+                lu_solve_one(kf, piv, rbar, k);
                 if self.inputs {
                     let into = (&mut self.gdq[s * k * d..(s + 1) * k * d], &mut self.gqv[..]);
                     constraint_input_grads(
