@@ -1087,17 +1087,7 @@ impl Chunk {
         }
         let inv_m = &self.inv_m;
         if k == 0 {
-            // No bars (springs, contacts): G = N, q̈ = M⁻¹N, in row order.
-            let ty = &self.node_ty[..nodes];
-            for c in 0..d {
-                let range = c * nodes..(c + 1) * nodes;
-                let (f, g) = (&self.out[range.clone()], &mut self.geq[range.clone()]);
-                g.copy_from_slice(f);
-                for ((a, f), &y) in self.acc[range].iter_mut().zip(f).zip(ty) {
-                    *a = inv_m[y] * f;
-                }
-            }
-            self.solved[..bs].fill(true);
+            self.no_bars(d, bs, nodes);
             return;
         }
         let minv = |p: usize| inv_m[m.plan.types[p]];
@@ -1167,6 +1157,21 @@ impl Chunk {
                 }
             }
         }
+    }
+
+    /// [`Chunk::constrain`] without bars (springs, contacts): G = N and
+    /// q̈ = M⁻¹N, in row order.
+    fn no_bars(&mut self, d: usize, bs: usize, nodes: usize) {
+        let (ty, inv_m) = (&self.node_ty[..nodes], &self.inv_m);
+        for c in 0..d {
+            let range = c * nodes..(c + 1) * nodes;
+            let (f, g) = (&self.out[range.clone()], &mut self.geq[range.clone()]);
+            g.copy_from_slice(f);
+            for ((a, f), &y) in self.acc[range].iter_mut().zip(f).zip(ty) {
+                *a = inv_m[y] * f;
+            }
+        }
+        self.solved[..bs].fill(true);
     }
 
     /// Reverse pass of [`Chunk::constrain`]: ∂L/∂N into `gout`, ∂L/∂log m into `grad`.

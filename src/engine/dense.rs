@@ -24,15 +24,25 @@ pub(crate) enum Simd {
 /// gives the same bits, so this only compares their speeds on one machine.
 #[inline(always)]
 pub(crate) fn simd() -> Simd {
-    static PATH: std::sync::OnceLock<Simd> = std::sync::OnceLock::new();
-    *PATH.get_or_init(|| {
-        let best = detected();
-        match std::env::var("MCGNODE_SIMD").as_deref() {
-            Ok("avx2") if best != Simd::Portable => Simd::Avx2,
-            Ok("portable") => Simd::Portable,
-            _ => best,
+    use std::sync::atomic::{AtomicU8, Ordering};
+    // 0: not chosen yet; else 1 + the path's index. A relaxed load per call
+    // (every layer calls this): racing first calls choose the same path.
+    static PATH: AtomicU8 = AtomicU8::new(0);
+    const PATHS: [Simd; 3] = [Simd::Avx512, Simd::Avx2, Simd::Portable];
+    match PATH.load(Ordering::Relaxed) {
+        0 => {
+            let best = detected();
+            let path = match std::env::var("MCGNODE_SIMD").as_deref() {
+                Ok("avx2") if best != Simd::Portable => Simd::Avx2,
+                Ok("portable") => Simd::Portable,
+                _ => best,
+            };
+            let at = PATHS.iter().position(|&p| p == path).unwrap_or(2);
+            PATH.store(1 + at as u8, Ordering::Relaxed);
+            path
         }
-    })
+        k => PATHS[usize::from(k - 1).min(2)],
+    }
 }
 
 /// The widest [`Simd`] path this CPU supports.

@@ -54,6 +54,32 @@ pub(crate) fn scatter_add_rows(dst: &mut [f64], src: &[f64], idx: &[usize]) {
     }
 }
 
+/// Asks the CPU to bring `x` into cache ahead of its use (a no-op off
+/// x86-64). A batch's states are shuffled over the heap, a few small
+/// buffers each: read one after another, each waited on its own cache miss.
+#[inline]
+pub(crate) fn prefetch(x: &[f64]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        // One request per 64-byte line, the last value's line included.
+        let p = x.as_ptr().cast::<i8>();
+        let bytes = std::mem::size_of_val(x);
+        let mut at = 0;
+        while at < bytes {
+            // SAFETY: a prefetch never faults, and `p + at` stays inside `x`.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.add(at)) };
+            at += 64;
+        }
+        if bytes > 0 {
+            // SAFETY: as above; the last byte of `x`.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.add(bytes - 1)) };
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -93,30 +119,4 @@ mod tests {
         let mut dst = vec![0.0; 2];
         gather_rows(&mut dst, &[1.0, 2.0], &[0, 2], Gather::Set);
     }
-}
-
-/// Asks the CPU to bring `x` into cache ahead of its use (a no-op off
-/// x86-64). A batch's states are shuffled over the heap, a few small
-/// buffers each: read one after another, each waited on its own cache miss.
-#[inline]
-pub(crate) fn prefetch(x: &[f64]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        // One request per 64-byte line, the last value's line included.
-        let p = x.as_ptr().cast::<i8>();
-        let bytes = std::mem::size_of_val(x);
-        let mut at = 0;
-        while at < bytes {
-            // SAFETY: a prefetch never faults, and `p + at` stays inside `x`.
-            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.add(at)) };
-            at += 64;
-        }
-        if bytes > 0 {
-            // SAFETY: as above; the last byte of `x`.
-            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.add(bytes - 1)) };
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = x;
 }
