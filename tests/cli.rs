@@ -1117,3 +1117,70 @@ fn a_closed_pipe_ends_a_command_without_a_panic() {
     // 141 = 128 + SIGPIPE: killed by the signal, as `yes | head` is.
     assert!(out.contains("status 141"), "{out} / {err}");
 }
+
+/// Every vector path (`MCGNODE_SIMD`) trains to the same bits: the graph
+/// passes forward and backward, the input scaling and the constraint, on
+/// springs (no bars) and pendulums (bars), against the portable build of
+/// the same code.
+#[test]
+fn every_vector_path_trains_the_same_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for system in ["spring", "pendulum"] {
+        let bag = format!("{system}.mcap");
+        ok(&mcgnode(
+            &[
+                "simulate",
+                "--system",
+                system,
+                "--particles",
+                "4",
+                "--trajectories",
+                "3",
+                "--seed",
+                "3",
+                "--out",
+                &bag,
+            ],
+            d,
+        ));
+        let mut trained = vec![];
+        for path in ["", "avx2", "portable"] {
+            let out = format!("{system}-{path}.json");
+            let o = Command::new(env!("CARGO_BIN_EXE_mcgnode"))
+                .args([
+                    "train",
+                    "--model",
+                    "mcgnode",
+                    "--recipe",
+                    "paper",
+                    "--data",
+                    &bag,
+                    "--epochs",
+                    "3",
+                    "--threads",
+                    "2",
+                    "--out",
+                    &out,
+                    "--quiet",
+                ])
+                .env("MCGNODE_SIMD", path)
+                .current_dir(d)
+                .output()
+                .expect("run mcgnode");
+            ok(&o);
+            let file: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(d.join(&out)).unwrap()).unwrap();
+            let losses = &file["training"]["validation_loss"];
+            assert!(
+                losses.as_f64().is_some_and(f64::is_finite),
+                "{system}: {losses}"
+            );
+            trained.push((file["weights"].to_string(), losses.to_string()));
+        }
+        assert!(
+            trained.iter().all(|t| *t == trained[0]),
+            "{system}: the vector paths trained different weights"
+        );
+    }
+}

@@ -10,6 +10,7 @@
 /// gives the same bits; without FMA hardware the portable path's `mul_add`
 /// is a slow library call, on x86-64 CPUs older than 2013 only).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
 pub(crate) enum Simd {
     /// AVX-512F and FMA.
     Avx512,
@@ -25,23 +26,36 @@ pub(crate) enum Simd {
 #[inline(always)]
 pub(crate) fn simd() -> Simd {
     use std::sync::atomic::{AtomicU8, Ordering};
-    // 0: not chosen yet; else 1 + the path's index. A relaxed load per call
-    // (every layer calls this): racing first calls choose the same path.
+    // 0: not chosen yet. A relaxed load per call (every layer calls this);
+    // racing first calls choose the same path.
     static PATH: AtomicU8 = AtomicU8::new(0);
-    const PATHS: [Simd; 3] = [Simd::Avx512, Simd::Avx2, Simd::Portable];
     match PATH.load(Ordering::Relaxed) {
-        0 => {
-            let best = detected();
-            let path = match std::env::var("MCGNODE_SIMD").as_deref() {
-                Ok("avx2") if best != Simd::Portable => Simd::Avx2,
-                Ok("portable") => Simd::Portable,
-                _ => best,
-            };
-            let at = PATHS.iter().position(|&p| p == path).unwrap_or(2);
-            PATH.store(1 + at as u8, Ordering::Relaxed);
+        1 => Simd::Avx512,
+        2 => Simd::Avx2,
+        3 => Simd::Portable,
+        _ => {
+            let path = chosen(detected(), std::env::var("MCGNODE_SIMD").ok().as_deref());
+            PATH.store(path as u8 + 1, Ordering::Relaxed);
             path
         }
-        k => PATHS[usize::from(k - 1).min(2)],
+    }
+}
+
+/// The path `MCGNODE_SIMD` asks for on a CPU whose widest is `best`; a
+/// value it does not know is said on stderr, not ignored silently.
+fn chosen(best: Simd, asked: Option<&str>) -> Simd {
+    match asked {
+        None | Some("" | "avx512") => best,
+        Some("avx2") if best == Simd::Portable => best,
+        Some("avx2") => Simd::Avx2,
+        Some("portable") => Simd::Portable,
+        Some(other) => {
+            eprintln!(
+                "warning: MCGNODE_SIMD={other:?} is not one of avx512, avx2, portable; \
+                 using the widest path this CPU has"
+            );
+            best
+        }
     }
 }
 

@@ -273,3 +273,16 @@ fn dots_give_the_bits_of_dot() {
         }
     }
 }
+
+/// `MCGNODE_SIMD` narrows the path, never widens it, and a value it does
+/// not know leaves the widest path.
+#[test]
+fn the_environment_narrows_the_vector_path() {
+    use Simd::{Avx2, Avx512, Portable};
+    assert_eq!(chosen(Avx512, None), Avx512);
+    assert_eq!(chosen(Avx512, Some("avx2")), Avx2);
+    assert_eq!(chosen(Avx512, Some("portable")), Portable);
+    assert_eq!(chosen(Avx2, Some("avx512")), Avx2);
+    assert_eq!(chosen(Portable, Some("avx2")), Portable);
+    assert_eq!(chosen(Avx2, Some("sse")), Avx2);
+}
