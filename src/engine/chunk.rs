@@ -198,6 +198,37 @@ pub(crate) struct Chunk {
     pub(crate) split: Split,
 }
 
+/// `fn $name(&mut self, args)` running `$any` (an `#[inline(always)]`
+/// method) compiled for AVX-512F or AVX2 with FMA, whichever [`simd`]
+/// chose, or as built: the same code, so the same bits, in the widest
+/// vectors the CPU has.
+macro_rules! widest {
+    ($(#[$doc:meta])* fn $name:ident => $any:ident($($arg:ident: $ty:ty),* $(,)?)) => {
+        $(#[$doc])*
+        fn $name(&mut self, $($arg: $ty),*) {
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx512f,fma")]
+            unsafe fn avx512(c: &mut Chunk, $($arg: $ty),*) {
+                c.$any($($arg),*);
+            }
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx2,fma")]
+            unsafe fn avx2(c: &mut Chunk, $($arg: $ty),*) {
+                c.$any($($arg),*);
+            }
+            match simd() {
+                // SAFETY: the CPU supports AVX-512F and FMA (`simd` checked).
+                #[cfg(target_arch = "x86_64")]
+                Simd::Avx512 => unsafe { avx512(self, $($arg),*) },
+                // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).
+                #[cfg(target_arch = "x86_64")]
+                Simd::Avx2 => unsafe { avx2(self, $($arg),*) },
+                _ => self.$any($($arg),*),
+            }
+        }
+    };
+}
+
 /// Prefetches the states `idx` (and their targets) that a chunk is about to
 /// read: their cache misses then overlap instead of following each other
 /// (a fifth of a 5-spring epoch was spent waiting on them).
@@ -629,37 +660,12 @@ impl Chunk {
         self.xn[..t * nodes].fill(0.0);
     }
 
-    /// Node inputs of state `s` (one-hot, q, q̇ raw in `x`, scaled in `xn`)
-    /// from node-major `q`, `v`; the one-hot rows must have been cleared.
-    fn put_graph_state(&mut self, m: &Model, s: usize, nodes: usize, q: &[f64], v: &[f64]) {
-        match simd() {
-            // SAFETY: the CPU supports AVX-512F and FMA (`simd` checked).
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx512 => unsafe { self.put_graph_state_avx512(m, s, nodes, q, v) },
-            // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => unsafe { self.put_graph_state_avx2(m, s, nodes, q, v) },
-            _ => self.put_graph_state_any(m, s, nodes, q, v),
-        }
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,fma")]
-    unsafe fn put_graph_state_avx512(
-        &mut self,
-        m: &Model,
-        s: usize,
-        n: usize,
-        q: &[f64],
-        v: &[f64],
-    ) {
-        self.put_graph_state_any(m, s, n, q, v);
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    unsafe fn put_graph_state_avx2(&mut self, m: &Model, s: usize, n: usize, q: &[f64], v: &[f64]) {
-        self.put_graph_state_any(m, s, n, q, v);
+    widest! {
+        /// Node inputs of state `s` (one-hot, q, q̇ raw in `x`, scaled in `xn`)
+        /// from node-major `q`, `v`; the one-hot rows must have been cleared.
+        fn put_graph_state => put_graph_state_any(
+            m: &Model, s: usize, nodes: usize, q: &[f64], v: &[f64]
+        )
     }
 
     #[inline(always)]
@@ -831,39 +837,18 @@ impl Chunk {
         (&self.recv[..self.edges], &self.send[..self.edges])
     }
 
-    /// The graph models' forward pass, compiled for the widest vectors the
-    /// CPU has (the activations and gathers between the MLPs are a third of
-    /// an inference step); the same bits on every path.
-    fn forward_graph(&mut self, m: &Model, th: &[f64]) {
-        match simd() {
-            // SAFETY: the CPU supports AVX-512F and FMA (`simd` checked).
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx512 => unsafe { self.forward_graph_avx512(m, th) },
-            // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => unsafe { self.forward_graph_avx2(m, th) },
-            _ => self.forward_graph_any(m, th),
-        }
+    widest! {
+        /// The graph models' forward pass, compiled for the widest vectors the
+        /// CPU has (the activations and gathers between the MLPs are a third of
+        /// an inference step); the same bits on every path.
+        fn forward_graph => forward_graph_any(m: &Model, th: &[f64])
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,fma")]
-    unsafe fn forward_graph_avx512(&mut self, m: &Model, th: &[f64]) {
-        self.forward_graph_any(m, th);
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    unsafe fn forward_graph_avx2(&mut self, m: &Model, th: &[f64]) {
-        self.forward_graph_any(m, th);
-    }
-
+    // The paper's forward pass stage by stage, as one loop nest, inlined into
+    // the vector copies above: helpers would each need #[inline(always)] to
+    // stay inside them.
     #[inline(always)]
-    #[allow(clippy::inline_always)]
-    // to be compiled into the vector copies
-    // The paper's forward pass stage by stage, as one loop nest: helpers would
-    // each need #[inline(always)] to stay inside the vector copies above.
-    #[allow(clippy::too_many_lines)]
+    #[allow(clippy::too_many_lines, clippy::inline_always)]
     fn forward_graph_any(&mut self, m: &Model, th: &[f64]) {
         let a = &m.arch;
         let (d, t, em) = (m.plan.dim, a.types, a.embed);
@@ -1263,32 +1248,12 @@ impl Chunk {
         }
     }
 
-    /// The reverse of [`Chunk::forward_graph`], compiled for the widest
-    /// vectors the CPU has (its activation derivatives, a division each,
-    /// were a tenth of a 5-spring epoch as two-lane SSE2); the same bits on
-    /// every path.
-    fn backward_graph(&mut self, m: &Model, th: &[f64], bs: usize) {
-        match simd() {
-            // SAFETY: the CPU supports AVX-512F and FMA (`simd` checked).
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx512 => unsafe { self.backward_graph_avx512(m, th, bs) },
-            // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => unsafe { self.backward_graph_avx2(m, th, bs) },
-            _ => self.backward_graph_any(m, th, bs),
-        }
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,fma")]
-    unsafe fn backward_graph_avx512(&mut self, m: &Model, th: &[f64], bs: usize) {
-        self.backward_graph_any(m, th, bs);
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    unsafe fn backward_graph_avx2(&mut self, m: &Model, th: &[f64], bs: usize) {
-        self.backward_graph_any(m, th, bs);
+    widest! {
+        /// The reverse of [`Chunk::forward_graph`], compiled for the widest
+        /// vectors the CPU has (its activation derivatives, a division each,
+        /// were a tenth of a 5-spring epoch as two-lane SSE2); the same bits on
+        /// every path.
+        fn backward_graph => backward_graph_any(m: &Model, th: &[f64], bs: usize)
     }
 
     // The reverse of forward_graph_any stage by stage, in one place so that
