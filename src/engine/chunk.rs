@@ -3,10 +3,11 @@
 //! graph, feature-major), the squared error against the targets, and the
 //! hand-written reverse pass. Every buffer lives here and is reused.
 
-use super::dense::{simd, squareplus_in_place, times_squareplus_grad, Mlp, Simd, Tape};
+use super::dense::{simd, squareplus_in_place, times_squareplus_grad, Mlp, Out, Simd, Tape};
+use super::fused::{EdgeBlocks, EDGE_BLOCK, FUSED_EDGES};
 use super::gather::{gather_rows, prefetch, scatter_add_rows, Gather};
 use super::layout::Layout;
-use super::split::Split;
+use super::split::{Scratch, Split};
 use crate::gnode::arch::{Arch, Block, Decoder, NodeInput};
 use crate::gnode::plan::{BarEnd, GraphPlan};
 use crate::gnode::solve::{lu_factor_in_place, lu_solve_one};
@@ -196,6 +197,8 @@ pub(crate) struct Chunk {
     pub(crate) sse: f64,
     /// The edge MLPs' rows over two cores (large graphs, inference only).
     pub(crate) split: Split,
+    /// This thread's scratch for [`Split::blocks`].
+    scratch: Scratch,
 }
 
 /// `fn $name(&mut self, args)` running `$any` (an `#[inline(always)]`
@@ -333,8 +336,10 @@ impl Chunk {
         };
         let contacts = std::mem::take(&mut self.contacts);
         let split = std::mem::take(&mut self.split);
+        let scratch = std::mem::take(&mut self.scratch);
         *self = Chunk {
             split,
+            scratch,
             cap: bs,
             record,
             laid: 0,
@@ -844,17 +849,15 @@ impl Chunk {
         fn forward_graph => forward_graph_any(m: &Model, th: &[f64])
     }
 
-    // The paper's forward pass stage by stage, as one loop nest, inlined into
-    // the vector copies above: helpers would each need #[inline(always)] to
-    // stay inside them.
+    // The paper's forward pass, inlined into the vector copies above with
+    // its stages (each #[inline(always)] to stay inside them).
     #[inline(always)]
-    #[allow(clippy::too_many_lines, clippy::inline_always)]
+    #[allow(clippy::inline_always)]
     fn forward_graph_any(&mut self, m: &Model, th: &[f64]) {
         let a = &m.arch;
         let (d, t, em) = (m.plan.dim, a.types, a.embed);
         let bs = self.laid;
         let nodes = bs * m.plan.n;
-        let edges = self.edges;
         let nf = a.node_features();
         // Encode: nodes from the type (by type) or (one-hot, q, q̇), edges
         // from w_ij = q_i − q_j.
@@ -892,6 +895,42 @@ impl Chunk {
             m.mlp(i).forward(th, x, &[], nodes, tape, h0);
             squareplus_in_place(h0);
         }
+        if by_type && a.rounds > 0 && a.updates_edges(0) {
+            self.pair_outputs(m, th, kept);
+        }
+        // MCGNODE's one round by type at inference: the edges' stages fused
+        // block by block, the blocks over both cores on a large graph.
+        let fused = by_type
+            && self.edges >= FUSED_EDGES
+            && !nodes_read
+            && !self.record
+            && a.rounds == 1
+            && a.updates_edges(0)
+            && matches!(a.decoder, Decoder::Pairwise { .. });
+        if fused {
+            self.edge_blocks(m, th);
+        } else {
+            self.edge_stages(m, th);
+        }
+        self.decode(m, th, fused);
+        // Constrain.
+        if a.constrained {
+            self.constrain(m, th, bs, kept);
+        } else {
+            self.acc[..d * nodes].copy_from_slice(&self.out[..d * nodes]);
+        }
+    }
+
+    /// The edges' stages one after the other over all rows: the edge
+    /// embedding from w_ij = q_i − q_j, then message passing.
+    #[inline(always)]
+    #[allow(clippy::too_many_lines, clippy::inline_always)] // the rounds as one loop nest
+    fn edge_stages(&mut self, m: &Model, th: &[f64]) {
+        let a = &m.arch;
+        let (d, t, em) = (m.plan.dim, a.types, a.embed);
+        let nodes = self.laid * m.plan.n;
+        let edges = self.edges;
+        let (by_type, nodes_read) = (m.by_type, m.nodes_read);
         for c in 0..d {
             let q = &self.x[(t + c) * nodes..(t + c + 1) * nodes];
             let w = &mut self.w_in[c * edges..(c + 1) * edges];
@@ -934,25 +973,8 @@ impl Chunk {
                 hn.copy_from_slice(hl);
             }
             if a.updates_edges(l) && by_pair {
-                // The same MLP on the types² pairs' inputs, read per edge.
-                let i = m.ix(Block::EdgeUpdate(l)).expect("round");
-                let (tt, emb) = (t * t, &self.type_embed[..em * t]);
-                let (pr, rest) = self.pair_in[..3 * em * tt].split_at_mut(em * tt);
-                let (ps, pp) = rest.split_at_mut(em * tt);
-                for k in 0..em {
-                    for p in 0..tt {
-                        let (r, s) = (emb[k * t + p / t], emb[k * t + p % t]);
-                        (pr[k * tt + p], ps[k * tt + p], pp[k * tt + p]) = (r, s, r * s);
-                    }
-                }
-                let (x, c): (&[f64], &[f64]) = match a.edge_input {
-                    EdgeInput::Concat => (pr, ps),
-                    EdgeInput::Product => (pp, &[]),
-                };
-                let po = &mut self.pair_out[..em * tt];
-                if !kept {
-                    m.mlp(i).forward(th, x, c, tt, &mut self.tapes[i], po);
-                }
+                // The same MLP on the types² pairs' inputs (above), read per edge.
+                let (tt, po) = (t * t, &self.pair_out[..em * t * t]);
                 let pair = &self.pair[..edges];
                 for k in 0..em {
                     let (x, old, pk) = (
@@ -990,6 +1012,18 @@ impl Chunk {
                 hen.copy_from_slice(hel);
             }
         }
+    }
+
+    /// The body branch and the decoder into `out`; `fused`: the edge
+    /// decoder's outputs are already in `f_edge` ([`Chunk::edge_blocks`]).
+    #[inline(always)]
+    #[allow(clippy::inline_always)] // inside forward_graph's vector copies
+    fn decode(&mut self, m: &Model, th: &[f64], fused: bool) {
+        let a = &m.arch;
+        let (d, em) = (m.plan.dim, a.embed);
+        let nodes = self.laid * m.plan.n;
+        let edges = self.edges;
+        let nf = a.node_features();
         // Global (body) embedding of (one-hot, q, q̇).
         if let Some(i) = m.ix(Block::GlobalEmbed) {
             let g = &mut self.glob[..em * nodes];
@@ -1015,8 +1049,10 @@ impl Chunk {
                 out.fill(0.0);
                 let i = m.ix(Block::EdgeDecoder).expect("pairwise decoder");
                 let fe = &mut self.f_edge[..d * edges];
-                let tape = &mut self.tapes[i];
-                (self.split).forward(m.mlp(i), th, (her_, &[]), edges, tape, fe, false);
+                if !fused {
+                    let tape = &mut self.tapes[i];
+                    (self.split).forward(m.mlp(i), th, (her_, &[]), edges, tape, fe, false);
+                }
                 let half = edges / 2;
                 for c in 0..d {
                     let (oc, fc) = (&mut out[c * nodes..(c + 1) * nodes], &fe[c * edges..]);
@@ -1048,12 +1084,68 @@ impl Chunk {
         }
         let k = a.norm.out_scale;
         self.out[..d * nodes].iter_mut().for_each(|o| *o *= k);
-        // Constrain.
-        if a.constrained {
-            self.constrain(m, th, bs, kept);
-        } else {
-            self.acc[..d * nodes].copy_from_slice(&self.out[..d * nodes]);
+    }
+
+    /// Round 0's edge update on the types² pairs' inputs (each edge reads its
+    /// pair's row): kept from the pass before when `kept`.
+    #[inline(always)]
+    #[allow(clippy::inline_always)] // inside forward_graph's vector copies
+    fn pair_outputs(&mut self, m: &Model, th: &[f64], kept: bool) {
+        let a = &m.arch;
+        let (t, em) = (a.types, a.embed);
+        let i = m.ix(Block::EdgeUpdate(0)).expect("round");
+        let (tt, emb) = (t * t, &self.type_embed[..em * t]);
+        let (pr, rest) = self.pair_in[..3 * em * tt].split_at_mut(em * tt);
+        let (ps, pp) = rest.split_at_mut(em * tt);
+        for k in 0..em {
+            for p in 0..tt {
+                let (r, s) = (emb[k * t + p / t], emb[k * t + p % t]);
+                (pr[k * tt + p], ps[k * tt + p], pp[k * tt + p]) = (r, s, r * s);
+            }
         }
+        let (x, c): (&[f64], &[f64]) = match a.edge_input {
+            EdgeInput::Concat => (pr, ps),
+            EdgeInput::Product => (pp, &[]),
+        };
+        let po = &mut self.pair_out[..em * tt];
+        if !kept {
+            m.mlp(i).forward(th, x, c, tt, &mut self.tapes[i], po);
+        }
+    }
+
+    /// [`Chunk::edge_stages`] and the edge decoder fused over blocks of edge
+    /// rows ([`super::fused`]): inference of MCGNODE's one round by type.
+    fn edge_blocks(&mut self, m: &Model, th: &[f64]) {
+        let a = &m.arch;
+        let (d, t, em) = (m.plan.dim, a.types, a.embed);
+        let nodes = self.laid * m.plan.n;
+        let edges = self.edges;
+        let (Some(ie), Some(id)) = (m.ix(Block::EdgeEmbed), m.ix(Block::EdgeDecoder)) else {
+            unreachable!("a pairwise graph model has both edge MLPs")
+        };
+        let features = a.edge_features();
+        let work = EdgeBlocks {
+            embed: m.mlp(ie),
+            decoder: m.mlp(id),
+            th,
+            q: &self.x[t * nodes..(t + d) * nodes],
+            nodes,
+            dim: d,
+            w_scale: a.norm.w_scale,
+            recv: &self.recv[..edges],
+            send: &self.send[..edges],
+            w_in: &self.w_in[..features * edges],
+            features,
+            edges,
+            pair_out: &self.pair_out[..em * t * t],
+            pairs: t * t,
+            pair: &self.pair[..edges],
+            embed_width: em,
+        };
+        let f_edge = Out::new(&mut self.f_edge[..d * edges], edges);
+        // SAFETY: `blocks` hands each block of rows to one thread.
+        let run = |rows, s: &mut Scratch| unsafe { work.run(rows, s, f_edge) };
+        (self.split).blocks(edges, EDGE_BLOCK, &mut self.scratch, &run);
     }
 
     /// q̈ = M⁻¹(N − Aᵀλ), λ = (A M⁻¹ Aᵀ)⁻¹(A M⁻¹ N + Ȧq̇), per state, on the

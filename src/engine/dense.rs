@@ -477,6 +477,9 @@ pub(crate) struct Out<'a> {
     ptr: *mut f64,
     len: usize,
     r: usize,
+    /// Row of `y` that the MLP's row 0 goes to (a block of rows computed
+    /// from block-sized inputs, [`super::fused`]).
+    off: usize,
     _buffer: std::marker::PhantomData<&'a mut [f64]>,
 }
 
@@ -494,14 +497,20 @@ impl<'a> Out<'a> {
             ptr: y.as_mut_ptr(),
             len: y.len(),
             r,
+            off: 0,
             _buffer: std::marker::PhantomData,
         }
+    }
+
+    /// The same buffer with the MLP's row `t` written at row `off + t`.
+    pub(crate) fn shifted(self, off: usize) -> Self {
+        Self { off, ..self }
     }
 
     /// Writes `src` (at most `T` values) at rows `t0..` of feature `j`.
     #[inline(always)]
     fn put<const T: usize>(self, j: usize, t0: usize, src: &[f64]) {
-        let at = j * self.r + t0;
+        let at = j * self.r + self.off + t0;
         assert!(
             at + src.len() <= self.len && src.len() <= T,
             "an MLP output out of its buffer"

@@ -14,6 +14,7 @@
 mod chunk;
 mod crew;
 mod dense;
+mod fused;
 mod gather;
 mod gns;
 mod infer;

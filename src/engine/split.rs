@@ -4,6 +4,7 @@
 //! Training and batched rollouts already fill the cores with states, so
 //! they never split.
 
+use std::ops::Range;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, PoisonError};
 
@@ -31,6 +32,8 @@ pub(crate) struct Split {
     helper: Option<Helper>,
     /// The helper's tile scratch (sized by `Tape::fit`).
     tape: Tape,
+    /// The helper's scratch for [`Split::blocks`].
+    scratch: Scratch,
 }
 
 impl Clone for Split {
@@ -83,25 +86,76 @@ impl Split {
             return self.forward(mlp, th, (a, c), r, tape, y, activate);
         };
         self.tape.fit(mlp);
-        // Both threads take blocks of rows in turn until none is left, so
-        // that a slower core (a busy neighbour) does less. Blocks start on
-        // tile boundaries: the tiles are those of the whole pass.
-        let next = AtomicUsize::new(0);
         let out = Out::new(y, r);
-        let work = |tape: &mut Tape| loop {
-            let lo = next.fetch_add(1, Ordering::Relaxed) * BLOCK;
-            if lo >= r {
-                break;
-            }
+        let work = |rows: Range<usize>, tape: &mut Tape| {
             // SAFETY: each block of rows is taken by one thread only.
-            unsafe { mlp.forward_part(th, (a, c), r, lo..r.min(lo + BLOCK), tape, out, activate) };
+            unsafe { mlp.forward_part(th, (a, c), r, rows, tape, out, activate) };
         };
-        // Only the helper takes its tape (an uncontended lock).
-        let spare = Mutex::new(&mut self.tape);
-        let theirs = || work(&mut spare.lock().unwrap_or_else(PoisonError::into_inner));
-        let mine = || work(tape);
-        helper.join(mine, &theirs);
+        share(helper, r, BLOCK, (tape, &mut self.tape), &work);
     }
+
+    /// Whether [`Split::blocks`] would run on both threads for `r` rows.
+    pub(crate) fn splits(&self, r: usize) -> bool {
+        self.enabled && r >= SPLIT_ROWS
+    }
+
+    /// `work(rows, scratch)` over the rows `0..r` in blocks of `block` (a
+    /// multiple of the 16-row tile), in order on this thread, or on both
+    /// threads when [`Split::splits`]; `mine` is this thread's scratch, the
+    /// helper's is kept here. `work` must write each block's rows alone.
+    pub(crate) fn blocks(
+        &mut self,
+        r: usize,
+        block: usize,
+        mine: &mut Scratch,
+        work: &(dyn Fn(Range<usize>, &mut Scratch) + Sync),
+    ) {
+        if self.splits(r) && self.helper.is_none() {
+            self.helper = Helper::start().ok();
+            self.enabled = self.helper.is_some();
+        }
+        match &self.helper {
+            Some(helper) if self.splits(r) => {
+                share(helper, r, block, (mine, &mut self.scratch), work);
+            }
+            _ => (0..r)
+                .step_by(block.max(1))
+                .for_each(|lo| work(lo..r.min(lo + block), mine)),
+        }
+    }
+}
+
+/// One thread's buffers for [`Split::blocks`]: an MLP tile's scratch and a
+/// block's intermediate rows.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Scratch {
+    pub(crate) tape: Tape,
+    pub(crate) rows: [Vec<f64>; 3],
+}
+
+/// Both threads take blocks of `block` rows of `0..r` in turn until none
+/// is left, so that a slower core (a busy neighbour) does less; this thread
+/// works with `mine`, the helper with `spare`. Blocks start on tile
+/// boundaries: the tiles are those of the whole pass.
+fn share<S: Send>(
+    helper: &Helper,
+    r: usize,
+    block: usize,
+    (mine, spare): (&mut S, &mut S),
+    work: &(dyn Fn(Range<usize>, &mut S) + Sync),
+) {
+    let next = AtomicUsize::new(0);
+    let run = |s: &mut S| loop {
+        let lo = next.fetch_add(1, Ordering::Relaxed) * block;
+        if lo >= r {
+            break;
+        }
+        work(lo..r.min(lo + block), s);
+    };
+    // Only the helper takes the spare (an uncontended lock).
+    let spare = Mutex::new(spare);
+    let theirs = || run(&mut spare.lock().unwrap_or_else(PoisonError::into_inner));
+    helper.join(|| run(mine), &theirs);
 }
 
 #[cfg(test)]

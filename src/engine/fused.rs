@@ -1,0 +1,146 @@
+//! MCGNODE's edge work at inference, fused block by block: for a block of
+//! directed edges, w_ij = (q_i − q_j)/σ_w, the edge embedding, round 0's
+//! edge update read from its type pair's row, and the edge decoder, with the
+//! block's intermediate rows in a thread's scratch. One pass over the edges
+//! instead of one per stage: the rows stay in cache, and a large graph's
+//! blocks go to both cores in one hand-over a step
+//! ([`super::split::Split::blocks`]) with the stages between the MLPs
+//! inside it. The same operations in the same order as the stage-by-stage
+//! pass, so the same bits.
+
+use std::ops::Range;
+
+use super::dense::{simd, squareplus_in_place, Mlp, Out, Simd};
+use super::split::Scratch;
+
+/// Edge rows per block (a multiple of the 16-row tile): a block's 16-wide
+/// intermediate rows are 32 KB, and a 1,000-particle contact state's 6,000
+/// edges make 24 blocks for the two cores to share.
+pub(crate) const EDGE_BLOCK: usize = 256;
+
+/// Directed edges from which the fused pass is taken: below, its set-up
+/// per block costs more than cache it saves (the 5-spring ring's 10 edges
+/// stepped 10 % slower, 500 springs 5–10 % faster; `bench`, 2026-12-03).
+pub(crate) const FUSED_EDGES: usize = 128;
+
+/// What every block reads.
+pub(crate) struct EdgeBlocks<'a> {
+    /// The edge embedding and the edge decoder.
+    pub(crate) embed: &'a Mlp,
+    pub(crate) decoder: &'a Mlp,
+    pub(crate) th: &'a [f64],
+    /// Raw positions, feature-major `dim × nodes`.
+    pub(crate) q: &'a [f64],
+    pub(crate) nodes: usize,
+    pub(crate) dim: usize,
+    pub(crate) w_scale: f64,
+    /// Receiver and sender of each directed edge.
+    pub(crate) recv: &'a [usize],
+    pub(crate) send: &'a [usize],
+    /// Every edge's inputs, feature-major `features × edges`: the rows after
+    /// the first `dim` (the constant inputs) are read.
+    pub(crate) w_in: &'a [f64],
+    pub(crate) features: usize,
+    pub(crate) edges: usize,
+    /// Round 0's edge update of each type pair (`embed × pairs`), and each
+    /// edge's pair.
+    pub(crate) pair_out: &'a [f64],
+    pub(crate) pairs: usize,
+    pub(crate) pair: &'a [usize],
+    /// Embedding width.
+    pub(crate) embed_width: usize,
+}
+
+/// `v` at least `len` long (allocates only while growing).
+fn at_least(v: &mut Vec<f64>, len: usize) -> &mut [f64] {
+    if v.len() < len {
+        v.resize(len, 0.0);
+    }
+    &mut v[..len]
+}
+
+impl EdgeBlocks<'_> {
+    /// The edge decoder's output for the edges `rows`, into those rows of
+    /// `f_edge` (`dim × edges`).
+    ///
+    /// # Safety
+    /// No other thread writes these rows of `f_edge` meanwhile.
+    pub(crate) unsafe fn run(&self, rows: Range<usize>, s: &mut Scratch, f_edge: Out<'_>) {
+        match simd() {
+            // SAFETY: the CPU supports AVX-512F and FMA (`simd` checked);
+            // the rows are the caller's.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { self.run_avx512(rows, s, f_edge) },
+            // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { self.run_avx2(rows, s, f_edge) },
+            // SAFETY: the caller's contract.
+            _ => unsafe { self.run_any(rows, s, f_edge) },
+        }
+    }
+
+    // The loops between the MLPs in the widest vectors (the MLPs and the
+    // activation choose theirs themselves).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,fma")]
+    unsafe fn run_avx512(&self, rows: Range<usize>, s: &mut Scratch, f_edge: Out<'_>) {
+        // SAFETY: the caller's contract.
+        unsafe { self.run_any(rows, s, f_edge) }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn run_avx2(&self, rows: Range<usize>, s: &mut Scratch, f_edge: Out<'_>) {
+        // SAFETY: the caller's contract.
+        unsafe { self.run_any(rows, s, f_edge) }
+    }
+
+    #[inline(always)]
+    #[allow(clippy::inline_always)] // inside the vector copies above
+    unsafe fn run_any(&self, rows: Range<usize>, s: &mut Scratch, f_edge: Out<'_>) {
+        let (lo, len, em) = (rows.start, rows.len(), self.embed_width);
+        s.tape.fit(self.embed);
+        s.tape.fit(self.decoder);
+        // Rows of a feature `st` apart, 64 bytes more than a multiple of the
+        // tile, so never a multiple of 2 KB: at 256 rows (2 KB) a tile's 16
+        // input features fell into the same few cache sets and the block's
+        // MLPs ran 10 % slower than over all rows.
+        let st = len.next_multiple_of(16) + 8;
+        let [w, he, hn] = &mut s.rows;
+        let w = at_least(w, self.features * st);
+        let (recv, send) = (&self.recv[rows.clone()], &self.send[rows]);
+        for c in 0..self.dim {
+            let q = &self.q[c * self.nodes..(c + 1) * self.nodes];
+            let wc = &mut w[c * st..c * st + len];
+            for ((wv, &i), &j) in wc.iter_mut().zip(recv).zip(send) {
+                *wv = (q[i] - q[j]) / self.w_scale;
+            }
+        }
+        for f in self.dim..self.features {
+            let at = f * self.edges + lo;
+            w[f * st..f * st + len].copy_from_slice(&self.w_in[at..at + len]);
+        }
+        let (he, hn) = (at_least(he, em * st), at_least(hn, em * st));
+        let th = self.th;
+        // SAFETY: `he` is this thread's own.
+        unsafe {
+            let out = Out::new(he, st);
+            (self.embed).forward_part(th, (w, &[]), st, 0..len, &mut s.tape, out, true);
+        }
+        let pair = &self.pair[lo..lo + len];
+        for k in 0..em {
+            let pk = &self.pair_out[k * self.pairs..(k + 1) * self.pairs];
+            let (x, old) = (&mut hn[k * st..k * st + len], &he[k * st..k * st + len]);
+            for ((x, old), &p) in x.iter_mut().zip(old).zip(pair) {
+                *x = pk[p] + old;
+            }
+            squareplus_in_place(x);
+        }
+        // SAFETY: these rows of `f_edge` are this call's alone (the
+        // caller's contract).
+        unsafe {
+            let out = f_edge.shifted(lo);
+            (self.decoder).forward_part(th, (hn, &[]), st, 0..len, &mut s.tape, out, false);
+        }
+    }
+}
