@@ -32,6 +32,9 @@ pub(crate) struct Model {
     /// Whether any stage reads per-node states: not MCGNODE's one round
     /// by type, whose edge update reads type pairs and whose decoder edges.
     nodes_read: bool,
+    /// Whether any MLP reads the scaled node inputs: the node embedding
+    /// unless by type, and the body branch's.
+    xn_read: bool,
 }
 
 impl Model {
@@ -54,10 +57,12 @@ impl Model {
             || arch.rounds > 1
             || (0..arch.rounds).any(|l| arch.updates_nodes(l))
             || matches!(arch.decoder, Decoder::Node { .. });
+        let xn_read = !by_type || arch.mlps.iter().any(|(b, _)| *b == Block::GlobalEmbed);
         Self {
             log_mass: layout.log_mass(),
             by_type,
             nodes_read,
+            xn_read,
             arch,
             layout,
             mlps,
@@ -681,7 +686,9 @@ impl Chunk {
         let at = |f: usize| f * nodes + s * n..f * nodes + (s + 1) * n;
         for (i, &ty) in m.plan.types.iter().enumerate() {
             self.x[ty * nodes + s * n + i] = 1.0;
-            self.xn[ty * nodes + s * n + i] = 1.0;
+            if m.xn_read {
+                self.xn[ty * nodes + s * n + i] = 1.0;
+            }
         }
         // Transposed first, then scaled a feature row at a time: the
         // divisions run in vectors (one by one they were a sixteenth of a
@@ -692,6 +699,9 @@ impl Chunk {
             }
             for (x, y) in self.x[at(t + d + c)].iter_mut().zip(v.chunks_exact(d)) {
                 *x = y[c];
+            }
+            if !m.xn_read {
+                continue;
             }
             let (mean, qs, vs) = (nm.q_mean[c], nm.q_scale, nm.v_scale);
             for (z, &y) in self.xn[at(t + c)].iter_mut().zip(&self.x[at(t + c)]) {
@@ -936,8 +946,10 @@ impl Chunk {
             let w = &mut self.w_in[c * edges..(c + 1) * edges];
             let ws = a.norm.w_scale;
             for ((wv, &r), &s) in w.iter_mut().zip(&self.recv).zip(&self.send) {
-                *wv = (q[r] - q[s]) / ws;
+                *wv = q[r] - q[s];
             }
+            // Divided apart from the gather, so in vectors (the same bits).
+            w.iter_mut().for_each(|wv| *wv /= ws);
         }
         let i = m.ix(Block::EdgeEmbed).expect("graph model");
         let he0 = &mut self.he[0][..em * edges];
