@@ -19,8 +19,10 @@ use super::split::Scratch;
 pub(crate) const EDGE_BLOCK: usize = 256;
 
 /// Directed edges from which the fused pass is taken: below, its set-up
-/// per block costs more than cache it saves (the 5-spring ring's 10 edges
-/// stepped 10 % slower, 500 springs 5–10 % faster; `bench`, 2026-12-03).
+/// per block costs more than the cache it saves (fused, the 5-spring ring's
+/// 10 edges stepped about 10 % slower; the 500-spring ring's 1,000 edges
+/// 21.4–28.7k against 21.0–26.7k steps/s, six interleaved runs of `bench`
+/// on one core, 2026-12-03).
 pub(crate) const FUSED_EDGES: usize = 128;
 
 /// What every block reads.
