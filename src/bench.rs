@@ -470,17 +470,23 @@ fn contact_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
         g.n()
     );
     let split_name = format!("{wide_name}, 2 cores (the node's)");
-    if want(&wide_name) || want(&split_name) {
-        // What `train` makes by default and the node serves.
-        let (_, m) = crate::testing::random_model_with(Variant::Mcgnode, &g, 0, |h| {
-            h.block_hidden
-                .extend(wide.iter().map(|(b, w)| ((*b).to_string(), w.clone())));
-        })?;
-        for (name, split) in [(wide_name, false), (split_name, true)] {
-            if want(&name) {
-                let s = model_rollout_seconds(&m, &g, &s0, 1e-3, steps, r.min(5), split)?;
-                out.push(Figure::speed(name, steps, s, r.min(5)));
-            }
+    // A soft-sphere box under gravity gets a body branch too (`train`'s
+    // automatic --body-force): the node's benchmark model.
+    let body_name = format!("{wide_name} and a body branch, 2 cores (the node's)");
+    for (name, split, body) in [
+        (wide_name, false, false),
+        (split_name, true, false),
+        (body_name, true, true),
+    ] {
+        if want(&name) {
+            // What `train` makes by default and the node serves.
+            let (_, m) = crate::testing::random_model_with(Variant::Mcgnode, &g, 0, |h| {
+                h.block_hidden
+                    .extend(wide.iter().map(|(b, w)| ((*b).to_string(), w.clone())));
+                h.body_force = body;
+            })?;
+            let s = model_rollout_seconds(&m, &g, &s0, 1e-3, steps, r.min(5), split)?;
+            out.push(Figure::speed(name, steps, s, r.min(5)));
         }
     }
     let name = format!(

@@ -591,7 +591,8 @@ fn state_gradients_equal_candle_and_finite_differences() {
 /// edges or more, MCGNODE's edge stages fused block by block, on one core or
 /// on two) gives the bits of the training engine's stage-by-stage pass (the
 /// reverse pass's forward sweep), for the default 5-wide blocks and
-/// `train`'s 16-wide edge blocks, with springs and contacts, on a small
+/// `train`'s 16-wide edge blocks, without and with the body branch (its
+/// blocks after the edges'), with springs and contacts, on a small
 /// graph and on one of about 9,000 directed edges, state after state as
 /// contacts come and go.
 #[test]
@@ -618,10 +619,11 @@ fn inference_gives_the_training_pass_bits() {
     let small = touching(2, 7, 2, false);
     let wide = mcgnode::train::recipe::edge_blocks(Variant::Mcgnode);
     for (gname, g) in [("small", &small), ("grid", &big)] {
-        for blocks in [vec![], wide.clone()] {
+        for (blocks, body) in [(vec![], false), (wide.clone(), false), (wide.clone(), true)] {
             let (_, model) = mcgnode::testing::random_model_with(Variant::Mcgnode, g, 3, |h| {
                 h.block_hidden
                     .extend(blocks.iter().map(|(b, w)| ((*b).to_string(), w.clone())));
+                h.body_force = body;
             })
             .unwrap();
             let mut sg = model.kernel.gradient(g).unwrap();
@@ -646,7 +648,7 @@ fn inference_gives_the_training_pass_bits() {
                 let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert!(
                     bits(&got) == bits(&want),
-                    "{gname}, {} edge blocks, state {k}: inference differs from the training pass by {:.2e}",
+                    "{gname}, {} edge blocks, body {body}, state {k}: inference differs from the training pass by {:.2e}",
                     if blocks.is_empty() { "default" } else { "train's" },
                     rel(&got, &want)
                 );

@@ -4,7 +4,7 @@
 //! hand-written reverse pass. Every buffer lives here and is reused.
 
 use super::dense::{simd, squareplus_in_place, times_squareplus_grad, Mlp, Out, Simd, Tape};
-use super::fused::{EdgeBlocks, EDGE_BLOCK, FUSED_EDGES};
+use super::fused::{BodyBlocks, EdgeBlocks, EDGE_BLOCK, FUSED_EDGES};
 use super::gather::{gather_rows, prefetch, scatter_add_rows, Gather};
 use super::layout::Layout;
 use super::split::{Scratch, Split};
@@ -1036,8 +1036,9 @@ impl Chunk {
         let nodes = self.laid * m.plan.n;
         let edges = self.edges;
         let nf = a.node_features();
-        // Global (body) embedding of (one-hot, q, q̇).
-        if let Some(i) = m.ix(Block::GlobalEmbed) {
+        // Global (body) embedding of (one-hot, q, q̇) (with the edges' blocks
+        // when fused).
+        if let (Some(i), false) = (m.ix(Block::GlobalEmbed), fused) {
             let g = &mut self.glob[..em * nodes];
             m.mlp(i).forward(
                 th,
@@ -1077,8 +1078,10 @@ impl Chunk {
                 if body {
                     let i = m.ix(Block::BodyDecoder).expect("body decoder");
                     let fb = &mut self.f_body[..d * nodes];
-                    let g = &self.glob[..em * nodes];
-                    m.mlp(i).forward(th, g, &[], nodes, &mut self.tapes[i], fb);
+                    if !fused {
+                        let g = &self.glob[..em * nodes];
+                        m.mlp(i).forward(th, g, &[], nodes, &mut self.tapes[i], fb);
+                    }
                     for (o, f) in out.iter_mut().zip(fb.iter()) {
                         *o += f;
                     }
@@ -1154,10 +1157,32 @@ impl Chunk {
             pair: &self.pair[..edges],
             embed_width: em,
         };
+        let body = match (m.ix(Block::GlobalEmbed), m.ix(Block::BodyDecoder)) {
+            (Some(ig), Some(ib)) => Some(BodyBlocks {
+                embed: m.mlp(ig),
+                decoder: m.mlp(ib),
+                th,
+                xn: &self.xn[..a.node_features() * nodes],
+                features: a.node_features(),
+                nodes,
+                embed_width: em,
+            }),
+            _ => None,
+        };
+        // Edge blocks first, then the particles' from the next whole block.
+        let span = edges.next_multiple_of(EDGE_BLOCK);
+        let rows = span + if body.is_some() { nodes } else { 0 };
         let f_edge = Out::new(&mut self.f_edge[..d * edges], edges);
-        // SAFETY: `blocks` hands each block of rows to one thread.
-        let run = |rows, s: &mut Scratch| unsafe { work.run(rows, s, f_edge) };
-        (self.split).blocks(edges, EDGE_BLOCK, &mut self.scratch, &run);
+        let f_body = Out::new(&mut self.f_body[..d * nodes], nodes);
+        let run = |r: std::ops::Range<usize>, s: &mut Scratch| match &body {
+            Some(b) if r.start >= span => {
+                // SAFETY: `blocks` hands each block of rows to one thread.
+                unsafe { b.run(r.start - span..r.end - span, s, f_body) }
+            }
+            // SAFETY: as above.
+            _ => unsafe { work.run(r.start..r.end.min(edges), s, f_edge) },
+        };
+        (self.split).blocks(rows, EDGE_BLOCK, &mut self.scratch, &run);
     }
 
     /// q̈ = M⁻¹(N − Aᵀλ), λ = (A M⁻¹ Aᵀ)⁻¹(A M⁻¹ N + Ȧq̇), per state, on the

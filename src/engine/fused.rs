@@ -1,9 +1,10 @@
 //! MCGNODE's edge work at inference, fused block by block: for a block of
 //! directed edges, w_ij = (q_i − q_j)/σ_w, the edge embedding, round 0's
 //! edge update read from its type pair's row, and the edge decoder, with the
-//! block's intermediate rows in a thread's scratch. One pass over the edges
-//! instead of one per stage: the rows stay in cache, and a large graph's
-//! blocks go to both cores in one hand-over a step
+//! block's intermediate rows in a thread's scratch; then, for blocks of
+//! particles, the body branch (its embedding and decoder). One pass over
+//! the rows instead of one per stage: they stay in cache, and a large
+//! graph's blocks go to both cores in one hand-over a step
 //! ([`super::split::Split::blocks`]) with the stages between the MLPs
 //! inside it. The same operations in the same order as the stage-by-stage
 //! pass, so the same bits.
@@ -51,6 +52,57 @@ pub(crate) struct EdgeBlocks<'a> {
     pub(crate) pair: &'a [usize],
     /// Embedding width.
     pub(crate) embed_width: usize,
+}
+
+/// The body branch's work: its embedding of the scaled node inputs and its
+/// decoder, per particle.
+pub(crate) struct BodyBlocks<'a> {
+    pub(crate) embed: &'a Mlp,
+    pub(crate) decoder: &'a Mlp,
+    pub(crate) th: &'a [f64],
+    /// Scaled node inputs, feature-major `features × nodes`.
+    pub(crate) xn: &'a [f64],
+    pub(crate) features: usize,
+    pub(crate) nodes: usize,
+    /// Embedding width.
+    pub(crate) embed_width: usize,
+}
+
+/// Rows a block's features are laid out apart for `len` rows: 64 bytes
+/// more than a multiple of the tile, so never a multiple of 2 KB (at 256
+/// rows, 2 KB, a tile's 16 input features fell into the same few cache
+/// sets and a block's MLPs ran 10 % slower than over all rows).
+fn stride(len: usize) -> usize {
+    len.next_multiple_of(16) + 8
+}
+
+impl BodyBlocks<'_> {
+    /// The body decoder's output for the particles `rows`, into those rows
+    /// of `f_body` (`dim × nodes`).
+    ///
+    /// # Safety
+    /// No other thread writes these rows of `f_body` meanwhile.
+    pub(crate) unsafe fn run(&self, rows: Range<usize>, s: &mut Scratch, f_body: Out<'_>) {
+        let (lo, len, em) = (rows.start, rows.len(), self.embed_width);
+        s.tape.fit(self.embed);
+        s.tape.fit(self.decoder);
+        let st = stride(len);
+        let [x, g, _] = &mut s.rows;
+        let x = at_least(x, self.features * st);
+        for f in 0..self.features {
+            let at = f * self.nodes + lo;
+            x[f * st..f * st + len].copy_from_slice(&self.xn[at..at + len]);
+        }
+        let g = at_least(g, em * st);
+        // SAFETY: `g` is this thread's own; these rows of `f_body` are this
+        // call's alone (the caller's contract).
+        unsafe {
+            let out = Out::new(g, st);
+            (self.embed).forward_part(self.th, (x, &[]), st, 0..len, &mut s.tape, out, true);
+            let out = f_body.shifted(lo);
+            (self.decoder).forward_part(self.th, (g, &[]), st, 0..len, &mut s.tape, out, false);
+        }
+    }
 }
 
 /// `v` at least `len` long (allocates only while growing).
@@ -103,11 +155,7 @@ impl EdgeBlocks<'_> {
         let (lo, len, em) = (rows.start, rows.len(), self.embed_width);
         s.tape.fit(self.embed);
         s.tape.fit(self.decoder);
-        // Rows of a feature `st` apart, 64 bytes more than a multiple of the
-        // tile, so never a multiple of 2 KB: at 256 rows (2 KB) a tile's 16
-        // input features fell into the same few cache sets and the block's
-        // MLPs ran 10 % slower than over all rows.
-        let st = len.next_multiple_of(16) + 8;
+        let st = stride(len);
         let [w, he, hn] = &mut s.rows;
         let w = at_least(w, self.features * st);
         let (recv, send) = (&self.recv[rows.clone()], &self.send[rows]);
