@@ -189,7 +189,7 @@ pub(super) fn log_start(h: &Handles, names: &Names, domain_id: u16) {
 
 /// Closes the open bag at shutdown and says what was recorded.
 pub(super) fn finish_recording(h: &Handles) {
-    match h.recorder.finish() {
+    match h.recorder.close() {
         None => {}
         Some(Ok((dir, finished))) => h.diag.log(
             LogLevel::Info,

@@ -85,7 +85,7 @@ impl Endpoints {
             trajectory: self.trajectory,
             forces: self.forces,
             accuracy: self.accuracy,
-            markers: self.markers,
+            markers: Arc::new(self.markers),
             last_markers: None,
         };
         let input = input_loop(h.clone(), self.input, outputs, trainer.clone());

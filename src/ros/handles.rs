@@ -347,12 +347,23 @@ impl RecorderHandle {
     /// returns the folder and every bag finished so far; `None` when the node
     /// does not record.
     pub fn finish(&self) -> Option<Result<(PathBuf, Vec<PathBuf>), RecordError>> {
+        self.finish_with(Recorder::finish)
+    }
+
+    /// [`RecorderHandle::finish`] for good (shutdown): a later record, such
+    /// as markers still being drawn, is dropped instead of opening a bag
+    /// nobody closes ([`Recorder::close`]).
+    pub fn close(&self) -> Option<Result<(PathBuf, Vec<PathBuf>), RecordError>> {
+        self.finish_with(Recorder::close)
+    }
+
+    fn finish_with(
+        &self,
+        end: fn(&mut Recorder) -> Result<(), RecordError>,
+    ) -> Option<Result<(PathBuf, Vec<PathBuf>), RecordError>> {
         let r = self.recorder.as_ref()?;
         let mut r = r.lock().unwrap_or_else(PoisonError::into_inner);
-        Some(
-            r.finish()
-                .map(|()| (r.dir().to_path_buf(), r.finished.clone())),
-        )
+        Some(end(&mut r).map(|()| (r.dir().to_path_buf(), r.finished.clone())))
     }
 }
 

@@ -65,6 +65,8 @@ pub struct Recorder {
     open: Option<OpenBag>,
     /// Bags finished so far, in order.
     pub finished: Vec<PathBuf>,
+    /// Closed for good ([`Recorder::close`]): later writes are dropped.
+    closed: bool,
 }
 
 /// Why recording failed: the folder, the bag written to, or the message.
@@ -138,6 +140,7 @@ impl Recorder {
             index: 0,
             open: None,
             finished: Vec::new(),
+            closed: false,
         })
     }
 
@@ -200,6 +203,9 @@ impl Recorder {
     }
 
     fn write(&mut self, which: usize, log_time_ns: u64, cdr: &[u8]) -> Result<(), RecordError> {
+        if self.closed {
+            return Ok(());
+        }
         self.maybe_split()?;
         let bag = match self.open {
             Some(ref mut b) => b,
@@ -271,6 +277,14 @@ impl Recorder {
         Ok(())
     }
 
+    /// [`Recorder::finish`] for good, at shutdown: what is written later
+    /// (markers drawn on another thread after the prediction they show was
+    /// recorded) is dropped, where a write would open a bag nobody closes.
+    pub fn close(&mut self) -> Result<(), RecordError> {
+        self.closed = true;
+        self.finish()
+    }
+
     /// The folder bags go to.
     pub fn dir(&self) -> &Path {
         &self.dir
@@ -339,6 +353,15 @@ mod tests {
         r.state(3, &state).unwrap();
         r.finish().unwrap();
         assert_eq!(r.finished.len(), 2, "{:?}", r.finished);
+        // After `finish` a write opens the next bag; after `close`, none.
+        r.state(4, &state).unwrap();
+        r.close().unwrap();
+        assert_eq!(r.finished.len(), 3, "{:?}", r.finished);
+        r.markers(5, &MarkerArray::default()).unwrap();
+        r.close().unwrap();
+        assert_eq!(r.finished.len(), 3, "{:?}", r.finished);
+        let bags = std::fs::read_dir(dir.path().join("rec")).unwrap().count();
+        assert_eq!(bags, 3, "no bag opened after close");
         let mut topics = Vec::new();
         scan_bag(&r.finished[0], |m| {
             topics.push(m.topic.to_string());
