@@ -4,7 +4,7 @@
 //! hand-written reverse pass. Every buffer lives here and is reused.
 
 use super::dense::{simd, squareplus_in_place, times_squareplus_grad, Mlp, Out, Simd, Tape};
-use super::fused::{BodyBlocks, EdgeBlocks, EDGE_BLOCK, FUSED_EDGES};
+use super::fused::{BodyBlocks, Branch, EdgeBlocks, EDGE_BLOCK, FUSED_EDGES};
 use super::gather::{gather_rows, prefetch, scatter_add_rows, Gather};
 use super::layout::Layout;
 use super::split::{Scratch, Split};
@@ -1140,9 +1140,12 @@ impl Chunk {
         };
         let features = a.edge_features();
         let work = EdgeBlocks {
-            embed: m.mlp(ie),
-            decoder: m.mlp(id),
-            th,
+            mlps: Branch {
+                embed: m.mlp(ie),
+                decoder: m.mlp(id),
+                th,
+                embed_width: em,
+            },
             q: &self.x[t * nodes..(t + d) * nodes],
             nodes,
             dim: d,
@@ -1155,17 +1158,18 @@ impl Chunk {
             pair_out: &self.pair_out[..em * t * t],
             pairs: t * t,
             pair: &self.pair[..edges],
-            embed_width: em,
         };
         let body = match (m.ix(Block::GlobalEmbed), m.ix(Block::BodyDecoder)) {
             (Some(ig), Some(ib)) => Some(BodyBlocks {
-                embed: m.mlp(ig),
-                decoder: m.mlp(ib),
-                th,
+                mlps: Branch {
+                    embed: m.mlp(ig),
+                    decoder: m.mlp(ib),
+                    th,
+                    embed_width: em,
+                },
                 xn: &self.xn[..a.node_features() * nodes],
                 features: a.node_features(),
                 nodes,
-                embed_width: em,
             }),
             _ => None,
         };

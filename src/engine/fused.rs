@@ -26,12 +26,27 @@ pub(crate) const EDGE_BLOCK: usize = 256;
 /// on one core, 2026-12-03).
 pub(crate) const FUSED_EDGES: usize = 128;
 
-/// What every block reads.
-pub(crate) struct EdgeBlocks<'a> {
-    /// The edge embedding and the edge decoder.
+/// An embedding, the decoder after it, their parameters and the
+/// embedding's width.
+pub(crate) struct Branch<'a> {
     pub(crate) embed: &'a Mlp,
     pub(crate) decoder: &'a Mlp,
     pub(crate) th: &'a [f64],
+    pub(crate) embed_width: usize,
+}
+
+impl Branch<'_> {
+    /// Makes a thread's tile scratch big enough for both MLPs.
+    fn fit(&self, s: &mut Scratch) {
+        s.tape.fit(self.embed);
+        s.tape.fit(self.decoder);
+    }
+}
+
+/// What every edge block reads.
+pub(crate) struct EdgeBlocks<'a> {
+    /// The edge embedding and the edge decoder.
+    pub(crate) mlps: Branch<'a>,
     /// Raw positions, feature-major `dim × nodes`.
     pub(crate) q: &'a [f64],
     pub(crate) nodes: usize,
@@ -50,22 +65,16 @@ pub(crate) struct EdgeBlocks<'a> {
     pub(crate) pair_out: &'a [f64],
     pub(crate) pairs: usize,
     pub(crate) pair: &'a [usize],
-    /// Embedding width.
-    pub(crate) embed_width: usize,
 }
 
 /// The body branch's work: its embedding of the scaled node inputs and its
 /// decoder, per particle.
 pub(crate) struct BodyBlocks<'a> {
-    pub(crate) embed: &'a Mlp,
-    pub(crate) decoder: &'a Mlp,
-    pub(crate) th: &'a [f64],
+    pub(crate) mlps: Branch<'a>,
     /// Scaled node inputs, feature-major `features × nodes`.
     pub(crate) xn: &'a [f64],
     pub(crate) features: usize,
     pub(crate) nodes: usize,
-    /// Embedding width.
-    pub(crate) embed_width: usize,
 }
 
 /// Rows a block's features are laid out apart for `len` rows: 64 bytes
@@ -83,9 +92,8 @@ impl BodyBlocks<'_> {
     /// # Safety
     /// No other thread writes these rows of `f_body` meanwhile.
     pub(crate) unsafe fn run(&self, rows: Range<usize>, s: &mut Scratch, f_body: Out<'_>) {
-        let (lo, len, em) = (rows.start, rows.len(), self.embed_width);
-        s.tape.fit(self.embed);
-        s.tape.fit(self.decoder);
+        let (lo, len, b) = (rows.start, rows.len(), &self.mlps);
+        b.fit(s);
         let st = stride(len);
         let [x, g, _] = &mut s.rows;
         let x = at_least(x, self.features * st);
@@ -93,14 +101,14 @@ impl BodyBlocks<'_> {
             let at = f * self.nodes + lo;
             x[f * st..f * st + len].copy_from_slice(&self.xn[at..at + len]);
         }
-        let g = at_least(g, em * st);
+        let g = at_least(g, b.embed_width * st);
         // SAFETY: `g` is this thread's own; these rows of `f_body` are this
         // call's alone (the caller's contract).
         unsafe {
             let out = Out::new(g, st);
-            (self.embed).forward_part(self.th, (x, &[]), st, 0..len, &mut s.tape, out, true);
+            (b.embed).forward_part(b.th, (x, &[]), st, 0..len, &mut s.tape, out, true);
             let out = f_body.shifted(lo);
-            (self.decoder).forward_part(self.th, (g, &[]), st, 0..len, &mut s.tape, out, false);
+            (b.decoder).forward_part(b.th, (g, &[]), st, 0..len, &mut s.tape, out, false);
         }
     }
 }
@@ -152,9 +160,9 @@ impl EdgeBlocks<'_> {
     #[inline(always)]
     #[allow(clippy::inline_always)] // inside the vector copies above
     unsafe fn run_any(&self, rows: Range<usize>, s: &mut Scratch, f_edge: Out<'_>) {
-        let (lo, len, em) = (rows.start, rows.len(), self.embed_width);
-        s.tape.fit(self.embed);
-        s.tape.fit(self.decoder);
+        let (lo, len, b) = (rows.start, rows.len(), &self.mlps);
+        let em = b.embed_width;
+        b.fit(s);
         let st = stride(len);
         let [w, he, hn] = &mut s.rows;
         let w = at_least(w, self.features * st);
@@ -173,11 +181,11 @@ impl EdgeBlocks<'_> {
             w[f * st..f * st + len].copy_from_slice(&self.w_in[at..at + len]);
         }
         let (he, hn) = (at_least(he, em * st), at_least(hn, em * st));
-        let th = self.th;
+        let th = b.th;
         // SAFETY: `he` is this thread's own.
         unsafe {
             let out = Out::new(he, st);
-            (self.embed).forward_part(th, (w, &[]), st, 0..len, &mut s.tape, out, true);
+            (b.embed).forward_part(th, (w, &[]), st, 0..len, &mut s.tape, out, true);
         }
         let pair = &self.pair[lo..lo + len];
         for k in 0..em {
@@ -192,7 +200,7 @@ impl EdgeBlocks<'_> {
         // caller's contract).
         unsafe {
             let out = f_edge.shifted(lo);
-            (self.decoder).forward_part(th, (hn, &[]), st, 0..len, &mut s.tape, out, false);
+            (b.decoder).forward_part(th, (hn, &[]), st, 0..len, &mut s.tape, out, false);
         }
     }
 }
