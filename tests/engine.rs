@@ -594,7 +594,7 @@ fn state_gradients_equal_candle_and_finite_differences() {
 /// `train`'s 16-wide edge blocks, without and with the body branch (its
 /// blocks after the edges'), with springs and contacts, on a small
 /// graph and on one of about 9,000 directed edges, state after state as
-/// contacts come and go.
+/// contacts come and go; and candle's accelerations to 1e-10.
 #[test]
 fn inference_gives_the_training_pass_bits() {
     use mcgnode::dynamics::StateGradient;
@@ -620,7 +620,7 @@ fn inference_gives_the_training_pass_bits() {
     let wide = mcgnode::train::recipe::edge_blocks(Variant::Mcgnode);
     for (gname, g) in [("small", &small), ("grid", &big)] {
         for (blocks, body) in [(vec![], false), (wide.clone(), false), (wide.clone(), true)] {
-            let (_, model) = mcgnode::testing::random_model_with(Variant::Mcgnode, g, 3, |h| {
+            let (net, model) = mcgnode::testing::random_model_with(Variant::Mcgnode, g, 3, |h| {
                 h.block_hidden
                     .extend(blocks.iter().map(|(b, w)| ((*b).to_string(), w.clone())));
                 h.body_force = body;
@@ -652,6 +652,23 @@ fn inference_gives_the_training_pass_bits() {
                     if blocks.is_empty() { "default" } else { "train's" },
                     rel(&got, &want)
                 );
+                if k == 0 {
+                    // And candle, the independent reference, on the free
+                    // particles (kinematic ones are held by the kernel).
+                    let plan = GraphPlan::new(g);
+                    let types = model.kernel.hyper().types;
+                    let batch = Batch::new(&plan, &[&st], None, types).unwrap();
+                    let out = net.forward(&batch).unwrap().acc;
+                    let c = out.flatten_all().unwrap().to_vec1::<f64>().unwrap();
+                    let free = |v: &[f64]| -> Vec<f64> {
+                        (0..nd)
+                            .filter(|f| !g.is_kinematic(f / g.dim))
+                            .map(|f| v[f])
+                            .collect()
+                    };
+                    let r = rel(&free(&got), &free(&c));
+                    assert!(r <= 1e-10, "{gname}, body {body}: kernel vs candle {r:.2e}");
+                }
             }
         }
     }

@@ -5,7 +5,9 @@
 
 use super::dense::{simd, squareplus_in_place, times_squareplus_grad, Mlp, Out, Simd, Tape};
 use super::fused::{BodyBlocks, Branch, EdgeBlocks, EDGE_BLOCK, FUSED_EDGES};
-use super::gather::{gather_rows, prefetch, scatter_add_rows, Gather};
+use super::gather::{
+    add_indexed, edge_differences, gather_rows, prefetch, scatter_add_rows, Gather,
+};
 use super::layout::Layout;
 use super::split::{Scratch, Split};
 use crate::gnode::arch::{Arch, Block, Decoder, NodeInput};
@@ -35,6 +37,10 @@ pub(crate) struct Model {
     /// Whether any MLP reads the scaled node inputs: the node embedding
     /// unless by type, and the body branch's.
     xn_read: bool,
+    /// Whether inference may take the fused pass ([`super::fused`]):
+    /// MCGNODE's one round by type, where nothing reads per-node states
+    /// (which implies a pairwise decoder, hence an edge update).
+    fusable: bool,
 }
 
 impl Model {
@@ -58,11 +64,13 @@ impl Model {
             || (0..arch.rounds).any(|l| arch.updates_nodes(l))
             || matches!(arch.decoder, Decoder::Node { .. });
         let xn_read = !by_type || arch.mlps.iter().any(|(b, _)| *b == Block::GlobalEmbed);
+        let fusable = !nodes_read && arch.rounds == 1;
         Self {
             log_mass: layout.log_mass(),
             by_type,
             nodes_read,
             xn_read,
+            fusable,
             arch,
             layout,
             mlps,
@@ -910,13 +918,7 @@ impl Chunk {
         }
         // MCGNODE's one round by type at inference: the edges' stages fused
         // block by block, the blocks over both cores on a large graph.
-        let fused = by_type
-            && self.edges >= FUSED_EDGES
-            && !nodes_read
-            && !self.record
-            && a.rounds == 1
-            && a.updates_edges(0)
-            && matches!(a.decoder, Decoder::Pairwise { .. });
+        let fused = m.fusable && !self.record && self.edges >= FUSED_EDGES;
         if fused {
             self.edge_blocks(m, th);
         } else {
@@ -944,12 +946,7 @@ impl Chunk {
         for c in 0..d {
             let q = &self.x[(t + c) * nodes..(t + c + 1) * nodes];
             let w = &mut self.w_in[c * edges..(c + 1) * edges];
-            let ws = a.norm.w_scale;
-            for ((wv, &r), &s) in w.iter_mut().zip(&self.recv).zip(&self.send) {
-                *wv = q[r] - q[s];
-            }
-            // Divided apart from the gather, so in vectors (the same bits).
-            w.iter_mut().for_each(|wv| *wv /= ws);
+            edge_differences(w, q, &self.recv, &self.send, a.norm.w_scale);
         }
         let i = m.ix(Block::EdgeEmbed).expect("graph model");
         let he0 = &mut self.he[0][..em * edges];
@@ -994,9 +991,7 @@ impl Chunk {
                         &hel[k * edges..(k + 1) * edges],
                         &po[k * tt..(k + 1) * tt],
                     );
-                    for ((x, old), &p) in x.iter_mut().zip(old).zip(pair) {
-                        *x = pk[p] + old;
-                    }
+                    add_indexed(x, old, pk, pair);
                 }
                 squareplus_in_place(hen);
             } else if a.updates_edges(l) {

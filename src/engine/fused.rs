@@ -12,6 +12,7 @@
 use std::ops::Range;
 
 use super::dense::{simd, squareplus_in_place, Mlp, Out, Simd};
+use super::gather::{add_indexed, edge_differences};
 use super::split::Scratch;
 
 /// Edge rows per block (a multiple of the 16-row tile): a block's 16-wide
@@ -169,12 +170,7 @@ impl EdgeBlocks<'_> {
         let (recv, send) = (&self.recv[rows.clone()], &self.send[rows]);
         for c in 0..self.dim {
             let q = &self.q[c * self.nodes..(c + 1) * self.nodes];
-            let wc = &mut w[c * st..c * st + len];
-            for ((wv, &i), &j) in wc.iter_mut().zip(recv).zip(send) {
-                *wv = q[i] - q[j];
-            }
-            // Divided apart from the gather, so in vectors (the same bits).
-            wc.iter_mut().for_each(|wv| *wv /= self.w_scale);
+            edge_differences(&mut w[c * st..c * st + len], q, recv, send, self.w_scale);
         }
         for f in self.dim..self.features {
             let at = f * self.edges + lo;
@@ -191,9 +187,7 @@ impl EdgeBlocks<'_> {
         for k in 0..em {
             let pk = &self.pair_out[k * self.pairs..(k + 1) * self.pairs];
             let (x, old) = (&mut hn[k * st..k * st + len], &he[k * st..k * st + len]);
-            for ((x, old), &p) in x.iter_mut().zip(old).zip(pair) {
-                *x = pk[p] + old;
-            }
+            add_indexed(x, old, pk, pair);
             squareplus_in_place(x);
         }
         // SAFETY: these rows of `f_edge` are this call's alone (the

@@ -54,6 +54,34 @@ pub(crate) fn scatter_add_rows(dst: &mut [f64], src: &[f64], idx: &[usize]) {
     }
 }
 
+/// One coordinate of the edge vectors: `w[e] = (q[recv[e]] − q[send[e]]) / scale`,
+/// gathered first and divided apart, so that the divisions run in vectors
+/// (the same bits as dividing each in turn).
+#[inline(always)]
+#[allow(clippy::inline_always)] // inside the callers' vector copies
+pub(crate) fn edge_differences(
+    w: &mut [f64],
+    q: &[f64],
+    recv: &[usize],
+    send: &[usize],
+    scale: f64,
+) {
+    for ((wv, &i), &j) in w.iter_mut().zip(recv).zip(send) {
+        *wv = q[i] - q[j];
+    }
+    w.iter_mut().for_each(|wv| *wv /= scale);
+}
+
+/// `out[e] = table[idx[e]] + old[e]`: a row computed once per index (a
+/// type pair's edge update) read by every edge and added to its state.
+#[inline(always)]
+#[allow(clippy::inline_always)] // inside the callers' vector copies
+pub(crate) fn add_indexed(out: &mut [f64], old: &[f64], table: &[f64], idx: &[usize]) {
+    for ((x, old), &p) in out.iter_mut().zip(old).zip(idx) {
+        *x = table[p] + old;
+    }
+}
+
 /// Asks the CPU to bring `x` into cache ahead of its use (a no-op off
 /// x86-64). A batch's states are shuffled over the heap, a few small
 /// buffers each: read one after another, each waited on its own cache miss.

@@ -71,19 +71,13 @@ impl Split {
         y: &mut [f64],
         activate: bool,
     ) {
-        if !self.enabled || r < SPLIT_ROWS || tape.records() {
+        let split = !tape.records() && self.ready(r);
+        let (true, Some(helper)) = (split, &self.helper) else {
             mlp.forward(th, a, c, r, tape, y);
             if activate {
                 squareplus_in_place(y);
             }
             return;
-        }
-        if self.helper.is_none() {
-            self.helper = Helper::start().ok();
-        }
-        let Some(helper) = &self.helper else {
-            self.enabled = false;
-            return self.forward(mlp, th, (a, c), r, tape, y, activate);
         };
         self.tape.fit(mlp);
         let out = Out::new(y, r);
@@ -94,14 +88,21 @@ impl Split {
         share(helper, r, BLOCK, (tape, &mut self.tape), &work);
     }
 
-    /// Whether [`Split::blocks`] would run on both threads for `r` rows.
-    pub(crate) fn splits(&self, r: usize) -> bool {
-        self.enabled && r >= SPLIT_ROWS
+    /// Whether `r` rows go to both threads: splitting is on and there are
+    /// enough, the helper started on first need (if it cannot start,
+    /// splitting turns off).
+    fn ready(&mut self, r: usize) -> bool {
+        let wanted = |s: &Self| s.enabled && r >= SPLIT_ROWS;
+        if wanted(self) && self.helper.is_none() {
+            self.helper = Helper::start().ok();
+            self.enabled = self.helper.is_some();
+        }
+        wanted(self)
     }
 
     /// `work(rows, scratch)` over the rows `0..r` in blocks of `block` (a
     /// multiple of the 16-row tile), in order on this thread, or on both
-    /// threads when [`Split::splits`]; `mine` is this thread's scratch, the
+    /// threads when there are enough; `mine` is this thread's scratch, the
     /// helper's is kept here. `work` must write each block's rows alone.
     pub(crate) fn blocks(
         &mut self,
@@ -110,14 +111,8 @@ impl Split {
         mine: &mut Scratch,
         work: &(dyn Fn(Range<usize>, &mut Scratch) + Sync),
     ) {
-        if self.splits(r) && self.helper.is_none() {
-            self.helper = Helper::start().ok();
-            self.enabled = self.helper.is_some();
-        }
-        match &self.helper {
-            Some(helper) if self.splits(r) => {
-                share(helper, r, block, (mine, &mut self.scratch), work);
-            }
+        match (self.ready(r), &self.helper) {
+            (true, Some(helper)) => share(helper, r, block, (mine, &mut self.scratch), work),
             _ => (0..r)
                 .step_by(block.max(1))
                 .for_each(|lo| work(lo..r.min(lo + block), mine)),

@@ -201,19 +201,7 @@ impl Kernel {
     /// Accelerations at (q, v), written to `acc` (`n·d`); see
     /// [`Kernel::read_forces`] for the forces of the same evaluation.
     pub fn acceleration(&self, ws: &mut Workspace, q: &[f64], v: &[f64], acc: &mut [f64]) {
-        Self::accelerate(&self.theta, &mut ws.forward, q, v, acc);
-    }
-
-    /// [`Kernel::acceleration`] on a workspace's forward pass alone, for a
-    /// caller that holds its other parts (the rollout's projector).
-    fn accelerate(
-        theta: &Arc<[f64]>,
-        forward: &mut Forward,
-        q: &[f64],
-        v: &[f64],
-        acc: &mut [f64],
-    ) {
-        forward.run(theta, q, v, acc);
+        ws.forward.run(&self.theta, q, v, acc);
     }
 
     /// The forces of the last [`Kernel::acceleration`] into `ws.force`

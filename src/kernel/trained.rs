@@ -161,7 +161,7 @@ impl TrainedModel {
                 }
             };
             let accel = |q: &[f64], v: &[f64], a: &mut [f64]| {
-                Kernel::accelerate(&self.kernel.theta, forward, q, v, a);
+                forward.run(&self.kernel.theta, q, v, a);
                 Ok::<(), Infallible>(())
             };
             let Ok(()) = verlet::step_placed(q, v, a, dt, projector.as_mut(), place, accel);
