@@ -75,6 +75,65 @@ fn detected() -> Simd {
     Simd::Portable
 }
 
+/// How squareplus takes its square root √(x² + 4). Chosen once per process
+/// from the CPU, never from the vector path, so that every path of one
+/// machine gives the same bits (the roots of the two kinds may differ in the
+/// last bit; both are within an ulp of the exact root).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub(crate) enum Root {
+    /// The correctly rounded f64 root: one instruction. Faster where the
+    /// divider takes f64 roots at about its f32 rate (AMD Zen 2 with AVX2:
+    /// the 500-spring rollout 13.1k → 18.4k steps/s, interleaved,
+    /// 2026-12-04).
+    Exact,
+    /// [`sqrt_via_f32`]: faster where f64 vector roots are much slower than
+    /// f32 roots and divisions (the Intel Xeon with AVX-512, where it was
+    /// measured).
+    ViaF32,
+}
+
+/// The [`Root`] for this CPU: [`Root::ViaF32`] on CPUs with AVX-512F,
+/// [`Root::Exact`] elsewhere, or the one named by the environment variable
+/// `MCGNODE_ROOT` (`exact`, `f32`) to compare them on one machine.
+#[inline(always)]
+pub(crate) fn root() -> Root {
+    use std::sync::atomic::{AtomicU8, Ordering};
+    // 0: not chosen yet (as in `simd`).
+    static ROOT: AtomicU8 = AtomicU8::new(0);
+    match ROOT.load(Ordering::Relaxed) {
+        1 => Root::Exact,
+        2 => Root::ViaF32,
+        _ => {
+            let best = if detected() == Simd::Avx512 {
+                Root::ViaF32
+            } else {
+                Root::Exact
+            };
+            let root = chosen_root(best, std::env::var("MCGNODE_ROOT").ok().as_deref());
+            ROOT.store(root as u8 + 1, Ordering::Relaxed);
+            root
+        }
+    }
+}
+
+/// The root `MCGNODE_ROOT` asks for, else `best`; a value it does not know
+/// is said on stderr, not ignored silently.
+fn chosen_root(best: Root, asked: Option<&str>) -> Root {
+    match asked {
+        None | Some("") => best,
+        Some("exact") => Root::Exact,
+        Some("f32") => Root::ViaF32,
+        Some(other) => {
+            eprintln!(
+                "warning: MCGNODE_ROOT={other:?} is not one of exact, f32; \
+                 using this CPU's choice ({best:?})"
+            );
+            best
+        }
+    }
+}
+
 /// squareplus'(z) from the activation y = squareplus(z): since
 /// z = y − 1/y and √(z² + 4) = y + 1/y, the derivative ½(1 + z/√(z²+4)) is
 /// y²/(1 + y²). Saves storing pre-activations.
@@ -86,7 +145,7 @@ pub(crate) fn squareplus_grad_from_output(y: f64) -> f64 {
 
 /// Applies squareplus in place, compiled for the widest vectors the CPU has
 /// (its fused multiply-adds are library calls otherwise). Within an ulp of
-/// [`crate::gnode::mlp::squareplus_f64`]: the root is [`sqrt_via_f32`]'s.
+/// [`crate::gnode::mlp::squareplus_f64`]: the root is [`root`]'s.
 pub(crate) fn squareplus_in_place(x: &mut [f64]) {
     match simd() {
         // SAFETY: the CPU supports AVX-512F and FMA (`simd` checked).
@@ -114,32 +173,52 @@ unsafe fn squareplus_avx2(x: &mut [f64]) {
 /// [`squareplus_in_place`] for callers already compiled for their vectors.
 #[inline(always)]
 fn squareplus_slice(x: &mut [f64]) {
-    // A plain loop: `for_each`'s closure was compiled out of line, without
-    // the caller's FMA, into library calls.
-    for v in x.iter_mut() {
-        *v = squareplus_fast(*v);
+    // A plain loop per root kind: `for_each`'s closure was compiled out of
+    // line, without the caller's FMA, into library calls; the kind is
+    // matched once per slice, not per value.
+    match root() {
+        Root::Exact => {
+            for v in x.iter_mut() {
+                *v = squareplus_by(Root::Exact, *v);
+            }
+        }
+        Root::ViaF32 => {
+            for v in x.iter_mut() {
+                *v = squareplus_by(Root::ViaF32, *v);
+            }
+        }
     }
 }
 
-/// squareplus(x) = (x + √(x² + 4)) / 2 with the root by [`sqrt_via_f32`]
-/// (|x| ≥ 1e15: √(x² + 4) is |x| in f64).
-#[inline(always)]
+/// squareplus(x) = (x + √(x² + 4)) / 2 with [`root`]'s root.
+#[cfg(test)]
 pub(crate) fn squareplus_fast(x: f64) -> f64 {
+    squareplus_by(root(), x)
+}
+
+/// squareplus(x) = (x + √(x² + 4)) / 2 with the root of kind `root`
+/// (|x| ≥ 1e15: √(x² + 4) is |x| in f64, and x² may overflow).
+#[inline(always)]
+fn squareplus_by(root: Root, x: f64) -> f64 {
     let ax = x.abs();
-    let root = if ax < 1e15 {
-        sqrt_via_f32(x * x + 4.0)
+    let r = if ax < 1e15 {
+        let y = x * x + 4.0;
+        match root {
+            Root::Exact => y.sqrt(),
+            Root::ViaF32 => sqrt_via_f32(y),
+        }
     } else {
         ax
     };
     // Halves first (exact), so that x near f64::MAX does not overflow.
-    x.mul_add(0.5, 0.5 * root)
+    x.mul_add(0.5, 0.5 * r)
 }
 
 /// √y for 1 ≤ y < 1e30, within an ulp of `y.sqrt()`: the f32 root refined by
 /// two Newton steps in f64 (each squares the relative error, 2⁻²⁴ → 2⁻⁴⁸ →
 /// rounding) with an f32 reciprocal. Square roots were most of an inference
-/// step with 16-wide layers, and f64 roots are the slowest vector
-/// instruction there is; f32 roots and divisions are several times faster.
+/// step with 16-wide layers, and on the Intel Xeon f64 vector roots were
+/// several times slower than f32 roots and divisions ([`Root::ViaF32`]).
 /// Every operation is an IEEE one (rounded exactly), so every vector width
 /// gives the same bits.
 #[inline(always)]
@@ -553,12 +632,15 @@ const TILE: usize = 16;
 /// The tile for the `rest` rows left: full tiles while more than 8 are
 /// left, then 8 or 4 rows, so that a 5-body graph's nodes fill 8 lanes and
 /// not 16 (a third of a 16-row tile's square roots were spent on padding).
-/// 9–12 rows take one 16-row tile, not an 8- and a 4-row one: one pass
+/// 9–12 rows take one 12-row tile, not an 8- and a 4-row one: one pass
 /// through the layers instead of two (the 5-spring rollout's 10 edges: 16.5
-/// → 13.9 ms, interleaved runs, 2026-12-03).
+/// → 13.9 ms with a 16-row tile, interleaved runs, 2026-12-03), and a
+/// quarter fewer padded lanes than 16 (29.4 → 26.2 ms on AMD Zen 2,
+/// 2026-12-04).
 fn tile_for(rest: usize) -> usize {
     match rest {
-        9.. => TILE,
+        13.. => TILE,
+        9..=12 => 12,
         5..=8 => 8,
         _ => 4,
     }
@@ -725,6 +807,7 @@ impl Mlp {
             let at = (r, t0, rest, activate);
             t0 += match tile_for(rest) {
                 TILE => self.tile::<TILE>(th, (a, c, na), at, tape, y),
+                12 => self.tile::<12>(th, (a, c, na), at, tape, y),
                 8 => self.tile::<8>(th, (a, c, na), at, tape, y),
                 _ => self.tile::<4>(th, (a, c, na), at, tape, y),
             };

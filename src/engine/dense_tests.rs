@@ -193,12 +193,36 @@ fn input_gradients_without_parameter_gradients() {
     assert_eq!(bits(&full.2), bits(&skipped.2));
 }
 
-/// The engine's squareplus is within an ulp of the plain formula (its root
-/// comes from an f32 root and two Newton steps) over the whole range, huge
-/// and tiny inputs and non-finite ones included, and the dispatched
-/// (vector) pass gives the same bits as the portable one.
+/// The engine's squareplus is within an ulp of the plain formula with
+/// either root (the exact one, or an f32 root and two Newton steps) over the
+/// whole range, huge and tiny inputs and non-finite ones included, and the
+/// dispatched (vector) pass gives the same bits as the portable one.
 #[test]
 fn fast_squareplus_is_within_an_ulp() {
+    for root in [Root::Exact, Root::ViaF32] {
+        squareplus_within_an_ulp(root);
+    }
+    let mut xs: Vec<f64> = (-4000..=4000).map(|i| f64::from(i) * 0.01).collect();
+    xs.extend([
+        0.0,
+        -0.0,
+        1e15,
+        -1e15,
+        9.99e14,
+        f64::MAX,
+        f64::MIN,
+        1e300,
+        -1e-300,
+    ]);
+    let mut v = xs.clone();
+    squareplus_in_place(&mut v);
+    let portable: Vec<f64> = xs.iter().map(|&x| squareplus_fast(x)).collect();
+    let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&v), bits(&portable));
+}
+
+/// [`fast_squareplus_is_within_an_ulp`] for one root kind.
+fn squareplus_within_an_ulp(root: Root) {
     let mut xs: Vec<f64> = (-4000..=4000).map(|i| f64::from(i) * 0.01).collect();
     for e in -300..=300 {
         let x = 10f64.powi(e) * 1.2345;
@@ -210,11 +234,15 @@ fn fast_squareplus_is_within_an_ulp() {
         // The root itself, against the correctly rounded one.
         let y = x * x + 4.0;
         if y < 1e30 {
-            let (fast, exact) = (sqrt_via_f32(y), y.sqrt());
+            let fast = match root {
+                Root::Exact => y.sqrt(),
+                Root::ViaF32 => sqrt_via_f32(y),
+            };
+            let exact = y.sqrt();
             worst = worst.max(fast.to_bits().abs_diff(exact.to_bits()));
             checked += 1;
         }
-        let (fast, plain) = (squareplus_fast(x), crate::gnode::mlp::squareplus_f64(x));
+        let (fast, plain) = (squareplus_by(root, x), crate::gnode::mlp::squareplus_f64(x));
         if !plain.is_finite() {
             // x² overflowed: the plain formula says ∞ where the value is x
             // (x > 0) or about 1/|x| (x < 0); the engine's is right.
@@ -235,14 +263,9 @@ fn fast_squareplus_is_within_an_ulp() {
         );
     }
     assert!(checked > 8000);
-    assert!(worst <= 1, "the root is {worst} ulps off");
-    assert!(squareplus_fast(f64::NAN).is_nan());
-    assert_eq!(squareplus_fast(f64::INFINITY), f64::INFINITY);
-    let mut v = xs.clone();
-    squareplus_in_place(&mut v);
-    let portable: Vec<f64> = xs.iter().map(|&x| squareplus_fast(x)).collect();
-    let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
-    assert_eq!(bits(&v), bits(&portable));
+    assert!(worst <= 1, "{root:?}: the root is {worst} ulps off");
+    assert!(squareplus_by(root, f64::NAN).is_nan());
+    assert_eq!(squareplus_by(root, f64::INFINITY), f64::INFINITY);
 }
 
 /// [`dots`] of 4 and of 8 vectors (AVX2 registers where the CPU has them)
@@ -272,6 +295,17 @@ fn dots_give_the_bits_of_dot() {
             }
         }
     }
+}
+
+/// `MCGNODE_ROOT` picks either root kind, and a value it does not know
+/// leaves the CPU's choice.
+#[test]
+fn the_environment_picks_the_root() {
+    assert_eq!(chosen_root(Root::ViaF32, None), Root::ViaF32);
+    assert_eq!(chosen_root(Root::Exact, Some("")), Root::Exact);
+    assert_eq!(chosen_root(Root::ViaF32, Some("exact")), Root::Exact);
+    assert_eq!(chosen_root(Root::Exact, Some("f32")), Root::ViaF32);
+    assert_eq!(chosen_root(Root::Exact, Some("fast")), Root::Exact);
 }
 
 /// `MCGNODE_SIMD` narrows the path, never widens it, and a value it does
