@@ -367,12 +367,22 @@ def params_file(work, script):
     return os.path.join(work, "results", sub)
 
 
+def mcg_cpus(figure):
+    """The CPUs a figure's process may run on: one-thread figures (the
+    rollouts, the 1-thread epochs) on CPU 0, as JAX's 1-thread runs, so that
+    neither is moved between cores mid-run; the others on every CPU."""
+    if f", {CORES} thread" in figure and CORES > 1:
+        return ",".join(str(c) for c in sorted(os.sched_getaffinity(0)))
+    return "0"
+
+
 def mcg_job(r, a, figure, quick):
-    cmd = flock_prefix(a) + [a.mcgnode, "bench", "--json", "--only", figure]
+    args = [a.mcgnode, "bench", "--json", "--only", figure]
     # `bench --quick` shrinks the baselines' data to 1,000 states (and renames
     # their figures): those run in full, a few seconds, even with --quick.
     if quick and "10000 states" not in figure:
-        cmd.insert(len(flock_prefix(a)) + 2, "--quick")
+        args.insert(2, "--quick")
+    cmd = flock_prefix(a) + ["taskset", "-c", mcg_cpus(figure)] + args
     out, pwall, puser, psys = r.run(cmd, timeout=a.timeout, capture=True)
     doc = json.loads(out)
     figs = doc if isinstance(doc, list) else doc.get("figures", doc)
@@ -453,7 +463,8 @@ def table(a, res, items, info, rounds):
             f"REF_DIR commit {git(a.ref, 'rev-parse', '--short', 'HEAD')}; jax {info.get('jax')}"
             f", jax-md {a.jaxmd}",
             "JAX 1 thread: taskset -c 0, XLA_FLAGS='--xla_cpu_multi_thread_eigen=false "
-            "intra_op_parallelism_threads=1'; JAX 2 threads: taskset -c 0,1",
+            "intra_op_parallelism_threads=1'; JAX 2 threads: taskset -c 0,1; "
+            "mcgnode's one-thread figures: taskset -c 0, the others on every CPU",
             "cells: median (min–max over rounds); JAX user/sys: CPU time of one timed epoch or "
             "rollout (getrusage of the process around it; steps/s rows also give its wall); "
             "mcgnode: the figure `bench --json --only <figure>` reports (its own median), and "
