@@ -368,10 +368,11 @@ def params_file(work, script):
 
 
 def mcg_cpus(figure):
-    """The CPUs a figure's process may run on: one-thread figures (the
-    rollouts, the 1-thread epochs) on CPU 0, as JAX's 1-thread runs, so that
-    neither is moved between cores mid-run; the others on every CPU."""
-    if f", {CORES} thread" in figure and CORES > 1:
+    """The CPUs a figure's process may run on: the rollouts (one thread) on
+    CPU 0, as JAX's 1-thread runs, so that neither is moved between cores
+    mid-run; the epochs on every CPU (`bench` names its all-cores epoch by
+    the CPUs it sees, so pinned it would name two figures "1 thread")."""
+    if "thread" in figure:
         return ",".join(str(c) for c in sorted(os.sched_getaffinity(0)))
     return "0"
 
@@ -464,7 +465,7 @@ def table(a, res, items, info, rounds):
             f", jax-md {a.jaxmd}",
             "JAX 1 thread: taskset -c 0, XLA_FLAGS='--xla_cpu_multi_thread_eigen=false "
             "intra_op_parallelism_threads=1'; JAX 2 threads: taskset -c 0,1; "
-            "mcgnode's one-thread figures: taskset -c 0, the others on every CPU",
+            "mcgnode's rollouts: taskset -c 0, its epochs on every CPU",
             "cells: median (min–max over rounds); JAX user/sys: CPU time of one timed epoch or "
             "rollout (getrusage of the process around it; steps/s rows also give its wall); "
             "mcgnode: the figure `bench --json --only <figure>` reports (its own median), and "
