@@ -470,3 +470,50 @@ fn managed_lifecycle_gates_the_predictions() {
         "{report}"
     );
 }
+
+/// scripts/build_msgs.sh run by several tests and scripts at once (each test
+/// binary's rclpy environment beside scripts/ros_markers.sh): every run
+/// succeeds (one at a time, under build/msgs.lock), and a reader sourcing
+/// build/msgs/env.sh meanwhile always finds it whole. Before the lock, CI
+/// saw both failures when the package needed a rebuild: two builds in one
+/// tree ("build failed"), and a driver without rclpy (env.sh read while it
+/// was rewritten in place). This test does not force a rebuild: the other
+/// tests of this binary use the installed package meanwhile.
+#[test]
+fn concurrent_message_builds_all_succeed() {
+    let env_sh = ros_env();
+    let runs: Vec<_> = (0..3)
+        .map(|_| {
+            Command::new("timeout")
+                .args(["300", "bash", "scripts/build_msgs.sh"])
+                .current_dir(ROOT)
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .expect("run scripts/build_msgs.sh")
+        })
+        .collect();
+    // Sourced while the builds run: complete every time.
+    let probe = format!(
+        "for _ in $(seq 200); do . '{}'; [ \"${{ROS_DISTRO:-}}\" = kilted ] || exit 1; unset ROS_DISTRO; done",
+        env_sh.display()
+    );
+    let o = Command::new("bash")
+        .args(["-c", &probe])
+        .output()
+        .expect("run bash");
+    for child in runs {
+        let out = child
+            .wait_with_output()
+            .expect("wait for scripts/build_msgs.sh");
+        assert!(
+            out.status.success(),
+            "scripts/build_msgs.sh failed beside two others:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    assert!(
+        o.status.success(),
+        "build/msgs/env.sh was read half written"
+    );
+}
