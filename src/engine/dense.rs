@@ -5,6 +5,8 @@
 // (`target_feature`) copies to be compiled for AVX2 at all.
 #![allow(clippy::inline_always)]
 
+use std::sync::atomic::{AtomicU8, Ordering};
+
 /// The widest vectors this CPU offers the passes below, with fused
 /// multiply-adds (the forward layers use them on every path, so every path
 /// gives the same bits; without FMA hardware the portable path's `mul_add`
@@ -25,19 +27,29 @@ pub(crate) enum Simd {
 /// gives the same bits, so this only compares their speeds on one machine.
 #[inline(always)]
 pub(crate) fn simd() -> Simd {
-    use std::sync::atomic::{AtomicU8, Ordering};
-    // 0: not chosen yet. A relaxed load per call (every layer calls this);
-    // racing first calls choose the same path.
     static PATH: AtomicU8 = AtomicU8::new(0);
-    match PATH.load(Ordering::Relaxed) {
-        1 => Simd::Avx512,
-        2 => Simd::Avx2,
-        3 => Simd::Portable,
-        _ => {
-            let path = chosen(detected(), std::env::var("MCGNODE_SIMD").ok().as_deref());
-            PATH.store(path as u8 + 1, Ordering::Relaxed);
-            path
+    let chosen = once(&PATH, || {
+        chosen(detected(), std::env::var("MCGNODE_SIMD").ok().as_deref()) as u8
+    });
+    match chosen {
+        c if c == Simd::Avx512 as u8 => Simd::Avx512,
+        c if c == Simd::Avx2 as u8 => Simd::Avx2,
+        _ => Simd::Portable,
+    }
+}
+
+/// A choice made once per process and kept in `cell` (0: not made yet, else
+/// the choice plus one). A relaxed load per call (every layer asks); racing
+/// first calls make the same choice.
+#[inline(always)]
+fn once(cell: &AtomicU8, choose: impl FnOnce() -> u8) -> u8 {
+    match cell.load(Ordering::Relaxed) {
+        0 => {
+            let c = choose();
+            cell.store(c + 1, Ordering::Relaxed);
+            c
         }
+        c => c - 1,
     }
 }
 
@@ -98,22 +110,19 @@ pub(crate) enum Root {
 /// `MCGNODE_ROOT` (`exact`, `f32`) to compare them on one machine.
 #[inline(always)]
 pub(crate) fn root() -> Root {
-    use std::sync::atomic::{AtomicU8, Ordering};
-    // 0: not chosen yet (as in `simd`).
     static ROOT: AtomicU8 = AtomicU8::new(0);
-    match ROOT.load(Ordering::Relaxed) {
-        1 => Root::Exact,
-        2 => Root::ViaF32,
-        _ => {
-            let best = if detected() == Simd::Avx512 {
-                Root::ViaF32
-            } else {
-                Root::Exact
-            };
-            let root = chosen_root(best, std::env::var("MCGNODE_ROOT").ok().as_deref());
-            ROOT.store(root as u8 + 1, Ordering::Relaxed);
-            root
-        }
+    let chosen = once(&ROOT, || {
+        let best = if detected() == Simd::Avx512 {
+            Root::ViaF32
+        } else {
+            Root::Exact
+        };
+        chosen_root(best, std::env::var("MCGNODE_ROOT").ok().as_deref()) as u8
+    });
+    if chosen == Root::Exact as u8 {
+        Root::Exact
+    } else {
+        Root::ViaF32
     }
 }
 
