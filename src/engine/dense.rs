@@ -513,13 +513,19 @@ impl Linear {
 }
 
 /// One layer on a tile: `y[j] = b[j] + Σ_i w[i][j]·x[i]`, summed in the
-/// order of [`Linear::forward`] (bias, then inputs in turn), [`OUTS`]
-/// outputs at a time. The blocked loop and the one-output tail are written
+/// order of [`Linear::forward`] (bias, then inputs in turn), `OUTS`
+/// outputs at a time (the path's [`OUTS_WIDE`] or [`OUTS_AVX2`]: any count
+/// gives the same bits, since each output's sum keeps its order). The blocked loop and the one-output tail are written
 /// out apart on purpose: folded into one const-generic helper, the
 /// 500-spring rollout ran at half the speed (4.6–6.3k against 9.0–11.9k
 /// steps/s, interleaved, 2026-12-02).
 #[inline(always)]
-fn dense_tile<const TILE: usize>(l: &Linear, th: &[f64], x: &[f64], y: &mut [f64]) {
+fn dense_tile<const TILE: usize, const OUTS: usize>(
+    l: &Linear,
+    th: &[f64],
+    x: &[f64],
+    y: &mut [f64],
+) {
     let w = &th[l.w..l.w + l.inp * l.out];
     let b = &th[l.b..l.b + l.out];
     let lane = |x: &[f64], i: usize| -> [f64; TILE] {
@@ -683,8 +689,16 @@ fn copy_tile<const T: usize>(dst: &mut [f64], src: &[f64]) {
 }
 
 /// Outputs computed together, so that each input tile loaded serves four
-/// independent accumulator chains (a chain alone waits on its adds).
-const OUTS: usize = 4;
+/// independent accumulator chains (a chain alone waits on its adds): with
+/// 32 vector registers (AVX-512) or the portable path.
+const OUTS_WIDE: usize = 4;
+
+/// [`OUTS_WIDE`] for AVX2, whose 16 registers four outputs of a 16-row tile
+/// fill with accumulators alone (they spilled to the stack). Two outputs
+/// measured on the Zen 2 EPYC, one core, interleaved (2026-12-04): the
+/// 16-wide contact rollout 1,247–1,267 → 1,395–1,443 steps/s, the 5-spring
+/// epoch 14.0–14.4 → 13.4–14.4 ms; three outputs 1,212–1,249.
+const OUTS_AVX2: usize = 2;
 
 impl Mlp {
     /// Widest layer.
@@ -761,7 +775,7 @@ impl Mlp {
             // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).
             #[cfg(target_arch = "x86_64")]
             Simd::Avx2 => unsafe { self.forward_avx2(th, ac, at, tape, y) },
-            _ => self.forward_any(th, ac, at, tape, y),
+            _ => self.forward_any::<OUTS_WIDE>(th, ac, at, tape, y),
         }
     }
 
@@ -775,7 +789,7 @@ impl Mlp {
         tape: &mut Tape,
         y: Out<'_>,
     ) {
-        self.forward_any(th, ac, at, tape, y);
+        self.forward_any::<OUTS_WIDE>(th, ac, at, tape, y);
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -788,7 +802,7 @@ impl Mlp {
         tape: &mut Tape,
         y: Out<'_>,
     ) {
-        self.forward_any(th, ac, at, tape, y);
+        self.forward_any::<OUTS_AVX2>(th, ac, at, tape, y);
     }
 
     /// [`Mlp::forward_part`] a tile of [`TILE`] rows at a time: the tile's
@@ -798,7 +812,7 @@ impl Mlp {
     /// layer over all rows ([`Mlp::layerwise`]) would stream every hidden
     /// row through memory once per weight instead.
     #[inline(always)]
-    fn forward_any(
+    fn forward_any<const OUTS: usize>(
         &self,
         th: &[f64],
         (a, c): (&[f64], &[f64]),
@@ -815,10 +829,10 @@ impl Mlp {
             let rest = rows.end - t0;
             let at = (r, t0, rest, activate);
             t0 += match tile_for(rest) {
-                TILE => self.tile::<TILE>(th, (a, c, na), at, tape, y),
-                12 => self.tile::<12>(th, (a, c, na), at, tape, y),
-                8 => self.tile::<8>(th, (a, c, na), at, tape, y),
-                _ => self.tile::<4>(th, (a, c, na), at, tape, y),
+                TILE => self.tile::<TILE, OUTS>(th, (a, c, na), at, tape, y),
+                12 => self.tile::<12, OUTS>(th, (a, c, na), at, tape, y),
+                8 => self.tile::<8, OUTS>(th, (a, c, na), at, tape, y),
+                _ => self.tile::<4, OUTS>(th, (a, c, na), at, tape, y),
             };
         }
     }
@@ -827,7 +841,7 @@ impl Mlp {
     /// range) through every layer (see [`Mlp::forward_any`]); returns the
     /// rows done.
     #[inline(always)]
-    fn tile<const T: usize>(
+    fn tile<const T: usize, const OUTS: usize>(
         &self,
         th: &[f64],
         (a, c, na): (&[f64], &[f64], usize),
@@ -849,7 +863,7 @@ impl Mlp {
             copy_padded::<T>(&mut x[i * T..(i + 1) * T], src);
         }
         for (li, l) in self.layers.iter().enumerate() {
-            dense_tile::<T>(l, th, x, h);
+            dense_tile::<T, OUTS>(l, th, x, h);
             if li + 1 < self.layers.len() {
                 squareplus_slice(&mut h[..l.out * T]);
                 if record {

@@ -119,7 +119,7 @@ fn vector_build_gives_the_same_bits() {
         },
     );
     let portable = run(
-        &|t, y| mlp.forward_any(&th, (&a, &c), (r, 0..r, false), t, Out::new(y, r)),
+        &|t, y| mlp.forward_any::<OUTS_WIDE>(&th, (&a, &c), (r, 0..r, false), t, Out::new(y, r)),
         &|t, g, ga, gc| {
             let (mut s1, mut s2) = (vec![0.0; w], vec![0.0; w]);
             mlp.backward_any(&th, g, &a, &c, r, t, &gy, Some((ga, gc)), &mut s1, &mut s2)
@@ -156,6 +156,28 @@ fn vector_build_gives_the_same_bits() {
         let mut yi = vec![0.0; 3 * r];
         mlp.forward(&th, &a, &c, r, &mut mlp.inference_tape(), &mut yi);
         assert_eq!(yi, want, "{r} rows, not recording");
+        // Each path's count of outputs a pass (16 and 3 outputs: blocks
+        // and one-output tails), whatever this CPU dispatches to.
+        let by_outs: [(
+            usize,
+            fn(&Mlp, &[f64], (&[f64], &[f64]), usize, &mut Tape, &mut [f64]),
+        ); 2] = [
+            (OUTS_WIDE, |m, th, ac, r, t, y| {
+                m.forward_any::<OUTS_WIDE>(th, ac, (r, 0..r, false), t, Out::new(y, r));
+            }),
+            (OUTS_AVX2, |m, th, ac, r, t, y| {
+                m.forward_any::<OUTS_AVX2>(th, ac, (r, 0..r, false), t, Out::new(y, r));
+            }),
+        ];
+        for (outs, fwd) in by_outs {
+            let (mut tape, mut y) = (mlp.tape(r), vec![0.0; 3 * r]);
+            fwd(&mlp, &th, (&a, &c), r, &mut tape, &mut y);
+            assert_eq!(y, want, "{r} rows, {outs} outputs a pass");
+            assert_eq!(
+                tape.hidden, want_tape.hidden,
+                "{r} rows, {outs} outputs: tape"
+            );
+        }
     }
 }
 
