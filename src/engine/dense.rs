@@ -437,33 +437,35 @@ impl Linear {
             }
         }
         let gyj = |j: usize| &gy[j * r..(j + 1) * r];
-        for i in 0..self.inp {
-            let xi = if i < na {
+        let x = |i: usize| {
+            if i < na {
                 &a[i * r..(i + 1) * r]
             } else {
                 &c[(i - na) * r..(i - na + 1) * r]
-            };
+            }
+        };
+        // Outputs in blocks of four per input row; the rest below.
+        let blocked = self.out - self.out % 4;
+        for i in 0..self.inp {
+            let xi = x(i);
             // Eight (then four) outputs per pass over the row: each sum is
             // the one `dot` forms, in its order (the same bits).
             if params {
                 let gw = &mut g[self.w + i * self.out..self.w + (i + 1) * self.out];
                 let mut j = 0;
-                while j + 8 <= self.out {
+                while j + 8 <= blocked {
                     let d: [f64; 8] = dots(xi, std::array::from_fn(|o| gyj(j + o)));
                     for (o, dv) in d.iter().enumerate() {
                         gw[j + o] += dv;
                     }
                     j += 8;
                 }
-                while j + 4 <= self.out {
+                while j + 4 <= blocked {
                     let d: [f64; 4] = dots(xi, std::array::from_fn(|o| gyj(j + o)));
                     for (o, dv) in d.iter().enumerate() {
                         gw[j + o] += dv;
                     }
                     j += 4;
-                }
-                for (jj, gwj) in gw.iter_mut().enumerate().skip(j) {
-                    *gwj += dot(xi, gyj(jj));
                 }
             }
             if let Some((ga, gc)) = gx.as_mut() {
@@ -473,42 +475,61 @@ impl Linear {
                     &mut gc[(i - na) * r..(i - na + 1) * r]
                 };
                 let w = &th[self.w + i * self.out..self.w + (i + 1) * self.out];
-                // Eight (then four) outputs per pass over ∂L/∂x_i, each
-                // element added to in the order of one output at a time (the
-                // same bits).
+                // Eight outputs per pass over ∂L/∂x_i, then the rest in one
+                // pass; each element added to in the order of one output at
+                // a time (the same bits).
                 let mut j = 0;
                 while j + 8 <= self.out {
-                    let gs: [&[f64]; 8] = std::array::from_fn(|o| gyj(j + o));
-                    let ws: [f64; 8] = std::array::from_fn(|o| w[j + o]);
-                    for (k, gv) in gxi.iter_mut().enumerate() {
-                        let mut v = *gv;
-                        for o in 0..8 {
-                            v = ws[o].mul_add(gs[o][k], v);
-                        }
-                        *gv = v;
-                    }
+                    add_outputs::<8>(gxi, &w[j..], |o| gyj(j + o));
                     j += 8;
                 }
-                while j + 4 <= self.out {
-                    let (g0, g1, g2, g3) = (gyj(j), gyj(j + 1), gyj(j + 2), gyj(j + 3));
-                    let (w0, w1, w2, w3) = (w[j], w[j + 1], w[j + 2], w[j + 3]);
-                    for (k, gv) in gxi.iter_mut().enumerate() {
-                        let mut v = *gv;
-                        v = w0.mul_add(g0[k], v);
-                        v = w1.mul_add(g1[k], v);
-                        v = w2.mul_add(g2[k], v);
-                        v = w3.mul_add(g3[k], v);
-                        *gv = v;
-                    }
-                    j += 4;
-                }
-                for (jj, &wv) in w.iter().enumerate().skip(j) {
-                    for (gv, yv) in gxi.iter_mut().zip(gyj(jj)) {
-                        *gv = wv.mul_add(*yv, *gv);
-                    }
+                let rest = |o| gyj(j + o);
+                match self.out - j {
+                    1 => add_outputs::<1>(gxi, &w[j..], rest),
+                    2 => add_outputs::<2>(gxi, &w[j..], rest),
+                    3 => add_outputs::<3>(gxi, &w[j..], rest),
+                    4 => add_outputs::<4>(gxi, &w[j..], rest),
+                    5 => add_outputs::<5>(gxi, &w[j..], rest),
+                    6 => add_outputs::<6>(gxi, &w[j..], rest),
+                    7 => add_outputs::<7>(gxi, &w[j..], rest),
+                    _ => {}
                 }
             }
         }
+        // The outputs past the blocks of four (the fifth of a 5-wide layer):
+        // four input rows per pass over the output's gradient. A product is
+        // the same either way round, so each sum is still `dot`'s bits.
+        if params {
+            for j in blocked..self.out {
+                let at = |i: usize| self.w + i * self.out + j;
+                let mut i = 0;
+                while i + 4 <= self.inp {
+                    let d: [f64; 4] = dots(gyj(j), std::array::from_fn(|o| x(i + o)));
+                    for (o, dv) in d.iter().enumerate() {
+                        g[at(i + o)] += dv;
+                    }
+                    i += 4;
+                }
+                for i in i..self.inp {
+                    g[at(i)] += dot(x(i), gyj(j));
+                }
+            }
+        }
+    }
+}
+
+/// `gx[k] += Σ_o w[o]·gy(o)[k]` for `N` outputs in one pass, adding output
+/// by output in their order (the bits of one pass per output).
+#[inline(always)]
+fn add_outputs<'a, const N: usize>(gx: &mut [f64], w: &[f64], gy: impl Fn(usize) -> &'a [f64]) {
+    let gs: [&[f64]; N] = std::array::from_fn(|o| &gy(o)[..gx.len()]);
+    let ws: [f64; N] = std::array::from_fn(|o| w[o]);
+    for (k, gv) in gx.iter_mut().enumerate() {
+        let mut v = *gv;
+        for o in 0..N {
+            v = ws[o].mul_add(gs[o][k], v);
+        }
+        *gv = v;
     }
 }
 

@@ -47,9 +47,11 @@ fn backward_one_at_a_time(
 
 type Backward<'f> = &'f dyn Fn(&Tape, &mut [f64], &mut [f64], &mut [f64]);
 
-/// The blocked reverse pass of a layer (four outputs per pass) gives the
-/// bits of the one-output-at-a-time pass, for widths that are and are not
-/// multiples of four, with and without input gradients.
+/// The blocked reverse pass of a layer (eight or four outputs per pass, the
+/// rest of the input gradients in one pass, the weights of outputs past the
+/// blocks four input rows a pass) gives the bits of the one-output-at-a-time
+/// pass, for widths that are and are not multiples of four, with and
+/// without input gradients.
 #[test]
 fn blocked_backward_gives_the_same_bits() {
     let wave =
@@ -58,7 +60,12 @@ fn blocked_backward_gives_the_same_bits() {
         (7usize, 16usize, 203usize),
         (48, 16, 97),
         (5, 5, 10),
+        (5, 5, 37),
         (3, 9, 1),
+        (9, 6, 37),
+        (7, 13, 37),
+        (6, 11, 37),
+        (4, 1, 37),
     ] {
         let l = Linear {
             w: 0,
