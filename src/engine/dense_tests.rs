@@ -47,6 +47,9 @@ fn backward_one_at_a_time(
 
 type Backward<'f> = &'f dyn Fn(&Tape, &mut [f64], &mut [f64], &mut [f64]);
 
+/// [`Mlp::forward_any`] with one count of outputs a pass.
+type TiledForward = fn(&Mlp, &[f64], (&[f64], &[f64]), usize, &mut Tape, &mut [f64]);
+
 /// The blocked reverse pass of a layer (eight or four outputs per pass, the
 /// rest of the input gradients in one pass, the weights of outputs past the
 /// blocks four input rows a pass) gives the bits of the one-output-at-a-time
@@ -165,10 +168,7 @@ fn vector_build_gives_the_same_bits() {
         assert_eq!(yi, want, "{r} rows, not recording");
         // Each path's count of outputs a pass (16 and 3 outputs: blocks
         // and one-output tails), whatever this CPU dispatches to.
-        let by_outs: [(
-            usize,
-            fn(&Mlp, &[f64], (&[f64], &[f64]), usize, &mut Tape, &mut [f64]),
-        ); 2] = [
+        let by_outs: [(usize, TiledForward); 2] = [
             (OUTS_WIDE, |m, th, ac, r, t, y| {
                 m.forward_any::<OUTS_WIDE>(th, ac, (r, 0..r, false), t, Out::new(y, r));
             }),
