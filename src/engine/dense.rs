@@ -366,7 +366,7 @@ fn dot4_any(a: &[f64], b: [&[f64]; 4]) -> [f64; 4] {
 
 /// Σ a_i, as [`dot`].
 #[inline(always)]
-fn sum(a: &[f64]) -> f64 {
+pub(crate) fn sum(a: &[f64]) -> f64 {
     let mut acc = [0.0; 4];
     let ca = a.chunks_exact(4);
     let tail: f64 = ca.remainder().iter().sum();
