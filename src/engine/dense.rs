@@ -536,8 +536,12 @@ fn add_outputs<'a, const N: usize>(gx: &mut [f64], w: &[f64], gy: impl Fn(usize)
 /// One layer on a tile: `y[j] = b[j] + Σ_i w[i][j]·x[i]`, summed in the
 /// order of [`Linear::forward`] (bias, then inputs in turn), `OUTS`
 /// outputs at a time (the path's [`OUTS_WIDE`] or [`OUTS_AVX2`]: any count
-/// gives the same bits, since each output's sum keeps its order). The blocked loop and the one-output tail are written
-/// out apart on purpose: folded into one const-generic helper, the
+/// gives the same bits, since each output's sum keeps its order), then
+/// squareplus on each block of outputs when `act` is set: its square roots
+/// overlap the next block's multiply-adds, where a pass over the whole tile
+/// after the layer left the divider and the FMA units each waiting on the
+/// other. The blocked loop and the one-output tail are written out apart on
+/// purpose: folded into one const-generic helper, the
 /// 500-spring rollout ran at half the speed (4.6–6.3k against 9.0–11.9k
 /// steps/s, interleaved, 2026-12-02).
 #[inline(always)]
@@ -546,6 +550,7 @@ fn dense_tile<const TILE: usize, const OUTS: usize>(
     th: &[f64],
     x: &[f64],
     y: &mut [f64],
+    act: bool,
 ) {
     let w = &th[l.w..l.w + l.inp * l.out];
     let b = &th[l.b..l.b + l.out];
@@ -570,6 +575,9 @@ fn dense_tile<const TILE: usize, const OUTS: usize>(
         for (o, row) in acc.iter().enumerate() {
             y[(j + o) * TILE..(j + o + 1) * TILE].copy_from_slice(row);
         }
+        if act {
+            squareplus_slice(&mut y[j * TILE..(j + OUTS) * TILE]);
+        }
         j += OUTS;
     }
     for j in j..l.out {
@@ -581,6 +589,9 @@ fn dense_tile<const TILE: usize, const OUTS: usize>(
             }
         }
         y[j * TILE..(j + 1) * TILE].copy_from_slice(&row);
+        if act {
+            squareplus_slice(&mut y[j * TILE..(j + 1) * TILE]);
+        }
     }
 }
 
@@ -883,10 +894,20 @@ impl Mlp {
             };
             copy_padded::<T>(&mut x[i * T..(i + 1) * T], src);
         }
+        let layers = self.layers.len();
+        // Full tiles take squareplus block by block (see `dense_tile`);
+        // smaller ones in one pass after the layer, as the per-block loops
+        // on 4- and 8-row tiles cost more than they overlap (the 5-pendulum
+        // rollout stepped 11 % slower).
+        let by_block = T == TILE;
         for (li, l) in self.layers.iter().enumerate() {
-            dense_tile::<T, OUTS>(l, th, x, h);
-            if li + 1 < self.layers.len() {
+            let hidden = li + 1 < layers;
+            let act = hidden || activate;
+            dense_tile::<T, OUTS>(l, th, x, h, act && by_block);
+            if act && !by_block {
                 squareplus_slice(&mut h[..l.out * T]);
+            }
+            if hidden {
                 if record {
                     let kept = &mut tape.hidden[li];
                     for j in 0..l.out {
@@ -896,10 +917,7 @@ impl Mlp {
             }
             std::mem::swap(&mut x, &mut h);
         }
-        let last = &self.layers[self.layers.len() - 1];
-        if activate {
-            squareplus_slice(&mut x[..last.out * T]);
-        }
+        let last = &self.layers[layers - 1];
         for j in 0..last.out {
             y.put::<T>(j, t0, &x[j * T..j * T + len]);
         }
