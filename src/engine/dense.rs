@@ -907,12 +907,10 @@ impl Mlp {
             if act && !by_block {
                 squareplus_slice(&mut h[..l.out * T]);
             }
-            if hidden {
-                if record {
-                    let kept = &mut tape.hidden[li];
-                    for j in 0..l.out {
-                        copy_tile::<T>(&mut kept[j * r + t0..j * r + t0 + len], &h[j * T..]);
-                    }
+            if hidden && record {
+                let kept = &mut tape.hidden[li];
+                for j in 0..l.out {
+                    copy_tile::<T>(&mut kept[j * r + t0..j * r + t0 + len], &h[j * T..]);
                 }
             }
             std::mem::swap(&mut x, &mut h);
