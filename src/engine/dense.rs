@@ -732,6 +732,12 @@ const OUTS_WIDE: usize = 4;
 /// epoch 14.0–14.4 → 13.4–14.4 ms; three outputs 1,212–1,249.
 const OUTS_AVX2: usize = 2;
 
+/// Tiles of up to this many rows take [`OUTS_WIDE`] outputs on every path:
+/// on AVX2 four outputs of 12 rows are 12 accumulators, which fit (the
+/// 5-spring rollout, whose 10 edges fill a 12-row tile, 19.1–19.2 →
+/// 18.0–18.2 ms with four there; 8 as the bound: 18.9–19.1 ms).
+const SMALL_WIDE: usize = 12;
+
 impl Mlp {
     /// Widest layer.
     pub(crate) fn width(&self) -> usize {
@@ -903,7 +909,12 @@ impl Mlp {
         for (li, l) in self.layers.iter().enumerate() {
             let hidden = li + 1 < layers;
             let act = hidden || activate;
-            dense_tile::<T, OUTS>(l, th, x, h, act && by_block);
+            // The path's count of outputs a pass, or four where they fit.
+            if T <= SMALL_WIDE {
+                dense_tile::<T, OUTS_WIDE>(l, th, x, h, act && by_block);
+            } else {
+                dense_tile::<T, OUTS>(l, th, x, h, act && by_block);
+            }
             if act && !by_block {
                 squareplus_slice(&mut h[..l.out * T]);
             }
