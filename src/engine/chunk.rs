@@ -3,10 +3,11 @@
 //! graph, feature-major), the squared error against the targets, and the
 //! hand-written reverse pass. Every buffer lives here and is reused.
 
-use super::dense::{simd, squareplus_in_place, sum, times_squareplus_grad, Mlp, Out, Simd, Tape};
+use super::dense::{simd, squareplus_in_place, times_squareplus_grad, Mlp, Out, Simd, Tape};
 use super::fused::{BodyBlocks, Branch, EdgeBlocks, EDGE_BLOCK, FUSED_EDGES};
 use super::gather::{
-    add_indexed, edge_differences, gather_rows, prefetch, scatter_add_rows, Gather,
+    add_indexed, edge_differences, gather_rows, prefetch, scatter_add_rows, sum_by_index, Gather,
+    IndexSums,
 };
 use super::layout::Layout;
 use super::split::{Scratch, Split};
@@ -194,6 +195,8 @@ pub(crate) struct Chunk {
     pair_out: Vec<f64>,
     g_pair_out: Vec<f64>,
     g_pair_in: Vec<f64>,
+    /// [`sum_by_index`]'s buffers.
+    sums: IndexSums,
     g_type: Vec<f64>,
     /// Whether the type embeddings and pair outputs above hold an inference
     /// pass's values (cleared when the buffers are made), and whether the
@@ -440,6 +443,7 @@ impl Chunk {
             pair_out: z(em * types * types),
             g_pair_out: g(em * types * types),
             g_pair_in: g(3 * em * types * types),
+            sums: IndexSums::default(),
             g_type: g(em * types),
             by_type_done: false,
             same_params: false,
@@ -1524,20 +1528,11 @@ impl Chunk {
                 if m.by_type && l == 0 {
                     // By type pair: each pair's ∂L/∂output is its edges' sum.
                     let tt = t * t;
-                    let gpo = &mut self.g_pair_out[..em * tt];
+                    let (gpo, sums) = (&mut self.g_pair_out[..em * tt], &mut self.sums);
                     gpo.fill(0.0);
                     for k in 0..em {
                         let (gk, zk) = (&mut gpo[k * tt..(k + 1) * tt], &gz[k * edges..]);
-                        if tt == 1 {
-                            // One type: every edge adds to one sum, in four
-                            // partial sums (one chain of adds through memory
-                            // took a tenth of a 5-spring epoch).
-                            gk[0] += sum(&zk[..edges]);
-                        } else {
-                            for (&p, z) in self.pair[..edges].iter().zip(zk) {
-                                gk[p] += z;
-                            }
-                        }
+                        sum_by_index(gk, &zk[..edges], &self.pair[..edges], sums);
                     }
                     let (pr, rest) = self.pair_in[..3 * em * tt].split_at(em * tt);
                     let (ps, pp) = rest.split_at(em * tt);
@@ -1617,9 +1612,7 @@ impl Chunk {
                 let ty = &self.node_ty[..nodes];
                 for k in 0..em {
                     let gk = &mut gty[k * t..(k + 1) * t];
-                    for (g, &y) in gh[k * nodes..(k + 1) * nodes].iter().zip(ty) {
-                        gk[y] += g;
-                    }
+                    sum_by_index(gk, &gh[k * nodes..(k + 1) * nodes], ty, &mut self.sums);
                 }
             }
             times_squareplus_grad(gty, &self.type_embed[..em * t]);
