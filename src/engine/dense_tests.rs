@@ -48,7 +48,7 @@ fn backward_one_at_a_time(
 type Backward<'f> = &'f dyn Fn(&Tape, &mut [f64], &mut [f64], &mut [f64]);
 
 /// [`Mlp::forward_any`] with one count of outputs a pass.
-type TiledForward = fn(&Mlp, &[f64], (&[f64], &[f64]), usize, &mut Tape, &mut [f64]);
+type TiledForward = fn(&Mlp, &[f64], (&[f64], &[f64]), usize, bool, &mut Tape, &mut [f64]);
 
 /// The blocked reverse pass of a layer (eight or four outputs per pass, the
 /// rest of the input gradients in one pass, the weights of outputs past the
@@ -167,23 +167,31 @@ fn vector_build_gives_the_same_bits() {
         mlp.forward(&th, &a, &c, r, &mut mlp.inference_tape(), &mut yi);
         assert_eq!(yi, want, "{r} rows, not recording");
         // Each path's count of outputs a pass (16 and 3 outputs: blocks
-        // and one-output tails), whatever this CPU dispatches to.
+        // and one-output tails), whatever this CPU dispatches to, with the
+        // outputs activated too (squareplus block by block in full tiles).
         let by_outs: [(usize, TiledForward); 2] = [
-            (OUTS_WIDE, |m, th, ac, r, t, y| {
-                m.forward_any::<OUTS_WIDE>(th, ac, (r, 0..r, false), t, Out::new(y, r));
+            (OUTS_WIDE, |m, th, ac, r, act, t, y| {
+                m.forward_any::<OUTS_WIDE>(th, ac, (r, 0..r, act), t, Out::new(y, r));
             }),
-            (OUTS_AVX2, |m, th, ac, r, t, y| {
-                m.forward_any::<OUTS_AVX2>(th, ac, (r, 0..r, false), t, Out::new(y, r));
+            (OUTS_AVX2, |m, th, ac, r, act, t, y| {
+                m.forward_any::<OUTS_AVX2>(th, ac, (r, 0..r, act), t, Out::new(y, r));
             }),
         ];
+        let mut want_act = want.clone();
+        squareplus_in_place(&mut want_act);
         for (outs, fwd) in by_outs {
-            let (mut tape, mut y) = (mlp.tape(r), vec![0.0; 3 * r]);
-            fwd(&mlp, &th, (&a, &c), r, &mut tape, &mut y);
-            assert_eq!(y, want, "{r} rows, {outs} outputs a pass");
-            assert_eq!(
-                tape.hidden, want_tape.hidden,
-                "{r} rows, {outs} outputs: tape"
-            );
+            for (act, want) in [(false, &want), (true, &want_act)] {
+                let (mut tape, mut y) = (mlp.tape(r), vec![0.0; 3 * r]);
+                fwd(&mlp, &th, (&a, &c), r, act, &mut tape, &mut y);
+                assert_eq!(
+                    &y, want,
+                    "{r} rows, {outs} outputs a pass, activated: {act}"
+                );
+                assert_eq!(
+                    tape.hidden, want_tape.hidden,
+                    "{r} rows, {outs} outputs: tape"
+                );
+            }
         }
     }
 }
