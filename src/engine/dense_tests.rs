@@ -166,32 +166,40 @@ fn vector_build_gives_the_same_bits() {
         let mut yi = vec![0.0; 3 * r];
         mlp.forward(&th, &a, &c, r, &mut mlp.inference_tape(), &mut yi);
         assert_eq!(yi, want, "{r} rows, not recording");
-        // Each path's count of outputs a pass (16 and 3 outputs: blocks
-        // and one-output tails), whatever this CPU dispatches to, with the
-        // outputs activated too (squareplus block by block in full tiles).
-        let by_outs: [(usize, TiledForward); 2] = [
-            (OUTS_WIDE, |m, th, ac, r, act, t, y| {
-                m.forward_any::<OUTS_WIDE>(th, ac, (r, 0..r, act), t, Out::new(y, r));
-            }),
-            (OUTS_AVX2, |m, th, ac, r, act, t, y| {
-                m.forward_any::<OUTS_AVX2>(th, ac, (r, 0..r, act), t, Out::new(y, r));
-            }),
-        ];
-        let mut want_act = want.clone();
-        squareplus_in_place(&mut want_act);
-        for (outs, fwd) in by_outs {
-            for (act, want) in [(false, &want), (true, &want_act)] {
-                let (mut tape, mut y) = (mlp.tape(r), vec![0.0; 3 * r]);
-                fwd(&mlp, &th, (&a, &c), r, act, &mut tape, &mut y);
-                assert_eq!(
-                    &y, want,
-                    "{r} rows, {outs} outputs a pass, activated: {act}"
-                );
-                assert_eq!(
-                    tape.hidden, want_tape.hidden,
-                    "{r} rows, {outs} outputs: tape"
-                );
-            }
+        each_output_count_gives(&mlp, &th, (&a, &c), r, (&want, &want_tape));
+    }
+}
+
+/// [`vector_build_gives_the_same_bits`] for each path's count of outputs a
+/// pass (16 and 3 outputs: blocks and one-output tails), whatever this CPU
+/// dispatches to, with the outputs activated too (squareplus block by block
+/// in full tiles): the layer-by-layer outputs `want` and tape.
+fn each_output_count_gives(
+    mlp: &Mlp,
+    th: &[f64],
+    (a, c): (&[f64], &[f64]),
+    r: usize,
+    (want, want_tape): (&[f64], &Tape),
+) {
+    let by_outs: [(usize, TiledForward); 2] = [
+        (OUTS_WIDE, |m, th, ac, r, act, t, y| {
+            m.forward_any::<OUTS_WIDE>(th, ac, (r, 0..r, act), t, Out::new(y, r));
+        }),
+        (OUTS_AVX2, |m, th, ac, r, act, t, y| {
+            m.forward_any::<OUTS_AVX2>(th, ac, (r, 0..r, act), t, Out::new(y, r));
+        }),
+    ];
+    let mut want_act = want.to_vec();
+    squareplus_in_place(&mut want_act);
+    for (outs, fwd) in by_outs {
+        for (act, want) in [(false, want), (true, &want_act[..])] {
+            let (mut tape, mut y) = (mlp.tape(r), vec![0.0; want.len()]);
+            fwd(mlp, th, (a, c), r, act, &mut tape, &mut y);
+            assert_eq!(y, want, "{r} rows, {outs} outputs a pass, activated: {act}");
+            assert_eq!(
+                tape.hidden, want_tape.hidden,
+                "{r} rows, {outs} outputs: tape"
+            );
         }
     }
 }
