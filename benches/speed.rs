@@ -24,8 +24,9 @@ fn training_step(c: &mut Criterion) {
         let theta = eng.layout().flatten(&net.store.weights().unwrap()).unwrap();
         let idx: Vec<usize> = (0..100).collect();
         let mut grad = vec![0.0; theta.len()];
+        let samples = eng.samples(&s, &a);
         c.bench_function(&format!("engine step 5-{name} mcgnode b100"), |b| {
-            b.iter(|| eng.loss_grad(&theta, &s, &a, &idx, &mut grad))
+            b.iter(|| eng.loss_grad(&theta, &samples, &idx, &mut grad))
         });
     }
 }

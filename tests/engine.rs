@@ -252,14 +252,15 @@ fn engine_gradients_equal_candle_and_finite_differences() {
         let theta = eng.layout().flatten(&net.store.weights().unwrap()).unwrap();
         let idx: Vec<usize> = (0..k).collect();
         let mut grad = vec![0.0; theta.len()];
-        let loss_e = eng.loss_grad(&theta, &states, &targets, &idx, &mut grad);
+        let samples = eng.samples(&states, &targets);
+        let loss_e = eng.loss_grad(&theta, &samples, &idx, &mut grad);
         let name = &case.name;
         assert!(loss_e.is_finite() && loss_e > 0.0, "{name}: loss {loss_e}");
         assert!(
             (loss_e - loss_c).abs() <= 1e-12 * loss_c,
             "{name}: engine loss {loss_e} vs candle {loss_c}"
         );
-        assert_eq!(eng.loss(&theta, &states, &targets, &idx), loss_e, "{name}");
+        assert_eq!(eng.loss(&theta, &samples, &idx), loss_e, "{name}");
         // Gradients, parameter by parameter, against candle.
         let ge = eng.layout().weights(&grad);
         let mut all_e = vec![];
@@ -289,9 +290,9 @@ fn engine_gradients_equal_candle_and_finite_differences() {
             for j in [0, len / 2, len - 1] {
                 let hstep = 1e-6;
                 th[off + j] = theta[off + j] + hstep;
-                let up = eng.loss(&th, &states, &targets, &idx);
+                let up = eng.loss(&th, &samples, &idx);
                 th[off + j] = theta[off + j] - hstep;
-                let down = eng.loss(&th, &states, &targets, &idx);
+                let down = eng.loss(&th, &samples, &idx);
                 th[off + j] = theta[off + j];
                 let fd = (up - down) / (2.0 * hstep);
                 let an = grad[off + j];
@@ -457,7 +458,8 @@ fn contact_cases_have_varying_contacts_and_kinematic_targets_do_not_count() {
             let tr: Vec<&[f64]> = t.iter().map(Vec::as_slice).collect();
             let c = net.loss(&Batch::new(&plan, &sr, Some(&tr), 2).unwrap());
             let c = c.unwrap().to_scalar::<f64>().unwrap();
-            (c, eng.loss(&theta, &states, t, &idx))
+            let samples = eng.samples(&states, t);
+            (c, eng.loss(&theta, &samples, &idx))
         };
         let before = losses(&targets, &mut eng);
         for t in &mut targets {

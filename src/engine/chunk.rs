@@ -6,17 +6,17 @@
 use super::dense::{simd, squareplus_in_place, times_squareplus_grad, Mlp, Out, Simd, Tape};
 use super::fused::{BodyBlocks, Branch, EdgeBlocks, EDGE_BLOCK, FUSED_EDGES};
 use super::gather::{
-    add_indexed, edge_differences, gather_rows, prefetch, scatter_add_rows, sum_by_index, Gather,
+    add_indexed, copy_row, edge_differences, gather_rows, scatter_add_rows, sum_by_index, Gather,
     IndexSums,
 };
 use super::layout::Layout;
+use super::samples::Samples;
 use super::split::{Scratch, Split};
 use crate::gnode::arch::{Arch, Block, Decoder, NodeInput};
 use crate::gnode::plan::{BarEnd, GraphPlan};
 use crate::gnode::solve::{lu_factor_in_place, lu_solve_one};
 use crate::gnode::variant::EdgeInput;
 use crate::physics::neighbors::NeighborSearch;
-use crate::system::State;
 
 /// The read-only part: architecture, parameter offsets, graph.
 #[derive(Clone, Debug)]
@@ -246,19 +246,6 @@ macro_rules! widest {
             }
         }
     };
-}
-
-/// Prefetches the states `idx` (and their targets) that a chunk is about to
-/// read: their cache misses then overlap instead of following each other
-/// (a fifth of a 5-spring epoch was spent waiting on them).
-fn ask_for(states: &[State], targets: &[Vec<f64>], idx: &[usize]) {
-    for &k in idx {
-        prefetch(&states[k].q);
-        prefetch(&states[k].v);
-        if let Some(a) = targets.get(k) {
-            prefetch(a);
-        }
-    }
 }
 
 /// The contact pairs of a chunk's states: state `s`'s are
@@ -509,13 +496,13 @@ impl Chunk {
         &mut self,
         m: &Model,
         th: &[f64],
-        states: &[State],
-        targets: &[Vec<f64>],
+        samples: &Samples,
         idx: &[usize],
         scale: Option<f64>,
     ) {
         let bs = idx.len();
         let edges = if m.plan.has_contacts() {
+            let states = samples.states();
             let q = idx.iter().map(|&k| states[k].q.as_slice());
             self.contacts.find(&m.plan, q)
         } else {
@@ -524,10 +511,10 @@ impl Chunk {
         self.reserve(m, bs, edges, true);
         self.lay_out(m, bs);
         if m.arch.biases.graph {
-            self.fill_graph_inputs(m, states, targets, idx);
+            self.fill_graph_inputs(m, samples, idx);
             self.forward_graph(m, th);
         } else {
-            self.fill_flat_inputs(m, states, targets, idx);
+            self.fill_flat_inputs(m, samples, idx);
             self.forward_flat(m, th, bs);
         }
         let len = self.rows_out(m, bs);
@@ -584,16 +571,11 @@ impl Chunk {
         m.plan.dim * m.plan.n * bs
     }
 
-    fn fill_flat_inputs(
-        &mut self,
-        m: &Model,
-        states: &[State],
-        targets: &[Vec<f64>],
-        idx: &[usize],
-    ) {
+    fn fill_flat_inputs(&mut self, m: &Model, samples: &Samples, idx: &[usize]) {
         let bs = idx.len();
         let nd = m.plan.n * m.plan.dim;
-        ask_for(states, targets, idx);
+        let (states, targets) = (samples.states(), samples.targets());
+        samples.ask_for(idx);
         for (s, &k) in idx.iter().enumerate() {
             self.put_flat_state(m, s, bs, &states[k].q, &states[k].v);
             if let Some(t) = targets.get(k) {
@@ -653,27 +635,12 @@ impl Chunk {
         );
     }
 
-    fn fill_graph_inputs(
-        &mut self,
-        m: &Model,
-        states: &[State],
-        targets: &[Vec<f64>],
-        idx: &[usize],
-    ) {
-        let (n, d) = (m.plan.n, m.plan.dim);
-        let nodes = idx.len() * n;
-        self.clear_one_hot(m, nodes);
-        ask_for(states, targets, idx);
-        for (s, &k) in idx.iter().enumerate() {
-            self.put_graph_state(m, s, nodes, &states[k].q, &states[k].v);
-            if let Some(a) = targets.get(k) {
-                for i in 0..n {
-                    for c in 0..d {
-                        self.tgt[c * nodes + s * n + i] = a[i * d + c];
-                    }
-                }
-            }
-        }
+    /// Node inputs and targets of the states `idx`, from their records
+    /// ([`Samples`] packs every graph model's states).
+    fn fill_graph_inputs(&mut self, m: &Model, samples: &Samples, idx: &[usize]) {
+        self.clear_one_hot(m, idx.len() * m.plan.n);
+        samples.ask_for(idx);
+        self.put_graph_records(m, samples, idx);
     }
 
     fn clear_one_hot(&mut self, m: &Model, nodes: usize) {
@@ -694,14 +661,7 @@ impl Chunk {
     #[allow(clippy::inline_always)]
     fn put_graph_state_any(&mut self, m: &Model, s: usize, nodes: usize, q: &[f64], v: &[f64]) {
         let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
-        let nm = &m.arch.norm;
         let at = |f: usize| f * nodes + s * n..f * nodes + (s + 1) * n;
-        for (i, &ty) in m.plan.types.iter().enumerate() {
-            self.x[ty * nodes + s * n + i] = 1.0;
-            if m.xn_read {
-                self.xn[ty * nodes + s * n + i] = 1.0;
-            }
-        }
         // Transposed first, then scaled a feature row at a time: the
         // divisions run in vectors (one by one they were a sixteenth of a
         // 50-spring rollout step).
@@ -712,9 +672,53 @@ impl Chunk {
             for (x, y) in self.x[at(t + d + c)].iter_mut().zip(v.chunks_exact(d)) {
                 *x = y[c];
             }
-            if !m.xn_read {
-                continue;
+        }
+        self.finish_graph_state(m, s, nodes);
+    }
+
+    widest! {
+        /// [`Chunk::put_graph_state`] and the targets for the states `idx`
+        /// from their packed records: rows copied, no transposing.
+        fn put_graph_records => put_graph_records_any(m: &Model, samples: &Samples, idx: &[usize])
+    }
+
+    #[inline(always)]
+    #[allow(clippy::inline_always)]
+    fn put_graph_records_any(&mut self, m: &Model, samples: &Samples, idx: &[usize]) {
+        let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
+        let nodes = idx.len() * n;
+        for (s, &k) in idx.iter().enumerate() {
+            let r = samples.record(k).expect("packed samples");
+            for (f, row) in r.chunks_exact(n).enumerate() {
+                let to = if f < 2 * d {
+                    &mut self.x[(t + f) * nodes + s * n..]
+                } else {
+                    &mut self.tgt[(f - 2 * d) * nodes + s * n..]
+                };
+                copy_row(&mut to[..n], row);
             }
+            self.finish_graph_state(m, s, nodes);
+        }
+    }
+
+    /// State `s`'s one-hot rows, and its inputs scaled into `xn` from the
+    /// raw rows of `x`.
+    #[inline(always)]
+    #[allow(clippy::inline_always)]
+    fn finish_graph_state(&mut self, m: &Model, s: usize, nodes: usize) {
+        let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
+        let nm = &m.arch.norm;
+        let at = |f: usize| f * nodes + s * n..f * nodes + (s + 1) * n;
+        for (i, &ty) in m.plan.types.iter().enumerate() {
+            self.x[ty * nodes + s * n + i] = 1.0;
+            if m.xn_read {
+                self.xn[ty * nodes + s * n + i] = 1.0;
+            }
+        }
+        if !m.xn_read {
+            return;
+        }
+        for c in 0..d {
             let (mean, qs, vs) = (nm.q_mean[c], nm.q_scale, nm.v_scale);
             for (z, &y) in self.xn[at(t + c)].iter_mut().zip(&self.x[at(t + c)]) {
                 *z = (y - mean) / qs;

@@ -20,12 +20,14 @@ mod gns;
 mod infer;
 mod layout;
 mod reverse;
+mod samples;
 mod split;
 
 pub use gns::{Gns, GnsSpec};
 pub use infer::Forward;
 pub use layout::{Layout, LayoutError};
 pub use reverse::Reverse;
+pub use samples::Samples;
 pub use split::SPLIT_ROWS;
 
 use crate::gnode::arch::Arch;
@@ -154,6 +156,18 @@ impl Engine {
         &self.model.arch
     }
 
+    /// `states` and their target accelerations (one per state, or none) as
+    /// this engine reads them: packed into one record per state for graph
+    /// models ([`Samples`]). Build them once per data set, not per batch.
+    ///
+    /// # Panics
+    /// If a state or target does not fit the graph, or there are targets but
+    /// not one per state.
+    pub fn samples<'a>(&self, states: &'a [State], targets: &'a [Vec<f64>]) -> Samples<'a> {
+        let (n, d) = (self.model.plan.n, self.model.plan.dim);
+        Samples::new(n, d, self.model.arch.biases.graph, states, targets)
+    }
+
     /// How a selection of `len` states is cut into chunks ([`split`]).
     fn split(&self, len: usize) -> Vec<(usize, usize)> {
         split(len, self.model.rows_per_state())
@@ -164,8 +178,7 @@ impl Engine {
     fn run(
         &mut self,
         theta: &[f64],
-        states: &[State],
-        targets: &[Vec<f64>],
+        samples: &Samples,
         idx: &[usize],
         scale: Option<f64>,
         fold: impl FnMut(&Chunk),
@@ -173,7 +186,7 @@ impl Engine {
         let parts = self.split(idx.len());
         let model = &self.model;
         let work = |c: &mut Chunk, (a, b): (usize, usize)| {
-            c.run(model, theta, states, targets, &idx[a..b], scale);
+            c.run(model, theta, samples, &idx[a..b], scale);
         };
         in_waves(&mut self.chunks, self.crew.as_ref(), &parts, work, fold);
     }
@@ -183,15 +196,14 @@ impl Engine {
     pub fn loss_grad(
         &mut self,
         theta: &[f64],
-        states: &[State],
-        targets: &[Vec<f64>],
+        samples: &Samples,
         idx: &[usize],
         grad: &mut [f64],
     ) -> f64 {
         let count = (idx.len() * self.model.plan.free_ndof()) as f64;
         grad.fill(0.0);
         let mut sse = 0.0;
-        self.run(theta, states, targets, idx, Some(1.0 / count), |c| {
+        self.run(theta, samples, idx, Some(1.0 / count), |c| {
             sse += c.sse;
             for (g, x) in grad.iter_mut().zip(&c.grad) {
                 *g += x;
@@ -201,16 +213,10 @@ impl Engine {
     }
 
     /// Mean squared error of the accelerations of states `idx` (no gradient).
-    pub fn loss(
-        &mut self,
-        theta: &[f64],
-        states: &[State],
-        targets: &[Vec<f64>],
-        idx: &[usize],
-    ) -> f64 {
+    pub fn loss(&mut self, theta: &[f64], samples: &Samples, idx: &[usize]) -> f64 {
         let count = (idx.len() * self.model.plan.free_ndof()) as f64;
         let mut sse = 0.0;
-        self.run(theta, states, targets, idx, None, |c| sse += c.sse);
+        self.run(theta, samples, idx, None, |c| sse += c.sse);
         sse / count
     }
 
@@ -222,7 +228,8 @@ impl Engine {
         let parts = self.split(idx.len());
         let mut at = parts.iter();
         let shape = self.model.shape();
-        self.run(theta, states, &[], &idx, None, |c| {
+        let samples = self.samples(states, &[]);
+        self.run(theta, &samples, &idx, None, |c| {
             let &(a, b) = at.next().expect("one fold per chunk");
             for (s, o) in out[a..b].iter_mut().enumerate() {
                 c.acceleration(shape, b - a, s, o);
@@ -245,7 +252,10 @@ mod tests {
             for len in [1, 2, 3, 5, 40, 99, 100, 512, 1000] {
                 let parts = split(len, rows);
                 let k = parts.len();
-                assert!(k == 1 || k == 2 || k % 4 == 0 || k == len, "{len}×{rows}: {k}");
+                assert!(
+                    k == 1 || k == 2 || k % 4 == 0 || k == len,
+                    "{len}×{rows}: {k}"
+                );
                 let at_least = (len * rows).div_ceil(CHUNK_ROWS).min(len);
                 assert!(k <= len && k >= at_least, "{len}×{rows}: {k}");
                 assert_eq!(parts[0].0, 0);

@@ -1,7 +1,7 @@
 //! What [`fit`](super::fit) minimises: the [`Objective`] trait, with candle's
 //! autodiff and the hand-written engine behind it.
 
-use crate::engine::{Engine, Gns};
+use crate::engine::{Engine, Gns, Samples};
 use crate::error::{bail, Result};
 use crate::gnode::params::ParamStore;
 use crate::system::State;
@@ -161,30 +161,25 @@ impl<F: Fn(&[usize]) -> Result<Tensor> + Sync> Objective for CandleObjective<'_,
 /// The hand-written engine on one graph's states and target accelerations.
 pub struct EngineObjective<'a> {
     engine: &'a mut Engine,
-    states: &'a [State],
-    targets: &'a [Vec<f64>],
+    samples: Samples<'a>,
 }
 
 impl<'a> EngineObjective<'a> {
-    /// The objective of `engine` on these states and targets.
+    /// The objective of `engine` on these states and targets (one per
+    /// state), laid out for it once.
     pub fn new(engine: &'a mut Engine, states: &'a [State], targets: &'a [Vec<f64>]) -> Self {
-        Self {
-            engine,
-            states,
-            targets,
-        }
+        let samples = engine.samples(states, targets);
+        Self { engine, samples }
     }
 }
 
 impl Objective for EngineObjective<'_> {
     fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64> {
-        Ok(self
-            .engine
-            .loss_grad(theta, self.states, self.targets, idx, grad))
+        Ok(self.engine.loss_grad(theta, &self.samples, idx, grad))
     }
 
     fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64> {
-        Ok(self.engine.loss(theta, self.states, self.targets, idx))
+        Ok(self.engine.loss(theta, &self.samples, idx))
     }
 }
 
