@@ -415,7 +415,8 @@ impl Linear {
 
     /// Reverse pass: accumulates ∂L/∂W and ∂L/∂b into `g` from `gy` (`out × r`)
     /// and the inputs `[a; c]`; when `gx` is given, accumulates ∂L/∂[a; c]
-    /// into its two parts.
+    /// into its two parts, or with `set` writes it there (the bits of
+    /// accumulating into zeros, without zeroing first).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn backward(
@@ -427,7 +428,9 @@ impl Linear {
         r: usize,
         gy: &[f64],
         mut gx: Option<(&mut [f64], &mut [f64])>,
+        set: bool,
     ) {
+        debug_assert!(self.out > 0, "a layer has outputs");
         let na = a.len() / r;
         // An empty `g`: input gradients only (planning's reverse pass).
         let params = !g.is_empty();
@@ -478,20 +481,20 @@ impl Linear {
                 // Eight outputs per pass over ∂L/∂x_i, then the rest in one
                 // pass; each element added to in the order of one output at
                 // a time (the same bits).
-                let mut j = 0;
+                let (mut j, mut set) = (0, set);
                 while j + 8 <= self.out {
-                    add_outputs::<8>(gxi, &w[j..], |o| gyj(j + o));
-                    j += 8;
+                    add_outputs::<8>(gxi, &w[j..], |o| gyj(j + o), set);
+                    (j, set) = (j + 8, false);
                 }
                 let rest = |o| gyj(j + o);
                 match self.out - j {
-                    1 => add_outputs::<1>(gxi, &w[j..], rest),
-                    2 => add_outputs::<2>(gxi, &w[j..], rest),
-                    3 => add_outputs::<3>(gxi, &w[j..], rest),
-                    4 => add_outputs::<4>(gxi, &w[j..], rest),
-                    5 => add_outputs::<5>(gxi, &w[j..], rest),
-                    6 => add_outputs::<6>(gxi, &w[j..], rest),
-                    7 => add_outputs::<7>(gxi, &w[j..], rest),
+                    1 => add_outputs::<1>(gxi, &w[j..], rest, set),
+                    2 => add_outputs::<2>(gxi, &w[j..], rest, set),
+                    3 => add_outputs::<3>(gxi, &w[j..], rest, set),
+                    4 => add_outputs::<4>(gxi, &w[j..], rest, set),
+                    5 => add_outputs::<5>(gxi, &w[j..], rest, set),
+                    6 => add_outputs::<6>(gxi, &w[j..], rest, set),
+                    7 => add_outputs::<7>(gxi, &w[j..], rest, set),
                     _ => {}
                 }
             }
@@ -519,13 +522,19 @@ impl Linear {
 }
 
 /// `gx[k] += Σ_o w[o]·gy(o)[k]` for `N` outputs in one pass, adding output
-/// by output in their order (the bits of one pass per output).
+/// by output in their order (the bits of one pass per output); with `set`,
+/// `gx[k]` is taken as zero, not read.
 #[inline(always)]
-fn add_outputs<'a, const N: usize>(gx: &mut [f64], w: &[f64], gy: impl Fn(usize) -> &'a [f64]) {
+fn add_outputs<'a, const N: usize>(
+    gx: &mut [f64],
+    w: &[f64],
+    gy: impl Fn(usize) -> &'a [f64],
+    set: bool,
+) {
     let gs: [&[f64]; N] = std::array::from_fn(|o| &gy(o)[..gx.len()]);
     let ws: [f64; N] = std::array::from_fn(|o| w[o]);
     for (k, gv) in gx.iter_mut().enumerate() {
-        let mut v = *gv;
+        let mut v = if set { 0.0 } else { *gv };
         for o in 0..N {
             v = ws[o].mul_add(gs[o][k], v);
         }
@@ -1043,12 +1052,11 @@ impl Mlp {
                 &cur[..l.out * r]
             };
             if li == 0 {
-                l.backward(th, g, a, c, r, gyl, gx.take());
+                l.backward(th, g, a, c, r, gyl, gx.take(), false);
             } else {
                 let x = &tape.hidden[li - 1][..l.inp * r];
                 let gxl = &mut next[..l.inp * r];
-                gxl.fill(0.0);
-                l.backward(th, g, x, &[], r, gyl, Some((gxl, &mut [])));
+                l.backward(th, g, x, &[], r, gyl, Some((gxl, &mut [])), true);
                 times_squareplus_grad(gxl, x);
                 std::mem::swap(&mut cur, &mut next);
             }

@@ -54,7 +54,8 @@ type TiledForward = fn(&Mlp, &[f64], (&[f64], &[f64]), usize, bool, &mut Tape, &
 /// rest of the input gradients in one pass, the weights of outputs past the
 /// blocks four input rows a pass) gives the bits of the one-output-at-a-time
 /// pass, for widths that are and are not multiples of four, with and
-/// without input gradients.
+/// without input gradients, and input gradients written (`set`) give the
+/// bits of input gradients added to zeros.
 #[test]
 fn blocked_backward_gives_the_same_bits() {
     let wave =
@@ -85,12 +86,28 @@ fn blocked_backward_gives_the_same_bits() {
             let (mut ga, mut gc) = (wave(na * r, 0.07), wave((inp - na) * r, 0.13));
             let gx = with_gx.then_some((&mut ga[..], &mut gc[..]));
             if blocked {
-                l.backward(&th, &mut g, &a, &c, r, &gy, gx);
+                l.backward(&th, &mut g, &a, &c, r, &gy, gx, false);
             } else {
                 backward_one_at_a_time(&l, &th, &mut g, &a, &c, r, &gy, gx);
             }
             (g, ga, gc)
         };
+        // Written (`set`) over whatever the buffers held: the bits of
+        // accumulating into zeros.
+        let set = {
+            let mut g = wave(th.len(), 0.05);
+            let (mut ga, mut gc) = (vec![f64::NAN; na * r], vec![f64::NAN; (inp - na) * r]);
+            l.backward(&th, &mut g, &a, &c, r, &gy, Some((&mut ga, &mut gc)), true);
+            let (mut za, mut zc) = (vec![0.0; na * r], vec![0.0; (inp - na) * r]);
+            l.backward(&th, &mut g, &a, &c, r, &gy, Some((&mut za, &mut zc)), false);
+            let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+            (bits(&ga) == bits(&za), bits(&gc) == bits(&zc))
+        };
+        assert_eq!(
+            set,
+            (true, true),
+            "{inp}x{out}, {r} rows: set against added to zeros"
+        );
         for with_gx in [true, false] {
             let (x, y) = (run(true, with_gx), run(false, with_gx));
             let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
@@ -227,7 +244,7 @@ fn input_gradients_without_parameter_gradients() {
             vec![]
         };
         let (mut ga, mut gc) = (vec![0.0; 4 * r], vec![0.0; (inp - 4) * r]);
-        l.backward(&th, &mut g, &a, &c, r, &gy, Some((&mut ga, &mut gc)));
+        l.backward(&th, &mut g, &a, &c, r, &gy, Some((&mut ga, &mut gc)), false);
         (g, ga, gc)
     };
     let (full, skipped) = (run(true), run(false));
