@@ -508,7 +508,9 @@ impl Chunk {
         } else {
             bs * m.plan.recv.len()
         };
-        self.reserve(m, bs, edges, true);
+        // Tapes only for a reverse pass: without one, the inference path
+        // (the same bits; fused for MCGNODE).
+        self.reserve(m, bs, edges, scale.is_some());
         self.lay_out(m, bs);
         if m.arch.biases.graph {
             self.fill_graph_inputs(m, samples, idx);

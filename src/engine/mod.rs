@@ -67,7 +67,11 @@ crate::error::typed_errors!(EngineError);
 /// Loss and gradients of one model on states of one graph.
 pub struct Engine {
     model: Model,
+    /// Buffers of training's chunks, and apart from them those of the
+    /// passes without gradients (validation), which record no tapes and
+    /// take the inference path: a chunk would reallocate at every switch.
     chunks: Vec<Chunk>,
+    eval_chunks: Vec<Chunk>,
     crew: Option<Crew>,
 }
 
@@ -142,6 +146,7 @@ impl Engine {
         Ok(Self {
             model: Model::new(arch, GraphPlan::new(graph)),
             chunks: vec![],
+            eval_chunks: vec![],
             crew,
         })
     }
@@ -188,7 +193,12 @@ impl Engine {
         let work = |c: &mut Chunk, (a, b): (usize, usize)| {
             c.run(model, theta, samples, &idx[a..b], scale);
         };
-        in_waves(&mut self.chunks, self.crew.as_ref(), &parts, work, fold);
+        let chunks = if scale.is_some() {
+            &mut self.chunks
+        } else {
+            &mut self.eval_chunks
+        };
+        in_waves(chunks, self.crew.as_ref(), &parts, work, fold);
     }
 
     /// Mean squared error of the accelerations of states `idx` against their
