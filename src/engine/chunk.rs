@@ -186,6 +186,8 @@ pub(crate) struct Chunk {
     gdq: Vec<f64>,
     /// Inverse masses per particle type (constrained variants).
     inv_m: Vec<f64>,
+    /// The log-mass gradients while they are summed (no-bar reverse pass).
+    g_mass: Vec<f64>,
     /// The one-hot rows of every type, feature-major `types × types`, and
     /// their node embeddings `embed × types` (inference).
     eye: Vec<f64>,
@@ -423,6 +425,7 @@ impl Chunk {
             gqv: g(2 * d * nodes),
             gdq: g(bs * m.plan.bars.len() * d),
             inv_m: z(types),
+            g_mass: Vec::with_capacity(types),
             eye: (0..types * types)
                 .map(|k| if k / types == k % types { 1.0 } else { 0.0 })
                 .collect(),
@@ -1395,6 +1398,54 @@ impl Chunk {
         }
     }
 
+    /// [`Chunk::constrain_backward`] without bars, row by row in vectors
+    /// where the general loop went particle by particle: the same products
+    /// and sums in the same order (each row's mass term summed over the
+    /// coordinates in turn, the log-mass gradients row by row), so the same
+    /// bits.
+    #[inline(always)]
+    #[allow(clippy::inline_always)] // inside backward_graph's vector copies
+    fn no_bars_backward(&mut self, m: &Model, th: &[f64], bs: usize) {
+        let (d, nodes) = (m.plan.dim, bs * m.plan.n);
+        let lm = m.log_mass.expect("constrained model has masses");
+        for (t, x) in self.inv_m.iter_mut().enumerate() {
+            *x = (-th[lm + t]).exp();
+        }
+        let (ty, inv_m) = (&self.node_ty[..nodes], &self.inv_m);
+        let gm = &mut self.gminv[..nodes];
+        gm.fill(0.0);
+        for c in 0..d {
+            let range = c * nodes..(c + 1) * nodes;
+            let (ga, eq) = (&self.gacc[range.clone()], &self.geq[range.clone()]);
+            for ((o, &g), &y) in self.gout[range].iter_mut().zip(ga).zip(ty) {
+                *o = inv_m[y] * g;
+            }
+            for ((x, &e), &g) in gm.iter_mut().zip(eq).zip(ga) {
+                *x += e * g;
+            }
+        }
+        // None to add without parameter gradients (planning's pass). One
+        // running sum per type, in row order, apart from `grad`.
+        if self.grad.is_empty() {
+            return;
+        }
+        if let [mi] = inv_m[..] {
+            let mut sum = self.grad[lm];
+            for &g in gm.iter() {
+                sum -= g * mi;
+            }
+            self.grad[lm] = sum;
+            return;
+        }
+        let sums = &mut self.g_mass;
+        sums.clear();
+        sums.extend_from_slice(&self.grad[lm..lm + inv_m.len()]);
+        for (&g, &y) in gm.iter().zip(ty) {
+            sums[y] -= g * inv_m[y];
+        }
+        self.grad[lm..lm + inv_m.len()].copy_from_slice(sums);
+    }
+
     widest! {
         /// The reverse of [`Chunk::forward_graph`], compiled for the widest
         /// vectors the CPU has (its activation derivatives, a division each,
@@ -1419,7 +1470,11 @@ impl Chunk {
             self.gqv[..2 * d * nodes].fill(0.0);
         }
         if a.constrained {
-            self.constrain_backward(m, th, bs);
+            if m.plan.bars.is_empty() {
+                self.no_bars_backward(m, th, bs);
+            } else {
+                self.constrain_backward(m, th, bs);
+            }
         } else {
             self.gout[..d * nodes].copy_from_slice(&self.gacc[..d * nodes]);
         }
