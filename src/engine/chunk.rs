@@ -914,8 +914,9 @@ impl Chunk {
             // an inference step's square roots fewer.
             let emb = &mut self.type_embed[..em * t];
             if !kept {
-                let (eye, tape) = (&self.eye[..t * t], &mut self.tapes[i]);
-                m.mlp(i).forward_activated(th, eye, &[], t, tape, emb);
+                m.mlp(i)
+                    .forward(th, &self.eye[..t * t], &[], t, &mut self.tapes[i], emb);
+                squareplus_in_place(emb);
             }
             if nodes_read {
                 let ty = &self.node_ty[..nodes];
@@ -931,7 +932,8 @@ impl Chunk {
             }
         } else {
             let (x, tape) = (&self.xn[..nf * nodes], &mut self.tapes[i]);
-            m.mlp(i).forward_activated(th, x, &[], nodes, tape, h0);
+            m.mlp(i).forward(th, x, &[], nodes, tape, h0);
+            squareplus_in_place(h0);
         }
         if by_type && a.rounds > 0 && a.updates_edges(0) {
             self.pair_outputs(m, th, kept);
@@ -1055,8 +1057,15 @@ impl Chunk {
         // when fused).
         if let (Some(i), false) = (m.ix(Block::GlobalEmbed), fused) {
             let g = &mut self.glob[..em * nodes];
-            let (x, tape) = (&self.xn[..nf * nodes], &mut self.tapes[i]);
-            m.mlp(i).forward_activated(th, x, &[], nodes, tape, g);
+            m.mlp(i).forward(
+                th,
+                &self.xn[..nf * nodes],
+                &[],
+                nodes,
+                &mut self.tapes[i],
+                g,
+            );
+            squareplus_in_place(g);
         }
         // Decode.
         let (hr_, her_) = (

@@ -794,22 +794,6 @@ impl Mlp {
         unsafe { self.forward_part(th, (a, c), r, 0..r, tape, Out::new(y, r), false) };
     }
 
-    /// [`Mlp::forward`], then squareplus on the outputs, applied inside the
-    /// tiles so that its square roots overlap the multiply-adds (the same
-    /// bits as applying it afterwards).
-    pub(crate) fn forward_activated(
-        &self,
-        th: &[f64],
-        a: &[f64],
-        c: &[f64],
-        r: usize,
-        tape: &mut Tape,
-        y: &mut [f64],
-    ) {
-        // SAFETY: one writer, the whole of `y`, borrowed for the call.
-        unsafe { self.forward_part(th, (a, c), r, 0..r, tape, Out::new(y, r), true) };
-    }
-
     /// [`Mlp::forward`] of the rows `rows` of `r` only, into their rows of
     /// `y`, with squareplus applied to the outputs too when `activate` is
     /// set (the same bits as applying it afterwards). Two threads may run

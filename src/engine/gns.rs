@@ -13,7 +13,7 @@
 //! Checked against candle's autodiff and finite differences
 //! (`tests/gns_engine.rs`).
 
-use super::dense::{times_squareplus_grad, Linear, Mlp, Tape};
+use super::dense::{squareplus_in_place, times_squareplus_grad, Linear, Mlp, Tape};
 use super::gather::{gather_rows, scatter_add_rows, Gather};
 use super::EngineError;
 use crate::gnode::plan::GraphPlan;
@@ -372,11 +372,13 @@ impl Chunk {
         let x_len = (net.spec.types + 2 * net.spec.dim) * nodes;
         let h0 = room(&mut self.h[0], l * nodes);
         net.node_em
-            .forward_activated(th, &self.x[..x_len], &[], nodes, &mut self.tapes[0], h0);
+            .forward(th, &self.x[..x_len], &[], nodes, &mut self.tapes[0], h0);
+        squareplus_in_place(h0);
         let e0 = room(&mut self.e[0], l * edges);
         let feat = &self.feat[..(net.spec.dim + 1) * edges];
         net.edge_em
-            .forward_activated(th, feat, &[], edges, &mut self.tapes[1], e0);
+            .forward(th, feat, &[], edges, &mut self.tapes[1], e0);
+        squareplus_in_place(e0);
         for (r, (we, wv)) in net.rounds.iter().enumerate() {
             let (h_prev, h_next) = self.h.split_at_mut(r + 1);
             let (e_prev, e_next) = self.e.split_at_mut(r + 1);

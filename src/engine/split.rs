@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, PoisonError};
 
 use super::crew::Helper;
-use super::dense::{Mlp, Out, Tape};
+use super::dense::{squareplus_in_place, Mlp, Out, Tape};
 
 /// Rows below which an MLP is not split: the hand-over costs about a
 /// microsecond, a 16-wide edge MLP about 60 ns a row.
@@ -73,10 +73,9 @@ impl Split {
     ) {
         let split = !tape.records() && self.ready(r);
         let (true, Some(helper)) = (split, &self.helper) else {
+            mlp.forward(th, a, c, r, tape, y);
             if activate {
-                mlp.forward_activated(th, a, c, r, tape, y);
-            } else {
-                mlp.forward(th, a, c, r, tape, y);
+                squareplus_in_place(y);
             }
             return;
         };
@@ -157,7 +156,7 @@ fn share<S: Send>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::engine::dense::{mlp_of_sizes, squareplus_in_place};
+    use crate::engine::dense::mlp_of_sizes;
 
     /// An MLP of these sizes and smooth parameter values.
     fn mlp(sizes: &[usize]) -> (Mlp, Vec<f64>) {
