@@ -188,6 +188,11 @@ impl Engine {
         scale: Option<f64>,
         fold: impl FnMut(&Chunk),
     ) {
+        let (n, d) = (self.model.plan.n, self.model.plan.dim);
+        assert!(
+            samples.laid_out_for(n, d, self.model.arch.biases.graph),
+            "samples laid out for another model: make them with this engine's `samples`"
+        );
         let parts = self.split(idx.len());
         let model = &self.model;
         let work = |c: &mut Chunk, (a, b): (usize, usize)| {
@@ -203,6 +208,10 @@ impl Engine {
 
     /// Mean squared error of the accelerations of states `idx` against their
     /// targets, and its gradient with respect to `theta` written to `grad`.
+    ///
+    /// # Panics
+    /// If `samples` were not made by [`Engine::samples`] of an engine of this
+    /// graph and model kind.
     pub fn loss_grad(
         &mut self,
         theta: &[f64],

@@ -67,6 +67,13 @@ impl<'a> Samples<'a> {
         }
     }
 
+    /// Whether these samples were laid out for a graph of `n` particles in
+    /// `d` dimensions, packed or not as `pack` says.
+    pub(crate) fn laid_out_for(&self, n: usize, d: usize, pack: bool) -> bool {
+        let packed = !self.packed.is_empty() || self.states.is_empty();
+        (self.n, self.d) == (n, d) && (packed == pack || self.states.is_empty())
+    }
+
     /// The states as given.
     pub(crate) fn states(&self) -> &'a [State] {
         self.states
@@ -149,8 +156,11 @@ mod tests {
         }
         let bare = Samples::new(n, d, true, &states, &[]);
         assert_eq!(bare.record(1).unwrap(), &s.record(1).unwrap()[..2 * n * d]);
-        assert!(Samples::new(n, d, false, &states, &targets)
-            .record(0)
-            .is_none());
+        let flat = Samples::new(n, d, false, &states, &targets);
+        assert!(flat.record(0).is_none());
+        // Each engine takes only samples laid out for its own model.
+        assert!(s.laid_out_for(n, d, true) && flat.laid_out_for(n, d, false));
+        assert!(!s.laid_out_for(n, d, false) && !flat.laid_out_for(n, d, true));
+        assert!(!s.laid_out_for(n + 1, d, true) && !s.laid_out_for(n, d + 1, true));
     }
 }
