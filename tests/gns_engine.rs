@@ -101,7 +101,8 @@ fn gradients_equal_candle() {
         let (lc, gc) = candle(&net, &graph, (&states, &acc), &theta, &idx);
         let mut gns = native(&net, &graph, 1);
         let mut gn = vec![0.0; theta.len()];
-        let ln = gns.loss_grad(&theta, &states, &acc, &idx, &mut gn);
+        let samples = gns.samples(&states, &acc);
+        let ln = gns.loss_grad(&theta, &samples, &idx, &mut gn);
         assert!(
             (ln - lc).abs() <= 1e-10 * lc.abs(),
             "{kind:?}: loss {ln} vs {lc}"
@@ -116,7 +117,7 @@ fn gradients_equal_candle() {
             "{kind:?}: a gradient to compare"
         );
         // The loss alone is the same number.
-        assert_eq!(gns.loss(&theta, &states, &acc, &idx), ln, "{kind:?}");
+        assert_eq!(gns.loss(&theta, &samples, &idx), ln, "{kind:?}");
     }
 }
 
@@ -129,15 +130,16 @@ fn gradients_equal_finite_differences() {
     let idx: Vec<usize> = (0..states.len()).collect();
     let mut gns = native(&net, &graph, 1);
     let mut g = vec![0.0; theta.len()];
-    gns.loss_grad(&theta, &states, &acc, &idx, &mut g);
+    let samples = gns.samples(&states, &acc);
+    gns.loss_grad(&theta, &samples, &idx, &mut g);
     let h = 1e-6;
     let mut worst: f64 = 0.0;
     for i in (0..theta.len()).step_by(theta.len() / 40 + 1) {
         let mut t = theta.clone();
         t[i] += h;
-        let up = gns.loss(&t, &states, &acc, &idx);
+        let up = gns.loss(&t, &samples, &idx);
         t[i] -= 2.0 * h;
-        let down = gns.loss(&t, &states, &acc, &idx);
+        let down = gns.loss(&t, &samples, &idx);
         let fd = (up - down) / (2.0 * h);
         let scale = g.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         worst = worst.max((fd - g[i]).abs() / scale);
@@ -153,7 +155,9 @@ fn threads_do_not_change_the_bits() {
     let idx: Vec<usize> = (0..states.len()).collect();
     let run = |threads| {
         let mut g = vec![0.0; theta.len()];
-        let l = native(&net, &graph, threads).loss_grad(&theta, &states, &acc, &idx, &mut g);
+        let mut gns = native(&net, &graph, threads);
+        let samples = gns.samples(&states, &acc);
+        let l = gns.loss_grad(&theta, &samples, &idx, &mut g);
         (l, g)
     };
     assert_eq!(run(1), run(2));

@@ -18,12 +18,6 @@ use crate::gnode::solve::{lu_factor_in_place, lu_solve_one};
 use crate::gnode::variant::EdgeInput;
 use crate::physics::neighbors::NeighborSearch;
 
-/// States whose records are asked for ahead of the one being copied: all of
-/// a chunk's at once queued behind one another in the CPU's miss buffers
-/// (a 5-spring epoch on two threads 5.51–5.67 ms, against 5.31–5.39 ms eight
-/// ahead; four and sixteen were no better).
-const AHEAD: usize = 8;
-
 /// The read-only part: architecture, parameter offsets, graph.
 #[derive(Clone, Debug)]
 pub(crate) struct Model {
@@ -650,7 +644,6 @@ impl Chunk {
     /// ([`Samples`] packs every graph model's states).
     fn fill_graph_inputs(&mut self, m: &Model, samples: &Samples, idx: &[usize]) {
         self.clear_one_hot(m, idx.len() * m.plan.n);
-        samples.ask_for(&idx[..AHEAD.min(idx.len())]);
         self.put_graph_records(m, samples, idx);
     }
 
@@ -698,11 +691,7 @@ impl Chunk {
     fn put_graph_records_any(&mut self, m: &Model, samples: &Samples, idx: &[usize]) {
         let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
         let nodes = idx.len() * n;
-        for (s, &k) in idx.iter().enumerate() {
-            if let Some(&next) = idx.get(s + AHEAD) {
-                samples.ask_for(&[next]);
-            }
-            let r = samples.record(k).expect("packed samples");
+        for (s, r) in samples.records(idx).enumerate() {
             for (f, row) in r.chunks_exact(n).enumerate() {
                 let to = if f < 2 * d {
                     &mut self.x[(t + f) * nodes + s * n..]

@@ -14,7 +14,8 @@
 //! (`tests/gns_engine.rs`).
 
 use super::dense::{squareplus_in_place, times_squareplus_grad, Linear, Mlp, Tape};
-use super::gather::{gather_rows, scatter_add_rows, Gather};
+use super::gather::{copy_row, gather_rows, scatter_add_rows, Gather};
+use super::samples::Samples;
 use super::EngineError;
 use crate::gnode::plan::GraphPlan;
 use crate::physics::neighbors::NeighborSearch;
@@ -142,20 +143,34 @@ impl Gns {
         })
     }
 
-    /// Mean squared error of the free particles' accelerations of states
-    /// `idx` against `targets`, and its gradient into `grad`.
+    /// `states` and their target accelerations (one per state, or none)
+    /// packed for this network ([`Samples`]), as [`super::Engine::samples`]
+    /// packs them. Build them once per data set, not per batch.
+    ///
+    /// # Panics
+    /// If a state or target does not fit the graph, or there are targets but
+    /// not one per state.
+    pub fn samples<'a>(&self, states: &'a [State], targets: &'a [Vec<f64>]) -> Samples<'a> {
+        Samples::new(self.plan.n, self.plan.dim, true, states, targets)
+    }
+
+    /// Mean squared error of the free particles' accelerations of the
+    /// states `idx` of `samples` against their targets, and its gradient
+    /// into `grad`.
+    ///
+    /// # Panics
+    /// If `samples` were not made by [`Gns::samples`] for this graph.
     pub fn loss_grad(
         &mut self,
         theta: &[f64],
-        states: &[State],
-        targets: &[Vec<f64>],
+        samples: &Samples,
         idx: &[usize],
         grad: &mut [f64],
     ) -> f64 {
         let count = (idx.len() * self.plan.free_ndof()).max(1) as f64;
         grad.fill(0.0);
         let mut sse = 0.0;
-        self.run(theta, states, targets, idx, Some(1.0 / count), |c| {
+        self.run(theta, samples, idx, Some(1.0 / count), |c| {
             sse += c.sse;
             for (g, x) in grad.iter_mut().zip(&c.grad) {
                 *g += x;
@@ -165,16 +180,10 @@ impl Gns {
     }
 
     /// [`Gns::loss_grad`]'s loss alone.
-    pub fn loss(
-        &mut self,
-        theta: &[f64],
-        states: &[State],
-        targets: &[Vec<f64>],
-        idx: &[usize],
-    ) -> f64 {
+    pub fn loss(&mut self, theta: &[f64], samples: &Samples, idx: &[usize]) -> f64 {
         let count = (idx.len() * self.plan.free_ndof()).max(1) as f64;
         let mut sse = 0.0;
-        self.run(theta, states, targets, idx, None, |c| sse += c.sse);
+        self.run(theta, samples, idx, None, |c| sse += c.sse);
         sse / count
     }
 
@@ -186,7 +195,8 @@ impl Gns {
         let idx: Vec<usize> = (0..states.len()).collect();
         let parts = super::split(idx.len(), n + self.plan.recv.len());
         let mut at = parts.iter();
-        self.run(theta, states, &[], &idx, None, |c| {
+        let samples = self.samples(states, &[]);
+        self.run(theta, &samples, &idx, None, |c| {
             let &(a, b) = at.next().expect("one fold per chunk");
             let nodes = (b - a) * n;
             for (s, o) in out[a..b].iter_mut().enumerate() {
@@ -204,16 +214,19 @@ impl Gns {
     fn run(
         &mut self,
         theta: &[f64],
-        states: &[State],
-        targets: &[Vec<f64>],
+        samples: &Samples,
         idx: &[usize],
         scale: Option<f64>,
         fold: impl FnMut(&Chunk),
     ) {
+        assert!(
+            samples.laid_out_for(self.plan.n, self.plan.dim, true),
+            "samples laid out for another model: make them with this network's `samples`"
+        );
         let parts = super::split(idx.len(), self.plan.n + self.plan.recv.len());
         let (net, plan) = (&self.net, &self.plan);
         let work = |c: &mut Chunk, (a, b): (usize, usize)| {
-            c.run(net, plan, theta, (states, targets, &idx[a..b]), scale);
+            c.run(net, plan, theta, (samples, &idx[a..b]), scale);
         };
         super::in_waves(&mut self.chunks, self.crew.as_ref(), &parts, work, fold);
     }
@@ -266,28 +279,30 @@ fn room(v: &mut Vec<f64>, len: usize) -> &mut [f64] {
 
 impl Chunk {
     /// Loss (and with `scale`, its gradient times `scale`) of the states
-    /// `sel` of `states` against `targets`.
+    /// `sel` of `samples` against their targets.
     fn run(
         &mut self,
         net: &Net,
         plan: &GraphPlan,
         theta: &[f64],
-        (states, targets, sel): (&[State], &[Vec<f64>], &[usize]),
+        (samples, sel): (&Samples, &[usize]),
         scale: Option<f64>,
     ) {
         let nodes = sel.len() * plan.n;
-        let edges = self.lay_out(net, plan, states, sel);
+        let edges = self.lay_out(net, plan, samples, sel);
         self.forward(net, theta, nodes, edges, scale.is_some());
-        if targets.is_empty() {
+        if samples.targets().is_empty() {
             // Inference: the accelerations are in `out`.
             self.sse = 0.0;
             return;
         }
         // The loss, and ∂L/∂q̈ into `gout`.
-        let d = plan.dim;
+        let (n, d) = (plan.n, plan.dim);
         let gout = room(&mut self.gout, d * nodes);
         self.sse = 0.0;
         for (s, &i) in sel.iter().enumerate() {
+            // The target's rows follow q's and q̇'s in the record.
+            let target = &samples.record(i).expect("packed samples")[2 * d * n..];
             for p in 0..plan.n {
                 if plan.is_kinematic(p) {
                     for c in 0..d {
@@ -297,7 +312,7 @@ impl Chunk {
                 }
                 for c in 0..d {
                     let row = s * plan.n + p;
-                    let r = self.out[c * nodes + row] - targets[i][p * d + c];
+                    let r = self.out[c * nodes + row] - target[c * n + p];
                     self.sse += r * r;
                     gout[c * nodes + row] = 2.0 * r * scale.unwrap_or(0.0);
                 }
@@ -309,7 +324,7 @@ impl Chunk {
     }
 
     /// Edges and inputs of the selected states; returns the directed edges.
-    fn lay_out(&mut self, net: &Net, plan: &GraphPlan, states: &[State], sel: &[usize]) -> usize {
+    fn lay_out(&mut self, net: &Net, plan: &GraphPlan, samples: &Samples, sel: &[usize]) -> usize {
         let (n, d, t) = (plan.n, plan.dim, net.spec.types);
         let nodes = sel.len() * n;
         self.pairs.clear();
@@ -318,7 +333,7 @@ impl Chunk {
             let search = self.search.get_or_insert_with(|| plan.contact_search());
             for &i in sel {
                 self.starts.push(self.pairs.len());
-                plan.contacts(search, &states[i].q, &mut self.pairs);
+                plan.contacts(search, &samples.states()[i].q, &mut self.pairs);
             }
             self.starts.push(self.pairs.len());
         }
@@ -332,14 +347,13 @@ impl Chunk {
         let edges = self.recv.len();
         let x = room(&mut self.x, (t + 2 * d) * nodes);
         x.fill(0.0);
-        for (s, &i) in sel.iter().enumerate() {
-            for p in 0..n {
-                let row = s * n + p;
-                x[plan.types[p] * nodes + row] = 1.0;
-                for c in 0..d {
-                    x[(t + c) * nodes + row] = states[i].q[p * d + c];
-                    x[(t + d + c) * nodes + row] = states[i].v[p * d + c];
-                }
+        for (s, r) in samples.records(sel).enumerate() {
+            for (p, &ty) in plan.types.iter().enumerate() {
+                x[ty * nodes + s * n + p] = 1.0;
+            }
+            // q's then q̇'s rows, the record's first 2d rows.
+            for (f, row) in r[..2 * d * n].chunks_exact(n).enumerate() {
+                copy_row(&mut x[(t + f) * nodes + s * n..][..n], row);
             }
         }
         let feat = room(&mut self.feat, (d + 1) * edges);

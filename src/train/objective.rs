@@ -187,29 +187,24 @@ impl Objective for EngineObjective<'_> {
 /// accelerations.
 pub struct GnsObjective<'a> {
     gns: Gns,
-    states: &'a [State],
-    targets: &'a [Vec<f64>],
+    samples: Samples<'a>,
 }
 
 impl<'a> GnsObjective<'a> {
-    /// The objective of `gns` on these states and targets.
+    /// The objective of `gns` on these states and targets (one per state),
+    /// laid out for it once.
     pub fn new(gns: Gns, states: &'a [State], targets: &'a [Vec<f64>]) -> Self {
-        Self {
-            gns,
-            states,
-            targets,
-        }
+        let samples = gns.samples(states, targets);
+        Self { gns, samples }
     }
 }
 
 impl Objective for GnsObjective<'_> {
     fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64> {
-        Ok(self
-            .gns
-            .loss_grad(theta, self.states, self.targets, idx, grad))
+        Ok(self.gns.loss_grad(theta, &self.samples, idx, grad))
     }
 
     fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64> {
-        Ok(self.gns.loss(theta, self.states, self.targets, idx))
+        Ok(self.gns.loss(theta, &self.samples, idx))
     }
 }
