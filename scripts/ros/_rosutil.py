@@ -102,7 +102,14 @@ def qos_profile(reliable=True, depth=10, transient_local=False):
     )
 
 
-def spin_until(rclpy, node, predicate, timeout, step=0.05):
+# How long one spin_once may block while a bench waits for a message: it
+# returns as soon as a callback has run, so a longer step adds no latency,
+# while a short one makes rclpy poll (a wait set rebuilt each time) and
+# takes CPU from the node under test.
+WAIT_STEP = 0.05
+
+
+def spin_until(rclpy, node, predicate, timeout, step=WAIT_STEP):
     """Spins `node` until `predicate()` is true or `timeout` seconds pass."""
     import time
 

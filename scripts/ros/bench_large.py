@@ -145,10 +145,16 @@ def main():
         k = stamp[0]
         t0 = time.perf_counter()
         pub.publish(m)
-        ok = ru.spin_until(rclpy, node, lambda: k in arrived, timeout or a.timeout, step=0.001)
+        # A blocking wait: spin_once returns as soon as the trajectory's
+        # callback (which stamps the arrival) has run. Polling every 1 ms
+        # kept this process busy on a core the node's two rollout threads
+        # need (the node's 100 steps took 57 ms instead of 42 on a 2-core
+        # machine): that measured the bench, not the node.
+        ok = ru.spin_until(rclpy, node, lambda: k in arrived, timeout or a.timeout, step=ru.WAIT_STEP)
         return k, (arrived[k] - t0) * 1000 if ok else None
 
     large_ms, small_ms, lost, big_bytes = [], [], 0, 0
+    cpu0, wall0 = time.process_time(), time.perf_counter()
     # One unmeasured round: the first large message sizes Fast DDS's pools.
     for i in range(a.messages + 1):
         k, ms = send(big)
@@ -168,7 +174,11 @@ def main():
                 small_ms.append(ms)
     result = {"particles": a.particles, "contacts": a.contacts, "prediction_bytes": big_bytes,
               "large": summary(large_ms),
-              "small_after_large": summary(small_ms), "lost": lost}
+              "small_after_large": summary(small_ms), "lost": lost,
+              # This process's CPU time over the measured loop, as a share of
+              # its wall time: what the bench took from the node's cores.
+              "bench_cpu_share": round((time.process_time() - cpu0)
+                                       / max(time.perf_counter() - wall0, 1e-9), 3)}
 
     if a.rollout:
         if not client.wait_for_service(timeout_sec=a.timeout):
@@ -200,7 +210,7 @@ def main():
 
     print(f"{a.particles} particles ({big_bytes / 1e6:.2f} MB per prediction): "
           f"{json.dumps(result['large'])}; 5 particles right after: {json.dumps(result['small_after_large'])}; "
-          f"lost {lost}", flush=True)
+          f"lost {lost}; this bench's CPU share {result['bench_cpu_share']}", flush=True)
     print("LARGE_JSON " + json.dumps(result), flush=True)
     node.destroy_node()
     rclpy.try_shutdown()
