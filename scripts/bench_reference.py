@@ -9,8 +9,13 @@ copies (a handful of one-line edits, each listed with its reason and printed),
 and `job` runs one of those copies in the venv with shims for the jax/jax-md
 API changes since their release (monkeypatched at import, also listed).
 
+Their LGN and HGN come from a second checkout, of M3RG-IITD/benchmarking_graph
+(the same group's NeurIPS 2022 benchmark, whose full-graph LGN and HGN the
+paper's baselines are), when the harness is given one (`--baselines`).
+
 Subcommands:
-  prepare REF WORK          adapted copy of their scripts in WORK (system python)
+  prepare REF WORK [--baselines REF2 WORK2]
+                            adapted copies of their scripts (system python)
   job WORK NAME OUT ...     one JAX measurement, run by the venv's python
   harness ...               the interleaved rounds and the table (system python)
 """
@@ -78,8 +83,9 @@ SHIMS = [
 NEEDED = ["Spring-data.py", "Pendulum-data.py", "Spring-4MCGNODE.py",
           "Pendulum-4MCGNODE.py", "Spring-4MCGNODE-post.py",
           "Pendulum-4MCGNODE-post.py"]
-# Not timed: their LGN and HGN, because their code (b5add1f) has neither in a
-# runnable form. Spring-5LGN.py trains a full graph network that outputs
+# Their GNODE repository's LGN and HGN are not timed (their LGN and HGN come
+# from benchmarking_graph instead, see BASELINE_EDITS): that code (b5add1f)
+# has neither in a runnable form. Spring-5LGN.py trains a full graph network that outputs
 # accelerations (`fgn.cal_acceleration`; the commit that added it, 77262b2,
 # calls these scripts "FGNs"): its Lagrangian path is commented out and the
 # `Lmodel` it would pass to `lnn.accelerationFull` is defined nowhere.
@@ -89,21 +95,46 @@ NEEDED = ["Spring-data.py", "Pendulum-data.py", "Spring-4MCGNODE.py",
 # Spring-5LGN.py against mcgnode's LGN: a different model, so no ratio.)
 
 
-def prepare(ref, work):
+# Their LGN and HGN, from a checkout of M3RG-IITD/benchmarking_graph: its
+# Spring-LGN.py and Spring-HGN.py train full graph networks that give the
+# Lagrangian (accelerations by Euler-Lagrange, Hessian in qdot included) and
+# the Hamiltonian, with the paper's sizes (embeddings 8, hidden 16, one round).
+BASELINE_EDITS = [
+    ("Spring-data.py", "stride = 100", "stride = 10", "as for their GNODE data above"),
+    ("Spring-data.py",
+     'rstring = datetime.now().strftime("%m-%d-%Y_%H-%M-%S") if rname else "0_10000"',
+     'rstring = datetime.now().strftime("%m-%d-%Y_%H-%M-%S") if rname else "0"',
+     "their data script writes to .../0_10000/, the LGN script reads .../0/"),
+    ("Spring-data-HGNN.py",
+     'rstring = datetime.now().strftime("%m-%d-%Y_%H-%M-%S") if rname else "2_" + str(nconfig * runs)',
+     'rstring = datetime.now().strftime("%m-%d-%Y_%H-%M-%S") if rname else "2"',
+     "their data script writes to .../2_10000/, the HGN script reads .../2/"),
+    ("Spring-LGN.py", "for epoch in range(epochs):", TIMED_EPOCHS, "as for MCGNODE"),
+    ("Spring-HGN.py", "for epoch in range(epochs):", TIMED_EPOCHS, "as for MCGNODE"),
+]
+BASELINE_NEEDED = ["Spring-data.py", "Spring-data-HGNN.py", "Spring-LGN.py", "Spring-HGN.py"]
+# Directories their training scripts write to without making them.
+BASELINE_DIRS = ["5-spring-training-time", "5-spring-training-loss"]
+
+
+def prepare(ref, work, needed=None, edits=None, dirs=()):
+    needed, edits = needed or NEEDED, edits or EDITS
     scripts = os.path.join(ref, "scripts")
-    for f in NEEDED:
+    for f in needed:
         if not os.path.isfile(os.path.join(scripts, f)):
-            sys.exit(f"bench: {ref} has no scripts/{f}: not a checkout of "
-                     "M3RG-IITD/graph_neural_ODE?")
+            sys.exit(f"bench: {ref} has no scripts/{f}: not a checkout of the "
+                     "authors' repository it should be (see --help)")
     for d in ["src", "scripts"]:
         shutil.rmtree(os.path.join(work, d), ignore_errors=True)
     shutil.copytree(os.path.join(ref, "src"), os.path.join(work, "src"))
     os.makedirs(os.path.join(work, "scripts"))
     shutil.copytree(os.path.join(scripts, "psystems"),
                     os.path.join(work, "scripts", "psystems"))
-    texts = {f: open(os.path.join(scripts, f)).read() for f in NEEDED}
+    for d in dirs:
+        os.makedirs(os.path.join(work, d), exist_ok=True)
+    texts = {f: open(os.path.join(scripts, f)).read() for f in needed}
     print(f"adapted copy of {ref} in {work}; edits to the copies:")
-    for f, old, new, why in EDITS:
+    for f, old, new, why in edits:
         lines = texts[f].split("\n")
         hits = [i for i, l in enumerate(lines) if l.strip() == old]
         if len(hits) != 1:
@@ -117,6 +148,8 @@ def prepare(ref, work):
     for f, t in texts.items():
         with open(os.path.join(work, "scripts", f), "w") as fh:
             fh.write(t)
+    if needed is not NEEDED:
+        return
     print("shims at import (nothing of theirs edited for these):")
     for s in SHIMS:
         print(f"  {s}")
@@ -323,6 +356,20 @@ def jax_items(quick):
     ]
 
 
+def baseline_items(quick):
+    """Their LGN and HGN epochs (benchmarking_graph; run in the baselines' work
+    directory). `--if_noisy_data=0`: their default adds noise to the data,
+    which does not change an epoch's cost, and writes elsewhere."""
+    reps = 1 if quick else 3
+    args = ["--N=5", "--epochs=1000", "--rname=False", "--if_noisy_data=0"]
+    return [
+        ("spring_lgn_epoch", "5-spring LGN epoch (10,000 states)", "Spring-LGN.py", args, reps, None),
+        ("spring_hgn_epoch", "5-spring HGN epoch (10,000 states)", "Spring-HGN.py", args, reps, None),
+    ]
+
+
+BASELINE_KEYS = {"spring_lgn_epoch", "spring_hgn_epoch"}
+
 # mcgnode figure (a substring for `bench --only`, unique) for each row; the
 # multi-thread epoch is named by the cores the binary sees (available_parallelism)
 CORES = len(os.sched_getaffinity(0))
@@ -335,6 +382,9 @@ MCG = {
     "pendulum_rollout": ["5-pendulum mcgnode rollout, 1 s"],
     "spring50": ["50-spring mcgnode rollout speed"],
     "spring500": ["500-spring mcgnode rollout speed"],
+    # Candle's (mcgnode's LGN and HGN train there), on every CPU.
+    "spring_lgn_epoch": ["5-spring lgn epoch, 10000 states (candle)"],
+    "spring_hgn_epoch": ["5-spring hgn epoch, 10000 states (candle)"],
 }
 
 
@@ -347,9 +397,10 @@ def jax_job(r, a, item, threads):
     extra, cpus = JAX_ENV[threads]
     env = dict(os.environ, **extra)
     env.pop("XLA_FLAGS", None) if not extra else None
-    out = os.path.join(a.work, f"out-{key}-{threads}.json")
+    work = a.work2 if key in BASELINE_KEYS else a.work
+    out = os.path.join(work, f"out-{key}-{threads}.json")
     cmd = flock_prefix(a) + ["taskset", "-c", cpus, a.venv_python, __file__, "job",
-                             a.work, script, out, "--reps", str(reps)]
+                             work, script, out, "--reps", str(reps)]
     if "post" in script:
         cmd += ["--params", params_file(a.work, script)]
     cmd += ["--"] + fargs
@@ -371,8 +422,9 @@ def mcg_cpus(figure):
     """The CPUs a figure's process may run on: the rollouts (one thread) on
     CPU 0, as JAX's 1-thread runs, so that neither is moved between cores
     mid-run; the epochs on every CPU (`bench` names its all-cores epoch by
-    the CPUs it sees, so pinned it would name two figures "1 thread")."""
-    if "thread" in figure:
+    the CPUs it sees, so pinned it would name two figures "1 thread"; candle's
+    baseline epochs take the cores they find)."""
+    if "thread" in figure or "epoch" in figure:
         return ",".join(str(c) for c in sorted(os.sched_getaffinity(0)))
     return "0"
 
@@ -414,7 +466,7 @@ def secs(x):
 def harness(a):
     rounds = 1 if a.quick else a.rounds
     r = Runner(a)
-    items = jax_items(a.quick)
+    items = jax_items(a.quick) + (baseline_items(a.quick) if a.work2 else [])
     # Their data sets and parameters (once; untimed).
     for kind in ["Spring", "Pendulum"]:
         data = os.path.join(a.work, "results",
@@ -426,6 +478,17 @@ def harness(a):
             r.run(flock_prefix(a) + [a.venv_python, __file__, "job", a.work,
                                      f"{kind}-data.py", os.devnull, "--reps", "0",
                                      "--allow-end", "--"] + args, timeout=a.timeout)
+    # The baselines' data: LGN reads Spring-data.py's, HGN Spring-data-HGNN.py's
+    # (positions and momenta), each 100 trajectories x 100 states.
+    for script, sub, args in [("Spring-data.py", "0", ["--N1=5"]),
+                              ("Spring-data-HGNN.py", "2", ["--N=5", "--stride=10"])]:
+        if a.work2 and not os.path.exists(os.path.join(
+                a.work2, "results", "5-Spring-data", sub, "model_states_0.pkl")):
+            print(f"generating their {script} data set for LGN/HGN (once, untimed; "
+                  f"{' '.join(args)}) ...", flush=True)
+            r.run(flock_prefix(a) + [a.venv_python, __file__, "job", a.work2, script,
+                                     os.devnull, "--reps", "0", "--allow-end", "--"] + args,
+                  timeout=a.timeout)
     res = {k[0]: {"jax1": [], "jax2": [], "mcg": {f: [] for f in MCG[k[0]]}} for k in items}
     info = {}
     for rnd in range(rounds):
@@ -462,7 +525,12 @@ def table(a, res, items, info, rounds):
             f"{' (dirty)' if git(HERE, 'status', '--porcelain', '--untracked-files=no') else ''}"
             f", binary {a.mcgnode}",
             f"REF_DIR commit {git(a.ref, 'rev-parse', '--short', 'HEAD')}; jax {info.get('jax')}"
-            f", jax-md {a.jaxmd}",
+            f", jax-md {a.jaxmd}"
+            + (f"; LGN/HGN from benchmarking_graph at {git(a.ref2, 'rev-parse', '--short', 'HEAD')}"
+               " (theirs: full graph networks for L(q, qdot) and H(q, p); mcgnode's: "
+               "L = T - V(q), H = T + V(q) with learned diagonal masses, as the paper "
+               "states; the same model families, not the same computation)"
+               if a.work2 else ""),
             "JAX 1 thread: taskset -c 0, XLA_FLAGS='--xla_cpu_multi_thread_eigen=false "
             "intra_op_parallelism_threads=1'; JAX 2 threads: taskset -c 0,1; "
             "mcgnode's rollouts: taskset -c 0, its epochs on every CPU",
@@ -530,6 +598,7 @@ def main():
     q = sub.add_parser("prepare")
     q.add_argument("ref")
     q.add_argument("work")
+    q.add_argument("--baselines", nargs=2, metavar=("REF2", "WORK2"))
     q = sub.add_parser("job")
     q.add_argument("work")
     q.add_argument("script")
@@ -539,7 +608,7 @@ def main():
     q.add_argument("--allow-end", action="store_true")
     q = sub.add_parser("harness")
     for o in ["--ref", "--work", "--mcgnode", "--venv-python", "--json", "--lock",
-              "--load-before", "--jaxmd"]:
+              "--load-before", "--jaxmd", "--ref2", "--work2"]:
         q.add_argument(o)
     q.add_argument("--rounds", type=int, default=3)
     q.add_argument("--quick", action="store_true")
@@ -551,6 +620,9 @@ def main():
     a.rest = rest  # their script's own (fire) arguments, after `--`
     if a.cmd == "prepare":
         prepare(a.ref, a.work)
+        if a.baselines:
+            prepare(a.baselines[0], a.baselines[1], BASELINE_NEEDED, BASELINE_EDITS,
+                    BASELINE_DIRS)
     elif a.cmd == "job":
         if a.allow_end:  # data scripts: run to their end
             import builtins

@@ -2,12 +2,16 @@
 # Side-by-side speed: the authors' JAX code against `mcgnode bench`, in
 # interleaved rounds on this machine (issue 24).
 #
-# Usage: scripts/bench_vs_reference.sh [--quick] [--rounds N] [--json OUT] REF_DIR
+# Usage: scripts/bench_vs_reference.sh [--quick] [--rounds N] [--json OUT]
+#                                      [--baselines REF2_DIR] REF_DIR
 #   REF_DIR  a checkout of the authors' repository, made by you:
 #            git clone https://github.com/M3RG-IITD/graph_neural_ODE REF_DIR
 #   --quick  one round, one timed epoch / rollout each (checks the harness)
 #   --rounds N   rounds (default 3; each: mcgnode, JAX 1 thread, JAX 2 threads)
 #   --json OUT   also write every measurement as JSON
+#   --baselines REF2_DIR  also time their LGN and HGN epochs from a checkout of
+#            the same group's benchmark (made by you):
+#            git clone https://github.com/M3RG-IITD/benchmarking_graph REF2_DIR
 #
 # Their code never enters this repository. The harness
 #  - makes a venv REF_DIR/.venv-bench and installs their dependencies from PyPI
@@ -16,10 +20,12 @@
 #  - copies the scripts it runs into REF_DIR/.mcgnode-bench/ and edits the
 #    copies, printing each edit and why (scripts/bench_reference.py, EDITS),
 #    with shims for jax API changes applied at import (SHIMS there);
-#  - times their MCGNODE spring and pendulum scripts (not their LGN or HGN:
-#    their "LGN" script trains a graph network that outputs accelerations,
-#    and their HGN scripts call functions their code does not define; see
-#    NEEDED in scripts/bench_reference.py);
+#  - times their MCGNODE spring and pendulum scripts (not that repository's
+#    LGN or HGN: its "LGN" script trains a graph network that outputs
+#    accelerations, and its HGN scripts call functions its code does not
+#    define; see NEEDED in scripts/bench_reference.py), and with --baselines
+#    the full-graph LGN and HGN of their benchmark repository against
+#    mcgnode's (candle) LGN and HGN epochs (BASELINE_EDITS there);
 #  - generates their 5-spring and 5-pendulum data sets once with their data
 #    scripts, then per round and per row: `mcgnode bench --json --only <figure>`,
 #    their script with 1 thread, their script with 2 threads.
@@ -29,13 +35,14 @@
 # $MCGNODE_BIN), copied aside first so a rebuild cannot change it mid-run.
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
-usage() { sed -n '5,10p' "$0" | sed 's/^# \{0,1\}//' >&2; exit 2; }
-QUICK=() ROUNDS=3 JSON=() REF=
+usage() { sed -n '5,14p' "$0" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+QUICK=() ROUNDS=3 JSON=() REF= REF2=
 while [ $# -gt 0 ]; do
     case "$1" in
         --quick) QUICK=(--quick); shift ;;
         --rounds) ROUNDS=${2:?}; shift 2 ;;
         --json) JSON=(--json "$(realpath -m "${2:?}")"); shift 2 ;;
+        --baselines) REF2=${2:?}; shift 2 ;;
         -h|--help) usage ;;
         -*) echo "bench_vs_reference: unknown option $1" >&2; usage ;;
         *) [ -z "$REF" ] || usage; REF=$1; shift ;;
@@ -51,6 +58,19 @@ if [ ! -d "$REF/scripts/psystems" ] || [ ! -f "$REF/scripts/Spring-4MCGNODE.py" 
     exit 2
 fi
 REF=$(cd "$REF" && pwd)
+BASE_PREP=() BASE_RUN=()
+if [ -n "$REF2" ]; then
+    if [ ! -f "$REF2/scripts/Spring-LGN.py" ] || [ ! -f "$REF2/scripts/Spring-HGN.py" ]; then
+        echo "bench_vs_reference: $REF2 is not a checkout of M3RG-IITD/benchmarking_graph" \
+            "(no scripts/Spring-LGN.py); make one with" >&2
+        echo "  git clone https://github.com/M3RG-IITD/benchmarking_graph $REF2" >&2
+        exit 2
+    fi
+    REF2=$(cd "$REF2" && pwd)
+    mkdir -p "$REF2/.mcgnode-bench"
+    BASE_PREP=(--baselines "$REF2" "$REF2/.mcgnode-bench")
+    BASE_RUN=(--ref2 "$REF2" --work2 "$REF2/.mcgnode-bench")
+fi
 
 BIN_SRC=${MCGNODE_BIN:-${CARGO_TARGET_DIR:-$ROOT/target}/release/mcgnode}
 if [ ! -x "$BIN_SRC" ]; then
@@ -81,9 +101,10 @@ fi
 BIN=$WORK/mcgnode
 cp "$BIN_SRC" "$BIN"
 
-"$PY" "$ROOT/scripts/bench_reference.py" prepare "$REF" "$WORK"
+"$PY" "$ROOT/scripts/bench_reference.py" prepare "$REF" "$WORK" "${BASE_PREP[@]}"
 LOAD=$(uptime)
 echo "load at start: $LOAD"
 exec "$PY" "$ROOT/scripts/bench_reference.py" harness --ref "$REF" --work "$WORK" \
     --mcgnode "$BIN" --venv-python "$VENV/bin/python" --lock "$LOCK" \
-    --load-before "$LOAD" --jaxmd 0.2.29 --rounds "$ROUNDS" "${QUICK[@]}" "${JSON[@]}"
+    --load-before "$LOAD" --jaxmd 0.2.29 --rounds "$ROUNDS" "${QUICK[@]}" "${JSON[@]}" \
+    "${BASE_RUN[@]}"

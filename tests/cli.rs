@@ -1066,13 +1066,19 @@ fn train_recipes_explained_fraction_and_the_still_reference() {
 }
 
 /// `scripts/bench_vs_reference.sh` (the side-by-side harness against the
-/// authors' JAX code) refuses a missing or wrong REF_DIR with a clear message
-/// and exit code 2, before it makes a venv or times anything.
+/// authors' JAX code) refuses a missing or wrong REF_DIR (or --baselines
+/// checkout) with a clear message and exit code 2, before it makes a venv or
+/// times anything.
 #[test]
 fn bench_vs_reference_refuses_a_missing_ref_dir() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let script = root.join("scripts/bench_vs_reference.sh");
     let dir = tempfile::tempdir().unwrap();
+    // Looks like their GNODE checkout (what the script checks), so that the
+    // check of --baselines comes next.
+    let gnode = dir.path().join("gnode");
+    std::fs::create_dir_all(gnode.join("scripts/psystems")).unwrap();
+    std::fs::write(gnode.join("scripts/Spring-4MCGNODE.py"), "").unwrap();
     for (args, want) in [
         (vec![], "no REF_DIR given"),
         (
@@ -1080,6 +1086,14 @@ fn bench_vs_reference_refuses_a_missing_ref_dir() {
             "is not a checkout of M3RG-IITD/graph_neural_ODE",
         ),
         (vec!["--bogus".to_string()], "unknown option --bogus"),
+        (
+            vec![
+                "--baselines".to_string(),
+                dir.path().join("nowhere").display().to_string(),
+                gnode.display().to_string(),
+            ],
+            "is not a checkout of M3RG-IITD/benchmarking_graph",
+        ),
     ] {
         let o = Command::new("bash")
             .arg(script.as_path())
