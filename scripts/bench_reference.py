@@ -85,8 +85,8 @@ NEEDED = ["Spring-data.py", "Pendulum-data.py", "Spring-4MCGNODE.py",
           "Pendulum-4MCGNODE-post.py"]
 # Their GNODE repository's LGN and HGN are not timed (their LGN and HGN come
 # from benchmarking_graph instead, see BASELINE_EDITS): that code (b5add1f)
-# has neither in a runnable form. Spring-5LGN.py trains a full graph network that outputs
-# accelerations (`fgn.cal_acceleration`; the commit that added it, 77262b2,
+# has neither in a runnable form. Spring-5LGN.py trains a full graph network
+# that outputs accelerations (`fgn.cal_acceleration`; the commit that added it, 77262b2,
 # calls these scripts "FGNs"): its Lagrangian path is commented out and the
 # `Lmodel` it would pass to `lnn.accelerationFull` is defined nowhere.
 # Spring-6HGN.py calls fgn.cal_l and Spring-6HGN-our.py
