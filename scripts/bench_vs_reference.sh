@@ -51,21 +51,25 @@ done
 if [ -z "$REF" ]; then
     echo "bench_vs_reference: no REF_DIR given" >&2; usage
 fi
-if [ ! -d "$REF/scripts/psystems" ] || [ ! -f "$REF/scripts/Spring-4MCGNODE.py" ]; then
-    echo "bench_vs_reference: $REF is not a checkout of M3RG-IITD/graph_neural_ODE" \
-        "(no scripts/Spring-4MCGNODE.py); make one with" >&2
-    echo "  git clone https://github.com/M3RG-IITD/graph_neural_ODE $REF" >&2
-    exit 2
-fi
+# checkout DIR REPO FILE...: exits 2, naming the clone to make, unless DIR
+# holds every scripts/FILE of a checkout of github.com/REPO.
+checkout() {
+    local dir=$1 repo=$2 f
+    shift 2
+    for f in "$@"; do
+        if [ ! -e "$dir/scripts/$f" ]; then
+            echo "bench_vs_reference: $dir is not a checkout of $repo" \
+                "(no scripts/$f); make one with" >&2
+            echo "  git clone https://github.com/$repo $dir" >&2
+            exit 2
+        fi
+    done
+}
+checkout "$REF" M3RG-IITD/graph_neural_ODE psystems Spring-4MCGNODE.py
 REF=$(cd "$REF" && pwd)
 BASE_PREP=() BASE_RUN=()
 if [ -n "$REF2" ]; then
-    if [ ! -f "$REF2/scripts/Spring-LGN.py" ] || [ ! -f "$REF2/scripts/Spring-HGN.py" ]; then
-        echo "bench_vs_reference: $REF2 is not a checkout of M3RG-IITD/benchmarking_graph" \
-            "(no scripts/Spring-LGN.py); make one with" >&2
-        echo "  git clone https://github.com/M3RG-IITD/benchmarking_graph $REF2" >&2
-        exit 2
-    fi
+    checkout "$REF2" M3RG-IITD/benchmarking_graph Spring-LGN.py Spring-HGN.py
     REF2=$(cd "$REF2" && pwd)
     mkdir -p "$REF2/.mcgnode-bench"
     BASE_PREP=(--baselines "$REF2" "$REF2/.mcgnode-bench")
