@@ -117,8 +117,7 @@ BASELINE_NEEDED = ["Spring-data.py", "Spring-data-HGNN.py", "Spring-LGN.py", "Sp
 BASELINE_DIRS = ["5-spring-training-time", "5-spring-training-loss"]
 
 
-def prepare(ref, work, needed=None, edits=None, dirs=()):
-    needed, edits = needed or NEEDED, edits or EDITS
+def prepare(ref, work, needed, edits, dirs=()):
     scripts = os.path.join(ref, "scripts")
     for f in needed:
         if not os.path.isfile(os.path.join(scripts, f)):
@@ -148,11 +147,6 @@ def prepare(ref, work, needed=None, edits=None, dirs=()):
     for f, t in texts.items():
         with open(os.path.join(work, "scripts", f), "w") as fh:
             fh.write(t)
-    if needed is not NEEDED:
-        return
-    print("shims at import (nothing of theirs edited for these):")
-    for s in SHIMS:
-        print(f"  {s}")
 
 
 # ---------------------------------------------------------------------------
@@ -368,7 +362,7 @@ def baseline_items(quick):
     ]
 
 
-BASELINE_KEYS = {"spring_lgn_epoch", "spring_hgn_epoch"}
+BASELINE_KEYS = {item[0] for item in baseline_items(False)}
 
 # mcgnode figure (a substring for `bench --only`, unique) for each row; the
 # multi-thread epoch is named by the cores the binary sees (available_parallelism)
@@ -467,26 +461,19 @@ def harness(a):
     rounds = 1 if a.quick else a.rounds
     r = Runner(a)
     items = jax_items(a.quick) + (baseline_items(a.quick) if a.work2 else [])
-    # Their data sets and parameters (once; untimed).
-    for kind in ["Spring", "Pendulum"]:
-        data = os.path.join(a.work, "results",
-                            "a-5-Spring-data" if kind == "Spring" else "5-Pendulum-data",
-                            "0", "model_states_0.pkl")
-        if not os.path.exists(data):
-            print(f"generating their {kind.lower()} data set (once, untimed) ...", flush=True)
-            args = ["--N1=5"] if kind == "Spring" else ["--N=5"]
-            r.run(flock_prefix(a) + [a.venv_python, __file__, "job", a.work,
-                                     f"{kind}-data.py", os.devnull, "--reps", "0",
-                                     "--allow-end", "--"] + args, timeout=a.timeout)
-    # The baselines' data: LGN reads Spring-data.py's, HGN Spring-data-HGNN.py's
-    # (positions and momenta), each 100 trajectories x 100 states.
-    for script, sub, args in [("Spring-data.py", "0", ["--N1=5"]),
-                              ("Spring-data-HGNN.py", "2", ["--N=5", "--stride=10"])]:
-        if a.work2 and not os.path.exists(os.path.join(
-                a.work2, "results", "5-Spring-data", sub, "model_states_0.pkl")):
-            print(f"generating their {script} data set for LGN/HGN (once, untimed; "
-                  f"{' '.join(args)}) ...", flush=True)
-            r.run(flock_prefix(a) + [a.venv_python, __file__, "job", a.work2, script,
+    # Their data sets (once; untimed): (work dir, data script, the file it
+    # writes, its arguments). LGN reads the benchmark's Spring-data.py's,
+    # HGN its Spring-data-HGNN.py's (positions and momenta).
+    data = [(a.work, "Spring-data.py", "a-5-Spring-data/0", ["--N1=5"]),
+            (a.work, "Pendulum-data.py", "5-Pendulum-data/0", ["--N=5"])]
+    if a.work2:
+        data += [(a.work2, "Spring-data.py", "5-Spring-data/0", ["--N1=5"]),
+                 (a.work2, "Spring-data-HGNN.py", "5-Spring-data/2", ["--N=5", "--stride=10"])]
+    for work, script, sub, args in data:
+        if not os.path.exists(os.path.join(work, "results", sub, "model_states_0.pkl")):
+            print(f"generating their data with {os.path.basename(os.path.dirname(work))}'s "
+                  f"{script} {' '.join(args)} (once, untimed) ...", flush=True)
+            r.run(flock_prefix(a) + [a.venv_python, __file__, "job", work, script,
                                      os.devnull, "--reps", "0", "--allow-end", "--"] + args,
                   timeout=a.timeout)
     res = {k[0]: {"jax1": [], "jax2": [], "mcg": {f: [] for f in MCG[k[0]]}} for k in items}
@@ -619,10 +606,13 @@ def main():
     a = p.parse_args(argv[:cut])
     a.rest = rest  # their script's own (fire) arguments, after `--`
     if a.cmd == "prepare":
-        prepare(a.ref, a.work)
+        prepare(a.ref, a.work, NEEDED, EDITS)
         if a.baselines:
             prepare(a.baselines[0], a.baselines[1], BASELINE_NEEDED, BASELINE_EDITS,
                     BASELINE_DIRS)
+        print("shims at import, for every script run (nothing of theirs edited for these):")
+        for shim in SHIMS:
+            print(f"  {shim}")
     elif a.cmd == "job":
         if a.allow_end:  # data scripts: run to their end
             import builtins
