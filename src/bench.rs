@@ -367,11 +367,24 @@ fn baseline_epoch_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Ve
     let data = training_set(SystemKind::Spring, 5, if quick { 10 } else { 100 });
     let states = data.1.len();
     let candle = (EngineKind::Candle, 1);
+    // LGN and HGN: the native engine on one thread and on every core, and
+    // candle (the reference).
+    let cores = crate::engine::all_cores();
     for kind in [Kind::Lgn, Kind::Hgn] {
-        let name = format!("5-spring {kind} epoch, {states} states (candle)");
-        if want(&name) {
-            let t = Trainee::Baseline(kind, candle.0, candle.1);
-            out.push(epoch_figure(name, t, &data, ep.min(3))?);
+        for (engine, threads) in [(EngineKind::Native, 1), (EngineKind::Native, cores), candle] {
+            if engine == EngineKind::Native && threads == cores && cores == 1 {
+                continue;
+            }
+            let name = match engine {
+                EngineKind::Candle => format!("5-spring {kind} epoch, {states} states (candle)"),
+                EngineKind::Native => format!(
+                    "5-spring {kind} epoch, {states} states (native engine, {threads} thread)"
+                ),
+            };
+            if want(&name) {
+                let t = Trainee::Baseline(kind, engine, threads);
+                out.push(epoch_figure(name, t, &data, ep.min(3))?);
+            }
         }
     }
     // GNS on both engines, one thread each: on the springs, and on the

@@ -107,6 +107,44 @@ impl BaselineHyper {
         }
     }
 
+    /// The executor's description of an LGN or HGN of these settings
+    /// (`None` for GNS).
+    pub fn potential_spec(&self) -> Option<crate::engine::PotentialSpec> {
+        use crate::engine::PotentialLoss;
+        let loss = match self.kind {
+            Kind::Lgn => PotentialLoss::Acceleration,
+            Kind::Hgn => PotentialLoss::Hamilton,
+            Kind::Gns => return None,
+        };
+        Some(crate::engine::PotentialSpec {
+            dim: self.dim,
+            types: self.types,
+            hidden: self.hidden,
+            latent: self.latent,
+            rounds: self.rounds,
+            loss,
+        })
+    }
+
+    /// This baseline on the executor for `graph`, its parameters laid out as
+    /// `params`, over `threads` threads; `None` where the executor does not
+    /// write it (LGN and HGN with bars: candle's autodiff serves them).
+    pub fn executor(
+        &self,
+        params: &[(String, usize)],
+        graph: &crate::system::Graph,
+        threads: usize,
+    ) -> Result<Option<crate::engine::BaselineExecutor>, crate::engine::EngineError> {
+        use crate::engine::{BaselineExecutor, Gns, Potential};
+        Ok(Some(match self.potential_spec() {
+            None => BaselineExecutor::Gns(Gns::new(self.gns_spec(), params, graph, threads)?),
+            Some(_) if graph.n_bars() > 0 => return Ok(None),
+            Some(spec) => {
+                BaselineExecutor::Potential(Potential::new(spec, params, graph, threads)?)
+            }
+        }))
+    }
+
     /// Scalar parameters of the network these settings define, counted as
     /// [`BaselineNet::new`] declares them but without building it; `None` if
     /// the count overflows. For refusing a file whose settings need more

@@ -7,14 +7,13 @@
 use super::file::{BaselineFile, FORMAT};
 use super::net::{BaselineHyper, BaselineNet};
 use super::trained::TrainedBaseline;
-use crate::engine::Gns;
 use crate::error::{bail, Result};
 use crate::gnode::batch::Batch;
 use crate::gnode::plan::GraphPlan;
 use crate::system::{Graph, State};
 use crate::train::{
-    check_data, fit, flat_params, set_flat_params, CandleObjective, EngineKind, EpochReport,
-    GnsObjective, Objective, TrainConfig,
+    check_data, fit, flat_params, set_flat_params, BaselineObjective, CandleObjective, EngineKind,
+    EpochReport, Objective, TrainConfig,
 };
 use candle_core::Tensor;
 use rand::SeedableRng;
@@ -52,17 +51,15 @@ pub fn train_baseline(
         net.loss(&Batch::new(&plan, &s, Some(&a), net.hyper.types)?, masses)
     };
     let mut theta = flat_params(&net.store)?;
-    let mut obj: Box<dyn Objective + '_> = match (net.hyper.kind, cfg.engine) {
-        (super::net::Kind::Gns, EngineKind::Native) => {
-            let gns = Gns::new(
-                net.hyper.gns_spec(),
-                &net.param_sizes()?,
-                graph,
-                cfg.threads,
-            )?;
-            Box::new(GnsObjective::new(gns, states, acc))
-        }
-        _ => Box::new(CandleObjective::with_threads(
+    let exec = match cfg.engine {
+        EngineKind::Native => net
+            .hyper
+            .executor(&net.param_sizes()?, graph, cfg.threads)?,
+        EngineKind::Candle => None,
+    };
+    let mut obj: Box<dyn Objective + '_> = match exec {
+        Some(exec) => Box::new(BaselineObjective::new(exec, states, acc)),
+        None => Box::new(CandleObjective::with_threads(
             &net.store,
             loss,
             cfg.threads,
@@ -101,6 +98,18 @@ pub fn train_baseline(
     TrainedBaseline::from_file(file)
 }
 
+/// Which engine computes a baseline's gradients on `graph`, for the log.
+fn engine_said(kind: super::net::Kind, graph: &Graph, engine: EngineKind) -> &'static str {
+    let energy = kind != super::net::Kind::Gns;
+    match engine {
+        EngineKind::Native if energy && graph.n_bars() > 0 => {
+            "candle's autodiff (LGN and HGN with bars are not on the native engine)"
+        }
+        EngineKind::Native => "the native engine (hand-written gradients)",
+        EngineKind::Candle => "candle's autodiff",
+    }
+}
+
 /// Trains a baseline from trajectory bags (on ParticleState topic `topic`
 /// when they hold several), as [`crate::train::train_from_bags`] does for the
 /// GNODE family (same data, split and loop); returns the file.
@@ -131,13 +140,10 @@ pub(crate) fn train_baseline_from_bags(
         .map(|&t| t as usize + 1)
         .max()
         .unwrap_or(1);
-    if kind == super::net::Kind::Gns {
-        let engine = match cfg.engine {
-            EngineKind::Native => "the native engine (hand-written gradients)",
-            EngineKind::Candle => "candle's autodiff",
-        };
-        log(&format!("gradients by {engine}"));
-    }
+    log(&format!(
+        "gradients by {}",
+        engine_said(kind, &ds.graph, cfg.engine)
+    ));
     let mut hyper = BaselineHyper::new(kind, ds.graph.dim, types);
     hyper.interaction_radius = ds.graph.interaction_radius;
     let trained = train_baseline(hyper, &ds.graph, &ds.states, &ds.acc, cfg, on_epoch)?;

@@ -1,11 +1,11 @@
-//! A trained baseline serving [`Dynamics`]: GNS on the executor's forward
-//! pass; LGN and HGN a candle forward per call (they differentiate at
-//! inference too; they are baselines, speed is secondary).
+//! A trained baseline serving [`Dynamics`] on the executor's forward pass
+//! (GNS; LGN and HGN with their force pass); LGN and HGN on graphs with bars
+//! a candle forward per call (their multipliers are written there only).
 
 use super::file::BaselineFile;
 use super::net::{BaselineHyper, BaselineNet, Kind};
 use crate::dynamics::{Dynamics, DynamicsError, Forces};
-use crate::engine::Gns;
+use crate::engine::BaselineExecutor;
 use crate::error::{bail, Result};
 use crate::gnode::arch::ArchError;
 use crate::gnode::batch::Batch;
@@ -23,28 +23,29 @@ pub struct TrainedBaseline {
     pub file: BaselineFile,
     /// The network with those weights.
     pub net: BaselineNet,
-    /// GNS: its weights as one vector and the executor of the last graph,
-    /// whose forward pass serves rollouts (candle's per-call cost is
+    /// Its weights as one vector and the executor of the last graph, whose
+    /// forward pass serves rollouts (candle's per-call cost is
     /// milliseconds).
-    gns: Option<GnsExecutor>,
+    exec: Executor,
 }
 
-/// GNS's weights and an executor for the last graph seen.
-struct GnsExecutor {
+/// The weights and an executor for the last graph seen (none where the
+/// executor does not write the model for it).
+struct Executor {
     theta: Vec<f64>,
     params: Vec<(String, usize)>,
-    last: Mutex<Option<(Graph, Gns)>>,
+    last: Mutex<Option<(Graph, Option<BaselineExecutor>)>>,
 }
 
-impl std::fmt::Debug for GnsExecutor {
+impl std::fmt::Debug for Executor {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("GnsExecutor")
+        f.debug_struct("Executor")
             .field("parameters", &self.theta.len())
             .finish_non_exhaustive()
     }
 }
 
-impl Clone for GnsExecutor {
+impl Clone for Executor {
     fn clone(&self) -> Self {
         Self {
             theta: self.theta.clone(),
@@ -74,37 +75,36 @@ impl TrainedBaseline {
         }
         let net = BaselineNet::new(file.hyper.clone(), &mut ChaCha8Rng::seed_from_u64(0))?;
         net.store.load(&file.weights)?;
-        let gns = match file.hyper.kind {
-            Kind::Gns => Some(GnsExecutor {
-                theta: crate::train::flat_params(&net.store)?,
-                params: net.param_sizes()?,
-                last: Mutex::new(None),
-            }),
-            _ => None,
+        let exec = Executor {
+            theta: crate::train::flat_params(&net.store)?,
+            params: net.param_sizes()?,
+            last: Mutex::new(None),
         };
-        Ok(Self { file, net, gns })
+        Ok(Self { file, net, exec })
     }
 
-    /// GNS's accelerations of `states` on the executor (`None`: not a GNS).
-    fn gns_accelerations(
+    /// The accelerations of `states` on the executor (`None`: it does not
+    /// write this model for this graph).
+    fn executor_accelerations(
         &self,
         graph: &Graph,
         states: &[State],
     ) -> Option<Result<Vec<Vec<f64>>, DynamicsError>> {
-        let g = self.gns.as_ref()?;
+        let g = &self.exec;
         let mut last = g
             .last
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         if last.as_ref().is_none_or(|(kept, _)| kept != graph) {
-            let spec = self.file.hyper.gns_spec();
-            match Gns::new(spec, &g.params, graph, 1) {
-                Ok(gns) => *last = Some((graph.clone(), gns)),
+            match self.file.hyper.executor(&g.params, graph, 1) {
+                Ok(exec) => *last = Some((graph.clone(), exec)),
                 Err(e) => return Some(Err(DynamicsError::Model(e.to_string()))),
             }
         }
-        let (_, gns) = last.as_mut()?;
-        let mut acc = gns.accelerations(&g.theta, states);
+        let (_, Some(exec)) = last.as_mut()? else {
+            return None;
+        };
+        let mut acc = exec.accelerations(&g.theta, states);
         for a in &mut acc {
             hold_kinematic(graph, a);
         }
@@ -114,7 +114,7 @@ impl TrainedBaseline {
     fn accel(&self, graph: &Graph, state: &State) -> Result<Vec<f64>, DynamicsError> {
         self.supports(graph)?;
         state.validate(graph)?;
-        if let Some(acc) = self.gns_accelerations(graph, std::slice::from_ref(state)) {
+        if let Some(acc) = self.executor_accelerations(graph, std::slice::from_ref(state)) {
             return Ok(acc?.remove(0));
         }
         let plan = GraphPlan::new(graph);
@@ -188,7 +188,7 @@ impl Dynamics for TrainedBaseline {
             return Ok(());
         }
         self.supports(graph)?;
-        if let Some(acc) = self.gns_accelerations(graph, states) {
+        if let Some(acc) = self.executor_accelerations(graph, states) {
             for (o, a) in out.iter_mut().zip(acc?) {
                 o.copy_from_slice(&a);
             }

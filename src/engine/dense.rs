@@ -253,7 +253,7 @@ pub(crate) fn times_squareplus_grad(g: &mut [f64], y: &[f64]) {
 /// every path gives the same bits; one instruction where a multiply and an
 /// add took two of the two floating-point ports' slots).
 #[inline(always)]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
     let mut acc = [0.0; 4];
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
     let tail = dot_tail(ca.remainder(), cb.remainder());
@@ -277,7 +277,7 @@ fn dot_tail(a: &[f64], b: &[f64]) -> f64 {
 /// adds' latency that four leave exposed (4-cycle adds, one per chain per
 /// pass).
 #[inline(always)]
-fn dots<const N: usize>(a: &[f64], b: [&[f64]; N]) -> [f64; N] {
+pub(crate) fn dots<const N: usize>(a: &[f64], b: [&[f64]; N]) -> [f64; N] {
     #[cfg(target_arch = "x86_64")]
     if simd() != Simd::Portable {
         // SAFETY: the CPU supports AVX2 and FMA (`simd` checked).

@@ -13,7 +13,7 @@
 //! Checked against candle's autodiff and finite differences
 //! (`tests/gns_engine.rs`).
 
-use super::dense::{squareplus_in_place, times_squareplus_grad, Linear, Mlp, Tape};
+use super::dense::{squareplus_in_place, times_squareplus_grad, Mlp, Tape};
 use super::gather::{copy_row, gather_rows, scatter_add_rows, Gather};
 use super::samples::Samples;
 use super::EngineError;
@@ -51,34 +51,9 @@ impl Net {
     /// The MLPs, their parameters found in `params` (name, scalar count, in
     /// the flat vector's order) under candle's names (`node_em.l0.w`, …).
     fn new(spec: GnsSpec, params: &[(String, usize)]) -> Result<Self, EngineError> {
-        let mut at = std::collections::HashMap::new();
-        let mut off = 0;
-        for (name, len) in params {
-            at.insert(name.as_str(), (off, *len));
-            off += len;
-        }
+        let named = super::named::Named::new(params);
         let (h, l, d) = (spec.hidden, spec.latent, spec.dim);
-        let mlp = |name: &str, sizes: &[usize]| -> Result<Mlp, EngineError> {
-            let mut layers = vec![];
-            for (i, w) in sizes.windows(2).enumerate() {
-                let find = |what: &str, want: usize| {
-                    let key = format!("{name}.l{i}.{what}");
-                    match at.get(key.as_str()) {
-                        Some(&(o, len)) if len == want => Ok(o),
-                        _ => Err(EngineError::Parameters(format!(
-                            "GNS needs parameter {key} of {want} numbers"
-                        ))),
-                    }
-                };
-                layers.push(Linear {
-                    w: find("w", w[0] * w[1])?,
-                    b: find("b", w[1])?,
-                    inp: w[0],
-                    out: w[1],
-                });
-            }
-            Ok(Mlp { layers })
-        };
+        let mlp = |name: &str, sizes: &[usize]| named.mlp("GNS", name, sizes);
         let rounds = (0..spec.rounds)
             .map(|r| {
                 Ok((

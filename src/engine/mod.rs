@@ -11,6 +11,7 @@
 //! Nothing is allocated per step once the buffers have grown to the largest
 //! chunk. Checked against candle and finite differences (tests/engine.rs).
 
+mod baseline;
 mod chunk;
 mod crew;
 mod dense;
@@ -19,13 +20,17 @@ mod gather;
 mod gns;
 mod infer;
 mod layout;
+mod named;
+mod potential;
 mod reverse;
 mod samples;
 mod split;
 
+pub use baseline::BaselineExecutor;
 pub use gns::{Gns, GnsSpec};
 pub use infer::Forward;
 pub use layout::{Layout, LayoutError};
+pub use potential::{Potential, PotentialLoss, PotentialSpec};
 pub use reverse::Reverse;
 pub use samples::Samples;
 pub use split::SPLIT_ROWS;

@@ -38,7 +38,7 @@ pub use checkpoint::{Checkpoint, CheckpointError, Checkpointing};
 pub use config::{EngineKind, TrainConfig};
 pub use fit::{check_data, fit, split, trivial_loss, trivial_loss_free, EpochReport, Split};
 pub use objective::{
-    flat_params, set_flat_params, CandleObjective, EngineObjective, GnsObjective, Objective,
+    flat_params, set_flat_params, BaselineObjective, CandleObjective, EngineObjective, Objective,
 };
 pub use options::{BodyForce, ModelOptions};
 pub use recipe::{Auto, Recipe};

@@ -1,7 +1,7 @@
 //! What [`fit`](super::fit) minimises: the [`Objective`] trait, with candle's
 //! autodiff and the hand-written engine behind it.
 
-use crate::engine::{Engine, Gns, Samples};
+use crate::engine::{BaselineExecutor, Engine, Samples};
 use crate::error::{bail, Result};
 use crate::gnode::params::ParamStore;
 use crate::system::State;
@@ -183,28 +183,28 @@ impl Objective for EngineObjective<'_> {
     }
 }
 
-/// GNS on the executor ([`Gns`]) on one graph's states and target
-/// accelerations.
-pub struct GnsObjective<'a> {
-    gns: Gns,
+/// A baseline on the executor ([`BaselineExecutor`]) on one graph's states
+/// and target accelerations.
+pub struct BaselineObjective<'a> {
+    exec: BaselineExecutor,
     samples: Samples<'a>,
 }
 
-impl<'a> GnsObjective<'a> {
-    /// The objective of `gns` on these states and targets (one per state),
+impl<'a> BaselineObjective<'a> {
+    /// The objective of `exec` on these states and targets (one per state),
     /// laid out for it once.
-    pub fn new(gns: Gns, states: &'a [State], targets: &'a [Vec<f64>]) -> Self {
-        let samples = gns.samples(states, targets);
-        Self { gns, samples }
+    pub fn new(exec: BaselineExecutor, states: &'a [State], targets: &'a [Vec<f64>]) -> Self {
+        let samples = exec.samples(states, targets);
+        Self { exec, samples }
     }
 }
 
-impl Objective for GnsObjective<'_> {
+impl Objective for BaselineObjective<'_> {
     fn loss_grad(&mut self, theta: &[f64], idx: &[usize], grad: &mut [f64]) -> Result<f64> {
-        Ok(self.gns.loss_grad(theta, &self.samples, idx, grad))
+        Ok(self.exec.loss_grad(theta, &self.samples, idx, grad))
     }
 
     fn loss(&mut self, theta: &[f64], idx: &[usize]) -> Result<f64> {
-        Ok(self.gns.loss(theta, &self.samples, idx))
+        Ok(self.exec.loss(theta, &self.samples, idx))
     }
 }

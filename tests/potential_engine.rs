@@ -1,0 +1,309 @@
+//! LGN and HGN on the executor (`engine::Potential`): the loss and its
+//! gradient (a second derivative of the learned potential: the tangent of
+//! the force pass and its reverse pass) against candle's autodiff of the
+//! reference networks (`baselines::{lgn, hgn}`) to 1e-10 and against
+//! central differences; the forces against candle's; the same bits with 1
+//! and 2 threads; `train --model lgn|hgn` on it by default. A ring of
+//! springs (2D) and the peridynamic cube (3D). Run with
+//! `cargo test --release --test potential_engine`.
+
+mod common;
+
+use mcgnode::baselines::{BaselineHyper, BaselineNet, Kind};
+use mcgnode::engine::Potential;
+use mcgnode::gnode::batch::Batch;
+use mcgnode::gnode::plan::GraphPlan;
+use mcgnode::physics::{SystemConfig, SystemKind};
+use mcgnode::system::{Graph, State};
+use mcgnode::train::{flat_params, CandleObjective, Objective};
+use rand::{Rng, SeedableRng};
+
+/// States, target accelerations and a model of `kind` with random weights
+/// (log-masses too, so that the masses' gradients are not at a symmetric
+/// point) for `system`.
+fn case(
+    kind: Kind,
+    system: SystemKind,
+    particles: usize,
+) -> (Graph, Vec<State>, Vec<Vec<f64>>, BaselineNet) {
+    let mut cfg = SystemConfig::new(system, particles);
+    cfg.states = 6;
+    let tr = cfg.simulate(2, 5);
+    let graph = tr[0].graph.clone();
+    let (mut states, mut acc) = (vec![], vec![]);
+    for t in &tr {
+        for s in &t.samples {
+            states.push(s.state.clone());
+            acc.push(s.acc.clone().expect("simulated accelerations"));
+        }
+    }
+    let types = graph
+        .types
+        .iter()
+        .map(|&t| t as usize + 1)
+        .max()
+        .unwrap_or(1);
+    let hyper = BaselineHyper::new(kind, graph.dim, types + 1);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let net = BaselineNet::new(hyper, &mut rng).unwrap();
+    let lm: Vec<f64> = (0..=types).map(|_| rng.random_range(-0.5..0.5)).collect();
+    net.store
+        .get("log_mass")
+        .unwrap()
+        .set(&candle_core::Tensor::from_vec(lm, types + 1, &candle_core::Device::Cpu).unwrap())
+        .unwrap();
+    (graph, states, acc, net)
+}
+
+/// Candle's loss and gradient of the reference network on states `idx`.
+fn candle(
+    net: &BaselineNet,
+    graph: &Graph,
+    (states, acc): (&[State], &[Vec<f64>]),
+    theta: &[f64],
+    idx: &[usize],
+) -> (f64, Vec<f64>) {
+    let plan = GraphPlan::new(graph);
+    let loss = |idx: &[usize]| {
+        let s: Vec<&State> = idx.iter().map(|&i| &states[i]).collect();
+        let a: Vec<&[f64]> = idx.iter().map(|&i| acc[i].as_slice()).collect();
+        let b = Batch::new(&plan, &s, Some(&a), net.hyper.types)?;
+        net.loss(&b, &graph.masses)
+    };
+    let mut obj = CandleObjective::new(&net.store, loss);
+    let mut grad = vec![0.0; theta.len()];
+    let l = obj.loss_grad(theta, idx, &mut grad).unwrap();
+    (l, grad)
+}
+
+fn native(net: &BaselineNet, graph: &Graph, threads: usize) -> Potential {
+    let spec = net.hyper.potential_spec().expect("LGN or HGN");
+    Potential::new(spec, &net.param_sizes().unwrap(), graph, threads).unwrap()
+}
+
+fn rel(a: &[f64], b: &[f64]) -> f64 {
+    let scale = b.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+        / scale
+}
+
+const CASES: [(SystemKind, usize); 2] = [(SystemKind::Spring, 5), (SystemKind::Peridynamic, 27)];
+
+/// Every case's loss and gradient against candle, to 1e-10.
+#[test]
+fn gradients_equal_candle() {
+    for kind in [Kind::Lgn, Kind::Hgn] {
+        for (system, n) in CASES {
+            let (graph, states, acc, net) = case(kind, system, n);
+            let theta = flat_params(&net.store).unwrap();
+            let idx: Vec<usize> = (0..states.len()).rev().step_by(2).collect();
+            let (lc, gc) = candle(&net, &graph, (&states, &acc), &theta, &idx);
+            let mut pot = native(&net, &graph, 1);
+            let mut gn = vec![0.0; theta.len()];
+            let samples = pot.samples(&states, &acc);
+            let ln = pot.loss_grad(&theta, &samples, &idx, &mut gn);
+            let what = format!("{kind} on {system:?}");
+            assert!(
+                (ln - lc).abs() <= 1e-10 * lc.abs(),
+                "{what}: loss {ln} vs {lc}"
+            );
+            let r = rel(&gn, &gc);
+            assert!(
+                r <= 1e-10,
+                "{what}: gradient differs by {r:.2e} of its largest"
+            );
+            assert!(
+                gc.iter().any(|g| g.abs() > 1e-6),
+                "{what}: a gradient to compare"
+            );
+            assert_eq!(pot.loss(&theta, &samples, &idx), ln, "{what}");
+        }
+    }
+}
+
+/// Central differences on a spread of parameters, every log-mass among them.
+#[test]
+fn gradients_equal_finite_differences() {
+    for kind in [Kind::Lgn, Kind::Hgn] {
+        let (graph, states, acc, net) = case(kind, SystemKind::Spring, 5);
+        let theta = flat_params(&net.store).unwrap();
+        let idx: Vec<usize> = (0..states.len()).collect();
+        let mut pot = native(&net, &graph, 1);
+        let mut g = vec![0.0; theta.len()];
+        let samples = pot.samples(&states, &acc);
+        pot.loss_grad(&theta, &samples, &idx, &mut g);
+        let h = 1e-6;
+        let scale = g.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let mut worst: f64 = 0.0;
+        let sizes = net.param_sizes().unwrap();
+        let at = sizes.iter().position(|(n, _)| n == "log_mass").unwrap();
+        let start: usize = sizes[..at].iter().map(|(_, len)| len).sum();
+        let masses = start..start + sizes[at].1;
+        let spread = (0..theta.len()).step_by(theta.len() / 40 + 1);
+        for i in spread.chain(masses) {
+            let mut t = theta.clone();
+            t[i] += h;
+            let up = pot.loss(&t, &samples, &idx);
+            t[i] -= 2.0 * h;
+            let down = pot.loss(&t, &samples, &idx);
+            let fd = (up - down) / (2.0 * h);
+            worst = worst.max((fd - g[i]).abs() / scale);
+        }
+        assert!(
+            worst < 1e-6,
+            "{kind}: finite differences differ by {worst:.2e}"
+        );
+    }
+}
+
+/// One and two threads give the same bits.
+#[test]
+fn threads_do_not_change_the_bits() {
+    let (graph, states, acc, net) = case(Kind::Hgn, SystemKind::Peridynamic, 27);
+    let theta = flat_params(&net.store).unwrap();
+    let idx: Vec<usize> = (0..states.len()).collect();
+    let run = |threads| {
+        let mut g = vec![0.0; theta.len()];
+        let mut pot = native(&net, &graph, threads);
+        let samples = pot.samples(&states, &acc);
+        let l = pot.loss_grad(&theta, &samples, &idx, &mut g);
+        (l, g)
+    };
+    assert_eq!(run(1), run(2));
+}
+
+/// The accelerations f / m equal candle's (to 1e-12 relative).
+#[test]
+fn accelerations_equal_candle() {
+    for kind in [Kind::Lgn, Kind::Hgn] {
+        for (system, n) in CASES {
+            let (graph, states, _, net) = case(kind, system, n);
+            let theta = flat_params(&net.store).unwrap();
+            let ours = native(&net, &graph, 1)
+                .accelerations(&theta, &states)
+                .concat();
+            let plan = GraphPlan::new(&graph);
+            let refs: Vec<&State> = states.iter().collect();
+            let b = Batch::new(&plan, &refs, None, net.hyper.types).unwrap();
+            let theirs: Vec<f64> = net
+                .acceleration(&b)
+                .unwrap()
+                .flatten_all()
+                .unwrap()
+                .to_vec1()
+                .unwrap();
+            let r = rel(&ours, &theirs);
+            assert!(
+                r <= 1e-12,
+                "{kind} on {system:?}: accelerations differ by {r:.2e}"
+            );
+        }
+    }
+}
+
+/// `train --model lgn|hgn` runs on the native engine by default and says
+/// so; `--engine candle` trains the same model by autodiff to the same
+/// validation loss (within 1e-6 relative after 4 epochs). Pendulums (bars)
+/// train on candle and the log says why.
+#[test]
+fn train_lgn_and_hgn_natively_from_the_cli() {
+    use common::cli::{log_ok, run_in};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (system, out) in [("spring", "springs.mcap"), ("pendulum", "pendulum.mcap")] {
+        log_ok(&run_in(
+            d,
+            &[
+                "simulate",
+                "--system",
+                system,
+                "--particles",
+                "5",
+                "--trajectories",
+                "3",
+                "--states",
+                "11",
+                "--out",
+                out,
+            ],
+        ));
+    }
+    let train = |model: &str, data: &str, engine: &str| {
+        let out = format!("{model}-{engine}.json");
+        let log = log_ok(&run_in(
+            d,
+            &[
+                "train", "--model", model, "--data", data, "--epochs", "4", "--engine", engine,
+                "--out", &out,
+            ],
+        ));
+        let file: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join(&out)).unwrap()).unwrap();
+        (log, file["training"]["validation_loss"].as_f64().unwrap())
+    };
+    for model in ["lgn", "hgn"] {
+        let (log, native) = train(model, "springs.mcap", "native");
+        assert!(log.contains("gradients by the native engine"), "{log}");
+        let (log, candle) = train(model, "springs.mcap", "candle");
+        assert!(log.contains("gradients by candle's autodiff"), "{log}");
+        assert!(
+            (native - candle).abs() <= 1e-6 * candle.abs(),
+            "{model}: validation loss {native} (native) against {candle} (candle)"
+        );
+        let (log, _) = train(model, "pendulum.mcap", "native");
+        assert!(
+            log.contains("candle's autodiff (LGN and HGN with bars are not on the native engine)"),
+            "{log}"
+        );
+    }
+}
+
+/// Trained LGN and HGN roll out on the executor: their accelerations equal
+/// candle's forward and force passes of the same weights (to 1e-12
+/// relative), state by state as in a batch.
+#[test]
+fn rollouts_run_on_the_executor() {
+    use mcgnode::baselines::train_baseline;
+    use mcgnode::train::TrainConfig;
+    use mcgnode::Dynamics;
+    for kind in [Kind::Lgn, Kind::Hgn] {
+        let (graph, states, acc, net) = case(kind, SystemKind::Spring, 5);
+        let cfg = TrainConfig {
+            epochs: 2,
+            ..TrainConfig::default()
+        };
+        let trained =
+            train_baseline(net.hyper.clone(), &graph, &states, &acc, &cfg, |_| true).unwrap();
+        let mut ours = vec![vec![0.0; graph.ndof()]; states.len()];
+        trained
+            .acceleration_batch(&graph, &states, &mut ours)
+            .unwrap();
+        let plan = GraphPlan::new(&graph);
+        let refs: Vec<&State> = states.iter().collect();
+        let b = Batch::new(&plan, &refs, None, trained.net.hyper.types).unwrap();
+        let theirs: Vec<f64> = trained
+            .net
+            .acceleration(&b)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        let r = rel(&ours.concat(), &theirs);
+        assert!(r <= 1e-12, "{kind}: accelerations differ by {r:.2e}");
+        let mut one = vec![0.0; graph.ndof()];
+        trained.acceleration(&graph, &states[3], &mut one).unwrap();
+        assert_eq!(one, ours[3], "{kind}");
+        let r = trained
+            .rollout_every(&graph, &states[0], 1e-3, 50, 10)
+            .unwrap();
+        assert_eq!(r.len(), 6);
+        assert!(
+            r.iter().all(|s| s.q.iter().all(|x| x.is_finite())),
+            "{kind}"
+        );
+    }
+}
