@@ -24,6 +24,7 @@ import argparse
 import datetime
 import json
 import os
+import re
 import resource
 import shutil
 import statistics
@@ -376,9 +377,12 @@ MCG = {
     "pendulum_rollout": ["5-pendulum mcgnode rollout, 1 s"],
     "spring50": ["50-spring mcgnode rollout speed"],
     "spring500": ["500-spring mcgnode rollout speed"],
-    # Candle's (mcgnode's LGN and HGN train there), on every CPU.
-    "spring_lgn_epoch": ["5-spring lgn epoch, 10000 states (candle)"],
-    "spring_hgn_epoch": ["5-spring hgn epoch, 10000 states (candle)"],
+    # mcgnode's LGN and HGN on the native engine (1 thread and every core)
+    # and on candle (the reference, which they trained on before).
+    **{f"spring_{m}_epoch": [f"5-spring {m} epoch, 10000 states (native engine, 1 thread)",
+                             f"5-spring {m} epoch, 10000 states (native engine, {CORES} thread)",
+                             f"5-spring {m} epoch, 10000 states (candle)"]
+       for m in ("lgn", "hgn")},
 }
 
 
@@ -559,8 +563,11 @@ def table(a, res, items, info, rounds):
                 rng = [(min(j) / max(mv), max(j) / min(mv)) for j in (j1, j2)]
             ratio = " / ".join(f"{x:.1f}x ({lo:.1f}–{hi:.1f})" for x, (lo, hi) in zip(rat, rng))
             name = label
-            if "thread" in f:
-                name += f", mcgnode native {f.split(', ')[-1]}(s)"
+            if "(candle)" in f:
+                name += ", mcgnode candle 1 thread"
+            elif "thread" in f:
+                threads = re.search(r"(\d+) thread", f).group(1)
+                name += f", mcgnode native {threads} thread(s)"
             rows.append([name, c1, c2, mcell, ratio])
             out["rows"].append({"work": name, "jax1": j1, "jax2": j2, "mcgnode": mv,
                                 "unit": unit, "ratio_jax1": rat[0], "ratio_jax2": rat[1],
