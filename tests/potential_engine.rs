@@ -4,7 +4,7 @@
 //! reference networks (`baselines::{lgn, hgn}`) to 1e-10 and against
 //! central differences; the forces against candle's; the same bits with 1
 //! and 2 threads; `train --model lgn|hgn` on it by default. A ring of
-//! springs (2D) and the peridynamic cube (3D). Run with
+//! springs and a pendulum of bars (2D), and the peridynamic cube (3D). Run with
 //! `cargo test --release --test potential_engine`.
 
 mod common;
@@ -90,7 +90,12 @@ fn rel(a: &[f64], b: &[f64]) -> f64 {
         / scale
 }
 
-const CASES: [(SystemKind, usize); 2] = [(SystemKind::Spring, 5), (SystemKind::Peridynamic, 27)];
+/// A ring of springs, a chain of bars (the multipliers) and a 3D cube.
+const CASES: [(SystemKind, usize); 3] = [
+    (SystemKind::Spring, 5),
+    (SystemKind::Pendulum, 5),
+    (SystemKind::Peridynamic, 27),
+];
 
 /// Every case's loss and gradient against candle, to 1e-10.
 #[test]
@@ -124,11 +129,42 @@ fn gradients_equal_candle() {
     }
 }
 
+/// A graph without edges (particles that interact through node energies
+/// only): loss, gradient and accelerations still equal candle's.
+#[test]
+fn a_graph_without_edges_equals_candle() {
+    for kind in [Kind::Lgn, Kind::Hgn] {
+        let (mut graph, states, acc, net) = case(kind, SystemKind::Spring, 5);
+        graph.edges.clear();
+        let theta = flat_params(&net.store).unwrap();
+        let idx: Vec<usize> = (0..states.len()).collect();
+        let (lc, gc) = candle(&net, &graph, (&states, &acc), &theta, &idx);
+        let mut pot = native(&net, &graph, 1);
+        let mut gn = vec![0.0; theta.len()];
+        let samples = pot.samples(&states, &acc);
+        let ln = pot.loss_grad(&theta, &samples, &idx, &mut gn);
+        assert!(
+            (ln - lc).abs() <= 1e-10 * lc.abs(),
+            "{kind}: loss {ln} vs {lc}"
+        );
+        let r = rel(&gn, &gc);
+        assert!(
+            r <= 1e-10,
+            "{kind}: gradient differs by {r:.2e} of its largest"
+        );
+    }
+}
+
 /// Central differences on a spread of parameters, every log-mass among them.
 #[test]
 fn gradients_equal_finite_differences() {
-    for kind in [Kind::Lgn, Kind::Hgn] {
-        let (graph, states, acc, net) = case(kind, SystemKind::Spring, 5);
+    for (kind, system) in [
+        (Kind::Lgn, SystemKind::Spring),
+        (Kind::Hgn, SystemKind::Spring),
+        (Kind::Lgn, SystemKind::Pendulum),
+        (Kind::Hgn, SystemKind::Pendulum),
+    ] {
+        let (graph, states, acc, net) = case(kind, system, 5);
         let theta = flat_params(&net.store).unwrap();
         let idx: Vec<usize> = (0..states.len()).collect();
         let mut pot = native(&net, &graph, 1);
@@ -154,7 +190,7 @@ fn gradients_equal_finite_differences() {
         }
         assert!(
             worst < 1e-6,
-            "{kind}: finite differences differ by {worst:.2e}"
+            "{kind} on {system:?}: finite differences differ by {worst:.2e}"
         );
     }
 }
@@ -206,8 +242,8 @@ fn accelerations_equal_candle() {
 
 /// `train --model lgn|hgn` runs on the native engine by default and says
 /// so; `--engine candle` trains the same model by autodiff to the same
-/// validation loss (within 1e-6 relative after 4 epochs). Pendulums (bars)
-/// train on candle and the log says why.
+/// validation loss (within 1e-6 relative after 4 epochs), on springs and on
+/// a pendulum (bars).
 #[test]
 fn train_lgn_and_hgn_natively_from_the_cli() {
     use common::cli::{log_ok, run_in};
@@ -245,32 +281,32 @@ fn train_lgn_and_hgn_natively_from_the_cli() {
         (log, file["training"]["validation_loss"].as_f64().unwrap())
     };
     for model in ["lgn", "hgn"] {
-        let (log, native) = train(model, "springs.mcap", "native");
-        assert!(log.contains("gradients by the native engine"), "{log}");
-        let (log, candle) = train(model, "springs.mcap", "candle");
-        assert!(log.contains("gradients by candle's autodiff"), "{log}");
-        assert!(
-            (native - candle).abs() <= 1e-6 * candle.abs(),
-            "{model}: validation loss {native} (native) against {candle} (candle)"
-        );
-        let (log, _) = train(model, "pendulum.mcap", "native");
-        assert!(
-            log.contains("candle's autodiff (LGN and HGN with bars are not on the native engine)"),
-            "{log}"
-        );
+        for data in ["springs.mcap", "pendulum.mcap"] {
+            let (log, native) = train(model, data, "native");
+            assert!(log.contains("gradients by the native engine"), "{log}");
+            let (log, candle) = train(model, data, "candle");
+            assert!(log.contains("gradients by candle's autodiff"), "{log}");
+            assert!(
+                (native - candle).abs() <= 1e-6 * candle.abs(),
+                "{model} on {data}: validation loss {native} (native) against {candle} (candle)"
+            );
+        }
     }
 }
 
 /// Trained LGN and HGN roll out on the executor: their accelerations equal
 /// candle's forward and force passes of the same weights (to 1e-12
-/// relative), state by state as in a batch.
+/// relative), state by state as in a batch, with and without bars.
 #[test]
 fn rollouts_run_on_the_executor() {
     use mcgnode::baselines::train_baseline;
     use mcgnode::train::TrainConfig;
     use mcgnode::Dynamics;
-    for kind in [Kind::Lgn, Kind::Hgn] {
-        let (graph, states, acc, net) = case(kind, SystemKind::Spring, 5);
+    for (kind, system) in [
+        (Kind::Lgn, SystemKind::Spring),
+        (Kind::Hgn, SystemKind::Pendulum),
+    ] {
+        let (graph, states, acc, net) = case(kind, system, 5);
         let cfg = TrainConfig {
             epochs: 2,
             ..TrainConfig::default()
@@ -293,7 +329,10 @@ fn rollouts_run_on_the_executor() {
             .to_vec1()
             .unwrap();
         let r = rel(&ours.concat(), &theirs);
-        assert!(r <= 1e-12, "{kind}: accelerations differ by {r:.2e}");
+        assert!(
+            r <= 1e-12,
+            "{kind} on {system:?}: accelerations differ by {r:.2e}"
+        );
         let mut one = vec![0.0; graph.ndof()];
         trained.acceleration(&graph, &states[3], &mut one).unwrap();
         assert_eq!(one, ours[3], "{kind}");

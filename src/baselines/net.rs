@@ -127,22 +127,20 @@ impl BaselineHyper {
     }
 
     /// This baseline on the executor for `graph`, its parameters laid out as
-    /// `params`, over `threads` threads; `None` where the executor does not
-    /// write it (LGN and HGN with bars: candle's autodiff serves them).
+    /// `params`, over `threads` threads.
     pub fn executor(
         &self,
         params: &[(String, usize)],
         graph: &crate::system::Graph,
         threads: usize,
-    ) -> Result<Option<crate::engine::BaselineExecutor>, crate::engine::EngineError> {
+    ) -> Result<crate::engine::BaselineExecutor, crate::engine::EngineError> {
         use crate::engine::{BaselineExecutor, Gns, Potential};
-        Ok(Some(match self.potential_spec() {
+        Ok(match self.potential_spec() {
             None => BaselineExecutor::Gns(Gns::new(self.gns_spec(), params, graph, threads)?),
-            Some(_) if graph.n_bars() > 0 => return Ok(None),
             Some(spec) => {
                 BaselineExecutor::Potential(Potential::new(spec, params, graph, threads)?)
             }
-        }))
+        })
     }
 
     /// Scalar parameters of the network these settings define, counted as

@@ -52,9 +52,10 @@ pub fn train_baseline(
     };
     let mut theta = flat_params(&net.store)?;
     let exec = match cfg.engine {
-        EngineKind::Native => net
-            .hyper
-            .executor(&net.param_sizes()?, graph, cfg.threads)?,
+        EngineKind::Native => Some(
+            net.hyper
+                .executor(&net.param_sizes()?, graph, cfg.threads)?,
+        ),
         EngineKind::Candle => None,
     };
     let mut obj: Box<dyn Objective + '_> = match exec {
@@ -98,18 +99,6 @@ pub fn train_baseline(
     TrainedBaseline::from_file(file)
 }
 
-/// Which engine computes a baseline's gradients on `graph`, for the log.
-fn engine_said(kind: super::net::Kind, graph: &Graph, engine: EngineKind) -> &'static str {
-    let energy = kind != super::net::Kind::Gns;
-    match engine {
-        EngineKind::Native if energy && graph.n_bars() > 0 => {
-            "candle's autodiff (LGN and HGN with bars are not on the native engine)"
-        }
-        EngineKind::Native => "the native engine (hand-written gradients)",
-        EngineKind::Candle => "candle's autodiff",
-    }
-}
-
 /// Trains a baseline from trajectory bags (on ParticleState topic `topic`
 /// when they hold several), as [`crate::train::train_from_bags`] does for the
 /// GNODE family (same data, split and loop); returns the file.
@@ -140,10 +129,11 @@ pub(crate) fn train_baseline_from_bags(
         .map(|&t| t as usize + 1)
         .max()
         .unwrap_or(1);
-    log(&format!(
-        "gradients by {}",
-        engine_said(kind, &ds.graph, cfg.engine)
-    ));
+    let engine = match cfg.engine {
+        EngineKind::Native => "the native engine (hand-written gradients)",
+        EngineKind::Candle => "candle's autodiff",
+    };
+    log(&format!("gradients by {engine}"));
     let mut hyper = BaselineHyper::new(kind, ds.graph.dim, types);
     hyper.interaction_radius = ds.graph.interaction_radius;
     let trained = train_baseline(hyper, &ds.graph, &ds.states, &ds.acc, cfg, on_epoch)?;

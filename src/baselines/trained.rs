@@ -1,6 +1,5 @@
 //! A trained baseline serving [`Dynamics`] on the executor's forward pass
-//! (GNS; LGN and HGN with their force pass); LGN and HGN on graphs with bars
-//! a candle forward per call (their multipliers are written there only).
+//! (GNS; LGN and HGN with their force pass).
 
 use super::file::BaselineFile;
 use super::net::{BaselineHyper, BaselineNet, Kind};
@@ -8,8 +7,6 @@ use crate::dynamics::{Dynamics, DynamicsError, Forces};
 use crate::engine::BaselineExecutor;
 use crate::error::{bail, Result};
 use crate::gnode::arch::ArchError;
-use crate::gnode::batch::Batch;
-use crate::gnode::plan::GraphPlan;
 use crate::system::{Graph, State};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -29,12 +26,11 @@ pub struct TrainedBaseline {
     exec: Executor,
 }
 
-/// The weights and an executor for the last graph seen (none where the
-/// executor does not write the model for it).
+/// The weights and an executor for the last graph seen.
 struct Executor {
     theta: Vec<f64>,
     params: Vec<(String, usize)>,
-    last: Mutex<Option<(Graph, Option<BaselineExecutor>)>>,
+    last: Mutex<Option<(Graph, BaselineExecutor)>>,
 }
 
 impl std::fmt::Debug for Executor {
@@ -83,48 +79,41 @@ impl TrainedBaseline {
         Ok(Self { file, net, exec })
     }
 
-    /// The accelerations of `states` on the executor (`None`: it does not
-    /// write this model for this graph).
+    /// The accelerations of `states` on the executor.
     fn executor_accelerations(
         &self,
         graph: &Graph,
         states: &[State],
-    ) -> Option<Result<Vec<Vec<f64>>, DynamicsError>> {
+    ) -> Result<Vec<Vec<f64>>, DynamicsError> {
         let g = &self.exec;
         let mut last = g
             .last
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
-        if last.as_ref().is_none_or(|(kept, _)| kept != graph) {
-            match self.file.hyper.executor(&g.params, graph, 1) {
-                Ok(exec) => *last = Some((graph.clone(), exec)),
-                Err(e) => return Some(Err(DynamicsError::Model(e.to_string()))),
+        let exec = match last.as_mut() {
+            Some((kept, exec)) if kept == graph => exec,
+            _ => {
+                let exec = self
+                    .file
+                    .hyper
+                    .executor(&g.params, graph, 1)
+                    .map_err(|e| DynamicsError::Model(e.to_string()))?;
+                &mut last.insert((graph.clone(), exec)).1
             }
-        }
-        let (_, Some(exec)) = last.as_mut()? else {
-            return None;
         };
         let mut acc = exec.accelerations(&g.theta, states);
         for a in &mut acc {
             hold_kinematic(graph, a);
         }
-        Some(Ok(acc))
+        Ok(acc)
     }
 
     fn accel(&self, graph: &Graph, state: &State) -> Result<Vec<f64>, DynamicsError> {
         self.supports(graph)?;
         state.validate(graph)?;
-        if let Some(acc) = self.executor_accelerations(graph, std::slice::from_ref(state)) {
-            return Ok(acc?.remove(0));
-        }
-        let plan = GraphPlan::new(graph);
-        let run = || -> Result<Vec<f64>> {
-            let b = Batch::new(&plan, &[state], None, self.net.hyper.types)?;
-            Ok(self.net.acceleration(&b)?.flatten_all()?.to_vec1::<f64>()?)
-        };
-        let mut acc = run().map_err(|e| DynamicsError::Model(format!("{e:#}")))?;
-        hold_kinematic(graph, &mut acc);
-        Ok(acc)
+        Ok(self
+            .executor_accelerations(graph, std::slice::from_ref(state))?
+            .remove(0))
     }
 }
 
@@ -176,7 +165,7 @@ impl Dynamics for TrainedBaseline {
         Ok(())
     }
 
-    /// One candle call for all states (the per-call cost dominates small graphs).
+    /// One executor call for all states.
     fn acceleration_batch(
         &self,
         graph: &Graph,
@@ -188,23 +177,11 @@ impl Dynamics for TrainedBaseline {
             return Ok(());
         }
         self.supports(graph)?;
-        if let Some(acc) = self.executor_accelerations(graph, states) {
-            for (o, a) in out.iter_mut().zip(acc?) {
-                o.copy_from_slice(&a);
-            }
-            return Ok(());
-        }
-        let plan = GraphPlan::new(graph);
-        let nd = graph.ndof();
-        let run = || -> Result<Vec<f64>> {
-            let refs: Vec<&State> = states.iter().collect();
-            let b = Batch::new(&plan, &refs, None, self.net.hyper.types)?;
-            Ok(self.net.acceleration(&b)?.flatten_all()?.to_vec1::<f64>()?)
-        };
-        let mut flat = run().map_err(|e| DynamicsError::Model(format!("{e:#}")))?;
-        hold_kinematic(graph, &mut flat);
-        for (o, chunk) in out.iter_mut().zip(flat.chunks(nd)) {
-            o.copy_from_slice(chunk);
+        for (o, a) in out
+            .iter_mut()
+            .zip(self.executor_accelerations(graph, states)?)
+        {
+            o.copy_from_slice(&a);
         }
         Ok(())
     }

@@ -11,6 +11,7 @@
 //! Nothing is allocated per step once the buffers have grown to the largest
 //! chunk. Checked against candle and finite differences (tests/engine.rs).
 
+mod bars;
 mod baseline;
 mod chunk;
 mod crew;

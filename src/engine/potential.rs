@@ -12,15 +12,17 @@
 //! - V = Σ_nodes φ_no(h) + Σ_edges φ_eo(e).
 //!
 //! A training step is four passes: the forward pass; its reverse pass from
-//! V down to q (the force, all a rollout needs); then, with u = ∂L/∂f, the
-//! tangent of the forward pass along q̇ = u, whose output is u·∂V/∂q; and
-//! the reverse pass of the pair (values, tangents), which gives
-//! ∂L/∂θ = −∂(u·∂V/∂q)/∂θ. Each MLP keeps its hidden activations and their
+//! V down to q (the force, all a rollout needs, with the bars' multipliers
+//! where there are bars); then, with u = ∂L/∂f, the
+//! tangent of the forward pass along q̇ = w, w = ∂L/∂(∂V/∂q) (−u, or through
+//! the bars' multipliers, [`super::bars`]), whose output is w·∂V/∂q; and the
+//! reverse pass of the pair (values, tangents), which gives
+//! ∂L/∂θ = ∂(w·∂V/∂q)/∂θ. Each MLP keeps its hidden activations and their
 //! tangents; squareplus's first and second derivatives come from its output.
-//! Graphs with bars train on candle (their multipliers are not written
-//! here). Checked against candle's autodiff and finite differences
+//! Checked against candle's autodiff and finite differences
 //! (`tests/potential_engine.rs`).
 
+use super::bars::BarForce;
 use super::dense::{dot, dots, squareplus_in_place, sum, times_squareplus_grad, Linear, Mlp};
 use super::gather::{copy_row, gather_rows, scatter_add_rows, Gather};
 use super::named::Named;
@@ -109,7 +111,7 @@ impl Net {
 }
 
 /// LGN's or HGN's loss, gradient and accelerations on states of one graph
-/// (fixed edges, no bars), over `threads` threads; the result does not
+/// (fixed edges and bars), over `threads` threads; the result does not
 /// depend on the thread count.
 pub struct Potential {
     net: Net,
@@ -123,7 +125,8 @@ pub struct Potential {
 impl Potential {
     /// An LGN or HGN of `spec` for `graph`, its parameters laid out as
     /// `params` (name and scalar count in the flat vector's order). Graphs
-    /// with bars, contacts or kinematic particles are refused.
+    /// with contacts or kinematic particles are refused (LGN and HGN model
+    /// closed systems).
     pub fn new(
         spec: PotentialSpec,
         params: &[(String, usize)],
@@ -143,11 +146,9 @@ impl Potential {
             )));
         }
         let plan = GraphPlan::new(graph);
-        if !plan.bars.is_empty() || plan.has_contacts() || graph.n_kinematic() > 0 {
+        if plan.has_contacts() || graph.n_kinematic() > 0 {
             return Err(EngineError::Parameters(
-                "LGN and HGN on the native engine take graphs of springs (no bars, contacts \
-                 or kinematic particles): train with --engine candle"
-                    .into(),
+                "LGN and HGN do not model contacts or kinematic particles".into(),
             ));
         }
         Ok(Self {
@@ -299,9 +300,14 @@ struct Chunk {
     apps: Vec<App>,
     /// The readouts' energies (unused but by the forward pass).
     energy: Vec<f64>,
-    /// Force `d × N`, and u = ∂L/∂f.
+    /// Force `d × N`, and ∂L/∂f, then ∂L/∂(∂V/∂q), in `u`.
     f: Vec<f64>,
     u: Vec<f64>,
+    /// The bars' multipliers, each particle's inverse learned mass and
+    /// ∂L/∂(M⁻¹) per coordinate (`d × N`).
+    bars: BarForce,
+    minv: Vec<f64>,
+    gminv: Vec<f64>,
     /// Reverse passes: adjoints of node and edge latents, of an update's
     /// inputs, and seeds.
     gh: Pair,
@@ -379,6 +385,14 @@ impl Chunk {
         let edges = self.lay_out(net, plan, samples, sel);
         self.forward(net, th, nodes, edges);
         self.force(net, th, nodes, edges);
+        if !plan.bars.is_empty() {
+            self.minv.clear();
+            self.minv
+                .extend(plan.types.iter().map(|&ty| 1.0 / net.mass(th, ty)));
+            let states = sel.iter().map(|&i| &samples.states()[i]);
+            let f = &mut self.f[..plan.dim * nodes];
+            self.bars.apply(plan, states, &self.minv, f);
+        }
         self.sse = 0.0;
         if samples.targets().is_empty() {
             return;
@@ -564,9 +578,9 @@ impl Chunk {
         f.iter_mut().for_each(|g| *g = -*g);
     }
 
-    /// The loss of the forces in `f` against the targets, u = ∂L/∂f (times
-    /// `scale`) and, with `scale`, the log-masses' gradients into `grad`
-    /// (zeroed first).
+    /// The loss of the forces in `f` against the targets, ∂L/∂(∂V/∂q) into
+    /// `u` (times `scale`) and the log-masses' gradients into `grad` (zeroed
+    /// first).
     #[inline(always)]
     #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
     fn seed(
@@ -616,10 +630,27 @@ impl Chunk {
             }
         }
         self.sse = sse;
+        // ∂L/∂f → ∂L/∂g, g = ∂V/∂q: f = −g, or through the bars' multipliers
+        // (which depend on the masses too: ∂M⁻¹/∂log m = −M⁻¹).
+        if plan.bars.is_empty() {
+            u.iter_mut().for_each(|x| *x = -*x);
+            return;
+        }
+        let gminv = room(&mut self.gminv, d * nodes);
+        gminv.fill(0.0);
+        self.bars
+            .reverse(plan, &self.minv, &self.f[..d * nodes], u, gminv);
+        for s in 0..sel.len() {
+            for (p, &ty) in plan.types.iter().enumerate() {
+                for c in 0..d {
+                    grad[net.log_mass + ty] -= gminv[c * nodes + s * n + p] * self.minv[p];
+                }
+            }
+        }
     }
 
-    /// The tangent of the forward pass along q̇ = u: every latent's tangent
-    /// and every MLP's hidden tangents.
+    /// The tangent of the forward pass along q̇ = u (= ∂L/∂(∂V/∂q)): every
+    /// latent's tangent and every MLP's hidden tangents.
     #[inline(always)]
     #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
     fn tangent(&mut self, net: &Net, th: &[f64], nodes: usize, edges: usize) {
@@ -684,7 +715,7 @@ impl Chunk {
     }
 
     /// The reverse pass of (values, tangents) from the readouts' output
-    /// tangents (seeded −1: ∂L/∂θ = −∂(u·∂V/∂q)/∂θ) to every weight,
+    /// tangents (seeded 1: ∂L/∂θ = ∂(u·∂V/∂q)/∂θ) to every weight,
     /// accumulated into `grad`.
     #[inline(always)]
     #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
@@ -698,7 +729,7 @@ impl Chunk {
         let rows = nodes.max(edges);
         room(&mut self.zeros, rows).fill(0.0);
         let seed = room(&mut self.ones, rows);
-        seed.fill(-1.0);
+        seed.fill(1.0);
         let (seed, zeros) = (&self.ones[..rows], &self.zeros[..rows]);
         let (grad, s) = (&mut self.grad[..th.len()], &mut self.s);
         let k = net.readout();
@@ -903,10 +934,14 @@ fn act_reverse(y: &[f64], yt: &[f64], g: &mut [f64], gt: &mut [f64]) {
     }
 }
 
-/// `y = mlp(x)` over `r` rows, keeping the hidden activations in `app`.
+/// `y = mlp(x)` over `r` rows (none: nothing to do), keeping the hidden
+/// activations in `app`.
 #[inline(always)]
 #[allow(clippy::inline_always)]
 fn mlp_forward(m: &Mlp, th: &[f64], x: &[f64], r: usize, app: &mut App, y: &mut [f64]) {
+    if r == 0 {
+        return;
+    }
     let k = m.layers.len();
     slots(&mut app.a, k - 1);
     slots(&mut app.at, k - 1);
@@ -936,6 +971,9 @@ fn mlp_input_grad(
     gx: &mut [f64],
     s: &mut [Vec<f64>; 4],
 ) {
+    if r == 0 {
+        return;
+    }
     let [cur, next, ..] = s;
     let mut first = true;
     for li in (1..m.layers.len()).rev() {
@@ -955,6 +993,9 @@ fn mlp_input_grad(
 #[inline(always)]
 #[allow(clippy::inline_always)]
 fn mlp_tangent(m: &Mlp, th: &[f64], xt: &[f64], r: usize, app: &mut App, yt: &mut [f64]) {
+    if r == 0 {
+        return;
+    }
     let k = m.layers.len();
     for (li, l) in m.layers.iter().enumerate() {
         let (done, rest) = app.at.split_at_mut(li);
@@ -983,6 +1024,10 @@ fn mlp_dual_reverse(
     gx: Option<(&mut [f64], &mut [f64])>,
     s: &mut [Vec<f64>; 4],
 ) {
+    if r == 0 {
+        // No rows (a graph without edges): nothing flows.
+        return;
+    }
     let [c, ct, n, nt] = s;
     let mut first = true;
     for li in (0..m.layers.len()).rev() {

@@ -25,7 +25,7 @@ pub mod drive;
 mod error;
 pub mod forces;
 pub mod integrator;
-mod linalg;
+pub(crate) mod linalg;
 pub mod neighbors;
 pub mod projection;
 pub mod rk4;
