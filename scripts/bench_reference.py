@@ -501,6 +501,12 @@ def harness(a):
     return res, items, info, rounds
 
 
+def sha256(path):
+    import hashlib
+    with open(path, "rb") as f:
+        return hashlib.sha256(f.read()).hexdigest()
+
+
 def table(a, res, items, info, rounds):
     def git(d, *args):
         try:
@@ -512,9 +518,11 @@ def table(a, res, items, info, rounds):
     up = subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
     head = [f"date: {now}; rounds: {rounds} (interleaved mcgnode, JAX 1 thread, JAX 2 threads per row)",
             f"load before: {a.load_before}; after: {up}",
-            f"mcgnode commit {git(HERE, 'rev-parse', '--short', 'HEAD')}"
-            f"{' (dirty)' if git(HERE, 'status', '--porcelain', '--untracked-files=no') else ''}"
-            f", binary {a.mcgnode}",
+            f"mcgnode commit {a.commit_at_start} at the start"
+            + (f" ({end} at the end)" if (end := git(HERE, 'rev-parse', '--short', 'HEAD'))
+               != a.commit_at_start else "")
+            + f"{' (dirty)' if git(HERE, 'status', '--porcelain', '--untracked-files=no') else ''}"
+            f", binary {a.mcgnode} (sha256 {sha256(a.mcgnode)[:12]}: a build, matched by its hash)",
             f"REF_DIR commit {git(a.ref, 'rev-parse', '--short', 'HEAD')}; jax {info.get('jax')}"
             f", jax-md {a.jaxmd}"
             + (f"; LGN/HGN from benchmarking_graph at {git(a.ref2, 'rev-parse', '--short', 'HEAD')}"
@@ -602,7 +610,7 @@ def main():
     q.add_argument("--allow-end", action="store_true")
     q = sub.add_parser("harness")
     for o in ["--ref", "--work", "--mcgnode", "--venv-python", "--json", "--lock",
-              "--load-before", "--jaxmd", "--ref2", "--work2"]:
+              "--load-before", "--commit-at-start", "--jaxmd", "--ref2", "--work2"]:
         q.add_argument(o)
     q.add_argument("--rounds", type=int, default=3)
     q.add_argument("--quick", action="store_true")

@@ -107,8 +107,9 @@ cp "$BIN_SRC" "$BIN"
 
 "$PY" "$ROOT/scripts/bench_reference.py" prepare "$REF" "$WORK" "${BASE_PREP[@]}"
 LOAD=$(uptime)
+COMMIT=$(git -C "$ROOT" rev-parse --short HEAD 2>/dev/null || echo "?")
 echo "load at start: $LOAD"
 exec "$PY" "$ROOT/scripts/bench_reference.py" harness --ref "$REF" --work "$WORK" \
     --mcgnode "$BIN" --venv-python "$VENV/bin/python" --lock "$LOCK" \
-    --load-before "$LOAD" --jaxmd 0.2.29 --rounds "$ROUNDS" "${QUICK[@]}" "${JSON[@]}" \
+    --load-before "$LOAD" --commit-at-start "$COMMIT" --jaxmd 0.2.29 --rounds "$ROUNDS" "${QUICK[@]}" "${JSON[@]}" \
     "${BASE_RUN[@]}"
