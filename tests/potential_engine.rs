@@ -9,13 +9,13 @@
 
 mod common;
 
+use common::baselines::{candle_accelerations, candle_loss_grad, rel};
+
 use mcgnode::baselines::{BaselineHyper, BaselineNet, Kind};
 use mcgnode::engine::Potential;
-use mcgnode::gnode::batch::Batch;
-use mcgnode::gnode::plan::GraphPlan;
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State};
-use mcgnode::train::{flat_params, CandleObjective, Objective};
+use mcgnode::train::flat_params;
 use rand::{Rng, SeedableRng};
 
 /// States, target accelerations and a model of `kind` with random weights
@@ -55,39 +55,9 @@ fn case(
     (graph, states, acc, net)
 }
 
-/// Candle's loss and gradient of the reference network on states `idx`.
-fn candle(
-    net: &BaselineNet,
-    graph: &Graph,
-    (states, acc): (&[State], &[Vec<f64>]),
-    theta: &[f64],
-    idx: &[usize],
-) -> (f64, Vec<f64>) {
-    let plan = GraphPlan::new(graph);
-    let loss = |idx: &[usize]| {
-        let s: Vec<&State> = idx.iter().map(|&i| &states[i]).collect();
-        let a: Vec<&[f64]> = idx.iter().map(|&i| acc[i].as_slice()).collect();
-        let b = Batch::new(&plan, &s, Some(&a), net.hyper.types)?;
-        net.loss(&b, &graph.masses)
-    };
-    let mut obj = CandleObjective::new(&net.store, loss);
-    let mut grad = vec![0.0; theta.len()];
-    let l = obj.loss_grad(theta, idx, &mut grad).unwrap();
-    (l, grad)
-}
-
 fn native(net: &BaselineNet, graph: &Graph, threads: usize) -> Potential {
     let spec = net.hyper.potential_spec().expect("LGN or HGN");
     Potential::new(spec, &net.param_sizes().unwrap(), graph, threads).unwrap()
-}
-
-fn rel(a: &[f64], b: &[f64]) -> f64 {
-    let scale = b.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
-        / scale
 }
 
 /// A ring of springs, a chain of bars (the multipliers) and a 3D cube.
@@ -105,7 +75,7 @@ fn gradients_equal_candle() {
             let (graph, states, acc, net) = case(kind, system, n);
             let theta = flat_params(&net.store).unwrap();
             let idx: Vec<usize> = (0..states.len()).rev().step_by(2).collect();
-            let (lc, gc) = candle(&net, &graph, (&states, &acc), &theta, &idx);
+            let (lc, gc) = candle_loss_grad(&net, &graph, (&states, &acc), &theta, &idx);
             let mut pot = native(&net, &graph, 1);
             let mut gn = vec![0.0; theta.len()];
             let samples = pot.samples(&states, &acc);
@@ -138,7 +108,7 @@ fn a_graph_without_edges_equals_candle() {
         graph.edges.clear();
         let theta = flat_params(&net.store).unwrap();
         let idx: Vec<usize> = (0..states.len()).collect();
-        let (lc, gc) = candle(&net, &graph, (&states, &acc), &theta, &idx);
+        let (lc, gc) = candle_loss_grad(&net, &graph, (&states, &acc), &theta, &idx);
         let mut pot = native(&net, &graph, 1);
         let mut gn = vec![0.0; theta.len()];
         let samples = pot.samples(&states, &acc);
@@ -221,16 +191,7 @@ fn accelerations_equal_candle() {
             let ours = native(&net, &graph, 1)
                 .accelerations(&theta, &states)
                 .concat();
-            let plan = GraphPlan::new(&graph);
-            let refs: Vec<&State> = states.iter().collect();
-            let b = Batch::new(&plan, &refs, None, net.hyper.types).unwrap();
-            let theirs: Vec<f64> = net
-                .acceleration(&b)
-                .unwrap()
-                .flatten_all()
-                .unwrap()
-                .to_vec1()
-                .unwrap();
+            let theirs = candle_accelerations(&net, &graph, &states);
             let r = rel(&ours, &theirs);
             assert!(
                 r <= 1e-12,
@@ -317,17 +278,7 @@ fn rollouts_run_on_the_executor() {
         trained
             .acceleration_batch(&graph, &states, &mut ours)
             .unwrap();
-        let plan = GraphPlan::new(&graph);
-        let refs: Vec<&State> = states.iter().collect();
-        let b = Batch::new(&plan, &refs, None, trained.net.hyper.types).unwrap();
-        let theirs: Vec<f64> = trained
-            .net
-            .acceleration(&b)
-            .unwrap()
-            .flatten_all()
-            .unwrap()
-            .to_vec1()
-            .unwrap();
+        let theirs = candle_accelerations(&trained.net, &graph, &states);
         let r = rel(&ours.concat(), &theirs);
         assert!(
             r <= 1e-12,

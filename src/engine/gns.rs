@@ -143,23 +143,17 @@ impl Gns {
         grad: &mut [f64],
     ) -> f64 {
         let count = (idx.len() * self.plan.free_ndof()).max(1) as f64;
-        grad.fill(0.0);
-        let mut sse = 0.0;
-        self.run(theta, samples, idx, Some(1.0 / count), |c| {
-            sse += c.sse;
-            for (g, x) in grad.iter_mut().zip(&c.grad) {
-                *g += x;
-            }
-        });
-        sse / count
+        super::mean_loss(count, Some(grad), |fold| {
+            self.run(theta, samples, idx, Some(1.0 / count), fold);
+        })
     }
 
     /// [`Gns::loss_grad`]'s loss alone.
     pub fn loss(&mut self, theta: &[f64], samples: &Samples, idx: &[usize]) -> f64 {
         let count = (idx.len() * self.plan.free_ndof()).max(1) as f64;
-        let mut sse = 0.0;
-        self.run(theta, samples, idx, None, |c| sse += c.sse);
-        sse / count
+        super::mean_loss(count, None, |fold| {
+            self.run(theta, samples, idx, None, fold)
+        })
     }
 
     /// Predicted accelerations of `states` (node-major, one vector each):
@@ -172,15 +166,8 @@ impl Gns {
         let mut at = parts.iter();
         let samples = self.samples(states, &[]);
         self.run(theta, &samples, &idx, None, |c| {
-            let &(a, b) = at.next().expect("one fold per chunk");
-            let nodes = (b - a) * n;
-            for (s, o) in out[a..b].iter_mut().enumerate() {
-                for p in 0..n {
-                    for k in 0..d {
-                        o[p * d + k] = c.out[k * nodes + s * n + p];
-                    }
-                }
-            }
+            let &part = at.next().expect("one fold per chunk");
+            super::node_major(&mut out, part, (n, d), &c.out);
         });
         out
     }
@@ -204,6 +191,16 @@ impl Gns {
             c.run(net, plan, theta, (samples, &idx[a..b]), scale);
         };
         super::in_waves(&mut self.chunks, self.crew.as_ref(), &parts, work, fold);
+    }
+}
+
+impl super::ChunkLoss for Chunk {
+    fn sse(&self) -> f64 {
+        self.sse
+    }
+
+    fn grad(&self) -> &[f64] {
+        &self.grad
     }
 }
 

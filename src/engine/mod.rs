@@ -129,6 +129,57 @@ fn in_waves<C: Default + Send>(
     }
 }
 
+/// A chunk's squared error and gradient, as [`mean_loss`] sums them.
+trait ChunkLoss {
+    fn sse(&self) -> f64;
+    fn grad(&self) -> &[f64];
+}
+
+impl ChunkLoss for Chunk {
+    fn sse(&self) -> f64 {
+        self.sse
+    }
+
+    fn grad(&self) -> &[f64] {
+        &self.grad
+    }
+}
+
+/// The mean of `count` squared errors and, with `grad` (zeroed first), its
+/// gradient: the chunks that `run` hands its fold, summed in their order.
+fn mean_loss<C: ChunkLoss>(
+    count: f64,
+    mut grad: Option<&mut [f64]>,
+    run: impl FnOnce(&mut dyn FnMut(&C)),
+) -> f64 {
+    if let Some(g) = grad.as_deref_mut() {
+        g.fill(0.0);
+    }
+    let mut sse = 0.0;
+    run(&mut |c: &C| {
+        sse += c.sse();
+        if let Some(g) = grad.as_deref_mut() {
+            for (x, y) in g.iter_mut().zip(c.grad()) {
+                *x += y;
+            }
+        }
+    });
+    sse / count
+}
+
+/// The states `a..b` of `out` (node-major, `n · d` each) from a chunk's
+/// feature-major rows (`d × nodes`).
+fn node_major(out: &mut [Vec<f64>], (a, b): (usize, usize), (n, d): (usize, usize), rows: &[f64]) {
+    let nodes = (b - a) * n;
+    for (s, o) in out[a..b].iter_mut().enumerate() {
+        for p in 0..n {
+            for k in 0..d {
+                o[p * d + k] = rows[k * nodes + s * n + p];
+            }
+        }
+    }
+}
+
 /// The threads of an engine running on `threads` threads (none beside the
 /// caller for one).
 fn crew(threads: usize) -> Result<Option<Crew>, EngineError> {
@@ -226,23 +277,17 @@ impl Engine {
         grad: &mut [f64],
     ) -> f64 {
         let count = (idx.len() * self.model.plan.free_ndof()) as f64;
-        grad.fill(0.0);
-        let mut sse = 0.0;
-        self.run(theta, samples, idx, Some(1.0 / count), |c| {
-            sse += c.sse;
-            for (g, x) in grad.iter_mut().zip(&c.grad) {
-                *g += x;
-            }
-        });
-        sse / count
+        mean_loss(count, Some(grad), |fold| {
+            self.run(theta, samples, idx, Some(1.0 / count), fold);
+        })
     }
 
     /// Mean squared error of the accelerations of states `idx` (no gradient).
     pub fn loss(&mut self, theta: &[f64], samples: &Samples, idx: &[usize]) -> f64 {
         let count = (idx.len() * self.model.plan.free_ndof()) as f64;
-        let mut sse = 0.0;
-        self.run(theta, samples, idx, None, |c| sse += c.sse);
-        sse / count
+        mean_loss(count, None, |fold| {
+            self.run(theta, samples, idx, None, fold)
+        })
     }
 
     /// Predicted accelerations of `states` (node-major, one vector each).

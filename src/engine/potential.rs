@@ -104,6 +104,12 @@ impl Net {
         2 + 2 * self.spec.rounds
     }
 
+    /// Latent width, dimension, one-hot width and rounds.
+    fn sizes(&self) -> (usize, usize, usize, usize) {
+        let s = &self.spec;
+        (s.latent, s.dim, s.types, s.rounds)
+    }
+
     /// The learned mass of type `ty`.
     fn mass(&self, th: &[f64], ty: usize) -> f64 {
         th[self.log_mass + ty].exp()
@@ -184,23 +190,17 @@ impl Potential {
         grad: &mut [f64],
     ) -> f64 {
         let count = (idx.len() * self.plan.ndof()).max(1) as f64;
-        grad.fill(0.0);
-        let mut sse = 0.0;
-        self.run(theta, samples, idx, Some(1.0 / count), |c| {
-            sse += c.sse;
-            for (g, x) in grad.iter_mut().zip(&c.grad) {
-                *g += x;
-            }
-        });
-        sse / count
+        super::mean_loss(count, Some(grad), |fold| {
+            self.run(theta, samples, idx, Some(1.0 / count), fold);
+        })
     }
 
     /// [`Potential::loss_grad`]'s loss alone.
     pub fn loss(&mut self, theta: &[f64], samples: &Samples, idx: &[usize]) -> f64 {
         let count = (idx.len() * self.plan.ndof()).max(1) as f64;
-        let mut sse = 0.0;
-        self.run(theta, samples, idx, None, |c| sse += c.sse);
-        sse / count
+        super::mean_loss(count, None, |fold| {
+            self.run(theta, samples, idx, None, fold)
+        })
     }
 
     /// Predicted accelerations f / m of `states` (node-major, one vector
@@ -212,20 +212,22 @@ impl Potential {
         let parts = super::split(idx.len(), n + self.plan.recv.len());
         let mut at = parts.iter();
         let samples = self.samples(states, &[]);
-        let (net, types) = (&self.net, &self.plan.types);
-        let m: Vec<f64> = types.iter().map(|&t| net.mass(theta, t)).collect();
-        let run = |c: &Chunk| {
-            let &(a, b) = at.next().expect("one fold per chunk");
-            let nodes = (b - a) * n;
-            for (s, o) in out[a..b].iter_mut().enumerate() {
-                for p in 0..n {
-                    for k in 0..d {
-                        o[p * d + k] = c.f[k * nodes + s * n + p] / m[p];
-                    }
-                }
+        self.run(theta, &samples, &idx, None, |c| {
+            let &part = at.next().expect("one fold per chunk");
+            super::node_major(&mut out, part, (n, d), &c.f);
+        });
+        // q̈ = f / m.
+        let m: Vec<f64> = self
+            .plan
+            .types
+            .iter()
+            .map(|&t| self.net.mass(theta, t))
+            .collect();
+        for o in &mut out {
+            for (x, &mp) in o.chunks_exact_mut(d).zip(&m) {
+                x.iter_mut().for_each(|v| *v /= mp);
             }
-        };
-        self.run(theta, &samples, &idx, None, run);
+        }
         out
     }
 
@@ -276,6 +278,16 @@ impl Pair {
     /// The values (read) and the tangents (to write, grown to `len`).
     fn tangents(&mut self, len: usize) -> (&[f64], &mut [f64]) {
         (&self.v[..len], room(&mut self.t, len))
+    }
+}
+
+impl super::ChunkLoss for Chunk {
+    fn sse(&self) -> f64 {
+        self.sse
+    }
+
+    fn grad(&self) -> &[f64] {
+        &self.grad
     }
 }
 
@@ -444,12 +456,7 @@ impl Chunk {
     #[inline(always)]
     #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
     fn forward(&mut self, net: &Net, th: &[f64], nodes: usize, edges: usize) {
-        let (l, d, t, rounds) = (
-            net.spec.latent,
-            net.spec.dim,
-            net.spec.types,
-            net.spec.rounds,
-        );
+        let (l, d, t, rounds) = net.sizes();
         slots(&mut self.apps, net.mlps.len());
         slots(&mut self.h, rounds + 1);
         slots(&mut self.e, rounds + 1);
@@ -472,19 +479,13 @@ impl Chunk {
         for r in 0..rounds {
             let (we, wv) = net.round(r);
             let ein = room(&mut self.ein[r].v, 3 * l * edges);
-            let (e_part, hrs) = ein.split_at_mut(l * edges);
-            e_part.copy_from_slice(&self.e[r].v[..l * edges]);
-            let (hr, hs) = hrs.split_at_mut(l * edges);
-            gather_rows(hr, &self.h[r].v[..l * nodes], &self.recv, Gather::Set);
-            gather_rows(hs, &self.h[r].v[..l * nodes], &self.send, Gather::Set);
+            let (e, h) = (&self.e[r].v[..l * edges], &self.h[r].v[..l * nodes]);
+            edge_update_inputs(ein, e, h, (&self.recv, &self.send));
             let e_new = room(&mut self.e[r + 1].v, l * edges);
             mlp_forward(we, th, ein, edges, &mut self.apps[2 + 2 * r], e_new);
             squareplus_in_place(e_new);
             let nin = room(&mut self.nin[r].v, 2 * l * nodes);
-            let (h_part, agg) = nin.split_at_mut(l * nodes);
-            h_part.copy_from_slice(&self.h[r].v[..l * nodes]);
-            agg.fill(0.0);
-            scatter_add_rows(agg, e_new, &self.recv);
+            node_update_inputs(nin, &self.h[r].v[..l * nodes], e_new, &self.recv);
             let h_new = room(&mut self.h[r + 1].v, l * nodes);
             mlp_forward(wv, th, nin, nodes, &mut self.apps[3 + 2 * r], h_new);
             squareplus_in_place(h_new);
@@ -516,12 +517,7 @@ impl Chunk {
     #[inline(always)]
     #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
     fn force(&mut self, net: &Net, th: &[f64], nodes: usize, edges: usize) {
-        let (l, d, t, rounds) = (
-            net.spec.latent,
-            net.spec.dim,
-            net.spec.types,
-            net.spec.rounds,
-        );
+        let (l, d, t, rounds) = net.sizes();
         let ones = room(&mut self.ones, nodes.max(edges));
         ones.fill(1.0);
         let k = net.readout();
@@ -654,12 +650,7 @@ impl Chunk {
     #[inline(always)]
     #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
     fn tangent(&mut self, net: &Net, th: &[f64], nodes: usize, edges: usize) {
-        let (l, d, t, rounds) = (
-            net.spec.latent,
-            net.spec.dim,
-            net.spec.types,
-            net.spec.rounds,
-        );
+        let (l, d, t, rounds) = net.sizes();
         let xt = &mut self.x.t[..(t + d) * nodes];
         xt[t * nodes..].copy_from_slice(&self.u[..d * nodes]);
         let wt = room(&mut self.w.t, d * edges);
@@ -673,19 +664,13 @@ impl Chunk {
         for r in 0..rounds {
             let (we, wv) = net.round(r);
             let eint = room(&mut self.ein[r].t, 3 * l * edges);
-            let (e_part, hrs) = eint.split_at_mut(l * edges);
-            e_part.copy_from_slice(&self.e[r].t[..l * edges]);
-            let (hr, hs) = hrs.split_at_mut(l * edges);
-            gather_rows(hr, &self.h[r].t[..l * nodes], &self.recv, Gather::Set);
-            gather_rows(hs, &self.h[r].t[..l * nodes], &self.send, Gather::Set);
+            let (et, ht) = (&self.e[r].t[..l * edges], &self.h[r].t[..l * nodes]);
+            edge_update_inputs(eint, et, ht, (&self.recv, &self.send));
             let (e_new, et_new) = self.e[r + 1].tangents(l * edges);
             mlp_tangent(we, th, eint, edges, &mut self.apps[2 + 2 * r], et_new);
             times_squareplus_grad(et_new, e_new);
             let nint = room(&mut self.nin[r].t, 2 * l * nodes);
-            let (h_part, agg) = nint.split_at_mut(l * nodes);
-            h_part.copy_from_slice(&self.h[r].t[..l * nodes]);
-            agg.fill(0.0);
-            scatter_add_rows(agg, et_new, &self.recv);
+            node_update_inputs(nint, &self.h[r].t[..l * nodes], et_new, &self.recv);
             let (h_new, ht_new) = self.h[r + 1].tangents(l * nodes);
             mlp_tangent(wv, th, nint, nodes, &mut self.apps[3 + 2 * r], ht_new);
             times_squareplus_grad(ht_new, h_new);
@@ -720,12 +705,7 @@ impl Chunk {
     #[inline(always)]
     #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
     fn reverse(&mut self, net: &Net, th: &[f64], nodes: usize, edges: usize) {
-        let (l, d, t, rounds) = (
-            net.spec.latent,
-            net.spec.dim,
-            net.spec.types,
-            net.spec.rounds,
-        );
+        let (l, d, t, rounds) = net.sizes();
         let rows = nodes.max(edges);
         room(&mut self.zeros, rows).fill(0.0);
         let seed = room(&mut self.ones, rows);
@@ -838,6 +818,29 @@ impl Chunk {
         scatter_add_rows(ght, ghr, &self.recv);
         scatter_add_rows(ght, ghs, &self.send);
     }
+}
+
+/// A round's edge-update inputs `[e; h_recv; h_send]` (`3L × E`) from the
+/// edge and node latents, or from their tangents (the map is linear).
+#[inline(always)]
+#[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
+fn edge_update_inputs(out: &mut [f64], e: &[f64], h: &[f64], (recv, send): (&[usize], &[usize])) {
+    let (e_part, hrs) = out.split_at_mut(e.len());
+    e_part.copy_from_slice(e);
+    let (hr, hs) = hrs.split_at_mut(e.len());
+    gather_rows(hr, h, recv, Gather::Set);
+    gather_rows(hs, h, send, Gather::Set);
+}
+
+/// A round's node-update inputs `[h; Σ_recv e]` (`2L × N`) from the node
+/// latents and the updated edge latents, or from their tangents.
+#[inline(always)]
+#[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
+fn node_update_inputs(out: &mut [f64], h: &[f64], e_new: &[f64], recv: &[usize]) {
+    let (h_part, agg) = out.split_at_mut(h.len());
+    h_part.copy_from_slice(h);
+    agg.fill(0.0);
+    scatter_add_rows(agg, e_new, recv);
 }
 
 /// Per coordinate row: `w[e] = q[recv[e]] − q[send[e]]` (`d × E` from `d × N`).

@@ -3,6 +3,7 @@
 #![allow(dead_code)] // each test binary uses its own subset
 
 pub mod bags;
+pub mod baselines;
 pub mod cli;
 
 use std::fs;
