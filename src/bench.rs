@@ -105,7 +105,7 @@ pub fn epoch_seconds(
         Trainee::Baseline(kind, engine, threads) => {
             cfg.engine = engine;
             cfg.threads = threads;
-            let types = g.types.iter().map(|&t| t as usize + 1).max().unwrap_or(1);
+            let types = g.type_count();
             let mut h = crate::baselines::BaselineHyper::new(kind, g.dim, types);
             h.interaction_radius = g.interaction_radius;
             crate::baselines::train_baseline(h, g, states, acc, &cfg, on_epoch)?;

@@ -89,6 +89,16 @@ impl Graph {
         self.types.len()
     }
 
+    /// The one-hot width its particle types need: the largest type id plus
+    /// one (1 without particles).
+    pub fn type_count(&self) -> usize {
+        self.types
+            .iter()
+            .map(|&t| t as usize + 1)
+            .max()
+            .unwrap_or(1)
+    }
+
     /// Number of generalised coordinates, `n * dim`.
     pub fn ndof(&self) -> usize {
         self.n() * self.dim

@@ -23,12 +23,7 @@ pub fn random_model_with(
     seed: u64,
     edit: impl FnOnce(&mut Hyper),
 ) -> Result<(Net, TrainedModel)> {
-    let types = graph
-        .types
-        .iter()
-        .map(|&t| t as usize + 1)
-        .max()
-        .unwrap_or(1);
+    let types = graph.type_count();
     let mut hyper = Hyper::new(variant, graph.dim, types, graph.n());
     hyper.body_force = !graph.anchors.is_empty();
     hyper.interaction_radius = graph.interaction_radius;

@@ -34,12 +34,7 @@ fn case(
             acc.push(s.acc.clone().expect("simulated accelerations"));
         }
     }
-    let types = graph
-        .types
-        .iter()
-        .map(|&t| t as usize + 1)
-        .max()
-        .unwrap_or(1);
+    let types = graph.type_count();
     let mut hyper = BaselineHyper::new(Kind::Gns, graph.dim, types + 1);
     hyper.interaction_radius = graph.interaction_radius;
     let net = BaselineNet::new(hyper, &mut rand_chacha::ChaCha8Rng::seed_from_u64(7)).unwrap();

@@ -37,12 +37,7 @@ fn case(
             acc.push(s.acc.clone().expect("simulated accelerations"));
         }
     }
-    let types = graph
-        .types
-        .iter()
-        .map(|&t| t as usize + 1)
-        .max()
-        .unwrap_or(1);
+    let types = graph.type_count();
     let hyper = BaselineHyper::new(kind, graph.dim, types + 1);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
     let net = BaselineNet::new(hyper, &mut rng).unwrap();

@@ -122,13 +122,7 @@ pub(crate) fn train_baseline_from_bags(
     let mut cfg = cfg.clone();
     cfg.auto = crate::train::Auto::default();
     let cfg = &cfg;
-    let types = ds
-        .graph
-        .types
-        .iter()
-        .map(|&t| t as usize + 1)
-        .max()
-        .unwrap_or(1);
+    let types = ds.graph.type_count();
     let engine = match cfg.engine {
         EngineKind::Native => "the native engine (hand-written gradients)",
         EngineKind::Candle => "candle's autodiff",

@@ -98,12 +98,7 @@ impl Gns {
         graph: &Graph,
         threads: usize,
     ) -> Result<Self, EngineError> {
-        let types = graph
-            .types
-            .iter()
-            .map(|&t| t as usize + 1)
-            .max()
-            .unwrap_or(1);
+        let types = graph.type_count();
         if graph.dim != spec.dim || types > spec.types {
             return Err(EngineError::Parameters(format!(
                 "a GNS of {}D and {} particle types cannot take a {}D graph with {types}",

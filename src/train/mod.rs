@@ -220,14 +220,7 @@ pub(crate) fn train_from_bags(
     if let Some(line) = chosen {
         log(&line);
     }
-    let types = opts.types.unwrap_or(
-        ds.graph
-            .types
-            .iter()
-            .map(|&t| t as usize + 1)
-            .max()
-            .unwrap_or(1),
-    );
+    let types = opts.types.unwrap_or(ds.graph.type_count());
     let mut hyper = opts.hyper(variant, ds.graph.dim, types, ds.graph.n())?;
     hyper.interaction_radius = ds.graph.interaction_radius;
     hyper.body_force = body_force(variant, opts.body_force, data.closed.as_ref(), cfg)?;
