@@ -349,9 +349,9 @@ fn stand_ins_play_echo_and_call() {
     let positions = call["trajectory"]["positions"]
         .as_array()
         .expect("positions");
-    assert_eq!(positions.len(), 3 * 2, "{call}");
-    // State 2 (the last), particle 1: positions[2 * n + 1].
-    let x1 = positions[2 * 2 + 1]["x"].as_f64().expect("x");
+    assert_eq!(positions.len(), 3 * 2 * 2, "{call}");
+    // State 2 (the last), particle 1, x: positions[(2 * n + 1) * d].
+    let x1 = positions[(2 * 2 + 1) * 2].as_f64().expect("x");
     assert!(
         x1 < 1.5,
         "the stretched spring should pull particle 1 back: x = {x1}"

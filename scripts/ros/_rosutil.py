@@ -121,18 +121,28 @@ def spin_until(rclpy, node, predicate, timeout, step=WAIT_STEP):
     return True
 
 
+def vectors(flat, d):
+    """Flat coordinates, d per particle (as a PredictedTrajectory carries them),
+    as geometry_msgs/Vector3s with z = 0 in 2D."""
+    from geometry_msgs.msg import Vector3
+
+    flat = [float(x) for x in flat]
+    pad = [0.0] * (3 - d)
+    return [Vector3(**dict(zip("xyz", flat[i:i + d] + pad))) for i in range(0, len(flat), d)]
+
+
 def predicted_states(traj):
     """The states of a compact mcgnode_msgs/PredictedTrajectory, each with the
     graph of `traj.initial` (types, masses, edges, anchors), its positions and
-    velocities, its stamp in ns and its step number."""
+    velocities (Vector3s, z = 0 in 2D), its stamp in ns and its step number."""
     from types import SimpleNamespace
 
-    init, n = traj.initial, len(traj.initial.positions)
+    init, n, d = traj.initial, len(traj.initial.positions), traj.initial.dimension
     t0 = traj.header.stamp.sec * 1_000_000_000 + traj.header.stamp.nanosec
     return [
         SimpleNamespace(
-            positions=list(traj.positions[k * n:(k + 1) * n]),
-            velocities=list(traj.velocities[k * n:(k + 1) * n]),
+            positions=vectors(traj.positions[k * n * d:(k + 1) * n * d], d),
+            velocities=vectors(traj.velocities[k * n * d:(k + 1) * n * d], d),
             types=init.types, masses=init.masses, edge_a=init.edge_a, edge_b=init.edge_b,
             anchors=init.anchors, system=init.system,
             stamp_ns=t0 + round((k + 1) * traj.dt * 1e9), step=init.step + k + 1,

@@ -49,6 +49,16 @@ impl KeptStates {
         &self.v[k * self.width..(k + 1) * self.width]
     }
 
+    /// Positions of states `k` onwards, one after another.
+    pub fn q_from(&self, k: usize) -> &[f64] {
+        &self.q[(k * self.width).min(self.q.len())..]
+    }
+
+    /// Velocities of states `k` onwards, one after another.
+    pub fn v_from(&self, k: usize) -> &[f64] {
+        &self.v[(k * self.width).min(self.v.len())..]
+    }
+
     /// State `k`, copied out.
     pub fn state(&self, k: usize) -> State {
         State {

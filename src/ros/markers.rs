@@ -53,6 +53,15 @@ fn point(v: &Vector3) -> Point {
     }
 }
 
+/// Flat coordinates of a trajectory (`d` per particle) as points, z = 0 in 2D.
+fn points(flat: &[f64], d: usize) -> impl Iterator<Item = Point> + '_ {
+    flat.chunks(d.max(1)).map(|c| Point {
+        x: c.first().copied().unwrap_or(0.0),
+        y: c.get(1).copied().unwrap_or(0.0),
+        z: c.get(2).copied().unwrap_or(0.0),
+    })
+}
+
 /// Where edge end `i` is: particle `i`, or anchor `i - n` (`None` when out
 /// of range).
 fn endpoint(s: &ParticleState, i: u32) -> Option<Point> {
@@ -172,9 +181,9 @@ fn draw(
     }
     let mut paths = base("predicted_paths", 0, LINE_LIST, 0.03 * l, PATH);
     let mut prev: Vec<Point> = s.positions.iter().map(point).collect();
+    let d = trajectory.dim();
     for k in drawn {
-        for (p, q) in prev.iter_mut().zip(trajectory.positions_at(k)) {
-            let q = point(q);
+        for (p, q) in prev.iter_mut().zip(points(trajectory.positions_at(k), d)) {
             paths.points.extend([*p, q]);
             *p = q;
         }
@@ -210,10 +219,10 @@ pub struct MarkerSource {
 impl MarkerSource {
     /// The parts of a prediction its markers read.
     pub fn new(trajectory: &PredictedTrajectory, forces: &ParticleForces) -> Self {
-        let positions: Vec<Vector3> = drawn_steps(trajectory)
+        let positions: Vec<f64> = drawn_steps(trajectory)
             .flat_map(|k| trajectory.positions_at(k).iter().copied())
             .collect();
-        let n = trajectory.particles().max(1);
+        let n = (trajectory.particles() * trajectory.dim()).max(1);
         let part = PredictedTrajectory {
             header: trajectory.header.clone(),
             initial: trajectory.initial.clone(),
@@ -381,7 +390,7 @@ mod tests {
             let (t, f) = predicted(kind, n, horizon);
             let source = MarkerSource::new(&t, &f);
             if n == 1000 {
-                assert_eq!(source.part.positions.len(), 20 * n, "thinned");
+                assert_eq!(source.part.positions.len(), 20 * n * 2, "thinned (2D)");
             }
             assert_eq!(
                 source.markers(),
@@ -415,7 +424,7 @@ mod tests {
         // Paths: per step, one segment per particle from where it was.
         let paths = by_ns(&m, "predicted_paths")[0];
         assert_eq!(paths.points.len(), 2 * 4 * 7);
-        let last: Vec<Point> = t.positions_at(6).iter().map(point).collect();
+        let last: Vec<Point> = points(t.positions_at(6), 2).collect();
         let ends: Vec<Point> = paths.points.iter().skip(1).step_by(2).copied().collect();
         assert_eq!(&ends[ends.len() - 4..], &last[..]);
         assert_eq!(&paths.points[0], &pos[0]);
@@ -464,7 +473,7 @@ mod tests {
         let m = prediction_markers(&t, &f);
         let paths = by_ns(&m, "predicted_paths")[0];
         assert_eq!(paths.points.len(), 2 * MAX_PATH_SEGMENTS);
-        let last: Vec<Point> = t.positions_at(99).iter().map(point).collect();
+        let last: Vec<Point> = points(t.positions_at(99), 2).collect();
         let ends: Vec<Point> = paths.points.iter().skip(1).step_by(2).copied().collect();
         assert_eq!(&ends[ends.len() - 1000..], &last[..]);
     }

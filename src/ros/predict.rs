@@ -147,7 +147,7 @@ pub fn trajectory_of(
 ) -> PredictedTrajectory {
     let mut kept = KeptStates::default();
     kept.fill(graph.ndof(), states);
-    trajectory_msg(input, graph, dt, &kept, 0)
+    trajectory_msg(input, dt, &kept, 0)
 }
 
 /// The model's states every `dt` for `horizon` steps from `start` (the
@@ -215,7 +215,7 @@ pub fn messages(
     p: &Predicted,
 ) -> Result<Prediction, PredictError> {
     Ok(Prediction {
-        trajectory: trajectory_msg(input, graph, dt, &p.states, 1),
+        trajectory: trajectory_msg(input, dt, &p.states, 1),
         forces: forces_msg(&input.header, graph.dim, &p.forces)?,
     })
 }
@@ -270,19 +270,13 @@ fn integrate(
 /// `input`, `dt` apart.
 fn trajectory_msg(
     input: &ParticleState,
-    graph: &Graph,
     dt: f64,
     states: &KeptStates,
     skip: usize,
 ) -> PredictedTrajectory {
-    let (n, d) = (graph.n(), graph.dim);
+    // The wire's layout is the kept states' own: n·d numbers a state.
     let kept = states.len().saturating_sub(skip);
-    let (mut positions, mut velocities) =
-        (Vec::with_capacity(n * kept), Vec::with_capacity(n * kept));
-    for k in skip..states.len() {
-        positions.extend(states.q(k).chunks(d).map(vector3));
-        velocities.extend(states.v(k).chunks(d).map(vector3));
-    }
+    let (positions, velocities) = (states.q_from(skip).to_vec(), states.v_from(skip).to_vec());
     PredictedTrajectory {
         header: input.header.clone(),
         initial: input.clone(),
@@ -364,7 +358,7 @@ pub fn predict(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::msg::Time;
+    use crate::data::msg::{to_vec3, Time};
     use crate::models::truth::load_truth;
     use crate::physics::{SystemConfig, SystemKind};
     use crate::system::Sample;
@@ -403,11 +397,13 @@ mod tests {
         assert_eq!(p.forces.header, input.header);
         assert_eq!(p.trajectory.initial, input);
         assert_eq!(p.trajectory.steps, 7);
-        assert_eq!(p.trajectory.positions.len(), 7 * 5);
-        assert_eq!(p.trajectory.velocities.len(), 7 * 5);
+        assert_eq!(p.trajectory.positions.len(), 7 * 5 * 2);
+        assert_eq!(p.trajectory.velocities.len(), 7 * 5 * 2);
         assert!(p.trajectory.state(7).is_none());
         let s3 = &p.trajectory.state(2).unwrap();
-        assert_eq!(s3.positions, p.trajectory.positions_at(2));
+        assert_eq!(s3.positions, to_vec3(p.trajectory.positions_at(2), 2));
+        assert_eq!(s3.velocities, to_vec3(p.trajectory.velocities_at(2), 2));
+        assert!(s3.positions.iter().all(|v| v.z == 0.0));
         assert_eq!(s3.edge_a, input.edge_a);
         assert_eq!(s3.step, 13);
         assert_eq!(s3.trajectory_id, 4);

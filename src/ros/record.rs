@@ -302,7 +302,6 @@ pub fn now_ns() -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::data::msg::Vector3;
     use crate::data::scan_bag;
 
     /// A bag that cannot be created says which, and keeps the I/O error as
@@ -448,8 +447,8 @@ mod tests {
         let traj = PredictedTrajectory {
             initial: state,
             steps: 100,
-            positions: vec![Vector3::default(); 500],
-            velocities: vec![Vector3::default(); 500],
+            positions: vec![0.0; 1000],
+            velocities: vec![0.0; 1000],
             ..PredictedTrajectory::default()
         };
         let size = encode_cdr(&traj).unwrap().len();

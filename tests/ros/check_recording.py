@@ -47,9 +47,10 @@ def check_markers(arr, inputs, trajs):
     t = trajs.get(stamp(parts))
     if paths is None or t is None:
         raise SystemExit("FAIL: no predicted paths, or no trajectory for the markers' input")
-    n = len(s.positions)
+    n, d = len(s.positions), s.dimension
     ends = [xyz(p) for p in paths.points[1::2]]
-    if ends[-n:] != [xyz(p) for p in t.positions[-n:]]:
+    last = [float(x) for x in t.positions[len(t.positions) - n * d:]]
+    if ends[-n:] != [tuple(last[i:i + d] + [0.0] * (3 - d)) for i in range(0, n * d, d)]:
         raise SystemExit("FAIL: the predicted paths do not end at the trajectory's last state")
     if not any(m.ns == "forces" for m in ms):
         raise SystemExit("FAIL: no force markers")
@@ -70,10 +71,10 @@ def summarize(items, horizon):
         if name == MARKERS:
             check_markers(m, by_stamp, traj_by_stamp)
     for t in trajs:
-        n = len(t.initial.positions)
-        if t.steps != horizon or len(t.positions) != horizon * n or len(t.velocities) != horizon * n:
+        n, d = len(t.initial.positions), t.initial.dimension
+        if t.steps != horizon or len(t.positions) != horizon * n * d or len(t.velocities) != horizon * n * d:
             raise SystemExit(f"FAIL: recorded trajectory has {t.steps} states ({len(t.positions)} "
-                             f"positions of {n} particles), horizon {horizon}")
+                             f"coordinates of {n} particles in {d}D), horizon {horizon}")
         if stamp(t) not in inputs:
             raise SystemExit(f"FAIL: recorded trajectory stamped {stamp(t)} matches no recorded input")
     return {

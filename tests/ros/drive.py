@@ -183,9 +183,9 @@ class Driver:
         states = ru.predicted_states(traj)
         check(traj.steps == a.horizon and len(states) == a.horizon,
               f"{traj.steps} predicted states, horizon is {a.horizon}")
-        n = len(state.positions)
-        check(len(traj.positions) == len(traj.velocities) == a.horizon * n,
-              f"{len(traj.positions)} positions for {a.horizon} states of {n} particles")
+        n, d = len(state.positions), state.dimension
+        check(len(traj.positions) == len(traj.velocities) == a.horizon * n * d,
+              f"{len(traj.positions)} coordinates for {a.horizon} states of {n} particles in {d}D")
         check(abs(traj.dt - a.dt) < 1e-15, f"trajectory dt {traj.dt} != {a.dt}")
         check(plain_vecs(traj.initial.positions) == plain_vecs(state.positions), "initial state altered")
         for i, s in enumerate(states):
@@ -224,7 +224,7 @@ class Driver:
         (paths,) = by_ns["predicted_paths"]
         n = len(state.positions)
         check(len(paths.points) == 2 * n * traj.steps, "one path segment per particle and step")
-        check(plain_vecs(paths.points[1::2][-n:]) == plain_vecs(traj.positions[-n:]),
+        check(plain_vecs(paths.points[1::2][-n:]) == plain_vecs(ru.predicted_states(traj)[-1].positions),
               "paths do not end at the predicted last state")
         arrows = by_ns.get("forces", [])
         check(len(arrows) == n and all(m.type == Marker.ARROW for m in arrows), "one force arrow per particle")
@@ -271,8 +271,8 @@ class Driver:
         req = Rollout.Request(initial=first, steps=a.horizon, dt=0.0)
         resp, first_call_s = self.call(req, a.timeout)
         check(resp.success, f"Rollout failed: {resp.message}")
-        got = plain_vecs(resp.trajectory.positions)
-        want = plain_vecs(self.trajs[valid[0]].positions)
+        got = list(resp.trajectory.positions)
+        want = list(self.trajs[valid[0]].positions)
         check(got == want, "Rollout and the topic disagree for the same input")
         call_s = []
         for _ in range(a.calls):

@@ -56,8 +56,9 @@ def read_state(path):
 
 
 def last_positions(traj):
-    n = len(traj.initial.masses)
-    return [(p.x, p.y) for p in traj.positions[-n:]]
+    n, d = len(traj.initial.masses), traj.initial.dimension
+    last = traj.positions[len(traj.positions) - n * d:]
+    return [(float(last[i]), float(last[i + 1])) for i in range(0, n * d, d)]
 
 
 def main():

@@ -40,7 +40,7 @@ def main():
 
     def on_traj(m):
         out["predicted"] += 1
-        nums = [c for v in list(m.positions) + list(m.velocities) for c in (v.x, v.y, v.z)]
+        nums = list(m.positions) + list(m.velocities)
         nums += [c for v in m.initial.velocities for c in (v.x, v.y, v.z)]
         if not all(math.isfinite(x) for x in nums):
             out["non_finite"] += 1

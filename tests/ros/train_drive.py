@@ -65,12 +65,12 @@ def read_states(path):
 
 
 def positions(traj):
-    return [(p.x, p.y, p.z) for p in traj.positions]
+    return [float(x) for x in traj.positions]
 
 
 def max_diff(a, b):
     check(len(a) == len(b), f"prediction sizes differ: {len(a)} vs {len(b)}")
-    return max(abs(x - y) for pa, pb in zip(a, b) for x, y in zip(pa, pb))
+    return max(abs(x - y) for x, y in zip(a, b))
 
 
 class Driver:

@@ -142,11 +142,11 @@ mod tests {
                     frame_id: "world".into(),
                     ..Header::default()
                 },
-                initial: state.clone(),
+                initial: state,
                 dt: 0.5,
                 steps: 2,
-                positions: [state.positions.clone(), state.positions.clone()].concat(),
-                velocities: [state.velocities.clone(), state.velocities].concat(),
+                positions: vec![0.5, -1.0, 2.0, 0.25, 1.5, 3.0, -0.5, 4.0],
+                velocities: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0],
             },
         };
         let back: RolloutResponse = decode_cdr(&encode_cdr(&resp).unwrap()).unwrap();
