@@ -55,11 +55,7 @@ fn point(v: &Vector3) -> Point {
 
 /// Flat coordinates of a trajectory (`d` per particle) as points, z = 0 in 2D.
 fn points(flat: &[f64], d: usize) -> impl Iterator<Item = Point> + '_ {
-    flat.chunks(d.max(1)).map(|c| Point {
-        x: c.first().copied().unwrap_or(0.0),
-        y: c.get(1).copied().unwrap_or(0.0),
-        z: c.get(2).copied().unwrap_or(0.0),
-    })
+    flat.chunks(d.max(1)).map(Point::from_coords)
 }
 
 /// Where edge end `i` is: particle `i`, or anchor `i - n` (`None` when out
@@ -222,13 +218,13 @@ impl MarkerSource {
         let positions: Vec<f64> = drawn_steps(trajectory)
             .flat_map(|k| trajectory.positions_at(k).iter().copied())
             .collect();
-        let n = (trajectory.particles() * trajectory.dim()).max(1);
+        let per_state = (trajectory.particles() * trajectory.dim()).max(1);
         let part = PredictedTrajectory {
             header: trajectory.header.clone(),
             initial: trajectory.initial.clone(),
             dt: trajectory.dt,
             #[allow(clippy::cast_possible_truncation)] // at most the original's u32 count
-            steps: (positions.len() / n) as u32,
+            steps: (positions.len() / per_state) as u32,
             positions,
             velocities: vec![],
         };

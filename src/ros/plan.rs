@@ -33,25 +33,18 @@ pub struct PlanSettings {
     pub max_particles: u32,
 }
 
-/// `(x, y, z)` of the first `dim` numbers of `x` (z = 0 in 2D).
-fn xyz(x: &[f64], dim: usize) -> [f64; 3] {
-    std::array::from_fn(|c| if c < dim { x[c] } else { 0.0 })
-}
-
 /// The flat rows of a drive as Points and Vector3s, step-major.
 fn motion(drive: &Drive) -> (Vec<Point>, Vec<Vector3>) {
     let d = drive.dim;
     let points = drive
         .q
         .iter()
-        .flat_map(|r| r.chunks(d).map(move |p| xyz(p, d)))
-        .map(|[x, y, z]| Point { x, y, z })
+        .flat_map(|r| r.chunks(d).map(Point::from_coords))
         .collect();
     let vectors = drive
         .v
         .iter()
-        .flat_map(|r| r.chunks(d).map(move |p| xyz(p, d)))
-        .map(|[x, y, z]| Vector3 { x, y, z })
+        .flat_map(|r| r.chunks(d).map(Vector3::from_coords))
         .collect();
     (points, vectors)
 }
@@ -267,15 +260,7 @@ fn respond(
     let driven = problem.driven();
     let drive = p.best.drive(&driven, d, problem.start, problem.timing);
     let (kinematic_positions, kinematic_velocities) = motion(&drive);
-    let best = p
-        .best
-        .u
-        .chunks(d)
-        .map(|u| {
-            let [x, y, z] = xyz(u, d);
-            Vector3 { x, y, z }
-        })
-        .collect();
+    let best = p.best.u.chunks(d).map(Vector3::from_coords).collect();
     Ok(PlanResponse {
         success: true,
         message: format!(

@@ -287,15 +287,6 @@ fn trajectory_msg(
     }
 }
 
-/// A 2- or 3-component vector on the wire (z = 0 in 2D).
-fn vector3(c: &[f64]) -> Vector3 {
-    Vector3 {
-        x: c[0],
-        y: c[1],
-        z: c.get(2).copied().unwrap_or(0.0),
-    }
-}
-
 /// Converts forces to the wire message (2D forces get z = 0).
 pub fn forces_msg(
     header: &Header,
@@ -310,7 +301,7 @@ pub fn forces_msg(
                 c.len()
             )));
         }
-        Ok(vector3(c))
+        Ok(Vector3::from_coords(c))
     };
     if f.total.len() % dim != 0 {
         let len = f.total.len();

@@ -94,13 +94,7 @@ pub fn to_vec3(flat: &[f64], dim: usize) -> Vec<Vector3> {
     if dim == 0 {
         return Vec::new();
     }
-    flat.chunks(dim)
-        .map(|c| Vector3 {
-            x: c.first().copied().unwrap_or(0.0),
-            y: c.get(1).copied().unwrap_or(0.0),
-            z: c.get(2).copied().unwrap_or(0.0),
-        })
-        .collect()
+    flat.chunks(dim).map(Vector3::from_coords).collect()
 }
 
 /// Index to the u32 of the wire; out-of-range values saturate so that validation
@@ -163,14 +157,7 @@ impl ParticleState {
             anchors: graph
                 .anchors
                 .iter()
-                .map(|a| {
-                    let v = to_vec3(a, dim).first().copied().unwrap_or_default();
-                    Point {
-                        x: v.x,
-                        y: v.y,
-                        z: v.z,
-                    }
-                })
+                .map(|a| Point::from_coords(&a[..a.len().min(dim)]))
                 .collect(),
             interaction_radius: graph.interaction_radius,
             kinematic: graph.kinematic.clone(),

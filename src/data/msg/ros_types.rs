@@ -119,3 +119,49 @@ pub struct Point {
     /// z coordinate (0 in 2D).
     pub z: f64,
 }
+
+impl Vector3 {
+    /// The vector of 2 or 3 coordinates (z = 0 in 2D).
+    pub fn from_coords(c: &[f64]) -> Self {
+        let [x, y, z] = xyz(c);
+        Self { x, y, z }
+    }
+}
+
+impl Point {
+    /// The point of 2 or 3 coordinates (z = 0 in 2D).
+    pub fn from_coords(c: &[f64]) -> Self {
+        let [x, y, z] = xyz(c);
+        Self { x, y, z }
+    }
+}
+
+/// `[x, y, z]` of a particle's flat coordinates, 0 where it has none.
+fn xyz(c: &[f64]) -> [f64; 3] {
+    std::array::from_fn(|i| c.get(i).copied().unwrap_or(0.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Point, Vector3};
+
+    /// 2D coordinates get z = 0, 3D ones keep theirs; a vector and a point
+    /// of the same numbers agree.
+    #[test]
+    fn coordinates_pad_to_three() {
+        let v = Vector3::from_coords(&[1.5, -2.0]);
+        assert_eq!((v.x, v.y, v.z), (1.5, -2.0, 0.0));
+        let p = Point::from_coords(&[1.5, -2.0, 4.0]);
+        assert_eq!((p.x, p.y, p.z), (1.5, -2.0, 4.0));
+        assert_eq!(Point::from_coords(&[]), Point::default());
+        let flat = [1.0, 2.0, 3.0, 4.0];
+        let vs = super::super::to_vec3(&flat, 2);
+        assert_eq!(
+            vs,
+            [
+                Vector3::from_coords(&[1.0, 2.0]),
+                Vector3::from_coords(&[3.0, 4.0])
+            ]
+        );
+    }
+}
