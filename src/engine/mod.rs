@@ -167,6 +167,27 @@ fn mean_loss<C: ChunkLoss>(
     sse / count
 }
 
+/// Node-major outputs (`n · d` each) of `states` states from a run over
+/// all of them: `run(idx, put)` runs the states `idx` in the chunks
+/// [`split`] cuts for `per_state` rows a state and hands each chunk's
+/// feature-major rows (`d × nodes`) to `put`, in chunk order.
+fn node_major_all(
+    states: usize,
+    (n, d): (usize, usize),
+    per_state: usize,
+    run: impl FnOnce(&[usize], &mut dyn FnMut(&[f64])),
+) -> Vec<Vec<f64>> {
+    let mut out = vec![vec![0.0; n * d]; states];
+    let idx: Vec<usize> = (0..states).collect();
+    let parts = split(states, per_state);
+    let mut at = parts.iter();
+    run(&idx, &mut |rows| {
+        let &part = at.next().expect("one fold per chunk");
+        node_major(&mut out, part, (n, d), rows);
+    });
+    out
+}
+
 /// The states `a..b` of `out` (node-major, `n · d` each) from a chunk's
 /// feature-major rows (`d × nodes`).
 fn node_major(out: &mut [Vec<f64>], (a, b): (usize, usize), (n, d): (usize, usize), rows: &[f64]) {

@@ -202,14 +202,10 @@ impl Potential {
     /// each): the forward pass and the force, for rollouts.
     pub fn accelerations(&mut self, theta: &[f64], states: &[State]) -> Vec<Vec<f64>> {
         let (n, d) = (self.plan.n, self.plan.dim);
-        let mut out = vec![vec![0.0; n * d]; states.len()];
-        let idx: Vec<usize> = (0..states.len()).collect();
-        let parts = super::split(idx.len(), n + self.plan.recv.len());
-        let mut at = parts.iter();
         let samples = self.samples(states, &[]);
-        self.run(theta, &samples, &idx, None, |c| {
-            let &part = at.next().expect("one fold per chunk");
-            super::node_major(&mut out, part, (n, d), &c.f);
+        let per_state = n + self.plan.recv.len();
+        let mut out = super::node_major_all(states.len(), (n, d), per_state, |idx, put| {
+            self.run(theta, &samples, idx, None, |c| put(&c.f));
         });
         // q̈ = f / m.
         let m: Vec<f64> = self
