@@ -2,6 +2,7 @@
 //! times of training steps and rollouts, next to the authors' JAX figures
 //! measured on this same 2-core machine.
 
+use crate::dynamics::Timing;
 use crate::error::Result;
 use crate::gnode::{Hyper, Variant};
 use crate::physics::{SystemConfig, SystemKind};
@@ -181,7 +182,7 @@ pub fn plan_seconds(candidates: usize, repeats: usize) -> Result<f64> {
 pub fn plan_gradient_seconds(repeats: usize) -> Result<f64> {
     let (cfg, g, start, m) = plan_setup()?;
     let problem = plan_problem(&cfg, &g, &start, &m);
-    let controls = crate::plan::Controls::zeros(problem.horizon, problem.width());
+    let controls = crate::plan::Controls::zeros(problem.timing.horizon, problem.width());
     let mut times = vec![];
     for _ in 0..repeats {
         let t = Instant::now();
@@ -210,16 +211,12 @@ fn plan_problem<'a>(
     start: &'a State,
     m: &'a crate::kernel::TrainedModel,
 ) -> crate::plan::Problem<'a> {
-    use crate::plan::{Cost, CostKind, Problem, Timing};
+    use crate::plan::{Cost, CostKind, Problem};
     Problem {
         model: m,
         graph: g,
         start,
-        timing: Timing {
-            dt: cfg.dt,
-            substeps: 10,
-        },
-        horizon: 5,
+        timing: Timing::of_step(cfg.dt, 10, 5),
         cost: Cost {
             kind: CostKind::Final,
             particles: vec![18],
@@ -263,7 +260,12 @@ fn model_rollout_seconds(
     let mut times = vec![];
     for _ in 0..repeats {
         let t = Instant::now();
-        let r = m.rollout_with(&mut ws, s0, dt, steps, steps, |_, _, _| {});
+        let r = m.rollout_with(
+            &mut ws,
+            s0,
+            Timing::integration(dt, steps, steps),
+            |_, _, _| {},
+        );
         times.push(t.elapsed().as_secs_f64());
         r.map_err(crate::error::Error::msg)?;
     }
@@ -515,9 +517,12 @@ fn contact_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
         // the Verlet list along the rollout's own positions.
         let mut ws = m.kernel.workspace(&g).map_err(crate::error::Error::msg)?;
         let mut path = vec![];
-        m.rollout_with(&mut ws, &s0, 1e-3, steps, 1, |_, q, _| {
-            path.push(q.to_vec())
-        })
+        m.rollout_with(
+            &mut ws,
+            &s0,
+            Timing::integration(1e-3, steps, 1),
+            |_, q, _| path.push(q.to_vec()),
+        )
         .map_err(crate::error::Error::msg)?;
         let times: Vec<f64> = (0..r.min(5))
             .map(|_| {

@@ -3,7 +3,7 @@
 
 use crate::data::bag::Bag;
 use crate::data::field::{bag_field, bag_system, stamp_interval, unknown_field_error};
-use crate::dynamics::Dynamics;
+use crate::dynamics::{Dynamics, Timing};
 use crate::error::{bail, Result};
 use crate::metrics::{error_curves, summarize, ErrorCurves, StillReference, Summary};
 use crate::physics::{Field, SystemConfig};
@@ -146,15 +146,13 @@ pub fn kinematic_moves(tr: &crate::system::Trajectory) -> bool {
 fn driven_rollout(
     model: &dyn Dynamics,
     tr: &crate::system::Trajectory,
-    dt: f64,
-    steps: usize,
-    every: usize,
+    timing: Timing,
 ) -> Result<crate::dynamics::Rollout> {
     let g = &tr.graph;
-    let drive = crate::physics::Drive::from_samples(g, &tr.samples, dt, steps)
+    let drive = crate::physics::Drive::from_samples(g, &tr.samples, timing.step(), timing.steps())
         .map_err(|e| crate::error::err!("trajectory {}: {e}", tr.id))?;
     let start = tr.samples[0].state.clone();
-    match model.rollout_driven(g, &start, dt, steps, every, &drive) {
+    match model.rollout_driven(g, &start, timing, &drive) {
         Ok(states) => Ok(crate::dynamics::Rollout {
             states,
             diverged_at: None,
@@ -256,14 +254,15 @@ fn score(
             .map(|&i| trajs[i].samples[0].state.clone())
             .collect();
         let driven = members.iter().any(|&i| kinematic_moves(trajs[i]));
+        let timing = Timing::integration(dt, *steps, *every);
         let rollouts = if driven {
             members
                 .iter()
-                .map(|&i| driven_rollout(model, trajs[i], dt, *steps, *every))
+                .map(|&i| driven_rollout(model, trajs[i], timing))
                 .collect::<Result<Vec<_>>>()?
         } else {
             model
-                .rollout_many(g, &starts, dt, *steps, *every)
+                .rollout_many(g, &starts, timing)
                 .map_err(|e| crate::error::err!("trajectory {}: {e}", trajs[members[0]].id))?
         };
         steps_total = *steps;

@@ -47,7 +47,7 @@ pub mod testing;
 pub mod train;
 
 pub use data::{read_bags, read_trajectories, Bag, ParticleState, ReadOptions};
-pub use dynamics::{Dynamics, DynamicsError, Forces, Predicted, Rollout};
+pub use dynamics::{Dynamics, DynamicsError, Forces, Predicted, Rollout, Timing};
 pub use error::{Error, Result};
 pub use evaluate::{evaluate, EvalOptions, Evaluation};
 pub use models::{

@@ -176,7 +176,11 @@ fn no_allocation_in(
         assert_eq!(n, 0, "{what}: {n} allocations in one prediction");
         // The same numbers as the model's own rollout and forces, apart.
         let want = model
-            .rollout_every(&input.graph, &input.state, params.dt, 10, 1)
+            .rollout(
+                &input.graph,
+                &input.state,
+                mcgnode::dynamics::Timing::integration(params.dt, 10, 1),
+            )
             .unwrap();
         assert_eq!(kept.states.to_states(), want, "{what}");
         let f = model.forces(&input.graph, &input.state).unwrap();
@@ -277,15 +281,8 @@ fn two_systems_in_turn_predict_without_allocating() {
 #[test]
 fn the_counter_sees_allocations() {
     let (inputs, model, params) = system(SystemKind::Spring, 5, Variant::Mcgnode, 3);
-    let (n, r) = allocations(|| {
-        predict::predict(
-            model.as_ref(),
-            &inputs[1].message,
-            params.dt,
-            params.horizon,
-            1,
-        )
-    });
+    let (n, r) =
+        allocations(|| predict::predict(model.as_ref(), &inputs[1].message, params.timing()));
     r.unwrap();
     assert!(n > 0, "the allocating path counted {n}");
     // And a refusal is still an error, not a panic, on the kept buffers.

@@ -468,16 +468,30 @@ fn baselines_train_save_load_and_roll_out() {
         t.acceleration(&g, &s[3], &mut x).unwrap();
         back.acceleration(&g, &s[3], &mut y).unwrap();
         assert_eq!(x, y);
-        let roll = back.rollout(&g, &s[0], 0.01, 20).unwrap();
+        let roll = back
+            .rollout(
+                &g,
+                &s[0],
+                mcgnode::dynamics::Timing::integration(0.01, 20, 1),
+            )
+            .unwrap();
         assert_eq!(roll.len(), 21);
         assert!(roll.iter().all(|st| st.validate(&g).is_ok()));
         // Batched lockstep rollouts (one candle call per step for all starts)
         // follow each start's own rollout.
         let starts = [s[0].clone(), s[21].clone(), s[42].clone()];
-        let many = back.rollout_many(&g, &starts, 0.01, 20, 5).unwrap();
+        let many = back
+            .rollout_many(
+                &g,
+                &starts,
+                mcgnode::dynamics::Timing::integration(0.01, 20, 5),
+            )
+            .unwrap();
         for (st, r) in starts.iter().zip(&many) {
             assert_eq!(r.diverged_at, None);
-            let one = back.rollout_every(&g, st, 0.01, 20, 5).unwrap();
+            let one = back
+                .rollout(&g, st, mcgnode::dynamics::Timing::integration(0.01, 20, 5))
+                .unwrap();
             assert_eq!(r.states.len(), one.len());
             for (a, b) in r.states.iter().zip(&one) {
                 let d = max_diff(&a.q, &b.q).max(max_diff(&a.v, &b.v));

@@ -100,11 +100,21 @@ fn rollouts_follow_the_given_motion() {
     let drive = cfg.drive_for(4, 0).unwrap();
     let truth = load_truth("truth:held-chain").unwrap();
     let exact = truth
-        .rollout_driven(&g, &tr.samples[0].state, cfg.dt, 2000, 100, &drive)
+        .rollout_driven(
+            &g,
+            &tr.samples[0].state,
+            mcgnode::dynamics::Timing::integration(cfg.dt, 2000, 100),
+            &drive,
+        )
         .unwrap();
     let recorded = Drive::from_samples(&g, &tr.samples, cfg.dt, 2000).unwrap();
     let interp = truth
-        .rollout_driven(&g, &tr.samples[0].state, cfg.dt, 2000, 100, &recorded)
+        .rollout_driven(
+            &g,
+            &tr.samples[0].state,
+            mcgnode::dynamics::Timing::integration(cfg.dt, 2000, 100),
+            &recorded,
+        )
         .unwrap();
     let worst = |a: &[State]| {
         a.iter()
@@ -118,11 +128,20 @@ fn rollouts_follow_the_given_motion() {
     assert!(w > 0.0 && w < 1e-4, "interpolated drive: {w}");
     // Held still instead, the chain goes elsewhere: the drive matters.
     let held_still = truth
-        .rollout_every(&g, &tr.samples[0].state, cfg.dt, 2000, 100)
+        .rollout(
+            &g,
+            &tr.samples[0].state,
+            mcgnode::dynamics::Timing::integration(cfg.dt, 2000, 100),
+        )
         .unwrap();
     assert!(worst(&held_still) > 1e-2, "{}", worst(&held_still));
     let still = Still
-        .rollout_driven(&g, &tr.samples[0].state, cfg.dt, 2000, 100, &drive)
+        .rollout_driven(
+            &g,
+            &tr.samples[0].state,
+            mcgnode::dynamics::Timing::integration(cfg.dt, 2000, 100),
+            &drive,
+        )
         .unwrap();
     let last = still.last().unwrap();
     let gi = g.n() - 1;
@@ -130,7 +149,12 @@ fn rollouts_follow_the_given_motion() {
     assert_eq!(&last.q[..gi * 2], &tr.samples[0].state.q[..gi * 2]);
     // A drive shorter than the rollout is refused, saying so.
     let e = truth
-        .rollout_driven(&g, &tr.samples[0].state, cfg.dt, 2001, 100, &drive)
+        .rollout_driven(
+            &g,
+            &tr.samples[0].state,
+            mcgnode::dynamics::Timing::integration(cfg.dt, 2001, 100),
+            &drive,
+        )
         .unwrap_err()
         .to_string();
     assert!(

@@ -316,7 +316,11 @@ fn diverged_rollouts_are_scored_not_fatal() {
     let g = c.graph();
     let starts: Vec<State> = trajs.iter().map(|t| t.samples[0].state.clone()).collect();
     let r = Exploding
-        .rollout_many(&g, &starts, 0.01, 3000, 100)
+        .rollout_many(
+            &g,
+            &starts,
+            mcgnode::dynamics::Timing::integration(0.01, 3000, 100),
+        )
         .unwrap();
     for x in &r {
         let at = x.diverged_at.expect("diverges");

@@ -426,7 +426,13 @@ fn model_file_round_trip_and_bad_files() {
         q: vec![f64::NAN; 6],
         v: vec![0.0; 6],
     };
-    assert!(m.rollout(&g, &s_nan, 1e-3, 10).is_err());
+    assert!(m
+        .rollout(
+            &g,
+            &s_nan,
+            mcgnode::dynamics::Timing::integration(1e-3, 10, 1)
+        )
+        .is_err());
 }
 
 /// A branched tree of unit bars in 2D hanging from the origin (node i from
@@ -488,7 +494,13 @@ fn learned_rollouts_keep_bars_exact() {
             let worst = |project: bool| {
                 let mut m = TrainedModel::from_file(model_file(&net)).unwrap();
                 m.kernel.set_project_bars(project);
-                let out = m.rollout_every(&g, &start, 1e-3, 2000, 100).unwrap();
+                let out = m
+                    .rollout(
+                        &g,
+                        &start,
+                        mcgnode::dynamics::Timing::integration(1e-3, 2000, 100),
+                    )
+                    .unwrap();
                 out.iter()
                     .map(|s| mcgnode::physics::constraint_residual(&g, s))
                     .fold(0.0f64, f64::max)
@@ -520,13 +532,21 @@ fn predict_into_equals_rollout_and_forces_apart() {
         let mut p = mcgnode::Predicted::default();
         for (c, g) in [(&c5, &g5), (&c7, &g7), (&c5, &g5)] {
             let s = c.start_for(g, 9, 0);
-            m.predict_into(g, &s, 1e-3, 30, 3, &mut p).unwrap();
+            m.predict_into(
+                g,
+                &s,
+                mcgnode::dynamics::Timing::integration(1e-3, 30, 3),
+                &mut p,
+            )
+            .unwrap();
             let (states, forces) = (p.states.to_states(), p.forces.to_forces(g.dim));
             // A fresh model: nothing kept from the calls before.
             let fresh = TrainedModel::from_file(m.file.clone()).unwrap();
             assert_eq!(
                 states,
-                fresh.rollout_every(g, &s, 1e-3, 30, 3).unwrap(),
+                fresh
+                    .rollout(g, &s, mcgnode::dynamics::Timing::integration(1e-3, 30, 3))
+                    .unwrap(),
                 "{v}"
             );
             assert_eq!(forces, fresh.forces(g, &s).unwrap(), "{v}");

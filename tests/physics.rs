@@ -527,7 +527,13 @@ fn truth_implements_dynamics() {
     let truth = Truth {
         field: p.field.clone(),
     };
-    let states = truth.rollout(&pg, &start, 1e-4, 500).unwrap();
+    let states = truth
+        .rollout(
+            &pg,
+            &start,
+            mcgnode::dynamics::Timing::integration(1e-4, 500, 1),
+        )
+        .unwrap();
     assert_eq!(states.len(), 501);
     let mut it = Integrator::new(&pg, &p.field, 1e-4, start).unwrap();
     it.advance(500);

@@ -6,9 +6,10 @@ mod common;
 
 use common::cli::{log_ok, ok, run_in};
 use mcgnode::dynamics::Dynamics;
+use mcgnode::dynamics::Timing;
 use mcgnode::models::truth::truth;
 use mcgnode::physics::{SystemConfig, SystemKind};
-use mcgnode::plan::{plan, Controls, Cost, CostKind, Problem, Sampler, Timing};
+use mcgnode::plan::{plan, Controls, Cost, CostKind, Problem, Sampler};
 use std::process::Output;
 
 fn problem<'a>(
@@ -22,13 +23,9 @@ fn problem<'a>(
         model,
         graph: g,
         start,
-        timing: Timing {
-            dt: 0.005,
-            substeps: 20,
-        },
-        // 3 s: the chain's free end follows its gripper slowly (its swing
-        // takes about 4.7 s).
-        horizon: 30,
+        // Horizon 3 s: the chain's free end follows its gripper slowly (its
+        // swing takes about 4.7 s).
+        timing: Timing::of_step(0.005, 20, 30),
         cost: Cost {
             kind: CostKind::Final,
             particles: vec![end],

@@ -16,10 +16,11 @@ mod common;
 
 use common::cli::{ok, run_in};
 use mcgnode::dynamics::Dynamics;
+use mcgnode::dynamics::Timing;
 use mcgnode::gnode::Variant;
 use mcgnode::models::truth::truth;
 use mcgnode::physics::{SystemConfig, SystemKind};
-use mcgnode::plan::{refine, Controls, Cost, CostKind, Problem, Timing};
+use mcgnode::plan::{refine, Controls, Cost, CostKind, Problem};
 use mcgnode::system::{Edge, EdgeKind, Endpoint, Graph, State};
 use mcgnode::testing::random_model;
 use rand::{Rng, SeedableRng};
@@ -69,11 +70,7 @@ fn problem<'a>(model: &'a dyn Dynamics, g: &'a Graph, start: &'a State) -> Probl
         model,
         graph: g,
         start,
-        timing: Timing {
-            dt: 0.01,
-            substeps: 4,
-        },
-        horizon: 3,
+        timing: Timing::of_step(0.01, 4, 3),
         cost: Cost {
             kind: CostKind::Along,
             particles: vec![end, end - 1],
@@ -103,9 +100,9 @@ fn check(name: &str, p: &Problem, seed: u64) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let width = p.width();
     let u = Controls {
-        steps: p.horizon,
+        steps: p.timing.horizon,
         width,
-        u: (0..p.horizon * width)
+        u: (0..p.timing.horizon * width)
             .map(|_| rng.random_range(-0.6..0.6))
             .collect(),
     };
@@ -288,7 +285,7 @@ fn candle_gradient(net: &mcgnode::gnode::Net, p: &Problem, u: &Controls) -> (f64
     let (n, d) = (g.n(), g.dim);
     let nd = n * d;
     let plan = mcgnode::gnode::plan::GraphPlan::new(g);
-    let (dt, sub) = (p.timing.dt, p.timing.substeps);
+    let (dt, sub) = (p.timing.step(), p.timing.substeps());
     let driven = p.driven();
     let w = driven.len() * d;
     let uv = Var::from_slice(&u.u, u.u.len(), &dev).unwrap();
@@ -361,13 +358,12 @@ fn candle_gradient(net: &mcgnode::gnode::Net, p: &Problem, u: &Controls) -> (f64
                 let term = ((qi - tgt).unwrap().sqr().unwrap().sum_all().unwrap()
                     + (vi.sqr().unwrap().sum_all().unwrap() * c.speed).unwrap())
                 .unwrap();
-                cost = (cost + (term / p.horizon as f64).unwrap()).unwrap();
+                cost = (cost + (term / p.timing.horizon as f64).unwrap()).unwrap();
             }
         }
     }
-    let effort = (uv.as_tensor().sqr().unwrap().sum_all().unwrap()
-        * (c.effort * p.timing.control_step()))
-    .unwrap();
+    let effort =
+        (uv.as_tensor().sqr().unwrap().sum_all().unwrap() * (c.effort * p.timing.dt)).unwrap();
     let cost = (cost + effort).unwrap();
     let grads = cost.backward().unwrap();
     let gu = grads.get(&uv).unwrap().to_vec1::<f64>().unwrap();
@@ -397,9 +393,9 @@ fn gradients_equal_candle_autodiff_through_the_rollout() {
         let p = problem(&model, g, start);
         let mut rng = ChaCha8Rng::seed_from_u64(k as u64);
         let u = Controls {
-            steps: p.horizon,
+            steps: p.timing.horizon,
             width: p.width(),
-            u: (0..p.horizon * p.width())
+            u: (0..p.timing.horizon * p.width())
                 .map(|_| rng.random_range(-0.6..0.6))
                 .collect(),
         };

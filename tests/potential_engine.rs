@@ -283,7 +283,11 @@ fn rollouts_run_on_the_executor() {
         trained.acceleration(&graph, &states[3], &mut one).unwrap();
         assert_eq!(one, ours[3], "{kind}");
         let r = trained
-            .rollout_every(&graph, &states[0], 1e-3, 50, 10)
+            .rollout(
+                &graph,
+                &states[0],
+                mcgnode::dynamics::Timing::integration(1e-3, 50, 10),
+            )
             .unwrap();
         assert_eq!(r.len(), 6);
         assert!(

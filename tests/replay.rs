@@ -216,7 +216,7 @@ fn node_recordings_replay_with_the_nodes_settings() {
         msg.header.stamp = Time::from_nanos(base_ns + (s.t * 1e9).round() as i64);
         let ns = msg.header.stamp.as_nanos() as u64;
         rec.state(ns, &msg).expect("recording a state");
-        let p = predict(&truth, &msg, params.dt, 5, params.substeps).expect("prediction");
+        let p = predict(&truth, &msg, params.timing().with_horizon(5)).expect("prediction");
         rec.prediction(ns + 1000, &p.trajectory, &p.forces)
             .expect("recording a prediction");
     }
@@ -447,18 +447,20 @@ fn cli_prints_table_json_and_plot() {
 /// The node's Replay service work, without ROS: its dt and horizon, JSON out.
 #[test]
 fn replay_as_node_uses_the_nodes_settings() {
+    use mcgnode::dynamics::Timing;
     use mcgnode::replay::replay_as_node;
     let model = TrainedModel::load(&root("bags/models/spring5-mcgnode.json")).expect("model");
     let bag = root("bags/spring5-sample.mcap");
-    let (r, json) = replay_as_node(&model, bag.to_str().unwrap(), 0.1, 4, 20).expect("replay");
+    let (r, json) =
+        replay_as_node(&model, bag.to_str().unwrap(), Timing::new(0.1, 4, 20)).expect("replay");
     assert_eq!(r.dt, 0.025, "dt / substeps");
     assert!((r.horizon - 2.0).abs() < 1e-12);
     let j: serde_json::Value = serde_json::from_str(&json).expect("JSON");
     assert_eq!(j["starts"], r.starts);
     assert_eq!(j["summary"]["re"]["gmean"][3], r.summary.re.gmean[3]);
-    let e = replay_as_node(&model, " ", 0.1, 1, 20).unwrap_err();
+    let e = replay_as_node(&model, " ", Timing::new(0.1, 1, 20)).unwrap_err();
     assert!(format!("{e:#}").contains("no bag given"), "{e:#}");
-    let e = replay_as_node(&model, "/nonexistent/b.mcap", 0.1, 1, 20).unwrap_err();
+    let e = replay_as_node(&model, "/nonexistent/b.mcap", Timing::new(0.1, 1, 20)).unwrap_err();
     assert!(format!("{e:#}").contains("/nonexistent/b.mcap"), "{e:#}");
 }
 

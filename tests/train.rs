@@ -150,7 +150,13 @@ fn mcgnode_conserves_momentum_on_unseen_sizes() {
     let p0 = s0.momentum(&bg);
     let scale: f64 = p0.iter().map(|x| x * x).sum::<f64>().sqrt();
     let drift = |m: &TrainedModel| {
-        let traj = m.rollout(&bg, &s0, 1e-3, 20_000).unwrap();
+        let traj = m
+            .rollout(
+                &bg,
+                &s0,
+                mcgnode::dynamics::Timing::integration(1e-3, 20_000, 1),
+            )
+            .unwrap();
         let p = traj.last().unwrap().momentum(&bg);
         p.iter()
             .zip(&p0)
@@ -170,7 +176,13 @@ fn mcgnode_conserves_momentum_on_unseen_sizes() {
     for n in [3usize, 20] {
         let c = SystemConfig::new(SystemKind::Spring, n);
         let gg = c.graph();
-        let tr = mc.rollout(&gg, &c.start_for(&gg, 5, 0), 1e-3, 100).unwrap();
+        let tr = mc
+            .rollout(
+                &gg,
+                &c.start_for(&gg, 5, 0),
+                mcgnode::dynamics::Timing::integration(1e-3, 100, 1),
+            )
+            .unwrap();
         assert_eq!(tr.len(), 101);
     }
 }

@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use mcgnode::compat::TrainedFor;
-use mcgnode::dynamics::{Dynamics, DynamicsError, STILL};
+use mcgnode::dynamics::{Dynamics, DynamicsError, Timing, STILL};
 use mcgnode::models::truth::TRUTH_PREFIX;
 use mcgnode::models::ModelKind;
 use mcgnode::physics::Field;
@@ -531,13 +531,11 @@ impl Model {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(lib_err(DynamicsError::TimeStep(dt)));
         }
-        let every = every.max(1);
+        let timing = Timing::integration(dt, steps, every.max(1));
         let states = py
             .detach(|| match drive {
-                Some(d) => self
-                    .dynamics
-                    .rollout_driven(graph, start, dt, steps, every, d),
-                None => self.dynamics.rollout_every(graph, start, dt, steps, every),
+                Some(d) => self.dynamics.rollout_driven(graph, start, timing, d),
+                None => self.dynamics.rollout(graph, start, timing),
             })
             .map_err(lib_err)?;
         let (n, d) = (graph.n(), graph.dim);

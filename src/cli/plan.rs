@@ -3,9 +3,10 @@
 
 use super::choices::{CostArg, SamplerArg};
 use super::{parse_vector, Vector};
+use crate::dynamics::Timing;
 use crate::models::{load_any_model, ModelRef};
 use crate::physics::SystemKind;
-use crate::plan::{plan, refine, Controls, Cost, Plan, Problem, Refined, Sampler, Timing};
+use crate::plan::{plan, refine, Controls, Cost, Plan, Problem, Refined, Sampler};
 use crate::system::State;
 use anyhow::{bail, Result};
 use serde_json::json;
@@ -118,11 +119,7 @@ pub fn run(a: Args) -> Result<()> {
         model: model.as_ref(),
         graph: g,
         start: &from.state,
-        timing: Timing {
-            dt,
-            substeps: a.substeps,
-        },
-        horizon: a.horizon,
+        timing: Timing::of_step(dt, a.substeps, a.horizon),
         cost: Cost {
             kind: a.cost.into(),
             particles: vec![particle],
@@ -217,9 +214,9 @@ fn print_json(
         "particle": particle,
         "target": a.target.0,
         "driven": problem.driven(),
-        "dt": problem.timing.dt,
+        "dt": problem.timing.step(),
         "substeps": a.substeps,
-        "control_step": problem.timing.control_step(),
+        "control_step": problem.timing.dt,
         "cost": cost,
         "search_cost": p.cost,
         "hold_still_cost": still,

@@ -1,7 +1,7 @@
 //! `mcgnode rollout`.
 
 use crate::data::bag::write_trajectories_with_field;
-use crate::dynamics::Dynamics;
+use crate::dynamics::{Dynamics, Timing};
 use crate::models::{load_any_model, ModelRef};
 use crate::physics::SystemKind;
 use crate::system::{Graph, Sample, State, Trajectory};
@@ -82,7 +82,8 @@ pub fn run(a: Args) -> Result<()> {
         graph: graph.clone(),
         samples: recorded,
     };
-    let states = roll_out(model.as_ref(), &moving, &start, dt, steps, every)?;
+    let timing = Timing::integration(dt, steps, every);
+    let states = roll_out(model.as_ref(), &moving, &start, timing)?;
     let secs = t0.elapsed().as_secs_f64();
     let samples = with_accelerations(model.as_ref(), &graph, states, dt, every)?;
     let n = samples.len();
@@ -114,8 +115,7 @@ pub fn run(a: Args) -> Result<()> {
     Ok(())
 }
 
-/// Rolls `model` out from `start` for `steps` steps of `dt`, keeping every
-/// `every`-th state. The GNODE family integrates on the allocation-free
+/// Rolls `model` out from `start` as `timing` says. The GNODE family integrates on the allocation-free
 /// kernel, baselines on candle. Kinematic particles that move in the
 /// recording `moving` follow it (cubic Hermite between its states);
 /// otherwise they are held.
@@ -123,11 +123,10 @@ fn roll_out(
     model: &dyn Dynamics,
     moving: &Trajectory,
     start: &State,
-    dt: f64,
-    steps: usize,
-    every: usize,
+    timing: Timing,
 ) -> Result<Vec<State>> {
     let graph = &moving.graph;
+    let (dt, steps) = (timing.step(), timing.steps());
     Ok(if crate::evaluate::kinematic_moves(moving) {
         let drive = crate::physics::Drive::from_samples(graph, &moving.samples, dt, steps)?;
         let have = moving
@@ -140,9 +139,9 @@ fn roll_out(
                  --duration {have} or less"
             );
         }
-        model.rollout_driven(graph, start, dt, steps, every, &drive)?
+        model.rollout_driven(graph, start, timing, &drive)?
     } else {
-        model.rollout_every(graph, start, dt, steps, every)?
+        model.rollout(graph, start, timing)?
     })
 }
 

@@ -8,7 +8,9 @@ use crate::physics::{verlet, Drive, DriveError, PhysicsError};
 use crate::system::{Graph, State, SystemError};
 
 mod predicted;
+mod timing;
 pub use predicted::{FlatForces, KeptStates, Predicted};
+pub use timing::Timing;
 
 /// Forces a model attributes to a state.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -69,23 +71,19 @@ pub struct Rollout {
 /// still-finite states of a step together, so models with a large per-call
 /// cost (the candle baselines) pay it once per step rather than once per
 /// trajectory. The arithmetic per trajectory is exactly that of
-/// [`Dynamics::rollout_every`]; a trajectory that turns non-finite is dropped
+/// [`Dynamics::rollout`]; a trajectory that turns non-finite is dropped
 /// from the batch and reported in [`Rollout::diverged_at`].
 pub fn verlet_lockstep(
     graph: &Graph,
     starts: &[State],
-    dt: f64,
-    steps: usize,
-    every: usize,
+    timing: Timing,
     mut accel: impl FnMut(&[State], &mut [Vec<f64>]) -> Result<(), DynamicsError>,
 ) -> Result<Vec<Rollout>, DynamicsError> {
-    if !(dt.is_finite() && dt > 0.0) {
-        return Err(DynamicsError::TimeStep(dt));
-    }
+    timing.check()?;
     for s in starts {
         s.validate(graph)?;
     }
-    let every = every.max(1);
+    let (dt, steps) = (timing.step(), timing.steps());
     let mut out: Vec<Rollout> = starts
         .iter()
         .map(|s| Rollout {
@@ -119,7 +117,7 @@ pub fn verlet_lockstep(
                 active.remove(k);
                 continue;
             }
-            if step % every == 0 {
+            if timing.keeps(step) {
                 out[active[k]].states.push(s.clone());
             }
             k += 1;
@@ -128,21 +126,19 @@ pub fn verlet_lockstep(
     Ok(out)
 }
 
-/// [`Dynamics::rollout_many`] as one [`Dynamics::rollout_every`] per start,
+/// [`Dynamics::rollout_many`] as one [`Dynamics::rollout`] per start,
 /// for models whose rollouts do not diverge (an error fails the call).
 pub fn rollout_each(
     model: &(impl Dynamics + ?Sized),
     graph: &Graph,
     starts: &[State],
-    dt: f64,
-    steps: usize,
-    every: usize,
+    timing: Timing,
 ) -> Result<Vec<Rollout>, DynamicsError> {
     starts
         .iter()
         .map(|s| {
             Ok(Rollout {
-                states: model.rollout_every(graph, s, dt, steps, every)?,
+                states: model.rollout(graph, s, timing)?,
                 diverged_at: None,
             })
         })
@@ -186,7 +182,7 @@ pub trait Dynamics: Send + Sync {
     /// Forces at a state.
     fn forces(&self, graph: &Graph, state: &State) -> Result<Forces, DynamicsError>;
 
-    /// [`Dynamics::rollout_every`] and the [`Dynamics::forces`] at `start`
+    /// [`Dynamics::rollout`] and the [`Dynamics::forces`] at `start`
     /// into `out` (the start first), what the node publishes for each state.
     /// Models with a forward pass take the forces from the rollout's first
     /// evaluation and, on a graph they saw last, allocate nothing.
@@ -194,12 +190,10 @@ pub trait Dynamics: Send + Sync {
         &self,
         graph: &Graph,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
         out: &mut Predicted,
     ) -> Result<(), DynamicsError> {
-        let states = self.rollout_every(graph, start, dt, steps, every)?;
+        let states = self.rollout(graph, start, timing)?;
         let forces = self
             .forces(graph, start)
             .map_err(|e| DynamicsError::Forces(Box::new(e)))?;
@@ -208,24 +202,23 @@ pub trait Dynamics: Send + Sync {
         Ok(())
     }
 
-    /// Velocity-Verlet rollout of `steps` steps of `dt`, keeping `start` and
-    /// every `every`-th state (so a coarse output can come from a fine
+    /// Velocity-Verlet rollout timed by `timing`: its [`Timing::steps`]
+    /// steps of [`Timing::step`], keeping `start` and every
+    /// [`Timing::stride`]-th state (so a coarse output can come from a fine
     /// integration step).
     ///
     /// The velocity-dependent acceleration at the new position is evaluated at
     /// the half-step velocity, which keeps the scheme explicit.
-    fn rollout_every(
+    fn rollout(
         &self,
         graph: &Graph,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
     ) -> Result<Vec<State>, DynamicsError> {
         self.supports(graph)?;
         start.validate(graph)?;
-        let every = every.max(1);
-        let mut out = Vec::with_capacity(steps / every + 1);
+        let (dt, steps) = (timing.step(), timing.steps());
+        let mut out = Vec::with_capacity(timing.kept());
         let mut s = start.clone();
         let mut a = vec![0.0; graph.ndof()];
         self.acceleration(graph, &s, &mut a)?;
@@ -237,7 +230,7 @@ pub trait Dynamics: Send + Sync {
             if s.q.iter().chain(&s.v).any(|x| !x.is_finite()) {
                 return Err(DynamicsError::Diverged(step));
             }
-            if step % every == 0 {
+            if timing.keeps(step) {
                 out.push(s.clone());
             }
         }
@@ -254,8 +247,8 @@ pub trait Dynamics: Send + Sync {
         Ok(None)
     }
 
-    /// [`Dynamics::rollout_every`] with the kinematic particles moved along
-    /// `drive` (one row per integration step, at least `steps` of them):
+    /// [`Dynamics::rollout`] with the kinematic particles moved along
+    /// `drive` (one row per integration step, at least [`Timing::steps`]):
     /// before each evaluation they are placed where it has them, so the free
     /// particles respond to that motion. The start's driven particles are
     /// placed at row 0 too. The default evaluates [`Dynamics::acceleration`]
@@ -264,19 +257,15 @@ pub trait Dynamics: Send + Sync {
         &self,
         graph: &Graph,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
         drive: &Drive,
     ) -> Result<Vec<State>, DynamicsError> {
         self.supports(graph)?;
         start.validate(graph)?;
+        let (dt, steps) = (timing.step(), timing.steps());
         drive.check(graph, steps)?;
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(DynamicsError::TimeStep(dt));
-        }
-        let every = every.max(1);
-        let mut out = Vec::with_capacity(steps / every + 1);
+        timing.check()?;
+        let mut out = Vec::with_capacity(timing.kept());
         let mut s = start.clone();
         drive.place(0, &mut s.q, &mut s.v);
         let mut a = vec![0.0; graph.ndof()];
@@ -305,7 +294,7 @@ pub trait Dynamics: Send + Sync {
             if s.q.iter().chain(&s.v).any(|x| !x.is_finite()) {
                 return Err(DynamicsError::Diverged(step));
             }
-            if step % every == 0 {
+            if timing.keeps(step) {
                 out.push(s.clone());
             }
         }
@@ -328,7 +317,7 @@ pub trait Dynamics: Send + Sync {
     }
 
     /// Rollouts of many starts of one graph, each as
-    /// [`Dynamics::rollout_every`] would do it, except that a rollout that
+    /// [`Dynamics::rollout`] would do it, except that a rollout that
     /// diverges keeps its states so far (see [`Rollout`]) instead of failing
     /// the call. The default steps all starts in lockstep with
     /// [`Dynamics::acceleration_batch`] ([`verlet_lockstep`]).
@@ -336,25 +325,12 @@ pub trait Dynamics: Send + Sync {
         &self,
         graph: &Graph,
         starts: &[State],
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
     ) -> Result<Vec<Rollout>, DynamicsError> {
         self.supports(graph)?;
-        verlet_lockstep(graph, starts, dt, steps, every, |s, a| {
+        verlet_lockstep(graph, starts, timing, |s, a| {
             self.acceleration_batch(graph, s, a)
         })
-    }
-
-    /// Velocity-Verlet rollout: `steps + 1` states including `start`.
-    fn rollout(
-        &self,
-        graph: &Graph,
-        start: &State,
-        dt: f64,
-        steps: usize,
-    ) -> Result<Vec<State>, DynamicsError> {
-        self.rollout_every(graph, start, dt, steps, 1)
     }
 }
 
@@ -404,16 +380,14 @@ impl Dynamics for Still {
         })
     }
 
-    fn rollout_every(
+    fn rollout(
         &self,
         graph: &Graph,
         start: &State,
-        _dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
     ) -> Result<Vec<State>, DynamicsError> {
         start.validate(graph)?;
-        Ok(vec![Self::at_rest(start); steps / every.max(1) + 1])
+        Ok(vec![Self::at_rest(start); timing.kept()])
     }
 
     /// The free particles stand still; the driven ones follow their motion.
@@ -421,15 +395,13 @@ impl Dynamics for Still {
         &self,
         graph: &Graph,
         start: &State,
-        _dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
         drive: &Drive,
     ) -> Result<Vec<State>, DynamicsError> {
         start.validate(graph)?;
-        drive.check(graph, steps)?;
-        Ok((0..=steps)
-            .step_by(every.max(1))
+        drive.check(graph, timing.steps())?;
+        Ok((0..=timing.steps())
+            .step_by(timing.stride())
             .map(|k| {
                 let mut s = Self::at_rest(start);
                 drive.place(k, &mut s.q, &mut s.v);
@@ -442,11 +414,9 @@ impl Dynamics for Still {
         &self,
         graph: &Graph,
         starts: &[State],
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
     ) -> Result<Vec<Rollout>, DynamicsError> {
-        rollout_each(self, graph, starts, dt, steps, every)
+        rollout_each(self, graph, starts, timing)
     }
 }
 

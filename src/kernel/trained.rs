@@ -1,7 +1,7 @@
 //! A trained model, loaded from its file, running on the inference kernel.
 
 use super::{Kernel, Workspace};
-use crate::dynamics::{Dynamics, DynamicsError, FlatForces, Forces, Predicted, Rollout};
+use crate::dynamics::{Dynamics, DynamicsError, FlatForces, Forces, Predicted, Rollout, Timing};
 use crate::error::Result;
 use crate::gnode::file::ModelFile;
 use crate::physics::{verlet, Drive};
@@ -83,17 +83,15 @@ impl TrainedModel {
 
     /// Velocity-Verlet rollout on the kernel (with SHAKE/RATTLE onto the bars,
     /// using the learned masses, for constrained models), calling `visit(step, q, v)` for the
-    /// start and every `every`-th step. Nothing is allocated inside the loop.
+    /// start and every state `timing` keeps. Nothing is allocated inside the loop.
     pub fn rollout_with(
         &self,
         ws: &mut Workspace,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
         visit: impl FnMut(usize, &[f64], &[f64]),
     ) -> Result<(), DynamicsError> {
-        match self.verlet(ws, start, dt, steps, every, None, |_, _| {}, visit) {
+        match self.verlet(ws, start, timing, None, |_, _| {}, visit) {
             None => Ok(()),
             Some(step) => Err(DynamicsError::Diverged(step)),
         }
@@ -102,14 +100,11 @@ impl TrainedModel {
     /// The loop of [`TrainedModel::rollout_with`]; `first(ws, q̈)` sees the
     /// workspace after the evaluation at the start (its forces). Returns the
     /// step at which the state became non-finite, if it did.
-    #[allow(clippy::too_many_arguments)]
     fn verlet(
         &self,
         ws: &mut Workspace,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
         drive: Option<&Drive>,
         first: impl FnOnce(&mut Workspace, &[f64]),
         mut visit: impl FnMut(usize, &[f64], &[f64]),
@@ -130,25 +125,22 @@ impl TrainedModel {
         self.kernel.acceleration(ws, &q, &v, &mut a);
         first(ws, &a);
         visit(0, &q, &v);
-        let diverged = self.steps(ws, (&mut q, &mut v, &mut a), dt, steps, every, drive, visit);
+        let diverged = self.steps(ws, (&mut q, &mut v, &mut a), timing, drive, visit);
         ws.rollout = [q, v, a];
         diverged
     }
 
     /// Steps 1 to `steps` of [`TrainedModel::verlet`] from (q, q̇, q̈).
-    #[allow(clippy::too_many_arguments)]
     fn steps(
         &self,
         ws: &mut Workspace,
         (q, v, a): (&mut [f64], &mut [f64], &mut [f64]),
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
         drive: Option<&Drive>,
         mut visit: impl FnMut(usize, &[f64], &[f64]),
     ) -> Option<usize> {
-        let every = every.max(1);
-        for step in 1..=steps {
+        let dt = timing.step();
+        for step in 1..=timing.steps() {
             // The projector and the forward pass borrow the workspace apart
             // (taking the projector out and back copied it twice a step, 3 %
             // of a 5-spring rollout).
@@ -168,7 +160,7 @@ impl TrainedModel {
             if q.iter().chain(v.iter()).any(|x| !x.is_finite()) {
                 return Some(step);
             }
-            if step % every == 0 {
+            if timing.keeps(step) {
                 visit(step, q, v);
             }
         }
@@ -179,19 +171,16 @@ impl TrainedModel {
 impl TrainedModel {
     /// The states [`TrainedModel::verlet`] visits, kept (up to the
     /// divergence, whose step comes with them).
-    #[allow(clippy::too_many_arguments)]
     fn states(
         &self,
         ws: &mut Workspace,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
         drive: Option<&Drive>,
         first: impl FnOnce(&mut Workspace, &[f64]),
     ) -> (Vec<State>, Option<usize>) {
-        let mut out = Vec::with_capacity(steps / every.max(1) + 1);
-        let diverged = self.verlet(ws, start, dt, steps, every, drive, first, |_, q, v| {
+        let mut out = Vec::with_capacity(timing.kept());
+        let diverged = self.verlet(ws, start, timing, drive, first, |_, q, v| {
             out.push(State {
                 q: q.to_vec(),
                 v: v.to_vec(),
@@ -224,18 +213,14 @@ impl TrainedModel {
     fn check_rollout(
         graph: &Graph,
         start: &State,
-        dt: f64,
-        steps: usize,
+        timing: Timing,
         drive: Option<&Drive>,
     ) -> Result<(), DynamicsError> {
         start.validate(graph)?;
         if let Some(drive) = drive {
-            drive.check(graph, steps)?;
+            drive.check(graph, timing.steps())?;
         }
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(DynamicsError::TimeStep(dt));
-        }
-        Ok(())
+        timing.check()
     }
 
     /// A rollout on the kept workspace, its states returned.
@@ -243,12 +228,12 @@ impl TrainedModel {
         &self,
         graph: &Graph,
         start: &State,
-        (dt, steps, every): (f64, usize, usize),
+        timing: Timing,
         drive: Option<&Drive>,
     ) -> Result<Vec<State>, DynamicsError> {
-        Self::check_rollout(graph, start, dt, steps, drive)?;
+        Self::check_rollout(graph, start, timing, drive)?;
         let mut kept = self.cache.take(&self.kernel, graph)?;
-        let (out, diverged) = self.states(&mut kept.1, start, dt, steps, every, drive, |_, _| {});
+        let (out, diverged) = self.states(&mut kept.1, start, timing, drive, |_, _| {});
         self.cache.put(kept);
         match diverged {
             None => Ok(out),
@@ -317,15 +302,13 @@ impl Dynamics for TrainedModel {
         Ok(f.to_forces(graph.dim))
     }
 
-    fn rollout_every(
+    fn rollout(
         &self,
         graph: &Graph,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
     ) -> Result<Vec<State>, DynamicsError> {
-        self.kept_rollout(graph, start, (dt, steps, every), None)
+        self.kept_rollout(graph, start, timing, None)
     }
 
     /// On the kept workspace, the driven particles placed before every
@@ -334,12 +317,10 @@ impl Dynamics for TrainedModel {
         &self,
         graph: &Graph,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
         drive: &Drive,
     ) -> Result<Vec<State>, DynamicsError> {
-        self.kept_rollout(graph, start, (dt, steps, every), Some(drive))
+        self.kept_rollout(graph, start, timing, Some(drive))
     }
 
     /// The forces come from the rollout's first evaluation, in the same
@@ -349,18 +330,16 @@ impl Dynamics for TrainedModel {
         &self,
         graph: &Graph,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
         out: &mut Predicted,
     ) -> Result<(), DynamicsError> {
-        Self::check_rollout(graph, start, dt, steps, None)?;
+        Self::check_rollout(graph, start, timing, None)?;
         let mut kept = self.cache.take(&self.kernel, graph)?;
         out.states.clear(graph.ndof());
         let (kept_states, forces) = (&mut out.states, &mut out.forces);
         let first = |ws: &mut Workspace, acc: &[f64]| self.forces_of(ws, graph, acc, forces);
         let visit = |_, q: &[f64], v: &[f64]| kept_states.push(q, v);
-        let diverged = self.verlet(&mut kept.1, start, dt, steps, every, None, first, visit);
+        let diverged = self.verlet(&mut kept.1, start, timing, None, first, visit);
         self.cache.put(kept);
         match diverged {
             None => Ok(()),
@@ -376,13 +355,9 @@ impl Dynamics for TrainedModel {
         &self,
         graph: &Graph,
         starts: &[State],
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: Timing,
     ) -> Result<Vec<Rollout>, DynamicsError> {
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(DynamicsError::TimeStep(dt));
-        }
+        timing.check()?;
         let ws = self.kernel.workspace(graph)?;
         for start in starts {
             start.validate(graph)?;
@@ -395,7 +370,7 @@ impl Dynamics for TrainedModel {
                 .iter()
                 .map(|start| {
                     let (states, diverged_at) =
-                        self.states(&mut ws, start, dt, steps, every, None, |_, _| {});
+                        self.states(&mut ws, start, timing, None, |_, _| {});
                     Rollout {
                         states,
                         diverged_at,

@@ -70,25 +70,21 @@ impl Dynamics for Checked {
         &self,
         graph: &Graph,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: crate::dynamics::Timing,
         out: &mut Predicted,
     ) -> Result<(), DynamicsError> {
         self.check(graph)?;
-        self.inner.predict_into(graph, start, dt, steps, every, out)
+        self.inner.predict_into(graph, start, timing, out)
     }
 
-    fn rollout_every(
+    fn rollout(
         &self,
         graph: &Graph,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: crate::dynamics::Timing,
     ) -> Result<Vec<State>, DynamicsError> {
         self.check(graph)?;
-        self.inner.rollout_every(graph, start, dt, steps, every)
+        self.inner.rollout(graph, start, timing)
     }
 
     fn state_gradient(
@@ -103,14 +99,11 @@ impl Dynamics for Checked {
         &self,
         graph: &Graph,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: crate::dynamics::Timing,
         drive: &crate::physics::Drive,
     ) -> Result<Vec<State>, DynamicsError> {
         self.check(graph)?;
-        self.inner
-            .rollout_driven(graph, start, dt, steps, every, drive)
+        self.inner.rollout_driven(graph, start, timing, drive)
     }
 
     fn acceleration_batch(
@@ -127,22 +120,9 @@ impl Dynamics for Checked {
         &self,
         graph: &Graph,
         starts: &[State],
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: crate::dynamics::Timing,
     ) -> Result<Vec<Rollout>, DynamicsError> {
         self.check(graph)?;
-        self.inner.rollout_many(graph, starts, dt, steps, every)
-    }
-
-    fn rollout(
-        &self,
-        graph: &Graph,
-        start: &State,
-        dt: f64,
-        steps: usize,
-    ) -> Result<Vec<State>, DynamicsError> {
-        self.check(graph)?;
-        self.inner.rollout(graph, start, dt, steps)
+        self.inner.rollout_many(graph, starts, timing)
     }
 }

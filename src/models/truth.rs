@@ -121,17 +121,15 @@ impl Dynamics for Truth {
 
     /// Velocity Verlet with SHAKE/RATTLE (exact for bars), not the generic
     /// unconstrained rollout.
-    fn rollout_every(
+    fn rollout(
         &self,
         graph: &Graph,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: crate::dynamics::Timing,
     ) -> Result<Vec<State>, DynamicsError> {
         self.supports(graph)?;
-        let it = Integrator::new(graph, &self.field, dt, start.clone())?;
-        integrate(it, graph, steps, every)
+        let it = Integrator::new(graph, &self.field, timing.step(), start.clone())?;
+        integrate(it, graph, timing)
     }
 
     /// The simulator's integrator with the kinematic particles on `drive`.
@@ -139,46 +137,41 @@ impl Dynamics for Truth {
         &self,
         graph: &Graph,
         start: &State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: crate::dynamics::Timing,
         drive: &crate::physics::Drive,
     ) -> Result<Vec<State>, DynamicsError> {
         self.supports(graph)?;
-        drive.check(graph, steps)?;
-        let it = Integrator::driven(graph, &self.field, 0.0, dt, start.clone(), drive.clone())?;
-        integrate(it, graph, steps, every)
+        drive.check(graph, timing.steps())?;
+        let (dt, drive) = (timing.step(), drive.clone());
+        let it = Integrator::driven(graph, &self.field, 0.0, dt, start.clone(), drive)?;
+        integrate(it, graph, timing)
     }
 
-    /// [`Dynamics::rollout_every`] (RATTLE) per start; the truth does not diverge.
+    /// [`Dynamics::rollout`] (RATTLE) per start; the truth does not diverge.
     fn rollout_many(
         &self,
         graph: &Graph,
         starts: &[State],
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: crate::dynamics::Timing,
     ) -> Result<Vec<Rollout>, DynamicsError> {
-        crate::dynamics::rollout_each(self, graph, starts, dt, steps, every)
+        crate::dynamics::rollout_each(self, graph, starts, timing)
     }
 }
 
-/// `steps` steps of `it`: its start, then every `every`-th state.
+/// `timing`'s steps of `it`: its start, then every kept state.
 fn integrate(
     mut it: Integrator,
     graph: &Graph,
-    steps: usize,
-    every: usize,
+    timing: crate::dynamics::Timing,
 ) -> Result<Vec<State>, DynamicsError> {
-    let every = every.max(1);
-    let mut out = Vec::with_capacity(steps / every + 1);
+    let mut out = Vec::with_capacity(timing.kept());
     out.push(it.state().clone());
-    for step in 1..=steps {
+    for step in 1..=timing.steps() {
         it.step();
         if it.state().validate(graph).is_err() {
             return Err(DynamicsError::Diverged(step));
         }
-        if step % every == 0 {
+        if timing.keeps(step) {
             out.push(it.state().clone());
         }
     }
@@ -263,51 +256,34 @@ impl Dynamics for TruthModel {
         self.truth.forces(graph, state)
     }
 
+    // The simulator's integrator (Verlet + SHAKE/RATTLE for bars), not the
+    // trait's unconstrained default: replay and serve call these.
     fn rollout(
         &self,
         graph: &crate::system::Graph,
         start: &crate::system::State,
-        dt: f64,
-        steps: usize,
+        timing: crate::dynamics::Timing,
     ) -> Result<Vec<crate::system::State>, DynamicsError> {
-        self.truth.rollout(graph, start, dt, steps)
-    }
-
-    // The simulator's integrator (Verlet + SHAKE/RATTLE for bars), not the
-    // trait's unconstrained default: replay and serve call these.
-    fn rollout_every(
-        &self,
-        graph: &crate::system::Graph,
-        start: &crate::system::State,
-        dt: f64,
-        steps: usize,
-        every: usize,
-    ) -> Result<Vec<crate::system::State>, DynamicsError> {
-        self.truth.rollout_every(graph, start, dt, steps, every)
+        self.truth.rollout(graph, start, timing)
     }
 
     fn rollout_many(
         &self,
         graph: &crate::system::Graph,
         starts: &[crate::system::State],
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: crate::dynamics::Timing,
     ) -> Result<Vec<crate::dynamics::Rollout>, DynamicsError> {
-        self.truth.rollout_many(graph, starts, dt, steps, every)
+        self.truth.rollout_many(graph, starts, timing)
     }
 
     fn rollout_driven(
         &self,
         graph: &crate::system::Graph,
         start: &crate::system::State,
-        dt: f64,
-        steps: usize,
-        every: usize,
+        timing: crate::dynamics::Timing,
         drive: &crate::physics::Drive,
     ) -> Result<Vec<crate::system::State>, DynamicsError> {
-        self.truth
-            .rollout_driven(graph, start, dt, steps, every, drive)
+        self.truth.rollout_driven(graph, start, timing, drive)
     }
 
     fn acceleration_batch(

@@ -2,25 +2,10 @@
 //! reaches at the end of each control step, and the smooth motion it gives
 //! them (velocity ramped linearly between those knots).
 
+use crate::dynamics::Timing;
 use crate::physics::Drive;
 use crate::system::State;
 use serde::{Deserialize, Serialize};
-
-/// How control steps map onto integration steps.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Timing {
-    /// Integration step of the rollouts, seconds.
-    pub dt: f64,
-    /// Integration steps per control step.
-    pub substeps: usize,
-}
-
-impl Timing {
-    /// Length of one control step, seconds.
-    pub fn control_step(&self) -> f64 {
-        self.dt * self.substeps as f64
-    }
-}
 
 /// A control sequence: `u[k·width..(k+1)·width]` is the velocity the
 /// driven particles (`dim` per particle, in their order) reach at the end of
@@ -60,9 +45,10 @@ impl Controls {
         Controls { u, ..self.clone() }
     }
 
-    /// Σ_k |u_k|² · T: the control effort, in (m/s)²·s.
+    /// Σ_k |u_k|² · T: the control effort, in (m/s)²·s (T the control
+    /// step, `timing.dt`).
     pub fn effort(&self, timing: Timing) -> f64 {
-        self.u.iter().map(|x| x * x).sum::<f64>() * timing.control_step()
+        self.u.iter().map(|x| x * x).sum::<f64>() * timing.dt
     }
 
     /// The motion of `particles` (driven, `dim` each) from where and how
@@ -72,7 +58,7 @@ impl Controls {
     /// (no jump in velocity), as the motions a model learns from are. One
     /// row per integration step, `steps × substeps` steps.
     pub fn drive(&self, particles: &[usize], dim: usize, start: &State, timing: Timing) -> Drive {
-        let sub = timing.substeps.max(1);
+        let (sub, dt) = (timing.substeps(), timing.step());
         let total = self.steps * sub;
         let pick = |x: &[f64]| -> Vec<f64> {
             particles
@@ -102,7 +88,7 @@ impl Controls {
         for j in 1..=total {
             let next = vel(j);
             for ((x, a), b) in q.iter_mut().zip(&prev).zip(&next) {
-                *x += 0.5 * (a + b) * timing.dt;
+                *x += 0.5 * (a + b) * dt;
             }
             rows_q.push(q.clone());
             rows_v.push(next.clone());
@@ -123,7 +109,7 @@ impl Controls {
     /// j ≥ 1 of control step k is (1 − s)·u_{k−1} + s·u_k (u_{−1} the
     /// start's), and q_j = q_{j−1} + ½(q̇_{j−1} + q̇_j)·dt.
     pub fn drive_vjp(&self, timing: Timing, gq: &[Vec<f64>], gv: &[Vec<f64>]) -> Vec<f64> {
-        let sub = timing.substeps.max(1);
+        let (sub, dt) = (timing.substeps(), timing.step());
         let total = self.steps * sub;
         let w = self.width;
         let mut gu = vec![0.0; self.u.len()];
@@ -136,7 +122,7 @@ impl Controls {
             let k = (j - 1) / sub;
             let frac = ((j - 1) % sub + 1) as f64 / sub as f64;
             for f in 0..w {
-                let gvel = gv[j][f] + 0.5 * timing.dt * (s[f] + s_next[f]);
+                let gvel = gv[j][f] + 0.5 * dt * (s[f] + s_next[f]);
                 gu[k * w + f] += frac * gvel;
                 if k > 0 {
                     gu[(k - 1) * w + f] += (1.0 - frac) * gvel;

@@ -2,7 +2,8 @@
 //! (and how fast they still move), at the end of the horizon or along it,
 //! plus the control effort.
 
-use super::controls::{Controls, Timing};
+use super::controls::Controls;
+use crate::dynamics::Timing;
 use crate::system::State;
 use serde::{Deserialize, Serialize};
 

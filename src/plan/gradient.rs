@@ -67,12 +67,12 @@ impl Problem<'_> {
         model: &mut dyn StateGradient,
         controls: &Controls,
     ) -> Result<Gradient, PlanError> {
-        if controls.steps != self.horizon || controls.width != self.width() {
+        if controls.steps != self.timing.horizon || controls.width != self.width() {
             return Err(PlanError::Problem(format!(
                 "the controls have {} steps of {} numbers, the problem {} of {}",
                 controls.steps,
                 controls.width,
-                self.horizon,
+                self.timing.horizon,
                 self.width()
             )));
         }
@@ -96,7 +96,7 @@ impl Problem<'_> {
         mut proj: Option<&mut Projector>,
         controls: &Controls,
     ) -> Result<(Vec<Step>, Vec<State>), PlanError> {
-        let (dt, sub) = (self.timing.dt, self.timing.substeps.max(1));
+        let (dt, sub) = (self.timing.step(), self.timing.substeps());
         let steps = controls.steps * sub;
         let drive = controls.drive(&self.driven(), self.graph.dim, self.start, self.timing);
         let (mut q, mut v) = (self.start.q.clone(), self.start.v.clone());
@@ -154,9 +154,9 @@ impl Problem<'_> {
     fn cost_grad_at(&self, k: usize, s: &State, gq: &mut [f64], gv: &mut [f64]) {
         let c = &self.cost;
         let w = match c.kind {
-            CostKind::Final if k == self.horizon => 1.0,
+            CostKind::Final if k == self.timing.horizon => 1.0,
             CostKind::Final => return,
-            CostKind::Along => 1.0 / self.horizon.max(1) as f64,
+            CostKind::Along => 1.0 / self.timing.horizon.max(1) as f64,
         };
         let d = self.graph.dim;
         for (t, &p) in c.particles.iter().enumerate() {
@@ -177,7 +177,7 @@ impl Problem<'_> {
         tape: &[Step],
         predicted: &[State],
     ) -> Vec<f64> {
-        let (dt, sub) = (self.timing.dt, self.timing.substeps.max(1));
+        let (dt, sub) = (self.timing.step(), self.timing.substeps());
         let (driven, d) = (self.driven(), self.graph.dim);
         let nd = self.graph.ndof();
         let steps = tape.len();
@@ -229,7 +229,7 @@ impl Problem<'_> {
             }
         }
         let mut grad = controls.drive_vjp(self.timing, &gq_rows, &gv_rows);
-        let e = 2.0 * self.cost.effort * self.timing.control_step();
+        let e = 2.0 * self.cost.effort * self.timing.dt;
         for (g, u) in grad.iter_mut().zip(&controls.u) {
             *g += e * u;
         }

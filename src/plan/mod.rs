@@ -20,7 +20,7 @@ pub mod gradient;
 pub mod mpc;
 pub mod search;
 
-pub use controls::{Controls, Timing};
+pub use controls::Controls;
 pub use cost::{Cost, CostKind};
 pub use gradient::{refine, Gradient, RefineStep, Refined};
 pub use mpc::{Episode, EpisodeReport};

@@ -3,11 +3,12 @@
 //! from the world's true state, the world executes the plan's first control
 //! for one control step, and the next plan starts from the rest of this one.
 
-use super::controls::{Controls, Timing};
+use super::controls::Controls;
 use super::cost::Cost;
 use super::gradient::refine;
 use super::search::{plan, PlanError, Problem, Sampler};
 use crate::dynamics::Dynamics;
+use crate::dynamics::Timing;
 use crate::physics::{Field, Integrator};
 use crate::system::{Graph, State};
 use serde::{Deserialize, Serialize};
@@ -27,10 +28,9 @@ pub struct Episode<'a> {
     pub planner: Option<&'a dyn Dynamics>,
     /// How the planner searches.
     pub sampler: Sampler,
-    /// The planner's rollouts: integration step and substeps per control step.
+    /// The planner's rollouts: control step, integration steps per control
+    /// step, control steps it looks ahead.
     pub timing: Timing,
-    /// Control steps the planner looks ahead.
-    pub horizon: usize,
     /// Control steps the episode lasts.
     pub steps: usize,
     /// The task: particles and their targets, and the effort weight.
@@ -73,12 +73,10 @@ pub fn run(ep: &Episode) -> Result<EpisodeReport, PlanError> {
     let (g, d) = (ep.graph, ep.graph.dim);
     let driven: Vec<usize> = (0..g.n()).filter(|&i| g.is_kinematic(i)).collect();
     let width = driven.len() * d;
-    let t_control = ep.timing.control_step();
+    let t_control = ep.timing.dt;
     let world_sub = (t_control / ep.world_dt).round().max(1.0) as usize;
-    let world_timing = Timing {
-        dt: ep.world_dt,
-        substeps: world_sub,
-    };
+    // One control step of the world, integrated with its own step.
+    let world_timing = Timing::new(ep.world_dt * world_sub as f64, world_sub, 1);
     let mut state = ep.start.clone();
     let mut executed = vec![picked(&ep.cost, &state, d)];
     let mut predicted = vec![];
@@ -93,7 +91,6 @@ pub fn run(ep: &Episode) -> Result<EpisodeReport, PlanError> {
                     graph: g,
                     start: &state,
                     timing: ep.timing,
-                    horizon: ep.horizon,
                     cost: ep.cost.clone(),
                     max_speed: ep.max_speed,
                 };

@@ -3,8 +3,9 @@
 //! the cross-entropy method (CEM) and model-predictive path integral (MPPI),
 //! as sampling-based planners on learned particle dynamics use them.
 
-use super::controls::{Controls, Timing};
+use super::controls::Controls;
 use super::cost::Cost;
+use crate::dynamics::Timing;
 use crate::dynamics::{Dynamics, DynamicsError};
 use crate::system::{Graph, State};
 use rand::SeedableRng;
@@ -88,10 +89,9 @@ pub struct Problem<'a> {
     pub graph: &'a Graph,
     /// The state to plan from.
     pub start: &'a State,
-    /// Integration step and steps per control step.
+    /// Control step (`dt`), integration steps per control step
+    /// (`substeps`) and control steps ahead (`horizon`).
     pub timing: Timing,
-    /// Control steps ahead.
-    pub horizon: usize,
     /// What to minimise.
     pub cost: Cost,
     /// Largest speed of a driven particle along each axis, m/s.
@@ -163,7 +163,7 @@ impl Problem<'_> {
         if self.driven().is_empty() {
             return bad("the system has no kinematic particle to move: planning drives kinematic particles (mark a gripper or pusher kinematic)".into());
         }
-        if self.horizon == 0 || self.timing.substeps == 0 {
+        if self.timing.horizon == 0 || self.timing.substeps == 0 {
             return bad("horizon and substeps must be at least 1".into());
         }
         if !(self.timing.dt.is_finite() && self.timing.dt > 0.0) {
@@ -211,15 +211,9 @@ impl Problem<'_> {
     /// control step).
     pub fn rollout(&self, controls: &Controls) -> Result<Vec<State>, DynamicsError> {
         let drive = controls.drive(&self.driven(), self.graph.dim, self.start, self.timing);
-        let steps = controls.steps * self.timing.substeps;
-        self.model.rollout_driven(
-            self.graph,
-            self.start,
-            self.timing.dt,
-            steps,
-            self.timing.substeps,
-            &drive,
-        )
+        let timing = self.timing.with_horizon(controls.steps);
+        self.model
+            .rollout_driven(self.graph, self.start, timing, &drive)
     }
 
     /// The cost of `controls`: +∞ when its rollout diverges.
@@ -322,7 +316,7 @@ impl<'a> Search<'a> {
         init: Option<&Controls>,
         seed: u64,
     ) -> Result<Self, PlanError> {
-        let (h, w) = (problem.horizon, problem.width());
+        let (h, w) = (problem.timing.horizon, problem.width());
         let n = sampler.candidates().max(1);
         if let Sampler::Cem { elites, .. } = sampler {
             if elites == 0 || elites > n {
@@ -359,7 +353,7 @@ impl<'a> Search<'a> {
     /// velocity clipped to the speed bound.
     fn draw(&mut self) -> Vec<Controls> {
         let p = self.problem;
-        let (h, w) = (p.horizon, p.width());
+        let (h, w) = (p.timing.horizon, p.width());
         let clip = |x: f64| x.clamp(-p.max_speed, p.max_speed);
         let (mean, sigma, rng) = (&self.mean, &self.sigma, &mut self.rng);
         (0..self.sampler.candidates().max(1))

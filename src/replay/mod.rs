@@ -41,7 +41,7 @@ use std::time::Instant;
 
 use crate::data::bag::Bag;
 use crate::data::stream::StreamOptions;
-use crate::dynamics::Dynamics;
+use crate::dynamics::{Dynamics, Timing};
 use crate::error::{bail, Context as _, Result};
 use crate::metrics::StillReference;
 use crate::system::Trajectory;
@@ -122,38 +122,31 @@ pub fn replay_bag(
 }
 
 /// What the node's Replay service does: replays the bag at `path` through
-/// `model` the way the node predicts (integration steps of `dt / substeps`,
-/// `horizon_steps` steps of `dt` ahead) and returns the report with its JSON
-/// encoding.
+/// `model` the way the node predicts (integration steps of
+/// [`Timing::step`], its horizon of steps of `dt` ahead) and returns the
+/// report with its JSON encoding.
 pub fn replay_as_node(
     model: &dyn Dynamics,
     path: &str,
-    dt: f64,
-    substeps: u32,
-    horizon_steps: u32,
+    timing: Timing,
 ) -> Result<(ReplayReport, String)> {
-    replay_as_node_with(
-        model,
-        path,
-        (dt, substeps, horizon_steps),
-        StreamOptions::default(),
-    )
+    replay_as_node_with(model, path, timing, StreamOptions::default())
 }
 
 /// [`replay_as_node`] with the node's stream settings (how it estimates
-/// the velocities of position-only states): `(dt, substeps, horizon_steps)`.
+/// the velocities of position-only states).
 pub fn replay_as_node_with(
     model: &dyn Dynamics,
     path: &str,
-    (dt, substeps, horizon_steps): (f64, u32, u32),
+    timing: Timing,
     stream: StreamOptions,
 ) -> Result<(ReplayReport, String)> {
     if path.trim().is_empty() {
         bail!("no bag given: set `bag` to the path of an MCAP file");
     }
     let opts = ReplayOptions {
-        dt: Some(dt / f64::from(substeps.max(1))),
-        horizon: Some(f64::from(horizon_steps) * dt),
+        dt: Some(timing.step()),
+        horizon: Some(timing.horizon as f64 * timing.dt),
         stream,
         ..ReplayOptions::default()
     };

@@ -3,7 +3,7 @@
 
 use crate::data::bag::Bag;
 use crate::data::stream::{Estimate, History, StreamOptions};
-use crate::dynamics::{Dynamics, DynamicsError};
+use crate::dynamics::{Dynamics, DynamicsError, Timing};
 use crate::error::{bail, Result};
 use crate::metrics::error_curves;
 use crate::system::{State, Trajectory};
@@ -25,7 +25,7 @@ fn advance(
     // round-off in the stamps) from getting one extra tiny step.
     let steps = ((span / dt) * (1.0 - 1e-9)).ceil().max(1.0) as usize;
     let h = span / steps as f64;
-    let mut states = model.rollout_every(&tr.graph, from, h, steps, steps)?;
+    let mut states = model.rollout(&tr.graph, from, Timing::integration(h, steps, steps))?;
     states
         .pop()
         .ok_or_else(|| DynamicsError::Model("the model returned no states".into()))

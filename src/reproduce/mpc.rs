@@ -7,12 +7,12 @@
 //! control step (`mpc.json`), and a picture of one episode (`mpc.png`).
 
 use super::lab::{Lab, TrainSpec, Trained};
-use crate::dynamics::Dynamics;
+use crate::dynamics::{Dynamics, Timing};
 use crate::error::{Context, Result};
 use crate::gnode::Variant;
 use crate::models::{load_any_model, ModelKind, ModelRef};
 use crate::physics::{SystemConfig, SystemKind};
-use crate::plan::{mpc, Cost, CostKind, EpisodeReport, Sampler, Timing};
+use crate::plan::{mpc, Cost, CostKind, EpisodeReport, Sampler};
 use crate::system::{Graph, State};
 use crate::train::recipe::{Auto, Recipe};
 use crate::train::{ModelOptions, TrainConfig};
@@ -87,10 +87,7 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
     let setup = Setup {
         cfg: &cfg,
         graph: &graph,
-        timing: Timing {
-            dt: 0.005,
-            substeps: 20,
-        },
+        timing: Timing::of_step(0.005, 20, 10),
         sampler: Sampler::Cem {
             candidates,
             iterations: 3,
@@ -255,8 +252,8 @@ impl Setup<'_> {
             cfg.stiffness,
             cfg.field.gravity,
             cfg.dt,
-            timing.control_step(),
-            timing.dt
+            timing.dt,
+            timing.step()
         )
     }
 
@@ -280,7 +277,6 @@ impl Setup<'_> {
                 planner: model,
                 sampler: self.sampler,
                 timing: self.timing,
-                horizon: 10,
                 steps: self.steps,
                 cost: Cost {
                     kind: CostKind::Along,

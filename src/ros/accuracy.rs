@@ -27,7 +27,7 @@ use std::collections::VecDeque;
 use std::sync::{Mutex, PoisonError};
 
 use crate::data::stream::Streams;
-use crate::dynamics::KeptStates;
+use crate::dynamics::{KeptStates, Timing};
 use crate::metrics::error_curves;
 use crate::physics::Field;
 use crate::system::{Graph, State};
@@ -140,11 +140,13 @@ impl Tracker {
         self.pending.len()
     }
 
-    /// For a prediction with step `dt` over `horizon` steps: `(lead index,
-    /// step k)` for each lead time that is a whole number `k ≥ 1` of steps
-    /// (within half a step) no further than the horizon. The others cannot
-    /// be compared with this prediction.
-    pub fn steps(&self, dt: f64, horizon: u32) -> Vec<(usize, usize)> {
+    /// For a prediction timed by `timing` (its kept states
+    /// [`Timing::kept_dt`] apart): `(lead index, kept state k)` for each
+    /// lead time that is a whole number `k ≥ 1` of them (within half of
+    /// one) no further than the last. The others cannot be compared with
+    /// this prediction.
+    pub fn steps(&self, timing: Timing) -> Vec<(usize, usize)> {
+        let (dt, last) = (timing.kept_dt(), timing.kept() - 1);
         if !(dt.is_finite() && dt > 0.0) {
             return Vec::new();
         }
@@ -154,7 +156,7 @@ impl Tracker {
             .filter_map(|(i, &lead)| {
                 let k = (lead / dt).round();
                 let whole = (k * dt - lead).abs() <= 0.5 * dt;
-                (whole && k >= 1.0 && k <= f64::from(horizon)).then_some((i, k as usize))
+                (whole && k >= 1.0 && k <= last as f64).then_some((i, k as usize))
             })
             .collect()
     }
@@ -424,9 +426,9 @@ impl Live {
             input.field.as_ref(),
             &input.state,
         );
-        let horizon = u32::try_from(predicted.len().saturating_sub(1)).unwrap_or(u32::MAX);
+        let kept = p.timing().with_horizon(predicted.len().saturating_sub(1));
         let ahead: Vec<(usize, State)> = tracker
-            .steps(p.dt, horizon)
+            .steps(kept)
             .into_iter()
             .filter(|&(_, k)| k < predicted.len())
             .map(|(lead, k)| (lead, predicted.state(k)))
@@ -517,8 +519,15 @@ mod tests {
         let t = Tracker::new(&[0.1, 0.5, 1.0, 0.015], 5, 100);
         // dt 0.01, 50 steps: 0.1 s is step 10, 0.5 s step 50; 1 s is beyond
         // the horizon; 0.015 s is 1.5 steps.
-        assert_eq!(t.steps(0.01, 50), vec![(0, 10), (1, 50)]);
-        assert_eq!(t.steps(0.0, 50), vec![]);
+        assert_eq!(t.steps(Timing::new(0.01, 10, 50)), vec![(0, 10), (1, 50)]);
+        assert_eq!(t.steps(Timing::new(0.0, 1, 50)), vec![]);
+        // Kept every 2nd step of 0.01 s: 0.1 s is kept state 5.
+        let every2 = Timing {
+            keep_every: 2,
+            ..Timing::new(0.01, 1, 50)
+        };
+        assert_eq!(every2.kept(), 26);
+        assert_eq!(t.steps(every2), vec![(0, 5), (1, 25)]);
     }
 
     #[test]
@@ -640,12 +649,12 @@ mod tests {
                     panic!("full states are ready");
                 };
                 let mut pred = crate::dynamics::Predicted::default();
-                let at = (p.dt, p.horizon, p.substeps);
+                let (graph, state) = (&input.graph, &input.state);
                 crate::ros::predict::predict_into(
                     model.as_ref(),
-                    &input.graph,
-                    &input.state,
-                    at,
+                    graph,
+                    state,
+                    p.timing(),
                     &mut pred,
                 )
                 .unwrap();

@@ -7,7 +7,7 @@ use super::predict;
 use super::wire::{
     PlanRequest, PlanResponse, ReplayRequest, ReplayResponse, RolloutRequest, RolloutResponse,
 };
-use crate::dynamics::Dynamics;
+use crate::dynamics::{Dynamics, Timing};
 
 /// The Rollout service's work with the node's current parameters.
 pub(crate) fn rollout_call(h: &Handles, req: RolloutRequest) -> RolloutResponse {
@@ -21,7 +21,7 @@ pub(crate) fn rollout_call(h: &Handles, req: RolloutRequest) -> RolloutResponse 
     let p = h.params.get();
     let limits = RolloutLimits {
         default_dt: p.dt,
-        fine_dt: p.dt / f64::from(p.substeps.max(1)),
+        fine_dt: p.timing().step(),
         max_steps: p.max_rollout_steps,
         max_particles: p.max_particles,
     };
@@ -48,9 +48,7 @@ pub(crate) fn plan_call_with(
     }
     let p = h.params.get();
     let settings = super::plan::PlanSettings {
-        dt: p.dt,
-        substeps: p.substeps,
-        horizon: p.horizon,
+        timing: p.timing(),
         max_steps: p.max_rollout_steps,
         max_particles: p.max_particles,
     };
@@ -105,33 +103,24 @@ pub fn rollout_response(
         Err(e) => return fail(e.to_string()),
     };
     let substeps = if dt.is_finite() && dt > 0.0 {
-        ((dt / fine_dt).round() as u32).max(1)
+        ((dt / fine_dt).round() as usize).max(1)
     } else {
         1
     };
-    let rows = req.steps as usize * substeps as usize + 1;
+    let timing = Timing::new(dt, substeps, req.steps as usize);
     let given = super::plan::requested_drive(
         &graph,
         &req.kinematic_positions,
         &req.kinematic_velocities,
-        rows,
-        dt / f64::from(substeps),
+        timing.steps() + 1,
+        timing.step(),
     );
     let predicted = match given {
         Err(e) => return fail(e.0),
-        Ok(None) => {
-            predict::trajectory(model, &req.initial, &graph, &start, dt, req.steps, substeps)
+        Ok(None) => predict::trajectory(model, &req.initial, &graph, &start, timing),
+        Ok(Some(drive)) => {
+            predict::trajectory_driven(model, (&req.initial, &graph, &start), timing, &drive)
         }
-        Ok(Some(drive)) => predict::trajectory_driven(
-            model,
-            &req.initial,
-            &graph,
-            &start,
-            dt,
-            req.steps,
-            substeps,
-            &drive,
-        ),
     };
     match predicted {
         Ok(trajectory) => RolloutResponse {
@@ -156,12 +145,7 @@ pub(crate) fn replay_call(h: &Handles, req: ReplayRequest) -> ReplayResponse {
             }
         }
     };
-    match crate::replay::replay_as_node_with(
-        h.model.get().as_ref(),
-        &req.bag,
-        (p.dt, p.substeps, p.horizon),
-        stream,
-    ) {
+    match crate::replay::replay_as_node_with(h.model.get().as_ref(), &req.bag, p.timing(), stream) {
         Ok((r, json)) => ReplayResponse {
             success: true,
             message: format!(

@@ -165,7 +165,7 @@ pub(super) fn log_start(h: &Handles, names: &Names, domain_id: u16) {
     if !p.accuracy_lead_times.is_empty() {
         let t = accuracy::Tracker::new(&p.accuracy_lead_times, 1, 1);
         let reachable: Vec<f64> = t
-            .steps(p.dt, p.horizon)
+            .steps(p.timing())
             .iter()
             .map(|(i, _)| p.accuracy_lead_times[*i])
             .collect();

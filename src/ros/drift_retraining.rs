@@ -155,7 +155,7 @@ fn held_out_re(
     file: &ModelFile,
 ) -> Result<(f64, f64), TrainingError> {
     let score = |m: &dyn Dynamics| {
-        crate::replay::replay_as_node(m, held, p.dt, p.substeps, p.horizon)
+        crate::replay::replay_as_node(m, held, p.timing())
             .map(|(r, _)| r.averages.re)
             .map_err(|source| TrainingError::Replay {
                 bag: held.to_string(),

@@ -317,6 +317,7 @@ fn force_markers(
 mod tests {
     use super::*;
     use crate::data::msg::encode_cdr;
+    use crate::dynamics::Timing;
     use crate::models::truth::load_truth;
     use crate::physics::{SystemConfig, SystemKind};
     use crate::system::Sample;
@@ -336,7 +337,12 @@ mod tests {
         };
         let msg = ParticleState::from_sample(0, 0, kind.name(), &graph, &sample);
         let model = load_truth(&format!("truth:{}", kind.name())).unwrap();
-        let p = super::super::predict::predict(model.as_ref(), &msg, 0.01, horizon, 1).unwrap();
+        let p = super::super::predict::predict(
+            model.as_ref(),
+            &msg,
+            Timing::new(0.01, 1, horizon as usize),
+        )
+        .unwrap();
         (p.trajectory, p.forces)
     }
 
@@ -357,7 +363,9 @@ mod tests {
             acc: None,
         };
         let msg = ParticleState::from_sample(0, 0, "", &graph, &sample);
-        let p = super::super::predict::predict(&crate::dynamics::Still, &msg, 0.01, 3, 1).unwrap();
+        let p =
+            super::super::predict::predict(&crate::dynamics::Still, &msg, Timing::new(0.01, 1, 3))
+                .unwrap();
         let m = prediction_markers(&p.trajectory, &p.forces);
         let c = by_ns(&m, "contacts");
         assert_eq!(c.len(), 1);

@@ -463,6 +463,12 @@ pub enum Kind {
 }
 
 impl NodeParams {
+    /// The timing of the node's predictions: `horizon` states `dt` apart,
+    /// integrated with `dt / substeps`.
+    pub fn timing(&self) -> crate::dynamics::Timing {
+        crate::dynamics::Timing::new(self.dt, self.substeps as usize, self.horizon as usize)
+    }
+
     /// The parameters as a ROS 2 parameter file (what `serve --print-params` prints).
     pub fn to_yaml(&self) -> String {
         let mut s = format!("{NODE_NAME}:\n  ros__parameters:\n");

@@ -6,11 +6,9 @@
 use super::predict;
 use super::wire::{PlanRequest, PlanResponse};
 use crate::data::msg::{Point, Vector3};
-use crate::dynamics::Dynamics;
+use crate::dynamics::{Dynamics, Timing};
 use crate::physics::Drive;
-use crate::plan::{
-    plan, refine, Controls, Cost, CostKind, Iteration, Plan, Problem, Sampler, Timing,
-};
+use crate::plan::{plan, refine, Controls, Cost, CostKind, Iteration, Plan, Problem, Sampler};
 use crate::system::{Graph, State};
 
 /// Why a Plan or Rollout request is refused: the message names the fix.
@@ -21,12 +19,9 @@ pub struct Refused(pub String);
 /// What the node lends a plan: its step, substeps, horizon and limits.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlanSettings {
-    /// Control step: the node's `dt`.
-    pub dt: f64,
-    /// Integration steps per control step: the node's `substeps`.
-    pub substeps: u32,
-    /// Control steps when the request gives 0: the node's `horizon`.
-    pub horizon: u32,
+    /// The node's timing: control step `dt`, integration steps per control
+    /// step `substeps`, control steps when the request gives 0 `horizon`.
+    pub timing: Timing,
     /// `max_rollout_steps`: the longest horizon accepted.
     pub max_steps: u32,
     /// `max_particles`.
@@ -131,17 +126,12 @@ fn answer(
 ) -> Result<PlanResponse, Refused> {
     let (graph, start, horizon, kind) = checked(model, req, s)?;
     let d = graph.dim;
-    let sub = s.substeps.max(1);
     let started = std::time::Instant::now();
     let problem = Problem {
         model,
         graph: &graph,
         start: &start,
-        timing: Timing {
-            dt: s.dt / f64::from(sub),
-            substeps: sub as usize,
-        },
-        horizon: horizon as usize,
+        timing: s.timing.with_horizon(horizon),
         cost: cost(req, kind, d),
         max_speed: if req.max_speed == 0.0 {
             2.0
@@ -165,7 +155,7 @@ fn checked(
     model: &dyn Dynamics,
     req: &PlanRequest,
     s: &PlanSettings,
-) -> Result<(Graph, State, u32, CostKind), Refused> {
+) -> Result<(Graph, State, usize, CostKind), Refused> {
     let no = |e: &dyn std::fmt::Display| Refused(e.to_string());
     if req.refine > MAX_REFINE {
         return Err(Refused(format!(
@@ -176,11 +166,11 @@ fn checked(
     predict::check_size(&req.initial, s.max_particles).map_err(|e| no(&e))?;
     let (graph, start) = predict::accept(model, &req.initial).map_err(|e| no(&e))?;
     let horizon = if req.horizon == 0 {
-        s.horizon
+        s.timing.horizon
     } else {
-        req.horizon
+        req.horizon as usize
     };
-    if horizon > s.max_steps {
+    if horizon > s.max_steps as usize {
         return Err(Refused(format!(
             "horizon = {horizon} exceeds max_rollout_steps = {}",
             s.max_steps
@@ -255,7 +245,7 @@ fn respond(
     let no = |e: &dyn std::fmt::Display| Refused(e.to_string());
     let d = problem.graph.dim;
     let still = problem
-        .cost_of(&Controls::zeros(problem.horizon, problem.width()))
+        .cost_of(&Controls::zeros(problem.timing.horizon, problem.width()))
         .map_err(|e| no(&e))?;
     let driven = problem.driven();
     let drive = p.best.drive(&driven, d, problem.start, problem.timing);
@@ -273,7 +263,12 @@ fn respond(
         best,
         kinematic_positions,
         kinematic_velocities,
-        trajectory: predict::trajectory_of(&req.initial, problem.graph, s.dt, &p.predicted[1..]),
+        trajectory: predict::trajectory_of(
+            &req.initial,
+            problem.graph,
+            s.timing.dt,
+            &p.predicted[1..],
+        ),
         costs: p.costs,
         seconds,
     })
@@ -354,9 +349,7 @@ mod tests {
         let initial = crate::data::msg::ParticleState::from_sample(0, 0, "", &g, &sample);
         let model = crate::models::truth::truth(crate::physics::SystemKind::HeldChain);
         let s = PlanSettings {
-            dt: 0.1,
-            substeps: 10,
-            horizon: 5,
+            timing: Timing::new(0.1, 10, 5),
             max_steps: 50,
             max_particles: 100,
         };

@@ -9,7 +9,7 @@
 use crate::compat::{OutOfRange, Passed};
 use crate::data::msg::{Header, ParticleState, Vector3};
 use crate::data::DataError;
-use crate::dynamics::{Dynamics, DynamicsError, FlatForces, KeptStates, Predicted};
+use crate::dynamics::{Dynamics, DynamicsError, FlatForces, KeptStates, Predicted, Timing};
 use crate::system::{Graph, State};
 
 use super::input::Input;
@@ -103,39 +103,30 @@ pub fn accept(model: &dyn Dynamics, input: &ParticleState) -> Result<(Graph, Sta
     Ok((graph, sample.state))
 }
 
-/// Rolls the model out `steps` steps of `dt` from `input` (already accepted
-/// as `graph` + `start`), integrating with `dt / substeps`; state `k` is
-/// `(k + 1)·dt` after the input ([`PredictedTrajectory::state`]).
+/// Rolls the model out from `input` (already accepted as `graph` +
+/// `start`) as `timing` says; state `k` is `(k + 1)·dt` after the input
+/// ([`PredictedTrajectory::state`]).
 pub fn trajectory(
     model: &dyn Dynamics,
     input: &ParticleState,
     graph: &Graph,
     start: &State,
-    dt: f64,
-    steps: u32,
-    substeps: u32,
+    timing: Timing,
 ) -> Result<PredictedTrajectory, PredictError> {
-    let states = rollout(model, graph, start, dt, steps, substeps)?;
-    Ok(trajectory_of(input, graph, dt, &states[1..]))
+    let states = integrate(timing, |t| model.rollout(graph, start, t))?;
+    Ok(trajectory_of(input, graph, timing.kept_dt(), &states[1..]))
 }
 
 /// [`trajectory`] with the kinematic particles moved along `drive` (one row
-/// per integration step of `dt / substeps`).
-#[allow(clippy::too_many_arguments)]
+/// per integration step of [`Timing::step`]).
 pub fn trajectory_driven(
     model: &dyn Dynamics,
-    input: &ParticleState,
-    graph: &Graph,
-    start: &State,
-    dt: f64,
-    steps: u32,
-    substeps: u32,
+    (input, graph, start): (&ParticleState, &Graph, &State),
+    timing: Timing,
     drive: &crate::physics::Drive,
 ) -> Result<PredictedTrajectory, PredictError> {
-    let states = integrate(dt, steps, substeps, |h, n, every| {
-        model.rollout_driven(graph, start, h, n, every, drive)
-    })?;
-    Ok(trajectory_of(input, graph, dt, &states[1..]))
+    let states = integrate(timing, |t| model.rollout_driven(graph, start, t, drive))?;
+    Ok(trajectory_of(input, graph, timing.kept_dt(), &states[1..]))
 }
 
 /// The wire message of `states` predicted after `input`, `dt` apart.
@@ -150,22 +141,20 @@ pub fn trajectory_of(
     trajectory_msg(input, dt, &kept, 0)
 }
 
-/// The model's states every `dt` for `horizon` steps from `start` (the
-/// first is `start` itself), integrated with `dt / substeps`, and the forces
-/// at `start`, into `out`: on the graph of the last call, a model with a
-/// forward pass allocates nothing. The model is asked whether it supports
-/// the graph.
+/// The model's states as `timing` keeps them from `start` (the first is
+/// `start` itself), and the forces at `start`, into `out`: on the graph of
+/// the last call, a model with a forward pass allocates nothing. The model
+/// is asked whether it supports the graph.
 pub fn predict_into(
     model: &dyn Dynamics,
     graph: &Graph,
     start: &State,
-    (dt, horizon, substeps): (f64, u32, u32),
+    timing: Timing,
     out: &mut Predicted,
 ) -> Result<(), PredictError> {
     model.supports(graph).map_err(PredictError::Unsupported)?;
-    let (h, n, every) = integration(dt, horizon, substeps)?;
     model
-        .predict_into(graph, start, h, n, every, out)
+        .predict_into(graph, start, checked(timing)?, out)
         .map_err(|e| match e {
             DynamicsError::Forces(e) => PredictError::Forces(*e),
             e => PredictError::Rollout(e),
@@ -201,8 +190,7 @@ pub fn predict_served(
             return Err(PredictError::OutOfRange(o.clone()));
         }
     }
-    let at = (params.dt, params.horizon, params.substeps);
-    predict_into(model, &input.graph, &input.state, at, out)?;
+    predict_into(model, &input.graph, &input.state, params.timing(), out)?;
     Ok(outside)
 }
 
@@ -220,29 +208,12 @@ pub fn messages(
     })
 }
 
-/// The model's states every `dt` for `steps` steps from `start` (the first
-/// is `start` itself), integrated with `dt / substeps`.
-fn rollout(
-    model: &dyn Dynamics,
-    graph: &Graph,
-    start: &State,
-    dt: f64,
-    steps: u32,
-    substeps: u32,
-) -> Result<Vec<State>, PredictError> {
-    integrate(dt, steps, substeps, |h, n, every| {
-        model.rollout_every(graph, start, h, n, every)
-    })
-}
-
-/// The integration step, step count and output stride of `steps` steps of
-/// `dt` split in `substeps`, after checking `dt`.
-fn integration(dt: f64, steps: u32, substeps: u32) -> Result<(f64, usize, usize), PredictError> {
-    if !(dt.is_finite() && dt > 0.0) {
-        return Err(PredictError::BadStep(dt));
-    }
-    let sub = substeps.max(1) as usize;
-    Ok((dt / sub as f64, steps as usize * sub, sub))
+/// `timing`, refused as a bad step unless its `dt` is positive and finite.
+fn checked(timing: Timing) -> Result<Timing, PredictError> {
+    timing
+        .check()
+        .map_err(|_| PredictError::BadStep(timing.dt))?;
+    Ok(timing)
 }
 
 /// A model that answered with no state at all.
@@ -250,16 +221,13 @@ fn no_states() -> PredictError {
     PredictError::Rollout(DynamicsError::Model("the model returned no states".into()))
 }
 
-/// Runs `roll(dt / substeps, steps · substeps, substeps)` after checking
-/// `dt`, refusing an empty answer (its states).
+/// Runs `roll(timing)` after checking its step, refusing an empty answer
+/// (its states).
 fn integrate(
-    dt: f64,
-    steps: u32,
-    substeps: u32,
-    roll: impl FnOnce(f64, usize, usize) -> Result<Vec<State>, DynamicsError>,
+    timing: Timing,
+    roll: impl FnOnce(Timing) -> Result<Vec<State>, DynamicsError>,
 ) -> Result<Vec<State>, PredictError> {
-    let (h, n, every) = integration(dt, steps, substeps)?;
-    let states = roll(h, n, every).map_err(PredictError::Rollout)?;
+    let states = roll(checked(timing)?).map_err(PredictError::Rollout)?;
     if states.is_empty() {
         return Err(no_states());
     }
@@ -336,14 +304,12 @@ pub fn forces_msg(
 pub fn predict(
     model: &dyn Dynamics,
     input: &ParticleState,
-    dt: f64,
-    horizon: u32,
-    substeps: u32,
+    timing: Timing,
 ) -> Result<Prediction, PredictError> {
     let (graph, start) = accept(model, input)?;
     let mut p = Predicted::default();
-    predict_into(model, &graph, &start, (dt, horizon, substeps), &mut p)?;
-    messages(input, &graph, dt, &p)
+    predict_into(model, &graph, &start, timing, &mut p)?;
+    messages(input, &graph, timing.kept_dt(), &p)
 }
 
 #[cfg(test)]
@@ -383,7 +349,7 @@ mod tests {
     fn prediction_is_stamped_from_the_input() {
         let model = load_truth("truth:spring").unwrap();
         let input = spring_state();
-        let p = predict(model.as_ref(), &input, 0.001, 7, 1).unwrap();
+        let p = predict(model.as_ref(), &input, Timing::new(0.001, 1, 7)).unwrap();
         assert_eq!(p.trajectory.header, input.header);
         assert_eq!(p.forces.header, input.header);
         assert_eq!(p.trajectory.initial, input);
@@ -417,13 +383,13 @@ mod tests {
     fn predicted_states_carry_the_inputs_field() {
         let model = load_truth("truth:spring").unwrap();
         let input = spring_state().with_field(Some(&crate::physics::Field::default()));
-        let p = predict(model.as_ref(), &input, 0.001, 3, 1).unwrap();
+        let p = predict(model.as_ref(), &input, Timing::new(0.001, 1, 3)).unwrap();
         for s in (0..3).filter_map(|k| p.trajectory.state(k)) {
             assert_eq!(s.field_status, crate::data::msg::FIELD_KNOWN);
             assert_eq!(s.field().unwrap(), Some(crate::physics::Field::default()));
         }
         // Without a field stated, the predictions do not invent one.
-        let p = predict(model.as_ref(), &spring_state(), 0.001, 3, 1).unwrap();
+        let p = predict(model.as_ref(), &spring_state(), Timing::new(0.001, 1, 3)).unwrap();
         assert!((0..3).all(|k| p.trajectory.state(k).unwrap().field_status == 0));
     }
 
@@ -444,12 +410,12 @@ mod tests {
             (edge, "out of range"),
             (dim, "dimension"),
         ] {
-            let e = predict(model.as_ref(), &bad, 0.001, 3, 1).unwrap_err();
+            let e = predict(model.as_ref(), &bad, Timing::new(0.001, 1, 3)).unwrap_err();
             assert!(matches!(e, PredictError::Malformed(_)), "{e}");
             let e = e.to_string();
             assert!(e.contains("malformed") && e.contains(want), "{e}");
         }
-        let e = predict(model.as_ref(), &spring_state(), f64::NAN, 3, 1).unwrap_err();
+        let e = predict(model.as_ref(), &spring_state(), Timing::new(f64::NAN, 1, 3)).unwrap_err();
         assert!(matches!(e, PredictError::BadStep(_)), "{e}");
         assert!(e.to_string().contains("dt"), "{e}");
     }
@@ -481,7 +447,7 @@ mod tests {
     #[test]
     fn failed_forces_are_reported_as_forces() {
         let model = NoForces(load_truth("truth:spring").unwrap());
-        let e = predict(&model, &spring_state(), 0.001, 3, 1).unwrap_err();
+        let e = predict(&model, &spring_state(), Timing::new(0.001, 1, 3)).unwrap_err();
         assert!(matches!(e, PredictError::Forces(_)), "{e:?}");
         assert_eq!(e.to_string(), "forces failed: this model has no forces");
     }
