@@ -9,7 +9,7 @@
 //!   [`mcgnode::models::trained_for`], as `mcgnode rollout --model` loads a
 //!   file, `still` or `truth:<system>`.
 //! - `Model.rollout` checks the graph and field as `mcgnode rollout` does and
-//!   calls the same [`mcgnode::dynamics::Dynamics::rollout_every`].
+//!   calls the same [`mcgnode::dynamics::Dynamics::rollout`].
 //! - `train` parses its options with `mcgnode train`'s own
 //!   [`mcgnode::cli::train::Args`] and trains through
 //!   [`mcgnode::cli::train::train`].
