@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::ros::names::{NameError, RosArgs};
+use crate::ros::resource_names::{NameError, RosArgs};
 use crate::ros::{domain_id_from_env, serve, NodeParams, ParamError};
 
 /// Options of `mcgnode serve`.

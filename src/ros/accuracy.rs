@@ -521,13 +521,14 @@ mod tests {
         // the horizon; 0.015 s is 1.5 steps.
         assert_eq!(t.steps(Timing::new(0.01, 10, 50)), vec![(0, 10), (1, 50)]);
         assert_eq!(t.steps(Timing::new(0.0, 1, 50)), vec![]);
-        // Kept every 2nd step of 0.01 s: 0.1 s is kept state 5.
+        // Kept every 2nd step of 0.01 s: 0.1 s is kept state 5, and 0.015 s
+        // is within half of one 0.02 s kept step of state 1.
         let every2 = Timing {
             keep_every: 2,
             ..Timing::new(0.01, 1, 50)
         };
         assert_eq!(every2.kept(), 26);
-        assert_eq!(t.steps(every2), vec![(0, 5), (1, 25)]);
+        assert_eq!(t.steps(every2), vec![(0, 5), (1, 25), (3, 1)]);
     }
 
     #[test]

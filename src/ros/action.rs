@@ -13,7 +13,7 @@ use ros2_client::action_msgs::GoalId;
 use ros2_client::log::LogLevel;
 use ros2_client::Node;
 
-use super::names::Names;
+use super::resource_names::Names;
 
 use super::topics::TRAIN_ACTION;
 use super::trainer::{claim, Claim, Trainer, BUSY};

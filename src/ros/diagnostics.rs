@@ -10,8 +10,8 @@ use ros2_client::Publisher;
 
 use super::accuracy::{self, Level};
 use super::handles::Handles;
-use super::names::Names;
 use super::params::NODE_NAME;
+use super::resource_names::Names;
 use super::topics::LIVE_ACCURACY_TOPIC;
 use super::wire::{
     DiagnosticArray, DiagnosticStatus, KeyValue, NodeDiagnostics, DIAGNOSTIC_OK, DIAGNOSTIC_WARN,

@@ -14,9 +14,9 @@ use super::calls::{plan_call, replay_call, rollout_call};
 use super::diagnostics::diagnostics_loop;
 use super::handles::Handles;
 use super::input_loop::{input_loop, Outputs};
-use super::names::Names;
 use super::params::NodeParams;
 use super::qos::{clock_qos, publisher, reliable_qos, server, subscription, topic_qos};
+use super::resource_names::Names;
 use super::service::{self, OnFailure::Warn};
 use super::topics::{
     CLOCK_TOPIC, LIVE_ACCURACY_TOPIC, PLAN_SERVICE, REPLAY_SERVICE, STANDARD_DIAGNOSTICS_TOPIC,

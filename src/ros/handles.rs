@@ -20,9 +20,9 @@ use crate::dynamics::Dynamics;
 
 use super::accuracy::Live;
 use super::clock::Clock;
-use super::names::severity;
 use super::params::NodeParams;
 use super::record::{RecordError, Recorder};
+use super::resource_names::severity;
 use super::wire::NodeDiagnostics;
 
 /// The parameters now: those settable at run time

@@ -25,7 +25,7 @@ pub struct LifecycleServers {
 /// rclcpp names them.
 pub fn create(
     node: &mut ros2_client::Node,
-    names: &super::names::Names,
+    names: &super::resource_names::Names,
 ) -> crate::error::Result<LifecycleServers> {
     use super::qos::{publisher, reliable_qos, server};
     use super::topics::lifecycle::{

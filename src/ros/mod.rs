@@ -12,7 +12,7 @@
 //!   (declarations, descriptions, run-time changes validated and applied);
 //! - [`wire`]: the wire structs of every interface, each with its ROS type
 //!   name, one file per family;
-//! - [`names`]: ROS 2 names and `--ros-args` as rcl reads them (namespace,
+//! - [`resource_names`]: ROS 2 names and `--ros-args` as rcl reads them (namespace,
 //!   node name, remaps);
 //! - [`input`]: an incoming state parsed once, with the velocities of
 //!   position-only streams estimated from their history (no DDS);
@@ -63,7 +63,6 @@ pub mod lifecycle;
 pub mod lifecycle_services;
 pub mod markers;
 pub mod model_swap;
-pub mod names;
 pub mod node;
 pub mod param_check;
 pub mod param_load;
@@ -74,6 +73,7 @@ pub mod plan_action;
 pub mod predict;
 pub mod qos;
 pub mod record;
+pub mod resource_names;
 pub mod service;
 pub mod topics;
 pub mod trainer;

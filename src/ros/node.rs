@@ -22,10 +22,10 @@ use super::action;
 use super::diagnostics::{finish_recording, log_start};
 use super::endpoints::{spawn_training, Endpoints};
 use super::handles::{Diagnostics, Handles, LiveParams, Logger, ModelHandle, RecorderHandle};
-use super::names::{Names, RosArgs};
 use super::param_server::declare_parameters;
 use super::params::{NodeParams, NODE_NAME};
 use super::record::Recorder;
+use super::resource_names::{Names, RosArgs};
 use super::trainer::{self, TrainerHandles};
 
 /// The handles of a node serving `model`, logging through `node` at

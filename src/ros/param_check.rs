@@ -1,8 +1,8 @@
 //! Checking one parameter value against its [`Kind`] (name, type, range)
 //! before it is stored, and what single parameters cannot check alone.
 
-use super::names::is_ros_name;
 use super::params::{spec, Kind, NodeParams, ParamError, Slot};
+use super::resource_names::is_ros_name;
 use super::yaml::Scalar;
 
 impl NodeParams {

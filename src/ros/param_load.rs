@@ -7,8 +7,8 @@
 
 use std::path::Path;
 
-use super::names::{Names, NODE_NAME};
 use super::params::{NodeParams, ParamError};
+use super::resource_names::{Names, NODE_NAME};
 use super::yaml::{self, Scalar, Value};
 
 /// Keys of a parameter file section that are this node's, as rcl matches
@@ -44,7 +44,7 @@ fn read_file(path: &Path) -> Result<String, ParamError> {
 impl NodeParams {
     /// Defaults, then the file (if any), then each `key=value` override in order.
     pub fn load(file: Option<&Path>, overrides: &[String]) -> Result<NodeParams, ParamError> {
-        Self::load_with(file, overrides, &super::names::RosArgs::default())
+        Self::load_with(file, overrides, &super::resource_names::RosArgs::default())
     }
 
     /// [`NodeParams::load`], then what `--ros-args` says: each
@@ -53,7 +53,7 @@ impl NodeParams {
     pub fn load_with(
         file: Option<&Path>,
         overrides: &[String],
-        ros: &super::names::RosArgs,
+        ros: &super::resource_names::RosArgs,
     ) -> Result<NodeParams, ParamError> {
         let names = ros.names()?;
         let mut p = NodeParams::default();
@@ -313,7 +313,7 @@ mod tests {
 
     #[test]
     fn ros_args_params_files_and_p_apply_in_order() {
-        use super::super::names::RosArgs;
+        use super::super::resource_names::RosArgs;
         let dir = tempfile::tempdir().unwrap();
         let fleet = dir.path().join("fleet.yaml");
         std::fs::write(

@@ -160,8 +160,8 @@ fn known_parameters() -> String {
     SPECS.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
 }
 
-use super::names::NameError;
-pub use super::names::NODE_NAME;
+use super::resource_names::NameError;
+pub use super::resource_names::NODE_NAME;
 
 /// One parameter in the table: its name, kind, description, and whether it
 /// can change while the node runs.

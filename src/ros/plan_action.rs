@@ -16,7 +16,7 @@ use ros2_client::Node;
 
 use super::calls::plan_call_with;
 use super::handles::Handles;
-use super::names::Names;
+use super::resource_names::Names;
 use super::topics::PLAN_ACTION;
 use super::wire::{PlanAction, PlanFeedback, PlanGoal, PlanResult};
 

@@ -7,8 +7,8 @@ use ros2_client::dds::rustdds::Topic;
 use ros2_client::qos::{Durability, History, WhenFull};
 use ros2_client::{Name, Node, Publisher, QosProfile, Server, ServiceMapping, Subscription};
 
-use super::names::Names;
 use super::params::NodeParams;
+use super::resource_names::Names;
 use super::wire::{RosAction, RosService, RosType};
 
 /// Topic QoS from the parameters: volatile, keep-last `qos_depth`.

@@ -334,7 +334,7 @@ mod tests {
         };
         // As the node hands them over: names resolved (here with no --ros-args).
         let params = params
-            .resolved(&crate::ros::names::Names::default())
+            .resolved(&crate::ros::resource_names::Names::default())
             .unwrap();
         let mut r = Recorder::new(&params, "truth:spring").unwrap();
         let state = ParticleState {

@@ -1,5 +1,5 @@
 //! Every topic, service and action name of the node, as given to
-//! [`super::names`] to resolve: `~/x` under the node's name, `x` in its
+//! [`super::resource_names`] to resolve: `~/x` under the node's name, `x` in its
 //! namespace, `/x` absolute. Those a parameter can change are the defaults
 //! of the parameter table ([`super::params`]).
 

@@ -20,9 +20,9 @@ use crate::gnode::Variant;
 
 use super::clock::Clock;
 use super::handles::{Diagnostics, ModelHandle, RecorderHandle};
-use super::names::Names;
 use super::params::NodeParams;
 use super::qos::{publisher, reliable_qos, server};
+use super::resource_names::Names;
 use super::topics::{LOAD_MODEL_SERVICE, MODEL_SWAP_TOPIC, TRAIN_SERVICE};
 use super::wire::{
     LoadModel, LoadModelRequest, LoadModelResponse, ModelSwap, Train, TrainRequest, TrainResponse,
