@@ -368,6 +368,40 @@ mod tests {
     }
 
     #[test]
+    fn the_help_states_the_recipe_s_numbers() {
+        // `--help` spells out what the recipe chooses; it must say the
+        // constants the recipe uses.
+        let help = Args::augment_args(clap::Command::new("train"))
+            .render_long_help()
+            .to_string();
+        let thousands = |n: usize| {
+            let s = n.to_string();
+            let head = s.len() % 3;
+            let mut out = s[..head].to_string();
+            for (i, c) in s[head..].chars().enumerate() {
+                if i % 3 == 0 && !out.is_empty() {
+                    out.push(',');
+                }
+                out.push(c);
+            }
+            out
+        };
+        assert_eq!(thousands(22_500), "22,500");
+        for needle in [
+            thousands(recipe::STEPS),
+            thousands(recipe::BATCH_EDGES),
+            thousands(paper::EPOCHS),
+            format!("{0},{0}", recipe::EDGE_WIDTH),
+            format!("{:e}", recipe::LR),
+            format!("{:e}", paper::LR),
+            format!("paper: {}", paper::BATCH),
+            format!("paper: {}", paper::HIDDEN),
+        ] {
+            assert!(help.contains(&needle), "--help does not say {needle:?}");
+        }
+    }
+
+    #[test]
     fn the_paper_recipe_is_one_flag_away() {
         let (opts, cfg) = parse(&["--recipe", "paper"]).settings().unwrap();
         assert_eq!(opts, ModelOptions::for_recipe(Recipe::Paper));
