@@ -4,18 +4,18 @@
 //! CLI's numbers bit for bit and its error messages word for word. One
 //! module a job:
 //!
-//! - [`bags`]: `read_bag` is [`mcgnode::data::bag::read_bags`] (every layout
+//! - `bags.rs`: `read_bag` is [`mcgnode::data::bag::read_bags`] (every layout
 //!   the CLI reads), each trajectory as numpy arrays.
-//! - [`models`]: `load_model` is [`mcgnode::models::load_any_model`] and
+//! - `models.rs`: `load_model` is [`mcgnode::models::load_any_model`] and
 //!   [`mcgnode::models::trained_for`], as `mcgnode rollout --model` loads a
 //!   file, `still` or `truth:<system>`; `Model.rollout` checks the graph and
 //!   field as `mcgnode rollout` does and calls the same
 //!   [`mcgnode::dynamics::Dynamics::rollout_every`].
-//! - [`training`]: `train` turns its keywords into the library's
+//! - `training.rs`: `train` turns its keywords into the library's
 //!   [`mcgnode::train::ModelOptions`] and [`mcgnode::train::TrainConfig`]
 //!   from the defaults `mcgnode train` has, and trains through
 //!   [`mcgnode::models::train_any_from_bags`].
-//! - [`arrays`]: numpy arrays to graphs, states and fields, and back.
+//! - `arrays.rs`: numpy arrays to graphs, states and fields, and back.
 //!
 //! Library errors are raised as `mcgnode.Error` with the message the CLI
 //! prints after `error: `; arrays of the wrong shape as `ValueError`.

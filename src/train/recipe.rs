@@ -69,8 +69,8 @@ impl Recipe {
 }
 
 /// The paper's settings (its appendix): what [`Recipe::Paper`] trains with,
-/// what [`super::TrainConfig::default`] holds and what the default recipe
-/// caps its choices at.
+/// what [`TrainConfig::default`](crate::train::TrainConfig) holds and what
+/// the default recipe caps its choices at.
 pub mod paper {
     use crate::gnode::Hyper;
 
