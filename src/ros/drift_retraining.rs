@@ -19,7 +19,8 @@ use super::trainer::{claim, Trainer, TrainingError};
 use super::training::{node_settings, served_file};
 
 /// Retrains after a drift alarm (`why`), blocking: warm-starts the served
-/// model file (`train --init` semantics, [`TrainConfig::init`](crate::train::TrainConfig::init)) on the bags
+/// model file (`train --init` semantics,
+/// [`TrainConfig::init`](crate::train::TrainConfig::init)) on the bags
 /// recorded during the `accuracy_retrain_after` seconds after the alarm,
 /// holding the last of them out, and swaps the new model in only if its
 /// replayed RE on that held-out bag (as the node predicts:
@@ -114,8 +115,10 @@ fn record_after_alarm(
     Ok(bags.get(before..).unwrap_or_default().to_vec())
 }
 
-/// Trains from `init` (`train --init` semantics, [`TrainConfig::init`](crate::train::TrainConfig::init)) on
-/// `train` for `accuracy_retrain_epochs` epochs.
+/// Trains from `init` (`train --init` semantics,
+/// [`TrainConfig::init`](crate::train::TrainConfig::init)) on `train` for
+/// `accuracy_retrain_epochs` epochs, with the node's settings
+/// ([`node_settings`]).
 fn warm_start(
     init: ModelFile,
     p: &NodeParams,
