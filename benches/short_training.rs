@@ -13,7 +13,7 @@ use mcgnode::gnode::Variant;
 use mcgnode::models::{load_any_model, train_any_from_bags, ModelKind, ModelRef};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::simulate::{simulate_with, DataIntegrator};
-use mcgnode::train::{ModelOptions, TrainConfig};
+use mcgnode::train::{ModelOptions, Recipe, TrainConfig};
 
 fn main() -> mcgnode::Result<()> {
     mcgnode::alloc::prepare_for_candle();
@@ -47,7 +47,7 @@ fn main() -> mcgnode::Result<()> {
             &verlet
         };
         let out = dir.path().join(format!("{kind}.json"));
-        let opts = ModelOptions::default();
+        let opts = ModelOptions::for_recipe(Recipe::Paper);
         let t = train_any_from_bags(
             kind,
             std::slice::from_ref(data),

@@ -945,12 +945,12 @@ fn train_recipes_explained_fraction_and_the_still_reference() {
         .as_object()
         .is_none_or(serde_json::Map::is_empty));
     assert!(!log.contains("recipe:"), "{log}");
-    // ... and is what the library's defaults (reproduce's, and `train`'s
-    // before the recipe) train: the same weights.
+    // ... and is what the library's paper settings (reproduce's) train: the
+    // same weights.
     let lib = mcgnode::models::train_from_bags(
         mcgnode::models::ModelKind::Family(mcgnode::gnode::Variant::Mcgnode),
         &[d.join("train.mcap")],
-        &mcgnode::train::ModelOptions::default(),
+        &mcgnode::train::ModelOptions::for_recipe(mcgnode::train::Recipe::Paper),
         &mcgnode::train::TrainConfig {
             epochs: 3,
             ..Default::default()
@@ -965,6 +965,24 @@ fn train_recipes_explained_fraction_and_the_still_reference() {
         serde_json::to_value(&lib.weights).unwrap(),
         paper["weights"]
     );
+    // The library's defaults (ModelOptions::default(), the default recipe's
+    // TrainConfig: what the node and the Python package start from) train
+    // what `train` with no option trains.
+    let mut cfg = mcgnode::train::TrainConfig::for_recipe(mcgnode::train::Recipe::default());
+    cfg.set_epochs(3);
+    let lib = mcgnode::models::train_from_bags(
+        mcgnode::models::ModelKind::Family(mcgnode::gnode::Variant::Mcgnode),
+        &[d.join("train.mcap")],
+        &mcgnode::train::ModelOptions::default(),
+        &cfg,
+        |_| {},
+        |_| true,
+    )
+    .unwrap()
+    .into_family()
+    .expect("a GNODE-family file");
+    assert_eq!(serde_json::to_value(&lib.weights).unwrap(), auto["weights"]);
+    assert_eq!(serde_json::to_value(&lib.hyper).unwrap(), auto["hyper"]);
     // Given options override the recipe.
     let (given, _) = train(&["--batch", "7", "--lr", "3e-3"], "given.json");
     assert_eq!(given["training"]["batch"], 7);

@@ -327,7 +327,7 @@ fn training_on_a_subset_reports_it() {
     let file = mcgnode::models::train_from_bags(
         mcgnode::models::ModelKind::Family(Variant::Gnode),
         &[bag],
-        &mcgnode::train::ModelOptions::default(),
+        &mcgnode::train::ModelOptions::for_recipe(mcgnode::train::Recipe::Paper),
         &cfg,
         |m| lines.push(m.to_string()),
         |_| true,
@@ -354,7 +354,7 @@ fn training_on_a_subset_reports_it() {
     let err = mcgnode::models::train_from_bags(
         mcgnode::models::ModelKind::Family(Variant::Gnode),
         &[dir.path().join("train.mcap")],
-        &mcgnode::train::ModelOptions::default(),
+        &mcgnode::train::ModelOptions::for_recipe(mcgnode::train::Recipe::Paper),
         &too_many,
         |_| {},
         |_| true,

@@ -1,7 +1,9 @@
 """Type hints of the mcgnode package (the native module mcgnode._mcgnode)."""
 
 import os
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Union
+from typing import Any, Dict, List, Literal, Mapping, Optional, Sequence, Tuple, Union
+
+from typing_extensions import TypedDict, Unpack
 
 import numpy as np
 import numpy.typing as npt
@@ -52,21 +54,60 @@ def load_model(ref: PathLike) -> Model:
     (GNODE family or a baseline), ``"still"`` or ``"truth:<system>"``.
     Raises Error with the library's message."""
 
+# One lr_drop: (epoch, lr), or "EPOCH:LR" as on the command line.
+LrDrop = Union[Tuple[int, float], str]
+# One block's hidden sizes: a list, one size, or "16,16".
+BlockSizes = Union[Sequence[int], int, str]
+
+class TrainOptions(TypedDict, total=False):
+    """train()'s keywords: ``mcgnode train``'s options, dashes as underscores
+    (see ``mcgnode train --help``); each left out, or None, keeps the default"""
+    topic: str
+    recipe: Literal["auto", "paper"]
+    epochs: int
+    seed: int
+    lr: float
+    lr_drop: Union[LrDrop, Sequence[LrDrop]]
+    batch: int
+    max_seconds: float
+    patience: int
+    hidden: int
+    embed: int
+    rounds: int
+    arch: Literal["authors", "paper"]
+    hidden_layers: int
+    messages: Literal["linear", "mlp"]
+    edge_update: Literal["concat", "product"]
+    block_hidden: Union[Mapping[str, BlockSizes], Sequence[Union[Tuple[str, BlockSizes], str]]]
+    noise: float
+    points: int
+    body_force: Literal["auto", "on", "off"]
+    engine: Literal["native", "candle"]
+    threads: int
+    edge_physics: bool
+    radius: float
+    no_normalize: bool
+    init: PathLike
+    checkpoint: PathLike
+    checkpoint_every: float
+    quiet: bool
+
 def train(
     bags: Union[PathLike, Sequence[PathLike]],
     out: PathLike,
     *,
     variant: str,
-    **options: Any,
+    **options: Unpack[TrainOptions],
 ) -> Dict[str, Any]:
     """``mcgnode train --data BAGS --out OUT --model VARIANT [options]``,
     options as keywords with underscores (``epochs=300``, ``seed=1``,
     ``recipe="paper"``, ``edge_physics=True``, ``lr_drop=[(300, 1e-3)]``,
-    ``block_hidden={"edge_out": [16, 16]}``, ``quiet=True``, ...), with the
-    CLI's defaults and checks. Writes the model file and returns its training
-    report as a dict, with "out", "summary" and "explained_line". Raises Error
-    with the CLI's message; an unknown option raises TypeError, a bad value
-    ValueError."""
+    ``block_hidden={"edge_out": [16, 16]}``, ``quiet=True``, ...; see
+    TrainOptions), turned into the library's typed options from the CLI's
+    defaults. Writes the model file and returns its training report as a
+    dict, with "out", "summary" and "explained_line". Raises Error with the
+    CLI's message; an unknown keyword raises TypeError, a bad value
+    ValueError naming its keyword."""
 
 class Model:
     """A loaded model (see load_model)."""

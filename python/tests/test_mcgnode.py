@@ -346,11 +346,13 @@ def test_errors_carry_the_cli_messages(bags, tmp_path):
         mcgnode.load_model(SPRING_MODEL).rollout(tr, 10)
     assert str(e.value) == cli_error("rollout", "--model", SPRING_MODEL, "--initial",
                                      bags["pendulum"], "--out", out)
-    # A bad training option: clap's message for it.
+    # A bad variant: named, with the reason the CLI gives for `--model`.
     with pytest.raises(ValueError) as e:
         mcgnode.train(bags["spring"], tmp_path / "m.json", variant="rope")
-    assert str(e.value) == cli_error("train", "--model", "rope", "--data", bags["spring"],
-                                     "--out", tmp_path / "m.json")
+    prefix = "train() argument 'variant': "
+    assert str(e.value).startswith(prefix)
+    assert str(e.value)[len(prefix):] in cli_error(
+        "train", "--model", "rope", "--data", bags["spring"], "--out", tmp_path / "m.json")
     with pytest.raises(TypeError, match="unexpected keyword argument 'epoch'"):
         mcgnode.train(bags["spring"], tmp_path / "m.json", variant="gnode", epoch=3)
     with pytest.raises(ValueError, match="positions must have shape"):
@@ -391,6 +393,46 @@ def test_train_equals_the_cli_with_the_same_options(bags, tmp_path):
     assert report["epochs_run"] == 4 and report["lr_drops"] == [[2, 1e-3]]
     assert report["out"] == str(py_out)
     assert report["summary"].startswith(f"wrote {py_out}: 4 epochs")
+    # The paper's recipe, one keyword away as it is one flag away.
+    py_out, cli_out = tmp_path / "py-paper.json", tmp_path / "cli-paper.json"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        mcgnode.train(bags["spring"], py_out, variant="gnode", recipe="paper", epochs=2,
+                      hidden=3, lr_drop="1:1e-4", quiet=True)
+    cli("train", "--model", "gnode", "--data", bags["spring"], "--out", cli_out,
+        "--recipe", "paper", "--epochs", 2, "--hidden", 3, "--lr-drop", "1:1e-4", "--quiet")
+    a, b = json.loads(py_out.read_text()), json.loads(cli_out.read_text())
+    for f in (a, b):
+        f["training"].pop("seconds")
+    assert a == b
+    assert a["training"]["batch"] == 100 and a["hyper"]["hidden"] == 3
+
+
+def test_train_takes_the_cli_s_options_and_names_a_bad_one(bags, tmp_path):
+    # Every `mcgnode train` option is a keyword (dashes as underscores), and
+    # the stubs' TrainOptions lists the same.
+    help_text = cli("train", "--help").stdout
+    flags = set(re.findall(r"^\s+(?:-\w, )?--([a-z][a-z-]*)", help_text, re.M))
+    flags = {f.replace("-", "_") for f in flags} - {"model", "data", "out", "help"}
+    assert set(mcgnode._mcgnode._TRAIN_OPTIONS) == flags
+    stub = (Path(mcgnode.__file__).parent / "__init__.pyi").read_text()
+    block = re.search(r"^class TrainOptions\(TypedDict, total=False\):\n(.*?)\n\n", stub,
+                      re.M | re.S)
+    assert set(re.findall(r"^    (\w+):", block[1], re.M)) == flags
+    # A bad value is a ValueError naming its keyword, raised before training.
+    out = tmp_path / "never.json"
+    for kw, match in [
+        ({"epochs": "many"}, "'epochs'"),
+        ({"recipe": "fast"}, "'recipe': \"fast\" is not one of auto, paper"),
+        ({"engine": "gpu"}, "'engine'"),
+        ({"lr_drop": [(2, -1.0)]}, "'lr_drop': the learning rate after epoch 2"),
+        ({"lr_drop": "2-1e-3"}, "'lr_drop': expected EPOCH:LR"),
+        ({"block_hidden": {"edge_out": [16, 0]}}, "'block_hidden'"),
+        ({"checkpoint_every": 5.0}, "'checkpoint_every': needs checkpoint="),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            mcgnode.train(bags["spring"], out, variant="gnode", **kw)
+    assert not out.exists()
 
 
 # -- the README's example and the type stubs --------------------------------

@@ -8,7 +8,7 @@ use crate::simulate::DataIntegrator;
 use crate::train::{BodyForce, EngineKind, Recipe};
 
 /// A clap value enum `$arg` mirroring the library's `$lib`, variant for
-/// variant, with `From<$arg> for $lib`.
+/// variant, with `From` both ways (clap's defaults read the library's).
 macro_rules! value_enum {
     ($(#[$m:meta])* $arg:ident => $lib:ident { $($(#[$vm:meta])* $v:ident),* $(,)? }) => {
         $(#[$m])*
@@ -21,6 +21,15 @@ macro_rules! value_enum {
             fn from(a: $arg) -> $lib {
                 match a {
                     $($arg::$v => $lib::$v),*
+                }
+            }
+        }
+
+        // The other way: clap's defaults read the library's.
+        impl From<$lib> for $arg {
+            fn from(a: $lib) -> $arg {
+                match a {
+                    $($lib::$v => $arg::$v),*
                 }
             }
         }

@@ -8,7 +8,7 @@ use crate::gnode::Variant;
 use crate::models::ModelKind;
 use crate::physics::{SystemConfig, SystemKind};
 use crate::reproduce::lab::{Lab, TrainSpec, Trained};
-use crate::train::{ModelOptions, TrainConfig};
+use crate::train::{ModelOptions, Recipe, TrainConfig};
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 
@@ -156,7 +156,7 @@ fn train_models(lab: &Lab, train: &Path, epochs: usize, seed: u64) -> Result<Vec
                 threads: (crate::engine::all_cores() / VARIANTS.len()).max(1),
                 ..TrainConfig::default()
             },
-            opts: ModelOptions::default(),
+            opts: ModelOptions::for_recipe(Recipe::Paper),
         })
         .collect();
     let models = lab

@@ -2,14 +2,21 @@
 
 use super::choices::{ArchArg, BodyForceArg, EdgeInputArg, EngineArg, MessageFnArg, RecipeArg};
 use crate::gnode::file::TrainingReport;
+use crate::gnode::ArchPreset;
 use crate::models::{train_any_from_bags, ModelKind};
-use crate::train::{Auto, Checkpointing, EpochReport, ModelOptions, Recipe, TrainConfig};
+use crate::train::recipe::{self, paper};
+use crate::train::{
+    BodyForce, Checkpointing, EngineKind, EpochReport, ModelOptions, Recipe, TrainConfig,
+};
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
-/// Options of `train`.
+/// Options of `train`. Their defaults are the library's
+/// ([`ModelOptions::default`] and [`TrainConfig::for_recipe`] of the default
+/// [`Recipe`], constants in [`recipe`]): [`Args::settings`] of no option
+/// gives exactly those (a test below checks it).
 #[derive(clap::Args, Debug, Clone)]
 pub struct Args {
     /// Model: node, gnode, cgnode, cdgnode, mcgnode, or a baseline: lgn, hgn, gns.
@@ -28,7 +35,7 @@ pub struct Args {
     /// alike) or paper (the paper's appendix: batch 100, lr 1e-3, 10,000
     /// epochs, width 5). Options given here override either. Baselines
     /// (lgn, hgn, gns) keep their papers' settings under both.
-    #[arg(long, value_enum, default_value_t = RecipeArg::Auto)]
+    #[arg(long, value_enum, default_value_t = RecipeArg::from(Recipe::default()))]
     pub recipe: RecipeArg,
     /// Maximum epochs (auto: for 22,500 Adam steps, at most 10,000; paper: 10,000).
     #[arg(long)]
@@ -37,7 +44,7 @@ pub struct Args {
     #[arg(long)]
     pub out: PathBuf,
     /// Seed for initialisation, the 75:25 split and shuffling.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = recipe::SEED)]
     pub seed: u64,
     /// Adam learning rate (auto: 1e-2, or 1e-3 for a warm start; paper: 1e-3).
     #[arg(long)]
@@ -56,21 +63,21 @@ pub struct Args {
     #[arg(long, value_name = "SECONDS")]
     pub max_seconds: Option<f64>,
     /// Stop when the validation loss has not improved for this many epochs.
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = recipe::PATIENCE)]
     pub patience: usize,
     /// Hidden units of the graph MLPs (paper: 5).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = paper::HIDDEN)]
     pub hidden: usize,
     /// Node/edge embedding width (paper: 5).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = paper::EMBED)]
     pub embed: usize,
     /// Message-passing rounds (paper: 1).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = paper::ROUNDS)]
     pub rounds: usize,
     /// Architecture: authors (their code, behind the paper's numbers: two
     /// hidden layers per MLP, MLP messages, h_i ⊙ h_j edge updates) or paper
     /// (the paper's text: one hidden layer, linear messages, h_i ‖ h_j).
-    #[arg(long, value_enum, default_value_t = ArchArg::Authors)]
+    #[arg(long, value_enum, default_value_t = ArchArg::from(ArchPreset::default()))]
     pub arch: ArchArg,
     /// Hidden layers per graph MLP (overrides --arch).
     #[arg(long)]
@@ -87,7 +94,7 @@ pub struct Args {
     pub block_hidden: Vec<(String, Vec<usize>)>,
     /// Gaussian noise added to the target accelerations, in percent of their
     /// standard deviation (the paper's noise experiments use 0, 1, 5 and 10).
-    #[arg(long, default_value_t = 0.0, value_name = "PERCENT")]
+    #[arg(long, default_value_t = TrainConfig::default().noise, value_name = "PERCENT")]
     pub noise: f64,
     /// Train on a seeded random subset of N states (train + validation) instead
     /// of all of them (the paper's data-efficiency experiments use 100 to 10000).
@@ -96,12 +103,12 @@ pub struct Args {
     /// MCGNODE body-force branch: auto (off for a closed system, as the bag's
     /// messages or metadata state or its data show; refused when none tells),
     /// on, off.
-    #[arg(long, value_enum, default_value_t = BodyForceArg::Auto)]
+    #[arg(long, value_enum, default_value_t = BodyForceArg::from(BodyForce::default()))]
     pub body_force: BodyForceArg,
     /// Gradient engine of the GNODE family and GNS: native (hand-written,
     /// all cores) or candle (the autodiff reference). LGN and HGN always use
     /// candle.
-    #[arg(long, value_enum, default_value_t = EngineArg::Native)]
+    #[arg(long, value_enum, default_value_t = EngineArg::from(EngineKind::default()))]
     pub engine: EngineArg,
     /// Training threads of the native engine (default: all cores). The
     /// trained weights do not depend on it.
@@ -136,7 +143,7 @@ pub struct Args {
     #[arg(
         long,
         value_name = "SECONDS",
-        default_value_t = 60.0,
+        default_value_t = Checkpointing::EVERY,
         requires = "checkpoint"
     )]
     pub checkpoint_every: f64,
@@ -145,8 +152,8 @@ pub struct Args {
     pub quiet: bool,
 }
 
-/// `EPOCH:LR`.
-fn parse_drop(s: &str) -> Result<(usize, f64)> {
+/// `EPOCH:LR` (also the Python package's string form of an `lr_drop`).
+pub fn parse_drop(s: &str) -> Result<(usize, f64)> {
     let bad = || anyhow::anyhow!("expected EPOCH:LR such as 300:1e-3, got {s:?}");
     let (e, lr) = s.split_once(':').ok_or_else(bad)?;
     let e = e.trim().parse::<usize>().map_err(|_| bad())?;
@@ -156,8 +163,9 @@ fn parse_drop(s: &str) -> Result<(usize, f64)> {
     }
 }
 
-/// `BLOCK=SIZES`, sizes comma-separated (empty: no hidden layer).
-fn parse_block(s: &str) -> Result<(String, Vec<usize>)> {
+/// `BLOCK=SIZES`, sizes comma-separated (empty: no hidden layer) (also the
+/// Python package's string form of a `block_hidden` item).
+pub fn parse_block(s: &str) -> Result<(String, Vec<usize>)> {
     let (block, sizes) = s
         .split_once('=')
         .ok_or_else(|| anyhow::anyhow!("expected BLOCK=SIZES such as edge_out=16,16, got {s:?}"))?;
@@ -213,64 +221,76 @@ pub fn progress(quiet: bool) -> impl FnMut(&EpochReport) -> bool {
     }
 }
 
+impl Args {
+    /// The model options and training config these arguments stand for
+    /// (loading the `--init` model file): the library's defaults with each
+    /// option given here set, so that one given setting takes it from the
+    /// recipe and the others stay the recipe's.
+    pub fn settings(&self) -> Result<(ModelOptions, TrainConfig)> {
+        let a = self;
+        let recipe = Recipe::from(a.recipe);
+        let mut cfg = TrainConfig {
+            patience: a.patience,
+            seed: a.seed,
+            noise: a.noise,
+            points: a.points,
+            engine: a.engine.into(),
+            time_budget: a.max_seconds,
+            checkpoint: a.checkpoint.clone().map(|path| Checkpointing {
+                path,
+                every: a.checkpoint_every,
+            }),
+            threads: a.threads.unwrap_or_else(crate::engine::all_cores),
+            normalize: !a.no_normalize,
+            init: a
+                .init
+                .as_deref()
+                .map(crate::gnode::ModelFile::load)
+                .transpose()?
+                .map(Box::new),
+            ..TrainConfig::for_recipe(recipe)
+        };
+        if let Some(e) = a.epochs {
+            cfg.set_epochs(e);
+        }
+        if let Some(lr) = a.lr {
+            cfg.set_lr(lr);
+        }
+        if let Some(b) = a.batch {
+            cfg.set_batch(b);
+        }
+        if !a.lr_drop.is_empty() {
+            cfg.set_lr_drops(a.lr_drop.clone());
+        }
+        let opts = ModelOptions {
+            hidden: a.hidden,
+            embed: a.embed,
+            rounds: a.rounds,
+            body_force: a.body_force.into(),
+            types: None,
+            topic: a.topic.clone(),
+            arch: a.arch.into(),
+            hidden_layers: a.hidden_layers,
+            message: a.messages.map(Into::into),
+            edge_input: a.edge_update.map(Into::into),
+            block_hidden: a.block_hidden.iter().cloned().collect(),
+            edge_physics: a.edge_physics,
+            radius: a.radius,
+            recipe,
+        };
+        Ok((opts, cfg))
+    }
+}
+
 /// Trains as `a` says and writes the model file `a.out`: what `run` does,
 /// without its printing. `log` gets training's messages and `on_epoch` each
-/// epoch's figures (returning false cancels). The Python package's `train`.
+/// epoch's figures (returning false cancels).
 pub fn train(
     a: &Args,
     log: impl FnMut(&str),
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainingReport> {
-    let recipe = Recipe::from(a.recipe);
-    let paper = TrainConfig::default();
-    let auto = recipe == Recipe::Auto;
-    let cfg = TrainConfig {
-        epochs: a.epochs.unwrap_or(paper.epochs),
-        lr: a.lr.unwrap_or(paper.lr),
-        batch: a.batch.unwrap_or(paper.batch),
-        auto: Auto {
-            epochs: auto && a.epochs.is_none(),
-            batch: auto && a.batch.is_none(),
-            lr: auto && a.lr.is_none(),
-            lr_drops: auto && a.lr_drop.is_empty(),
-        },
-        patience: a.patience,
-        seed: a.seed,
-        noise: a.noise,
-        points: a.points,
-        engine: a.engine.into(),
-        lr_drops: a.lr_drop.clone(),
-        time_budget: a.max_seconds,
-        checkpoint: a.checkpoint.clone().map(|path| Checkpointing {
-            path,
-            every: a.checkpoint_every,
-        }),
-        threads: a.threads.unwrap_or_else(crate::engine::all_cores),
-        normalize: !a.no_normalize,
-        init: a
-            .init
-            .as_deref()
-            .map(crate::gnode::ModelFile::load)
-            .transpose()?
-            .map(Box::new),
-        ..TrainConfig::default()
-    };
-    let opts = ModelOptions {
-        hidden: a.hidden,
-        embed: a.embed,
-        rounds: a.rounds,
-        body_force: a.body_force.into(),
-        types: None,
-        topic: a.topic.clone(),
-        arch: a.arch.into(),
-        hidden_layers: a.hidden_layers,
-        message: a.messages.map(Into::into),
-        edge_input: a.edge_update.map(Into::into),
-        block_hidden: a.block_hidden.iter().cloned().collect(),
-        edge_physics: a.edge_physics,
-        radius: a.radius,
-        recipe,
-    };
+    let (opts, cfg) = a.settings()?;
     Ok(train_any_from_bags(
         a.model, &a.data, &opts, &cfg, log, on_epoch, &a.out,
     )?)
@@ -316,4 +336,99 @@ pub fn run(a: Args) -> Result<()> {
         eprintln!("{w}");
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::{Args as _, FromArgMatches as _};
+
+    /// `train` with `argv` after `--model mcgnode --data d.mcap --out m.json`.
+    fn parse(argv: &[&str]) -> Args {
+        let cmd = Args::augment_args(clap::Command::new("train")).no_binary_name(true);
+        let base = ["--model", "mcgnode", "--data", "d.mcap", "--out", "m.json"];
+        let m = cmd
+            .try_get_matches_from(base.iter().chain(argv))
+            .expect("valid arguments");
+        Args::from_arg_matches(&m).expect("matches")
+    }
+
+    #[test]
+    fn the_command_line_defaults_are_the_library_defaults() {
+        let (opts, cfg) = parse(&[]).settings().unwrap();
+        assert_eq!(opts, ModelOptions::default());
+        assert_eq!(opts.recipe, Recipe::Auto);
+        // TrainConfig holds a model file (no PartialEq): compared as printed.
+        assert_eq!(
+            format!("{cfg:?}"),
+            format!("{:?}", TrainConfig::for_recipe(Recipe::default()))
+        );
+        assert_eq!(cfg.auto, crate::train::Auto::ALL);
+        assert_eq!(cfg.patience, recipe::PATIENCE);
+    }
+
+    #[test]
+    fn the_help_states_the_recipe_s_numbers() {
+        // `--help` spells out what the recipe chooses; it must say the
+        // constants the recipe uses.
+        let help = Args::augment_args(clap::Command::new("train"))
+            .render_long_help()
+            .to_string();
+        let thousands = |n: usize| {
+            let s = n.to_string();
+            let head = s.len() % 3;
+            let mut out = s[..head].to_string();
+            for (i, c) in s[head..].chars().enumerate() {
+                if i % 3 == 0 && !out.is_empty() {
+                    out.push(',');
+                }
+                out.push(c);
+            }
+            out
+        };
+        assert_eq!(thousands(22_500), "22,500");
+        for needle in [
+            thousands(recipe::STEPS),
+            thousands(recipe::BATCH_EDGES),
+            thousands(paper::EPOCHS),
+            format!("{0},{0}", recipe::EDGE_WIDTH),
+            format!("{:e}", recipe::LR),
+            format!("{:e}", paper::LR),
+            format!("paper: {}", paper::BATCH),
+            format!("paper: {}", paper::HIDDEN),
+        ] {
+            assert!(help.contains(&needle), "--help does not say {needle:?}");
+        }
+    }
+
+    #[test]
+    fn the_paper_recipe_is_one_flag_away() {
+        let (opts, cfg) = parse(&["--recipe", "paper"]).settings().unwrap();
+        assert_eq!(opts, ModelOptions::for_recipe(Recipe::Paper));
+        assert_eq!(format!("{cfg:?}"), format!("{:?}", TrainConfig::default()));
+        assert_eq!(
+            (cfg.epochs, cfg.batch, cfg.lr, opts.hidden),
+            (paper::EPOCHS, paper::BATCH, paper::LR, paper::HIDDEN)
+        );
+    }
+
+    #[test]
+    fn a_given_setting_leaves_the_others_to_the_recipe() {
+        let (opts, cfg) = parse(&["--epochs", "7", "--lr-drop", "3:1e-4", "--hidden", "9"])
+            .settings()
+            .unwrap();
+        assert_eq!((cfg.epochs, cfg.lr_drops.clone()), (7, vec![(3, 1e-4)]));
+        let auto = cfg.auto;
+        assert!(
+            !auto.epochs && !auto.lr_drops && auto.batch && auto.lr,
+            "{auto:?}"
+        );
+        assert_eq!(
+            opts,
+            ModelOptions {
+                hidden: 9,
+                ..ModelOptions::default()
+            }
+        );
+    }
 }

@@ -99,10 +99,12 @@ pub enum EdgeInput {
 }
 
 /// Architecture presets.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ArchPreset {
     /// What the authors' code ran, behind the paper's numbers: two hidden
-    /// layers per MLP, MLP message functions, h_i ⊙ h_j in the edge update.
+    /// layers per MLP, MLP message functions, h_i ⊙ h_j in the edge update
+    /// (the default).
+    #[default]
     Authors,
     /// The paper's text: one hidden layer, linear message functions, h_i ‖ h_j.
     Paper,
@@ -315,6 +317,14 @@ pub struct Hyper {
 }
 
 impl Hyper {
+    /// Hidden units of each graph MLP in the paper (appendix): the width
+    /// every graph MLP gets unless a recipe or the user widens it.
+    pub const PAPER_HIDDEN: usize = 5;
+    /// Node and edge embedding width in the paper.
+    pub const PAPER_EMBED: usize = 5;
+    /// Message-passing rounds in the paper.
+    pub const PAPER_ROUNDS: usize = 1;
+
     /// Applies an architecture preset.
     pub fn with_preset(mut self, preset: ArchPreset) -> Self {
         (self.hidden_layers, self.message, self.edge_input) = preset.settings();
@@ -324,14 +334,14 @@ impl Hyper {
     /// Defaults for a variant: the paper's sizes with the authors' architecture
     /// ([`ArchPreset::Authors`]).
     pub fn new(variant: Variant, dim: usize, types: usize, particles: usize) -> Self {
-        let (hidden_layers, message, edge_input) = ArchPreset::Authors.settings();
+        let (hidden_layers, message, edge_input) = ArchPreset::default().settings();
         Self {
             variant,
             dim,
             types: types.max(1),
-            hidden: 5,
-            embed: 5,
-            rounds: 1,
+            hidden: Self::PAPER_HIDDEN,
+            embed: Self::PAPER_EMBED,
+            rounds: Self::PAPER_ROUNDS,
             body_force: true,
             node_hidden: 16,
             node_layers: 2,

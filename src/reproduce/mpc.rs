@@ -14,7 +14,7 @@ use crate::models::{load_any_model, ModelKind, ModelRef};
 use crate::physics::{SystemConfig, SystemKind};
 use crate::plan::{mpc, Cost, CostKind, EpisodeReport, Sampler};
 use crate::system::{Graph, State};
-use crate::train::recipe::{Auto, Recipe};
+use crate::train::recipe::Auto;
 use crate::train::{ModelOptions, TrainConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -162,10 +162,8 @@ fn train_models(
                 auto: Auto::GIVEN_EPOCHS,
                 ..TrainConfig::default()
             },
-            opts: ModelOptions {
-                recipe: Recipe::Auto,
-                ..ModelOptions::default()
-            },
+            // The default recipe's options (`mcgnode train`'s).
+            opts: ModelOptions::default(),
         })
         .collect();
     let trained = lab

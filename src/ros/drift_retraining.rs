@@ -12,15 +12,15 @@ use crate::dynamics::Dynamics;
 use crate::gnode::ModelFile;
 use crate::kernel::TrainedModel;
 use crate::models::{train_from_bags, ModelKind};
-use crate::train::{Auto, TrainConfig};
 
 use super::model_swap::{save_and_load, swap};
 use super::params::NodeParams;
 use super::trainer::{claim, Trainer, TrainingError};
-use super::training::{auto_options, served_file};
+use super::training::{node_settings, served_file};
 
 /// Retrains after a drift alarm (`why`), blocking: warm-starts the served
-/// model file (`train --init` semantics, [`TrainConfig::init`]) on the bags
+/// model file (`train --init` semantics,
+/// [`TrainConfig::init`](crate::train::TrainConfig::init)) on the bags
 /// recorded during the `accuracy_retrain_after` seconds after the alarm,
 /// holding the last of them out, and swaps the new model in only if its
 /// replayed RE on that held-out bag (as the node predicts:
@@ -115,24 +115,22 @@ fn record_after_alarm(
     Ok(bags.get(before..).unwrap_or_default().to_vec())
 }
 
-/// Trains from `init` (`train --init` semantics, [`TrainConfig::init`]) on
-/// `train` for `accuracy_retrain_epochs` epochs.
+/// Trains from `init` (`train --init` semantics,
+/// [`TrainConfig::init`](crate::train::TrainConfig::init)) on `train` for
+/// `accuracy_retrain_epochs` epochs, with the node's settings
+/// ([`node_settings`]).
 fn warm_start(
     init: ModelFile,
     p: &NodeParams,
     train: &[PathBuf],
 ) -> Result<ModelFile, TrainingError> {
     let variant = init.hyper.variant;
-    let cfg = TrainConfig {
-        epochs: p.accuracy_retrain_epochs as usize,
-        init: Some(Box::new(init)),
-        auto: Auto::GIVEN_EPOCHS,
-        ..TrainConfig::default()
-    };
+    let (opts, mut cfg) = node_settings(p.accuracy_retrain_epochs as usize);
+    cfg.init = Some(Box::new(init));
     train_from_bags(
         ModelKind::Family(variant),
         train,
-        &auto_options(),
+        &opts,
         &cfg,
         |_| {},
         |_| true,

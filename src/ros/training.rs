@@ -18,7 +18,7 @@ use ros2_client::log::LogLevel;
 
 use crate::gnode::{ModelFile, Variant};
 use crate::models::{train_from_bags, ModelKind};
-use crate::train::{Auto, EpochReport, ModelOptions, Recipe, TrainConfig};
+use crate::train::{EpochReport, ModelOptions, Recipe, TrainConfig};
 
 use super::model_swap::{save_and_load, swap};
 use super::trainer::{Trainer, TrainingError};
@@ -194,19 +194,14 @@ fn train(
                 .join(", ")
         ),
     );
-    // The default recipe, as `mcgnode train` has it, with the epochs asked for.
-    let cfg = TrainConfig {
-        epochs: req.epochs as usize,
-        seed: req.seed,
-        init,
-        auto: Auto::GIVEN_EPOCHS,
-        ..TrainConfig::default()
-    };
+    let (opts, mut cfg) = node_settings(req.epochs as usize);
+    cfg.seed = req.seed;
+    cfg.init = init;
     let every = (cfg.epochs / 10).max(1);
     let trained = train_from_bags(
         ModelKind::Family(variant),
         &bags,
-        &auto_options(),
+        &opts,
         &cfg,
         |m| job.log(LogLevel::Info, m),
         |r| {
@@ -302,12 +297,12 @@ pub(super) fn served_file(shared: &Trainer) -> Result<(PathBuf, ModelFile), Trai
     Ok((path, file))
 }
 
-/// The architecture options of `mcgnode train`'s default recipe.
-pub(super) fn auto_options() -> ModelOptions {
-    ModelOptions {
-        recipe: Recipe::Auto,
-        ..ModelOptions::default()
-    }
+/// What the node trains with (Train requests and drift retraining):
+/// `mcgnode train`'s defaults, the default recipe, with the epochs given.
+pub(super) fn node_settings(epochs: usize) -> (ModelOptions, TrainConfig) {
+    let mut cfg = TrainConfig::for_recipe(Recipe::default());
+    cfg.set_epochs(epochs);
+    (ModelOptions::default(), cfg)
 }
 
 #[cfg(test)]

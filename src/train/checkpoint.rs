@@ -21,6 +21,13 @@ pub struct Checkpointing {
     pub every: f64,
 }
 
+impl Checkpointing {
+    /// Seconds between saves unless told (`--checkpoint-every`): a minute,
+    /// short against the hours a run worth resuming takes, long against a
+    /// save's milliseconds.
+    pub const EVERY: f64 = 60.0;
+}
+
 /// Why a checkpoint could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum CheckpointError {

@@ -1,6 +1,6 @@
 //! Training settings: [`TrainConfig`] and the gradient engine it chooses.
 
-use super::recipe::{self, Auto};
+use super::recipe::{self, paper, Auto, Recipe};
 use crate::system::Graph;
 
 /// Training settings.
@@ -65,18 +65,65 @@ impl TrainConfig {
     }
 }
 
+impl TrainConfig {
+    /// The settings of a user who names none under `recipe`:
+    /// [`Recipe::Auto`] (the default of `mcgnode train`, the node and the
+    /// Python package) leaves epochs, batch, learning rate and its step to
+    /// the data ([`Auto::ALL`]); [`Recipe::Paper`] is
+    /// [`TrainConfig::default`]. Set a setting the recipe would choose with
+    /// [`set_epochs`](Self::set_epochs) and its siblings, which also take it
+    /// away from the recipe.
+    pub fn for_recipe(recipe: Recipe) -> Self {
+        Self {
+            auto: match recipe {
+                Recipe::Auto => Auto::ALL,
+                Recipe::Paper => Auto::default(),
+            },
+            ..Self::default()
+        }
+    }
+
+    /// Trains at most `epochs` epochs, whatever the recipe.
+    pub fn set_epochs(&mut self, epochs: usize) {
+        self.epochs = epochs;
+        self.auto.epochs = false;
+    }
+
+    /// Batches of `batch` states, whatever the recipe.
+    pub fn set_batch(&mut self, batch: usize) {
+        self.batch = batch;
+        self.auto.batch = false;
+    }
+
+    /// Learning rate `lr`, whatever the recipe.
+    pub fn set_lr(&mut self, lr: f64) {
+        self.lr = lr;
+        self.auto.lr = false;
+    }
+
+    /// The step schedule `drops` ([`TrainConfig::lr_drops`]) instead of the
+    /// recipe's step.
+    pub fn set_lr_drops(&mut self, drops: Vec<(usize, f64)>) {
+        self.lr_drops = drops;
+        self.auto.lr_drops = false;
+    }
+}
+
+/// The paper's settings, nothing left to the recipe (see [`recipe`'s
+/// notes](super::recipe#where-the-defaults-live) for why this is not the
+/// auto recipe).
 impl Default for TrainConfig {
     fn default() -> Self {
         Self {
-            epochs: 10_000,
-            lr: 1e-3,
-            batch: 100,
-            validation: 0.25,
-            patience: 1_000,
-            seed: 0,
+            epochs: paper::EPOCHS,
+            lr: paper::LR,
+            batch: paper::BATCH,
+            validation: paper::VALIDATION,
+            patience: recipe::PATIENCE,
+            seed: recipe::SEED,
             noise: 0.0,
             points: None,
-            engine: EngineKind::Native,
+            engine: EngineKind::default(),
             threads: crate::engine::all_cores(),
             init: None,
             normalize: true,
@@ -110,7 +157,7 @@ impl TrainConfig {
             c.batch = recipe::batch_for_edges(edges);
         }
         if a.lr {
-            c.lr = if warm { 1e-3 } else { 1e-2 };
+            c.lr = if warm { paper::LR } else { recipe::LR };
         }
         if a.epochs {
             let n_val = ((states as f64 * c.validation).round() as usize)
@@ -118,7 +165,7 @@ impl TrainConfig {
             c.epochs = recipe::epochs_for(states.saturating_sub(n_val), c.batch);
         }
         if a.lr_drops && !warm {
-            c.lr_drops = vec![((c.epochs * 2).div_ceil(3), c.lr / 10.0)];
+            c.lr_drops = vec![((c.epochs * 2).div_ceil(3), c.lr / recipe::LR_DROP_FACTOR)];
         }
         let drops = c
             .lr_drops
@@ -138,9 +185,10 @@ impl TrainConfig {
 }
 
 /// Which engine computes the gradients of the GNODE family and GNS.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum EngineKind {
     /// Hand-written reverse mode on the kernel's layout, over all cores (default).
+    #[default]
     Native,
     /// Candle's autodiff: the reference.
     Candle,

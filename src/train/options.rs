@@ -1,14 +1,16 @@
 //! Architecture choices for the GNODE family: [`ModelOptions`] and the
 //! body-force branch.
 
-use super::recipe::{self, Recipe};
+use super::recipe::{self, paper, Recipe};
 use crate::error::{bail, Result};
 use crate::gnode::{ArchPreset, EdgeInput, Hyper, MessageFn, Variant};
 
 /// Whether MCGNODE learns a body-force branch.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BodyForce {
-    /// On unless the bag says the system is closed (no field, no anchors).
+    /// On unless the bag says the system is closed (no field, no anchors)
+    /// (the default).
+    #[default]
     Auto,
     /// Always learn body forces.
     On,
@@ -17,7 +19,13 @@ pub enum BodyForce {
 }
 
 /// Architecture choices on top of a variant's paper defaults.
-#[derive(Clone, Debug)]
+///
+/// The default is what `mcgnode train`, the node's Train service and the
+/// Python package's `train` use when given no option: the paper's sizes
+/// ([`paper`]) with the authors' architecture and the auto recipe's wider
+/// edge MLPs; [`ModelOptions::for_recipe`]`(Recipe::Paper)` is the paper's
+/// settings exactly (`--recipe paper`).
+#[derive(Clone, Debug, PartialEq)]
 pub struct ModelOptions {
     /// Hidden units of the graph MLPs.
     pub hidden: usize,
@@ -46,34 +54,43 @@ pub struct ModelOptions {
     /// The interaction radius to train with, overriding the bags' (none:
     /// theirs).
     pub radius: Option<f64>,
-    /// With [`Recipe::Auto`], the blocks that embed and decode edges get the
-    /// recipe's widths ([`recipe::edge_blocks`]) unless `block_hidden` names
-    /// them; [`Recipe::Paper`] (the default here) adds nothing.
+    /// With [`Recipe::Auto`] (the default), the blocks that embed and decode
+    /// edges get the recipe's widths ([`recipe::edge_blocks`]) unless
+    /// `block_hidden` names them; [`Recipe::Paper`] adds nothing.
     pub recipe: Recipe,
 }
 
 impl Default for ModelOptions {
     fn default() -> Self {
         Self {
-            hidden: 5,
-            embed: 5,
-            rounds: 1,
-            body_force: BodyForce::Auto,
+            hidden: paper::HIDDEN,
+            embed: paper::EMBED,
+            rounds: paper::ROUNDS,
+            body_force: BodyForce::default(),
             types: None,
             topic: None,
-            arch: ArchPreset::Authors,
+            arch: ArchPreset::default(),
             hidden_layers: None,
             message: None,
             edge_input: None,
             block_hidden: Default::default(),
             edge_physics: false,
             radius: None,
-            recipe: Recipe::Paper,
+            recipe: Recipe::default(),
         }
     }
 }
 
 impl ModelOptions {
+    /// The default options under `recipe` ([`Recipe::Paper`]: the paper's
+    /// widths everywhere, as `reproduce` trains).
+    pub fn for_recipe(recipe: Recipe) -> Self {
+        Self {
+            recipe,
+            ..Self::default()
+        }
+    }
+
     /// The hyperparameters these options give a variant on a `dim`-D graph of
     /// `particles` particles with `types` types (body force left on).
     pub fn hyper(

@@ -22,6 +22,27 @@
 //!
 //! `--recipe auto` is the default; `--recipe paper` restores the paper's settings exactly, and every setting
 //! given on the command line overrides the recipe's choice.
+//!
+//! # Where the defaults live
+//!
+//! Every training default is stated once, here ([`paper`], [`PATIENCE`],
+//! [`SEED`], [`LR`], [`LR_DROP_FACTOR`]) or beside the type it belongs to
+//! ([`Hyper::PAPER_HIDDEN`](crate::gnode::Hyper::PAPER_HIDDEN) and the
+//! other sizes a [`Hyper`](crate::gnode::Hyper) starts from). What a user
+//! who names no setting gets is [`ModelOptions::default`](super::ModelOptions)
+//! with [`TrainConfig::for_recipe`](super::TrainConfig::for_recipe)`(Recipe::default())`:
+//! `mcgnode train`'s clap defaults read these constants, the node's Train
+//! service and drift retraining and the Python package's `train` start from
+//! the same two values, and a test in `src/cli/train.rs` fails if the
+//! command line's defaults and these disagree.
+//!
+//! [`TrainConfig::default`](super::TrainConfig) is the paper's settings with
+//! nothing left to the recipe, not the auto recipe: a config written as
+//! `TrainConfig { epochs: 30, ..TrainConfig::default() }` must mean 30
+//! epochs, and struct-update syntax cannot tell the recipe which fields were
+//! written (`reproduce` and the tests rely on it). [`ModelOptions`](super::ModelOptions)
+//! has no such trap: its recipe only adds widths to blocks that `block_hidden`
+//! does not name, so its default is the auto recipe.
 
 use crate::gnode::Variant;
 use crate::system::Graph;
@@ -47,6 +68,43 @@ impl Recipe {
     }
 }
 
+/// The paper's settings (its appendix): what [`Recipe::Paper`] trains with,
+/// what [`TrainConfig::default`](crate::train::TrainConfig) holds and what
+/// the default recipe caps its choices at.
+pub mod paper {
+    use crate::gnode::Hyper;
+
+    /// Maximum epochs.
+    pub const EPOCHS: usize = 10_000;
+    /// Adam's learning rate (also the default recipe's for a warm start,
+    /// which is already trained).
+    pub const LR: f64 = 1e-3;
+    /// States a batch.
+    pub const BATCH: usize = 100;
+    /// Fraction of the states held out for validation (the 75:25 split).
+    pub const VALIDATION: f64 = 0.25;
+    /// Hidden units of the graph MLPs.
+    pub const HIDDEN: usize = Hyper::PAPER_HIDDEN;
+    /// Node and edge embedding width.
+    pub const EMBED: usize = Hyper::PAPER_EMBED;
+    /// Message-passing rounds.
+    pub const ROUNDS: usize = Hyper::PAPER_ROUNDS;
+}
+
+/// Epochs without a better validation loss before training stops, under
+/// either recipe. The paper states no early stopping; a tenth of its epochs
+/// stops a paper-length run only on a long plateau, and the default recipe's
+/// shorter runs (300 epochs on the cube) practically never.
+pub const PATIENCE: usize = 1_000;
+/// Seed of initialisation, split and shuffling.
+pub const SEED: u64 = 0;
+/// The default recipe's learning rate for a fresh model (a warm start keeps
+/// [`paper::LR`]): ten times the paper's, which the step down returns to.
+pub const LR: f64 = 1e-2;
+/// The default recipe divides the learning rate by this after two thirds of
+/// the epochs.
+pub const LR_DROP_FACTOR: f64 = 10.0;
+
 /// Directed edges in a batch under the default recipe.
 pub const BATCH_EDGES: usize = 16_000;
 /// Adam steps the default recipe's epoch count aims at.
@@ -54,9 +112,9 @@ pub const STEPS: usize = 22_500;
 /// Hidden width of the edge MLPs under the default recipe.
 pub const EDGE_WIDTH: usize = 16;
 /// The most states a batch holds (the paper's batch).
-const MAX_BATCH: usize = 100;
+const MAX_BATCH: usize = paper::BATCH;
 /// The most epochs the step budget may ask for (the paper's count).
-const MAX_EPOCHS: usize = 10_000;
+const MAX_EPOCHS: usize = paper::EPOCHS;
 
 /// Which settings the default recipe chooses from the data; the others are
 /// taken from [`super::TrainConfig`] as given. `Auto::default()` chooses
@@ -68,7 +126,7 @@ pub struct Auto {
     pub epochs: bool,
     /// Batch from the edge budget.
     pub batch: bool,
-    /// Learning rate 1e-2 (1e-3 for a warm start).
+    /// Learning rate [`LR`] ([`paper::LR`] for a warm start).
     pub lr: bool,
     /// The step down after two thirds of the epochs.
     pub lr_drops: bool,

@@ -14,7 +14,7 @@ use crate::plot::Metric;
 use crate::reproduce::lab::{Lab, TrainSpec, Trained};
 use crate::reproduce::report::{error_table, num, table, Experiment, Row};
 use crate::reproduce::scale::Scale;
-use crate::train::{ModelOptions, TrainConfig};
+use crate::train::{ModelOptions, Recipe, TrainConfig};
 use std::path::PathBuf;
 
 /// Biases, baselines, zero-shot sizes and timing on one system family
@@ -167,7 +167,7 @@ impl<'s> Comparison<'s> {
                         kind: ModelKind::Family(v),
                         bags: vec![train_bag.clone()],
                         cfg: cfg(sc.family_epochs),
-                        opts: ModelOptions::default(),
+                        opts: ModelOptions::for_recipe(Recipe::Paper),
                     },
                 )
             })
@@ -186,7 +186,7 @@ impl<'s> Comparison<'s> {
                         train_bag.clone()
                     }],
                     cfg: cfg(sc.epochs),
-                    opts: ModelOptions::default(),
+                    opts: ModelOptions::for_recipe(Recipe::Paper),
                 },
             ));
         }
@@ -202,7 +202,7 @@ impl<'s> Comparison<'s> {
                     cfg: cfg(sc.family_epochs),
                     opts: ModelOptions {
                         arch: ArchPreset::Paper,
-                        ..ModelOptions::default()
+                        ..ModelOptions::for_recipe(Recipe::Paper)
                     },
                 },
             ));
@@ -226,7 +226,7 @@ impl<'s> Comparison<'s> {
                     time_budget: Some(budget),
                     ..cfg(usize::MAX / 2)
                 },
-                opts: ModelOptions::default(),
+                opts: ModelOptions::for_recipe(Recipe::Paper),
             })
             .collect()
     }

@@ -16,7 +16,7 @@ use crate::physics::{SystemConfig, SystemKind};
 use crate::reproduce::lab::{Lab, TrainSpec, Trained};
 use crate::reproduce::report::{num, table, Experiment};
 use crate::reproduce::scale::Scale;
-use crate::train::recipe::{Auto, Recipe};
+use crate::train::recipe::Auto;
 use crate::train::{ModelOptions, TrainConfig};
 
 /// Every model trains with the default recipe but the epochs (given), on
@@ -35,8 +35,8 @@ fn contact_cfg(epochs: usize) -> TrainConfig {
 /// The models of one system: MCGNODE and GNODE, then GNS at equal epochs
 /// and GNS for the seconds MCGNODE took (its time budget is set later).
 fn specs(system: &str, bag: &std::path::Path, sc: &Scale, edge_physics: bool) -> Vec<TrainSpec> {
+    // The default recipe's options (`mcgnode train`'s).
     let opts = ModelOptions {
-        recipe: Recipe::Auto,
         edge_physics,
         ..ModelOptions::default()
     };

@@ -12,7 +12,7 @@ use crate::plot::Metric;
 use crate::reproduce::lab::{Lab, TrainSpec};
 use crate::reproduce::report::{num, Experiment, Row};
 use crate::reproduce::scale::Scale;
-use crate::train::ModelOptions;
+use crate::train::{ModelOptions, Recipe};
 use std::path::PathBuf;
 
 /// Drag −0.1 q̇ and a constant external force on the 5-spring: MCGNODE vs
@@ -27,7 +27,7 @@ pub fn drag_and_force(lab: &Lab, sc: &Scale) -> Result<Section> {
                 kind: ModelKind::Family(v),
                 bags: vec![train.clone()],
                 cfg: cfg(sc.family_epochs),
-                opts: ModelOptions::default(),
+                opts: ModelOptions::for_recipe(Recipe::Paper),
             });
         }
     }

@@ -13,7 +13,7 @@ use crate::plot::Metric;
 use crate::reproduce::lab::{Lab, TrainSpec, Trained};
 use crate::reproduce::report::{num, table, Experiment, Row};
 use crate::reproduce::scale::Scale;
-use crate::train::{ModelOptions, TrainConfig};
+use crate::train::{ModelOptions, Recipe, TrainConfig};
 use std::path::{Path, PathBuf};
 
 /// Training of the peridynamic models: batches of 10 states (a cube state
@@ -48,7 +48,7 @@ fn peri_opts(kind: ModelKind) -> ModelOptions {
             ModelKind::Family(_) => wide(&["edge_em", "node_out"]),
             ModelKind::Baseline(_) => Default::default(),
         },
-        ..ModelOptions::default()
+        ..ModelOptions::for_recipe(Recipe::Paper)
     }
 }
 

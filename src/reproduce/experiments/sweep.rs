@@ -10,7 +10,7 @@ use crate::plot::{plot_sweep, SweepLine};
 use crate::reproduce::lab::{Lab, TrainSpec};
 use crate::reproduce::report::{num, table, Experiment, Row};
 use crate::reproduce::scale::Scale;
-use crate::train::{ModelOptions, TrainConfig};
+use crate::train::{ModelOptions, Recipe, TrainConfig};
 use std::path::PathBuf;
 
 /// Lines of a sweep figure: per model, (x, time-averaged gmean, band) of `pick`.
@@ -84,7 +84,7 @@ pub(super) fn sweep(lab: &Lab, sc: &Scale, w: Sweep<'_>) -> Result<Section> {
                     kind: k,
                     bags: vec![bag],
                     cfg,
-                    opts: ModelOptions::default(),
+                    opts: ModelOptions::for_recipe(Recipe::Paper),
                 },
             ));
         }
