@@ -1,6 +1,6 @@
 //! The library's one error type. Modules with errors a caller branches on
 //! keep their own thiserror enums (`DataError`, `ModelFileError`, ...), made
-//! into this type by [`typed_errors!`] in their own module (so that this
+//! into this type by `typed_errors!` in their own module (so that this
 //! module imports none of them) and found again with [`Error::find`]. It also
 //! carries the errors of the crates underneath (I/O, JSON, candle) and the
 //! context each step adds. The binary turns it into `anyhow` at its edge.

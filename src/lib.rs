@@ -4,10 +4,10 @@
 //! served as a ROS 2 node.
 //!
 //! Data flows one way: [`physics`] → [`simulate`] → [`data`] (bags) →
-//! [`train`] (on the [`engine`], or candle via [`model`]) → model file
+//! [`train`] (on the [`engine`], or candle via [`gnode`]) → model file
 //! ([`models`] loads and trains any kind) →
 //! [`kernel`] rollouts ([`dynamics`], [`ros`]) and plans ([`plan`]) →
-//! [`data`] → [`evaluate`] / [`replay`] → [`metrics`].
+//! [`data`] → [`evaluate`](mod@evaluate) / [`replay`](mod@replay) → [`metrics`].
 //!
 //! What a library user needs is re-exported here: naming and loading a
 //! model ([`ModelRef`], [`load_model`], [`load_any_model`]), rolling it out
@@ -55,5 +55,6 @@ pub use models::{
 };
 pub use physics::{Field, SystemConfig, SystemKind};
 pub use replay::{replay, ReplayOptions, ReplayReport};
+pub use ros::{NodeParams, Recorder};
 pub use system::{Graph, State, Trajectory};
 pub use train::{ModelOptions, TrainConfig};

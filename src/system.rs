@@ -7,7 +7,7 @@
 //!
 //! Systems that touch add an interaction radius (every pair of particles
 //! closer than it interacts through a contact edge rebuilt from positions,
-//! [`crate::physics::neighbors`]) and kinematic particles (walls, floors,
+//! `crate::physics::neighbors`) and kinematic particles (walls, floors,
 //! pushers: their motion is given, never predicted). Both default to off, and
 //! a graph without them behaves, serialises and validates exactly as before.
 
@@ -138,7 +138,7 @@ impl Graph {
     }
 
     /// The fixed edges: every edge but contacts (which are rebuilt from
-    /// positions and appended after them, [`crate::physics::neighbors`]).
+    /// positions and appended after them, `crate::physics::neighbors`).
     pub fn fixed_edges(&self) -> impl Iterator<Item = &Edge> + Clone {
         self.edges.iter().filter(|e| e.kind != EdgeKind::Contact)
     }

@@ -1,5 +1,5 @@
 //! The node's prediction path allocates nothing: a counting global allocator
-//! counts the heap allocations of `predict::predict_served` (compatibility
+//! counts the heap allocations of `predict_served` (compatibility
 //! check, training-range check, rollout and forces into the node's kept
 //! buffers) state after state of one system, for a model file loaded as the
 //! node loads it. The prediction is checked against the model's own rollout
@@ -15,9 +15,9 @@ use mcgnode::dynamics::{Dynamics, Predicted};
 use mcgnode::gnode::Variant;
 use mcgnode::models::{load_model, ModelRef};
 use mcgnode::physics::{SystemConfig, SystemKind};
-use mcgnode::ros::input::{Accepted, Input, Inputs};
-use mcgnode::ros::predict::{self, PredictError};
 use mcgnode::ros::NodeParams;
+use mcgnode::ros::{predict, predict_served, PredictError};
+use mcgnode::ros::{Accepted, Input, Inputs};
 use mcgnode::system::{Graph, Sample, State};
 
 /// The system allocator, counting the allocations each thread makes.
@@ -111,7 +111,7 @@ fn short_predictions() -> NodeParams {
 fn model_for(graph: &Graph, variant: Variant) -> std::sync::Arc<dyn Dynamics> {
     let (_, mut model) = mcgnode::testing::random_model(variant, graph, 3).expect("random model");
     // As `train` records them: the edges it was trained on.
-    model.file.trained_on.edge_params = mcgnode::gnode::file::EdgeParams::of(graph);
+    model.file.trained_on.edge_params = mcgnode::gnode::EdgeParams::of(graph);
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("model.json");
     model.file.save(&path).expect("saving the model file");
@@ -162,16 +162,14 @@ fn no_allocation_in(
     let served = (model.as_ref(), 1);
     // Warm-up: buffers sized for this system (contact systems: for every
     // state's neighbours). The first call builds them, and is counted.
-    let (first, _) =
-        allocations(|| predict::predict_served(served, &passed, &inputs[0], params, &mut kept));
+    let (first, _) = allocations(|| predict_served(served, &passed, &inputs[0], params, &mut kept));
     assert!(first > 0, "{what}: the first call counted {first}");
     for input in inputs {
-        predict::predict_served(served, &passed, input, params, &mut kept)
+        predict_served(served, &passed, input, params, &mut kept)
             .unwrap_or_else(|e| panic!("{what}: {e}"));
     }
     for input in inputs {
-        let (n, r) =
-            allocations(|| predict::predict_served(served, &passed, input, params, &mut kept));
+        let (n, r) = allocations(|| predict_served(served, &passed, input, params, &mut kept));
         r.unwrap_or_else(|e| panic!("{what}: {e}"));
         assert_eq!(n, 0, "{what}: {n} allocations in one prediction");
         // The same numbers as the model's own rollout and forces, apart.
@@ -227,7 +225,7 @@ fn large_contact_systems_predict_without_allocating() {
             s
         })
         .collect();
-    let mut search = mcgnode::physics::neighbors::NeighborSearch::new(&g);
+    let mut search = mcgnode::physics::NeighborSearch::new(&g);
     let directed = 2 * search.search(&s0.q, g.dim, g.interaction_radius).len();
     assert!(
         directed >= mcgnode::engine::SPLIT_ROWS,
@@ -261,12 +259,11 @@ fn two_systems_in_turn_predict_without_allocating() {
     let mut kept = Predicted::default();
     let served = (model.as_ref(), 1);
     for input in [&a[0], &b[0]] {
-        predict::predict_served(served, &passed, input, &params, &mut kept).expect("warm-up");
+        predict_served(served, &passed, input, &params, &mut kept).expect("warm-up");
     }
     for (x, y) in a.iter().zip(&b) {
         for (input, what) in [(x, "5 springs"), (y, "40 springs")] {
-            let (n, r) =
-                allocations(|| predict::predict_served(served, &passed, input, &params, &mut kept));
+            let (n, r) = allocations(|| predict_served(served, &passed, input, &params, &mut kept));
             r.unwrap_or_else(|e| panic!("{what}: {e}"));
             assert_eq!(
                 n, 0,
@@ -281,14 +278,13 @@ fn two_systems_in_turn_predict_without_allocating() {
 #[test]
 fn the_counter_sees_allocations() {
     let (inputs, model, params) = system(SystemKind::Spring, 5, Variant::Mcgnode, 3);
-    let (n, r) =
-        allocations(|| predict::predict(model.as_ref(), &inputs[1].message, params.timing()));
+    let (n, r) = allocations(|| predict(model.as_ref(), &inputs[1].message, params.timing()));
     r.unwrap();
     assert!(n > 0, "the allocating path counted {n}");
     // And a refusal is still an error, not a panic, on the kept buffers.
     let mut bad = params.clone();
     bad.dt = f64::NAN;
-    let e = predict::predict_served(
+    let e = predict_served(
         (model.as_ref(), 1),
         &Default::default(),
         &inputs[1],

@@ -3,10 +3,10 @@
 //! training.
 
 use candle_core::{Device, Tensor, Var};
-use mcgnode::baselines::autodiff::{ensure_second_order, probe_second_derivative, DO_NOT_DETACH};
-use mcgnode::baselines::mechanics::{euler_lagrange, hamilton};
-use mcgnode::gnode::batch::Batch;
-use mcgnode::gnode::plan::GraphPlan;
+use mcgnode::baselines::{ensure_second_order, probe_second_derivative, DO_NOT_DETACH};
+use mcgnode::baselines::{euler_lagrange, hamilton};
+use mcgnode::gnode::Batch;
+use mcgnode::gnode::GraphPlan;
 use mcgnode::physics::{acceleration, SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State};
 use std::process::Command;
@@ -271,7 +271,7 @@ fn hamilton_matches_physics() {
 
 use mcgnode::baselines::{train_baseline, BaselineHyper, BaselineNet, Kind, TrainedBaseline};
 use mcgnode::dynamics::Dynamics;
-use mcgnode::physics::rk4::rk4_trajectories;
+use mcgnode::physics::rk4_trajectories;
 use mcgnode::train::TrainConfig;
 use rand::SeedableRng;
 
@@ -654,8 +654,8 @@ fn training_gradients_equal_grad_of_grad() {
 /// distance feature, against candle's autodiff of Σ c_h∘h + Σ c_e∘e.
 #[test]
 fn graph_network_input_gradients_equal_autodiff() {
-    use mcgnode::baselines::graphnet::{GraphNet, GraphNetSpec};
-    use mcgnode::gnode::params::ParamStore;
+    use mcgnode::baselines::{GraphNet, GraphNetSpec};
+    use mcgnode::gnode::ParamStore;
     for (residual, edge_distance, rounds) in [(true, true, 2), (false, false, 1), (false, true, 2)]
     {
         let (_, b) = target_batch(SystemKind::Spring, 5, 2, 3);

@@ -4,10 +4,10 @@
 //! all three, the falling chain's bars), kinematic particles held still, and
 //! the input errors. Run with `cargo test --release --test contact`.
 
-use mcgnode::physics::contact::{contact_energy, ContactLaw, Contacts};
 use mcgnode::physics::{
     constraint_residual, hamiltonian, Integrator, PhysicsError, SystemConfig, SystemKind,
 };
+use mcgnode::physics::{contact_energy, ContactLaw, Contacts};
 use mcgnode::system::{Edge, EdgeKind, Endpoint, Graph, State, SystemError};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -291,7 +291,7 @@ fn contact_configurations_are_checked() {
     cfg.contact_stiffness = f64::NAN;
     assert!(cfg.validate().is_err());
     let cfg = SystemConfig::new(SystemKind::FallingChain, 5);
-    let e = mcgnode::physics::rk4::rk4_trajectories(&cfg, 1, 1).unwrap_err();
+    let e = mcgnode::physics::rk4_trajectories(&cfg, 1, 1).unwrap_err();
     assert!(e.to_string().contains("--integrator verlet"), "{e}");
     for kind in SystemKind::ALL {
         assert_eq!(kind.name().parse::<SystemKind>().unwrap(), kind);

@@ -217,8 +217,8 @@ fn walls_held(d: &std::path::Path, model: &str) {
 #[test]
 fn gns_loss_leaves_kinematic_particles_out() {
     use mcgnode::baselines::{BaselineHyper, BaselineNet, Kind};
-    use mcgnode::gnode::batch::Batch;
-    use mcgnode::gnode::plan::GraphPlan;
+    use mcgnode::gnode::Batch;
+    use mcgnode::gnode::GraphPlan;
     use mcgnode::physics::{SystemConfig, SystemKind};
     use rand::SeedableRng;
     let cfg = SystemConfig::new(SystemKind::SoftSpheres, 4);

@@ -9,8 +9,8 @@
 #![allow(clippy::too_many_lines)]
 
 use mcgnode::engine::Engine;
-use mcgnode::gnode::batch::Batch;
-use mcgnode::gnode::plan::GraphPlan;
+use mcgnode::gnode::Batch;
+use mcgnode::gnode::GraphPlan;
 use mcgnode::gnode::{ArchPreset, Hyper, Net, Norm, Variant};
 use mcgnode::kernel::TrainedModel;
 use mcgnode::physics::{SystemConfig, SystemKind};
@@ -432,7 +432,7 @@ fn contact_cases_have_varying_contacts_and_kinematic_targets_do_not_count() {
         for st in &states {
             let mut pairs = vec![];
             plan.contacts(&mut search, &st.q, &mut pairs);
-            let brute = mcgnode::physics::neighbors::brute_force_pairs(&g, &st.q, 1.5);
+            let brute = mcgnode::physics::brute_force_pairs(&g, &st.q, 1.5);
             assert_eq!(pairs, brute);
             counts.push(pairs.len());
         }

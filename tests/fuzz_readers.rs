@@ -625,7 +625,7 @@ fn make_seeds() -> Seeds {
         let net = BaselineNet::new(hyper, &mut rand_chacha::ChaCha8Rng::seed_from_u64(4))
             .expect("baseline");
         let file = BaselineFile {
-            format: mcgnode::baselines::file::FORMAT.into(),
+            format: mcgnode::baselines::FORMAT.into(),
             crate_version: env!("CARGO_PKG_VERSION").into(),
             hyper: net.hyper.clone(),
             trained_on: Some(template.file.trained_on.clone()),

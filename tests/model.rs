@@ -4,10 +4,10 @@
 
 use candle_core::{Device, Tensor, Var};
 use mcgnode::dynamics::Dynamics;
-use mcgnode::gnode::batch::Batch;
-use mcgnode::gnode::plan::GraphPlan;
-use mcgnode::gnode::solve::solve;
-use mcgnode::gnode::variant::EdgeInput;
+use mcgnode::gnode::solve;
+use mcgnode::gnode::Batch;
+use mcgnode::gnode::EdgeInput;
+use mcgnode::gnode::GraphPlan;
 use mcgnode::gnode::{Hyper, ModelFile, Net, Variant};
 use mcgnode::kernel::TrainedModel;
 use mcgnode::models::ModelRef;
@@ -395,8 +395,8 @@ fn model_file_round_trip_and_bad_files() {
     };
     assert!(
         matches!(
-            e.find::<mcgnode::gnode::file::ModelFileError>(),
-            Some(mcgnode::gnode::file::ModelFileError::Parse { .. })
+            e.find::<mcgnode::gnode::ModelFileError>(),
+            Some(mcgnode::gnode::ModelFileError::Parse { .. })
         ),
         "{e:?}"
     );

@@ -6,9 +6,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
-use mcgnode::physics::neighbors::{
-    brute_force_pairs, edges_with_contacts, ContactEdges, NeighborSearch,
-};
+use mcgnode::physics::{brute_force_pairs, edges_with_contacts, ContactEdges, NeighborSearch};
 use mcgnode::system::{Edge, EdgeKind, Endpoint, Graph};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -570,7 +570,7 @@ fn mean_radius(s: &State) -> f64 {
 
 #[test]
 fn peridynamic_cube_graph_is_the_documented_lattice() {
-    use mcgnode::physics::config::PERIDYNAMIC_HORIZON;
+    use mcgnode::physics::PERIDYNAMIC_HORIZON;
     let cfg = SystemConfig::new(SystemKind::Peridynamic, 125);
     assert_eq!(cfg.dim, 3);
     cfg.validate().unwrap();

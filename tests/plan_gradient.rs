@@ -284,7 +284,7 @@ fn candle_gradient(net: &mcgnode::gnode::Net, p: &Problem, u: &Controls) -> (f64
     let g = p.graph;
     let (n, d) = (g.n(), g.dim);
     let nd = n * d;
-    let plan = mcgnode::gnode::plan::GraphPlan::new(g);
+    let plan = mcgnode::gnode::GraphPlan::new(g);
     let (dt, sub) = (p.timing.step(), p.timing.substeps());
     let driven = p.driven();
     let w = driven.len() * d;
@@ -317,8 +317,7 @@ fn candle_gradient(net: &mcgnode::gnode::Net, p: &Problem, u: &Controls) -> (f64
         ((x * &keep).unwrap() + driven).unwrap()
     };
     let accel = |q: &Tensor, v: &Tensor| -> Tensor {
-        let mut b =
-            mcgnode::gnode::batch::Batch::new(&plan, &[p.start], None, net.hyper.types).unwrap();
+        let mut b = mcgnode::gnode::Batch::new(&plan, &[p.start], None, net.hyper.types).unwrap();
         b.q = q.reshape((n, d)).unwrap();
         b.v = v.reshape((n, d)).unwrap();
         if !plan.bars.is_empty() {

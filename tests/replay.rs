@@ -191,9 +191,9 @@ fn irregular_stamps_are_followed_exactly() {
 /// metadata; dt and horizon come from the recording node's parameters.
 #[test]
 fn node_recordings_replay_with_the_nodes_settings() {
-    use mcgnode::ros::predict::predict;
-    use mcgnode::ros::record::Recorder;
+    use mcgnode::ros::predict;
     use mcgnode::ros::NodeParams;
+    use mcgnode::ros::Recorder;
     let dir = tempfile::tempdir().expect("tempdir");
     let params = NodeParams {
         record_dir: dir.path().join("rec").to_string_lossy().into_owned(),

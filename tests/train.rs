@@ -489,7 +489,7 @@ fn normalisation_is_recorded_and_applied() {
 #[test]
 fn edge_physics_reads_stiffness_and_plain_models_refuse_other_edges() {
     use mcgnode::compat::TrainedFor;
-    use mcgnode::gnode::file::EdgeParams;
+    use mcgnode::gnode::EdgeParams;
     let (g, s, a) = data(SystemKind::Spring, 5, 3, 1);
     let mut stiff = g.clone();
     stiff.edges.iter_mut().for_each(|e| e.stiffness = 5.0);

@@ -58,7 +58,7 @@ pub fn probe_second_derivative() -> Result<Option<f64>> {
 }
 
 /// Makes sure second derivatives work on the calling thread: requests them
-/// ([`request_second_order`]) and proves it once per thread with
+/// (`request_second_order`) and proves it once per thread with
 /// [`probe_second_derivative`] (d²x³/dx² = 6x = 12 at x = 2).
 pub fn ensure_second_order() -> Result<()> {
     if CHECKED.with(std::cell::Cell::get) {

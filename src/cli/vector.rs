@@ -1,6 +1,6 @@
 //! Vectors on the command line (`--force 0,-1`).
 
-/// A vector given as one argument, "x,y[,z]" (a newtype, so that clap takes
+/// A vector given as one argument, "x,y,z" (a newtype, so that clap takes
 /// it as one value rather than a list of numbers).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Vector(pub Vec<f64>);

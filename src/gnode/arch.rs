@@ -110,7 +110,7 @@ pub struct Arch {
     /// Graph variants: how outputs are decoded.
     pub decoder: Decoder,
     /// Outputs are forces, turned into accelerations by the constrained
-    /// equation of motion with learnable masses ([`LOG_MASS`]).
+    /// equation of motion with learnable masses (`LOG_MASS`).
     pub constrained: bool,
     /// NODE: the particle count it was built for.
     pub particles: usize,
@@ -237,7 +237,7 @@ impl Arch {
     }
 
     /// Edge input features: q_i − q_j, then the constant inputs
-    /// ([`EdgeConst`]).
+    /// (`EdgeConst`).
     pub fn edge_features(&self) -> usize {
         self.dim + EdgeConst::width_of(self.edge_consts())
     }

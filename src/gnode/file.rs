@@ -241,7 +241,7 @@ impl TrainingReport {
 /// A trained model on disk.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelFile {
-    /// Always [`FORMAT`].
+    /// Always `FORMAT`.
     pub format: String,
     /// Version of mcgnode that wrote it.
     pub crate_version: String,

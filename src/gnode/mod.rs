@@ -1,20 +1,26 @@
-//! Learned dynamics: the GNODE family and NODE described once ([`arch`]), in
+//! Learned dynamics: the GNODE family and NODE described once (`arch`), in
 //! candle (the reference the engine is tested against), and the model file
 //! that hands trained weights to inference (where
 //! [`crate::kernel::TrainedModel`] runs them on the engine).
 
-pub mod arch;
-pub mod batch;
-pub mod mlp;
-pub mod net;
-pub mod params;
-pub mod plan;
-pub mod solve;
-pub mod variant;
+pub(crate) mod arch;
+pub(crate) mod batch;
+pub(crate) mod mlp;
+pub(crate) mod net;
+pub(crate) mod params;
+pub(crate) mod plan;
+pub(crate) mod solve;
+pub(crate) mod variant;
 
 pub use arch::{Arch, Block};
+pub use batch::Batch;
+pub use file::{EdgeParams, ModelFileError};
+pub use mlp::squareplus_f64;
 pub use net::Net;
+pub use params::ParamStore;
+pub use plan::{Bar, GraphPlan};
+pub use solve::solve;
 pub use variant::{ArchPreset, EdgeInput, Hyper, MessageFn, Norm, Variant};
-pub mod file;
+pub(crate) mod file;
 
 pub use file::ModelFile;

@@ -92,7 +92,7 @@ impl SystemConfig {
     /// every 100 steps; 100 saved states; no drag or external force; 2D
     /// ([`SystemKind::default_dim`]: 3D for the peridynamic solid).
     ///
-    /// The systems that touch ([`SystemConfig::contact_defaults`]): soft
+    /// The systems that touch (`SystemConfig::contact_defaults`): soft
     /// spheres R = 1, k_c = 1000, g = 1, dt 1e-3 every 100 steps; colliding
     /// lattices spacing 1, spring k = 10, R = 1, k_c = 100, no field, dt 1e-3
     /// every 100; falling chain bars of 1, R = 0.5, k_c = 1e4, g = 10, dt 1e-4
@@ -254,7 +254,7 @@ impl SystemConfig {
     /// that is not a cube (rejected by [`SystemConfig::validate`]) fills the
     /// first n sites of the smallest enclosing cube.
     ///
-    /// The systems that touch are described in [`scenes`]. Every graph has
+    /// The systems that touch are described in `scenes`. Every graph has
     /// the configuration's interaction radius (0 for the paper's systems).
     pub fn graph(&self) -> Graph {
         let n = self.particles;

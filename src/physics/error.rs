@@ -91,7 +91,7 @@ pub enum PhysicsError {
         /// The first non-finite sample.
         sample: usize,
     },
-    /// An RK4 trajectory ([`super::rk4`]) turned invalid.
+    /// An RK4 trajectory (`super::rk4`) turned invalid.
     #[error("trajectory {id} diverged at sample {sample}: {cause}")]
     Rk4Diverged {
         /// The trajectory.

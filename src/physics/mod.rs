@@ -1,46 +1,51 @@
 //! Ground-truth physics: one simulator for any [`Graph`] of springs and bars in
 //! a field (gravity along −y, linear drag, a constant force).
 //!
-//! * [`forces`]: applied forces and the Hamiltonian;
-//! * [`constraints`]: bars, the exact constrained acceleration, residuals;
+//! * `forces`: applied forces and the Hamiltonian;
+//! * `constraints`: bars, the exact constrained acceleration, residuals;
 //! * [`verlet`]: the velocity-Verlet step (drift, kick), written once;
-//! * [`integrator`]: velocity Verlet + SHAKE/RATTLE on the true forces;
-//! * [`config`]: the paper's spring, pendulum and peridynamic-solid systems,
+//! * `integrator`: velocity Verlet + SHAKE/RATTLE on the true forces;
+//! * `config`: the paper's spring, pendulum and peridynamic-solid systems,
 //!   initial states, trajectory generation;
-//! * [`rk4`]: RK4 on (q, p), the paper's HGN training data;
-//! * [`neighbors`]: contact pairs within a radius (cell list) and their edges;
-//! * [`contact`]: the soft-sphere contact force and energy on those pairs;
-//! * [`drive`]: given motion of kinematic particles (grippers, pushers);
-//! * [`scenes`]: the systems that touch (soft spheres in a box, colliding
+//! * `rk4`: RK4 on (q, p), the paper's HGN training data;
+//! * `neighbors`: contact pairs within a radius (cell list) and their edges;
+//! * `contact`: the soft-sphere contact force and energy on those pairs;
+//! * `drive`: given motion of kinematic particles (grippers, pushers);
+//! * `scenes`: the systems that touch (soft spheres in a box, colliding
 //!   lattices, a chain falling on a floor), with kinematic walls, and a
 //!   chain held by a moving kinematic gripper.
 //!
 //! The same physics as a model behind [`crate::dynamics::Dynamics`] is
 //! [`crate::models::truth::Truth`], above the trait.
 
-pub mod config;
-pub mod constraints;
-pub mod contact;
-pub mod drive;
+pub(crate) mod config;
+pub(crate) mod constraints;
+pub(crate) mod contact;
+pub(crate) mod drive;
 mod error;
-pub mod forces;
-pub mod integrator;
+pub(crate) mod forces;
+pub(crate) mod integrator;
 pub(crate) mod linalg;
-pub mod neighbors;
-pub mod projection;
-pub mod rk4;
-pub mod scenes;
+pub(crate) mod neighbors;
+pub(crate) mod projection;
+pub(crate) mod rk4;
+pub(crate) mod scenes;
 pub mod verlet;
 
 use serde::{Deserialize, Serialize};
 
-pub use config::SystemConfig;
+pub use config::{SystemConfig, PERIDYNAMIC_HORIZON};
 pub use constraints::{acceleration, bar_jacobian, constraint_residual};
+pub use contact::{contact_energy, ContactLaw, Contacts};
 pub use drive::{Drive, DriveError};
 pub use error::PhysicsError;
 pub use forces::{applied_forces, hamiltonian, kinetic_energy, potential_energy};
 pub use integrator::Integrator;
+pub use neighbors::{
+    brute_force_pairs, contact_edge, edges_with_contacts, ContactEdges, NeighborSearch,
+};
 pub use projection::Projector;
+pub use rk4::rk4_trajectories;
 
 #[cfg(doc)]
 use crate::system::Graph;
@@ -55,10 +60,10 @@ pub enum SystemKind {
     Pendulum,
     /// A 3D elastic cube of k×k×k particles, bond-based peridynamics (bonds
     /// are springs to every particle within the horizon
-    /// [`config::PERIDYNAMIC_HORIZON`]), compressed isotropically and released.
+    /// `config::PERIDYNAMIC_HORIZON`), compressed isotropically and released.
     Peridynamic,
     /// Elastic soft spheres in a box whose walls are kinematic particles,
-    /// under gravity ([`scenes`]).
+    /// under gravity (`scenes`).
     #[serde(rename = "soft-spheres")]
     SoftSpheres,
     /// Two spring lattices thrown at each other, no field: a closed system
@@ -69,7 +74,7 @@ pub enum SystemKind {
     #[serde(rename = "falling-chain")]
     FallingChain,
     /// A chain of springs hanging from a kinematic gripper that moves along a
-    /// random smooth path, under gravity ([`scenes`]): action-rich data.
+    /// random smooth path, under gravity (`scenes`): action-rich data.
     #[serde(rename = "held-chain")]
     HeldChain,
 }
@@ -96,7 +101,7 @@ impl SystemKind {
     }
 
     /// Whether its particles touch: contact edges within a radius (the
-    /// systems of [`scenes`]).
+    /// systems of `scenes`).
     pub fn has_contacts(self) -> bool {
         matches!(
             self,

@@ -156,7 +156,7 @@ impl NeighborSearch {
 
     /// [`NeighborSearch::search`] for positions that move a little from
     /// one call to the next (a rollout's steps): the same pairs in the same
-    /// order, found among candidates within R + s (s = [`SKIN`]·R) that are
+    /// order, found among candidates within R + s (s = `SKIN`·R) that are
     /// searched again only once a particle has moved s/2 since (a Verlet
     /// list: a pair closer than R now was closer than R + s then). The
     /// distance test is the search's own arithmetic. A step then costs a

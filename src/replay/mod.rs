@@ -16,8 +16,8 @@
 //! [`crate::metrics::summarize`] defines them, computed streaming (a long node
 //! recording can have millions of pairs). Grid points no pair fell on are
 //! left out. The grid starts with lead 0 (errors exactly 0), as
-//! [`crate::evaluate`]'s curves start with t = 0, so
-//! [`Summary::time_average`] skips it the same way.
+//! [`evaluate`](mod@crate::evaluate)'s curves start with t = 0, so
+//! `Summary::time_average` skips it the same way.
 
 //!
 //! The stages, one file each: [`ReplayOptions`] (`options.rs`), the settings

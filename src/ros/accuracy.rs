@@ -78,7 +78,7 @@ pub struct LeadAccuracy {
     pub ee_mean: f64,
 }
 
-/// Diagnostic levels of [`alarm`] (diagnostic_msgs/DiagnosticStatus).
+/// Diagnostic levels of `alarm` (diagnostic_msgs/DiagnosticStatus).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Level {
     /// Every running RE at or below the warning threshold.

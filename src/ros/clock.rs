@@ -25,11 +25,6 @@ impl Clock {
         }
     }
 
-    /// Whether the clock follows `/clock`.
-    pub fn is_simulated(&self) -> bool {
-        self.sim.is_some()
-    }
-
     /// Takes a `/clock` message (ignored by a system clock).
     pub fn set(&self, msg: &ClockMsg) {
         if let Some(s) = &self.sim {

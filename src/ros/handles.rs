@@ -328,11 +328,6 @@ impl RecorderHandle {
         }
     }
 
-    /// Whether the node records.
-    pub fn is_recording(&self) -> bool {
-        self.recorder.is_some()
-    }
-
     /// Records with the recorder, if any; failures are warned about.
     pub fn record(&self, what: impl FnOnce(&mut Recorder) -> Result<(), RecordError>) {
         if let Some(r) = &self.recorder {

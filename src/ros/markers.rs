@@ -101,10 +101,10 @@ fn length_scale(s: &ParticleState) -> f64 {
 /// The markers of one prediction: a DELETEALL (so that markers of an earlier,
 /// larger graph disappear), then the particles (a sphere list coloured by
 /// type), the edges (springs grey, bars dark), anchors (cubes), every
-/// particle's predicted path (every k-th step above [`MAX_PATH_SEGMENTS`]
+/// particle's predicted path (every k-th step above `MAX_PATH_SEGMENTS`
 /// segments), and the total force on each particle (arrows
 /// scaled so the largest is half the median edge length; one line list above
-/// [`MAX_ARROWS`] particles).
+/// `MAX_ARROWS` particles).
 pub fn prediction_markers(
     trajectory: &PredictedTrajectory,
     forces: &ParticleForces,

@@ -1,4 +1,4 @@
-//! Checkpoints of a training run: everything [`super::fit`] needs to go on
+//! Checkpoints of a training run: everything [`fit`](mod@super::fit) needs to go on
 //! exactly where it stopped (parameters, Adam's moments, the shuffling RNG and
 //! the order it left, the best weights so far, the seconds spent), written
 //! atomically every few minutes. A run of hours survives a stop or a crash
@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 /// Format tag of a checkpoint file.
 pub const FORMAT: &str = "mcgnode-checkpoint-1";
 
-/// Where and how often [`super::fit`] saves its state.
+/// Where and how often [`fit`](mod@super::fit) saves its state.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Checkpointing {
     /// The checkpoint file (JSON). When it exists, training resumes from it.
@@ -186,7 +186,7 @@ impl RngState {
     }
 }
 
-/// How far a training run has come: what [`super::fit`] carries from epoch
+/// How far a training run has come: what [`fit`](mod@super::fit) carries from epoch
 /// to epoch besides the parameters, Adam and the RNG.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Progress {

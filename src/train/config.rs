@@ -50,7 +50,7 @@ pub struct TrainConfig {
     /// exists (see [`checkpoint`](super::checkpoint)).
     pub checkpoint: Option<super::checkpoint::Checkpointing>,
     /// Settings the default recipe chooses from the data instead of taking
-    /// them from this config ([`recipe`](super::recipe); none by default).
+    /// them from this config ([`super::recipe`]; none by default).
     pub auto: Auto,
 }
 

@@ -10,7 +10,7 @@
 //! - [`recipe`]: settings chosen from the data.
 //!
 //! This file trains a model of given hyperparameters ([`train`]) and a model
-//! from bags ([`train_from_bags`]); the bags are read by
+//! from bags (`train_from_bags`); the bags are read by
 //! [`crate::data::load`].
 
 use crate::data::dataset::Dataset;

@@ -1,4 +1,4 @@
-//! What [`fit`](super::fit) minimises: the [`Objective`] trait, with candle's
+//! What [`fit`](mod@super::fit) minimises: the [`Objective`] trait, with candle's
 //! autodiff and the hand-written engine behind it.
 
 use crate::engine::{BaselineExecutor, Engine, Samples};
@@ -8,7 +8,7 @@ use crate::system::State;
 use candle_core::Tensor;
 use rayon::prelude::*;
 
-/// What [`fit`](super::fit) minimises: a mean loss over samples, with its gradient, as a
+/// What [`fit`](mod@super::fit) minimises: a mean loss over samples, with its gradient, as a
 /// function of one flat parameter vector.
 pub trait Objective {
     /// Mean loss over the samples `idx` at `theta`, its gradient written to `grad`.

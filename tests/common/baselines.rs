@@ -3,8 +3,8 @@
 //! accelerations, and the relative difference they are compared by.
 
 use mcgnode::baselines::BaselineNet;
-use mcgnode::gnode::batch::Batch;
-use mcgnode::gnode::plan::GraphPlan;
+use mcgnode::gnode::Batch;
+use mcgnode::gnode::GraphPlan;
 use mcgnode::system::{Graph, State};
 use mcgnode::train::{CandleObjective, Objective};
 

@@ -2,10 +2,10 @@
 //! messages, zstd chunks): a streaming writer for any topics, and reading
 //! `ParticleState` trajectories back with full validation.
 //!
-//! - [`write`]: the streaming writer, and writing trajectories as a bag.
+//! - [`write`](mod@write): the streaming writer, and writing trajectories as a bag.
 //! - [`scan`]: every message of a bag argument in order, as stored (MCAP,
 //!   rosbag2 sqlite3 and directories, decompressed).
-//! - [`schema`]: which ParticleState layout a bag's schema declares.
+//! - `schema`: which ParticleState layout a bag's schema declares.
 //! - [`read`]: ParticleState messages back into validated trajectories.
 
 pub mod read;

@@ -1,6 +1,6 @@
 //! The paper's experiments, one file each, writing its figures and
 //! returning its section of the report and its result rows; what they share
-//! is in [`common`].
+//! is in `common`.
 
 mod common;
 mod comparison;

@@ -1,5 +1,5 @@
 //! `lifecycle_msgs`: the managed-node messages and services (the state
-//! machine over them is [`crate::ros::lifecycle`]).
+//! machine over them is `crate::ros::lifecycle`).
 
 use serde::{Deserialize, Serialize};
 
