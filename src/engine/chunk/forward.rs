@@ -103,7 +103,7 @@ impl Chunk {
     /// The edges' stages one after the other over all rows: the edge
     /// embedding from w_ij = q_i − q_j, then message passing.
     #[inline(always)]
-    #[allow(clippy::too_many_lines, clippy::inline_always)] // the rounds as one loop nest
+    #[allow(clippy::inline_always)] // inside forward_graph's vector copies
     pub(super) fn edge_stages(&mut self, m: &Model, th: &[f64]) {
         let a = &m.arch;
         let (d, t, em) = (m.plan.dim, a.types, a.embed);
@@ -124,8 +124,7 @@ impl Chunk {
         for l in 0..a.rounds {
             let (hl, hn) = self.h.split_at_mut(l + 1);
             let (hl, hn) = (&hl[l][..em * nodes], &mut hn[0][..em * nodes]);
-            let (hel, hen) = self.he.split_at_mut(l + 1);
-            let (hel, hen) = (&hel[l][..em * edges], &mut hen[0][..em * edges]);
+            let hel = &self.he[l][..em * edges];
             let (hs, hr) = (&mut self.hs[l][..em * edges], &mut self.hr[l][..em * edges]);
             let by_pair = by_type && l == 0;
             if !by_pair || a.updates_nodes(l) {
@@ -148,44 +147,58 @@ impl Chunk {
             } else if nodes_read {
                 hn.copy_from_slice(hl);
             }
-            if a.updates_edges(l) && by_pair {
-                // The same MLP on the types² pairs' inputs (above), read per edge.
-                let (tt, po) = (t * t, &self.pair_out[..em * t * t]);
-                let pair = &self.pair[..edges];
-                for k in 0..em {
-                    let (x, old, pk) = (
-                        &mut hen[k * edges..(k + 1) * edges],
-                        &hel[k * edges..(k + 1) * edges],
-                        &po[k * tt..(k + 1) * tt],
-                    );
-                    add_indexed(x, old, pk, pair);
-                }
-                squareplus_in_place(hen);
-            } else if a.updates_edges(l) {
-                // h_ij ← sqp(h_ij + W_E(h_i ‖ h_j)), from the node states before the round.
-                let i = m.ix(Block::EdgeUpdate(l)).expect("round");
-                let tape = &mut self.tapes[i];
-                let split = &mut self.split;
-                match a.edge_input {
-                    EdgeInput::Concat => {
-                        split.forward(m.mlp(i), th, (hr, hs), edges, tape, hen, false)
-                    }
-                    EdgeInput::Product => {
-                        let hp = &mut self.hp[l][..em * edges];
-                        for ((p, r), s) in hp.iter_mut().zip(hr.iter()).zip(hs.iter()) {
-                            *p = r * s;
-                        }
-                        split.forward(m.mlp(i), th, (hp, &[]), edges, tape, hen, false);
-                    }
-                }
-                for (x, old) in hen.iter_mut().zip(hel) {
-                    *x += old;
-                }
-                squareplus_in_place(hen);
+            if a.updates_edges(l) {
+                self.edge_update(m, th, l);
             } else {
-                hen.copy_from_slice(hel);
+                let (hel, hen) = self.he.split_at_mut(l + 1);
+                hen[0][..em * edges].copy_from_slice(&hel[l][..em * edges]);
             }
         }
+    }
+
+    /// Round `l`'s edge update h_ij ← sqp(h_ij + W_E(h_i ‖ h_j)), from the
+    /// node states before the round (by type pair in round 0 when
+    /// [`Model::by_type`]: the pairs' outputs read per edge).
+    #[inline(always)]
+    #[allow(clippy::inline_always)] // inside forward_graph's vector copies
+    fn edge_update(&mut self, m: &Model, th: &[f64], l: usize) {
+        let a = &m.arch;
+        let (t, em, edges) = (a.types, a.embed, self.edges);
+        let (hel, hen) = self.he.split_at_mut(l + 1);
+        let (hel, hen) = (&hel[l][..em * edges], &mut hen[0][..em * edges]);
+        let (hs, hr) = (&self.hs[l][..em * edges], &self.hr[l][..em * edges]);
+        if m.by_type && l == 0 {
+            // The same MLP on the types² pairs' inputs, read per edge.
+            let (tt, po) = (t * t, &self.pair_out[..em * t * t]);
+            let pair = &self.pair[..edges];
+            for k in 0..em {
+                let (x, old, pk) = (
+                    &mut hen[k * edges..(k + 1) * edges],
+                    &hel[k * edges..(k + 1) * edges],
+                    &po[k * tt..(k + 1) * tt],
+                );
+                add_indexed(x, old, pk, pair);
+            }
+            squareplus_in_place(hen);
+            return;
+        }
+        let i = m.ix(Block::EdgeUpdate(l)).expect("round");
+        let tape = &mut self.tapes[i];
+        let split = &mut self.split;
+        match a.edge_input {
+            EdgeInput::Concat => split.forward(m.mlp(i), th, (hr, hs), edges, tape, hen, false),
+            EdgeInput::Product => {
+                let hp = &mut self.hp[l][..em * edges];
+                for ((p, r), s) in hp.iter_mut().zip(hr.iter()).zip(hs.iter()) {
+                    *p = r * s;
+                }
+                split.forward(m.mlp(i), th, (hp, &[]), edges, tape, hen, false);
+            }
+        }
+        for (x, old) in hen.iter_mut().zip(hel) {
+            *x += old;
+        }
+        squareplus_in_place(hen);
     }
 
     /// The body branch and the decoder into `out`; `fused`: the edge
