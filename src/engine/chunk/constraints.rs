@@ -10,7 +10,7 @@ impl Chunk {
     /// q̈ = M⁻¹(N − Aᵀλ), λ = (A M⁻¹ Aᵀ)⁻¹(A M⁻¹ N + Ȧq̇), per state, on the
     /// sparse bar incidence. K and λ are kept for the reverse pass.
     pub(super) fn constrain(&mut self, m: &Model, th: &[f64], bs: usize, kept: bool) {
-        let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
+        let (n, d) = (m.plan.n, m.plan.dim);
         let nodes = bs * n;
         let k = m.plan.bars.len();
         let lm = m.log_mass.expect("constrained model has masses");
@@ -21,66 +21,20 @@ impl Chunk {
                 *x = (-th[lm + t]).exp();
             }
         }
-        let inv_m = &self.inv_m;
         if k == 0 {
             self.no_bars(d, bs, nodes);
             return;
         }
-        let minv = |p: usize| inv_m[m.plan.types[p]];
-        let (x, out) = (&self.x, &self.out);
-        let q = |row: usize, c: usize| x[(t + c) * nodes + row];
-        let v = |row: usize, c: usize| x[(t + d + c) * nodes + row];
-        let f = |row: usize, c: usize| out[c * nodes + row];
         for s in 0..bs {
-            let base = s * n;
-            let (dq, lam) = (
-                &mut self.dq[s * k * d..(s + 1) * k * d],
-                &mut self.lam[s * k..(s + 1) * k],
-            );
-            let kmat = &mut self.kmat[s * k * k..(s + 1) * k * k];
-            let mut ok = true;
-            if k > 0 {
-                for (r, bar) in m.plan.bars.iter().enumerate() {
-                    let (mut vv, mut rhs) = (0.0, 0.0);
-                    let a = base + bar.a;
-                    for c in 0..d {
-                        let (qb, vb, fb) = match &bar.b {
-                            BarEnd::Particle(bp) => {
-                                let b = base + bp;
-                                (q(b, c), v(b, c), minv(*bp) * f(b, c))
-                            }
-                            BarEnd::Fixed(p) => (p[c], 0.0, 0.0),
-                        };
-                        let (dqc, dvc) = (q(a, c) - qb, v(a, c) - vb);
-                        dq[r * d + c] = dqc;
-                        vv += dvc * dvc;
-                        rhs += dqc * (minv(bar.a) * f(a, c) - fb);
-                    }
-                    lam[r] = rhs + vv;
-                }
-                kmat.fill(0.0);
-                for p in 0..n {
-                    let mi = minv(p);
-                    for &(r, sr) in &m.incid[p] {
-                        for &(r2, s2) in &m.incid[p] {
-                            let dot: f64 = (0..d).map(|c| dq[r * d + c] * dq[r2 * d + c]).sum();
-                            kmat[r * k + r2] += mi * sr * s2 * dot;
-                        }
-                    }
-                }
-                // Factored in place and kept: the reverse pass solves with
-                // the same K again.
-                let piv = &mut self.piv[s * k..(s + 1) * k];
-                ok = lu_factor_in_place(kmat, piv, k).is_ok();
-                if ok {
-                    lu_solve_one(kmat, piv, lam, k);
-                }
-            }
+            let ok = self.solve_bars(m, s, nodes);
             self.solved[s] = ok;
+            let (base, k) = (s * n, m.plan.bars.len());
+            let (dq, lam) = (&self.dq[s * k * d..], &self.lam[s * k..(s + 1) * k]);
+            let (inv_m, out) = (&self.inv_m, &self.out);
             for p in 0..n {
-                let mi = minv(p);
+                let mi = inv_m[m.plan.types[p]];
                 for c in 0..d {
-                    let mut g = f(base + p, c);
+                    let mut g = out[c * nodes + base + p];
                     if ok {
                         for &(r, sr) in &m.incid[p] {
                             g -= sr * dq[r * d + c] * lam[r];
@@ -93,6 +47,64 @@ impl Chunk {
                 }
             }
         }
+    }
+
+    /// State `s`'s bars: q_a − q_b into `dq`, K = A M⁻¹ Aᵀ LU-factored in
+    /// place into `kmat` (pivots in `piv`), and λ solved into `lam`; whether
+    /// K factored (a singular K leaves q̈ NaN).
+    #[inline(always)]
+    #[allow(clippy::inline_always)] // one body with constrain, as it was
+    fn solve_bars(&mut self, m: &Model, s: usize, nodes: usize) -> bool {
+        let (n, d, t) = (m.plan.n, m.plan.dim, m.arch.types);
+        let k = m.plan.bars.len();
+        let inv_m = &self.inv_m;
+        let minv = |p: usize| inv_m[m.plan.types[p]];
+        let (x, out) = (&self.x, &self.out);
+        let q = |row: usize, c: usize| x[(t + c) * nodes + row];
+        let v = |row: usize, c: usize| x[(t + d + c) * nodes + row];
+        let f = |row: usize, c: usize| out[c * nodes + row];
+        let base = s * n;
+        let (dq, lam) = (
+            &mut self.dq[s * k * d..(s + 1) * k * d],
+            &mut self.lam[s * k..(s + 1) * k],
+        );
+        let kmat = &mut self.kmat[s * k * k..(s + 1) * k * k];
+        for (r, bar) in m.plan.bars.iter().enumerate() {
+            let (mut vv, mut rhs) = (0.0, 0.0);
+            let a = base + bar.a;
+            for c in 0..d {
+                let (qb, vb, fb) = match &bar.b {
+                    BarEnd::Particle(bp) => {
+                        let b = base + bp;
+                        (q(b, c), v(b, c), minv(*bp) * f(b, c))
+                    }
+                    BarEnd::Fixed(p) => (p[c], 0.0, 0.0),
+                };
+                let (dqc, dvc) = (q(a, c) - qb, v(a, c) - vb);
+                dq[r * d + c] = dqc;
+                vv += dvc * dvc;
+                rhs += dqc * (minv(bar.a) * f(a, c) - fb);
+            }
+            lam[r] = rhs + vv;
+        }
+        kmat.fill(0.0);
+        for p in 0..n {
+            let mi = minv(p);
+            for &(r, sr) in &m.incid[p] {
+                for &(r2, s2) in &m.incid[p] {
+                    let dot: f64 = (0..d).map(|c| dq[r * d + c] * dq[r2 * d + c]).sum();
+                    kmat[r * k + r2] += mi * sr * s2 * dot;
+                }
+            }
+        }
+        // Factored in place and kept: the reverse pass solves with the same
+        // K again.
+        let piv = &mut self.piv[s * k..(s + 1) * k];
+        let ok = lu_factor_in_place(kmat, piv, k).is_ok();
+        if ok {
+            lu_solve_one(kmat, piv, lam, k);
+        }
+        ok
     }
 
     /// [`Chunk::constrain`] without bars (springs, contacts): G = N and
@@ -120,12 +132,10 @@ impl Chunk {
         for (t, x) in self.inv_m.iter_mut().enumerate() {
             *x = (-th[lm + t]).exp();
         }
-        let inv_m = &self.inv_m;
-        let minv = |p: usize| inv_m[m.plan.types[p]];
         for s in 0..bs {
             let base = s * n;
             for p in 0..n {
-                let (mi, row) = (minv(p), base + p);
+                let (mi, row) = (self.inv_m[m.plan.types[p]], base + p);
                 let mut gm = 0.0;
                 for c in 0..d {
                     let ga = self.gacc[c * nodes + row];
@@ -135,67 +145,80 @@ impl Chunk {
                 self.gminv[row] = gm;
             }
             if k > 0 && self.solved[s] {
-                let dq = &self.dq[s * k * d..(s + 1) * k * d];
-                let lam = &self.lam[s * k..(s + 1) * k];
-                // λ̄ = −A ḡ_G; r̄hs = K⁻ᵀ λ̄ (K is symmetric); K̄ = −r̄hs λᵀ.
-                let rbar = &mut self.rhs[..k];
-                for (r, bar) in m.plan.bars.iter().enumerate() {
-                    let mut x = 0.0;
-                    for c in 0..d {
-                        let mut gg = self.gout[c * nodes + base + bar.a];
-                        if let BarEnd::Particle(b) = bar.b {
-                            gg -= self.gout[c * nodes + base + b];
-                        }
-                        x -= dq[r * d + c] * gg;
-                        if self.inputs {
-                            // G = N − Aᵀλ: ∂/∂(q_a − q_b) = −λ_r ḡ_G.
-                            self.gdq[(s * k + r) * d + c] = -lam[r] * gg;
-                        }
-                    }
-                    rbar[r] = x;
-                }
-                // K's factors from the forward pass (it solved, so they are).
-                let (kf, piv) = (
-                    &self.kmat[s * k * k..(s + 1) * k * k],
-                    &self.piv[s * k..(s + 1) * k],
-                );
-                lu_solve_one(kf, piv, rbar, k);
-                if self.inputs {
-                    let into = (&mut self.gdq[s * k * d..(s + 1) * k * d], &mut self.gqv[..]);
-                    constraint_input_grads(
-                        m,
-                        s,
-                        nodes,
-                        inv_m,
-                        (dq, lam, rbar),
-                        (&self.x, &self.out),
-                        into,
-                    );
-                }
-                for p in 0..n {
-                    let (mi, row) = (minv(p), base + p);
-                    let mut gm = 0.0;
-                    for &(r, sr) in &m.incid[p] {
-                        let mut dot_f = 0.0;
-                        for c in 0..d {
-                            let dqc = dq[r * d + c];
-                            self.gout[c * nodes + row] += rbar[r] * sr * mi * dqc;
-                            dot_f += dqc * self.out[c * nodes + row];
-                        }
-                        gm += rbar[r] * sr * dot_f;
-                        for &(r2, s2) in &m.incid[p] {
-                            let dot: f64 = (0..d).map(|c| dq[r * d + c] * dq[r2 * d + c]).sum();
-                            gm -= rbar[r] * lam[r2] * sr * s2 * dot;
-                        }
-                    }
-                    self.gminv[row] += gm;
-                }
+                self.bars_backward(m, s, nodes);
             }
             // None to add without parameter gradients (planning's pass).
             for p in 0..n * usize::from(!self.grad.is_empty()) {
-                let mi = minv(p);
+                let mi = self.inv_m[m.plan.types[p]];
                 self.grad[lm + m.plan.types[p]] -= self.gminv[base + p] * mi;
             }
+        }
+    }
+
+    /// State `s`'s bars in reverse (K factored in the forward pass): λ̄ from
+    /// ḡ_G, r̄hs = K⁻¹λ̄, then their terms added into ∂L/∂N (`gout`), the
+    /// inverse masses' (`gminv`) and, for planning, ∂L/∂(q, q̇).
+    #[inline(always)]
+    #[allow(clippy::inline_always)] // one body with constrain_backward, as it was
+    fn bars_backward(&mut self, m: &Model, s: usize, nodes: usize) {
+        let (n, d) = (m.plan.n, m.plan.dim);
+        let (k, base) = (m.plan.bars.len(), s * n);
+        let inv_m = &self.inv_m;
+        let minv = |p: usize| inv_m[m.plan.types[p]];
+        let dq = &self.dq[s * k * d..(s + 1) * k * d];
+        let lam = &self.lam[s * k..(s + 1) * k];
+        // λ̄ = −A ḡ_G; r̄hs = K⁻ᵀ λ̄ (K is symmetric); K̄ = −r̄hs λᵀ.
+        let rbar = &mut self.rhs[..k];
+        for (r, bar) in m.plan.bars.iter().enumerate() {
+            let mut x = 0.0;
+            for c in 0..d {
+                let mut gg = self.gout[c * nodes + base + bar.a];
+                if let BarEnd::Particle(b) = bar.b {
+                    gg -= self.gout[c * nodes + base + b];
+                }
+                x -= dq[r * d + c] * gg;
+                if self.inputs {
+                    // G = N − Aᵀλ: ∂/∂(q_a − q_b) = −λ_r ḡ_G.
+                    self.gdq[(s * k + r) * d + c] = -lam[r] * gg;
+                }
+            }
+            rbar[r] = x;
+        }
+        // K's factors from the forward pass (it solved, so they are).
+        let (kf, piv) = (
+            &self.kmat[s * k * k..(s + 1) * k * k],
+            &self.piv[s * k..(s + 1) * k],
+        );
+        lu_solve_one(kf, piv, rbar, k);
+        if self.inputs {
+            let into = (&mut self.gdq[s * k * d..(s + 1) * k * d], &mut self.gqv[..]);
+            constraint_input_grads(
+                m,
+                s,
+                nodes,
+                inv_m,
+                (dq, lam, rbar),
+                (&self.x, &self.out),
+                into,
+            );
+        }
+        for p in 0..n {
+            let (mi, row) = (minv(p), base + p);
+            let mut gm = 0.0;
+            for &(r, sr) in &m.incid[p] {
+                let mut dot_f = 0.0;
+                for c in 0..d {
+                    let dqc = dq[r * d + c];
+                    self.gout[c * nodes + row] += rbar[r] * sr * mi * dqc;
+                    dot_f += dqc * self.out[c * nodes + row];
+                }
+                gm += rbar[r] * sr * dot_f;
+                for &(r2, s2) in &m.incid[p] {
+                    let dot: f64 = (0..d).map(|c| dq[r * d + c] * dq[r2 * d + c]).sum();
+                    gm -= rbar[r] * lam[r2] * sr * s2 * dot;
+                }
+            }
+            self.gminv[row] += gm;
         }
     }
 
