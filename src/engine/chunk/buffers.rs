@@ -3,7 +3,6 @@
 //! ([`Chunk::lay_out`]), and the contact pairs those edges include.
 
 use super::{Chunk, Model};
-use crate::engine::gather::IndexSums;
 use crate::gnode::plan::GraphPlan;
 use crate::physics::neighbors::NeighborSearch;
 
@@ -70,7 +69,6 @@ impl Chunk {
     /// Makes room for `bs` states with `edges` directed edges in all
     /// (allocates only when growing; contact counts grow with headroom, so a
     /// rollout whose contacts vary a little stops allocating).
-    #[allow(clippy::too_many_lines)] // one line per buffer, sized in one place
     pub(super) fn reserve(&mut self, m: &Model, bs: usize, edges: usize, record: bool) {
         if bs <= self.cap && edges <= self.edge_cap && record == self.record {
             return;
@@ -80,129 +78,127 @@ impl Chunk {
         } else {
             edges
         };
-        let a = &m.arch;
-        // NODE's `embed` and `types` size no weight: they must size no
-        // buffer either (a corrupt file's 2^32 would be an abort).
-        let (em, types) = if a.biases.graph {
-            (a.embed, a.types)
-        } else {
-            (0, 0)
-        };
-        let (n, d) = (m.plan.n, m.plan.dim);
-        let nodes = bs * n;
-        let rmax = nodes.max(edges).max(bs).max(types * types).max(1);
-        let width = m.mlps.iter().map(|(_, x)| x.width()).max().unwrap_or(1);
-        let z = |len: usize| vec![0.0; len];
-        // Buffers only the reverse pass reads: none for inference.
-        let g = |len: usize| if record { vec![0.0; len] } else { vec![] };
-        let outs = if a.biases.graph {
-            d * nodes
-        } else {
-            d * n * bs
-        };
-        let contacts = std::mem::take(&mut self.contacts);
-        let split = std::mem::take(&mut self.split);
-        let scratch = std::mem::take(&mut self.scratch);
+        let z = Sizes::new(m, bs, edges);
         *self = Chunk {
-            split,
-            scratch,
+            split: std::mem::take(&mut self.split),
+            scratch: std::mem::take(&mut self.scratch),
+            contacts: std::mem::take(&mut self.contacts),
             cap: bs,
             record,
-            laid: 0,
-            edges: 0,
             edge_cap: edges,
-            contacts,
-            recv: vec![0; edges],
-            send: vec![0; edges],
-            x: z(if a.biases.graph {
-                a.node_features() * nodes
-            } else {
-                2 * n * d * bs
-            }),
-            xn: z(if a.biases.graph {
-                a.node_features() * nodes
-            } else {
-                0
-            }),
-            w_in: z(a.edge_features() * edges),
-            h: (0..=a.rounds).map(|_| z(em * nodes)).collect(),
-            he: (0..=a.rounds).map(|_| z(em * edges)).collect(),
-            hs: (0..a.rounds).map(|_| z(em * edges)).collect(),
-            hr: (0..a.rounds).map(|_| z(em * edges)).collect(),
-            hp: (0..a.rounds).map(|_| z(em * edges)).collect(),
-            gp: z(em * edges),
-            msg: z(em * edges),
-            agg: z(em * nodes),
-            glob: z(em * nodes),
-            f_edge: z(d * edges),
-            f_body: z(d * nodes),
-            out: z(outs),
-            geq: z(outs),
-            acc: z(outs),
-            tgt: z(outs),
-            tapes: m
-                .mlps
-                .iter()
-                .map(|(_, x)| {
-                    if record {
-                        x.tape(rmax)
-                    } else {
-                        x.inference_tape()
-                    }
-                })
-                .collect(),
-            dq: z(bs * m.plan.bars.len() * d),
-            kmat: z(bs * m.plan.bars.len().pow(2)),
-            lam: z(bs * m.plan.bars.len()),
-            piv: vec![0; bs * m.plan.bars.len()],
-            rhs: z(m.plan.bars.len()),
-            solved: vec![false; bs],
-            gacc: g(outs),
-            gout: g(outs),
-            gh: g(em * nodes),
-            gh_prev: g(em * nodes),
-            ghe: g(em * edges),
-            ghe_prev: g(em * edges),
-            gs: g(em * edges),
-            gr: g(em * edges),
-            gz: g(em * rmax),
-            gmsg: g(em * edges),
-            gglob: g(em * nodes),
-            gf_edge: g(d * edges),
-            gminv: g(nodes),
-            inputs: false,
-            gxn: g(if a.biases.graph {
-                a.node_features() * nodes
-            } else {
-                2 * n * d * bs
-            }),
-            gw: g(a.edge_features() * edges),
-            gqv: g(2 * d * nodes),
-            gdq: g(bs * m.plan.bars.len() * d),
-            inv_m: z(types),
-            g_mass: Vec::with_capacity(types),
-            eye: (0..types * types)
-                .map(|k| if k / types == k % types { 1.0 } else { 0.0 })
-                .collect(),
-            type_embed: z(em * types),
-            node_ty: (0..if a.biases.graph { nodes } else { 0 })
-                .map(|r| m.plan.types[r % n])
-                .collect(),
-            // (`em`, `types`: 0 for NODE.)
-            pair: if m.by_type { vec![0; edges] } else { vec![] },
-            pair_in: z(3 * em * types * types),
-            pair_out: z(em * types * types),
-            g_pair_out: g(em * types * types),
-            g_pair_in: g(3 * em * types * types),
-            sums: IndexSums::default(),
-            g_type: g(em * types),
-            by_type_done: false,
-            same_params: false,
-            s1: g(width * rmax),
-            s2: g(width * rmax),
-            grad: g(m.layout.len()),
-            sse: 0.0,
+            ..Chunk::default()
         };
+        self.make_forward(m, &z);
+        self.make_constraint(m, &z);
+        if record {
+            self.make_reverse(m, &z);
+        }
+    }
+
+    /// The forward pass's buffers: inputs, states, messages and outputs, and
+    /// the MLPs' tapes (with activations only when recording).
+    fn make_forward(&mut self, m: &Model, z: &Sizes) {
+        let a = &m.arch;
+        let (em, nodes, edges) = (z.em, z.nodes, z.edges);
+        let zero = |len: usize| vec![0.0; len];
+        self.recv = vec![0; edges];
+        self.send = vec![0; edges];
+        self.x = zero(if a.biases.graph {
+            a.node_features() * nodes
+        } else {
+            2 * z.n * z.d * z.bs
+        });
+        self.xn = zero(if a.biases.graph {
+            a.node_features() * nodes
+        } else {
+            0
+        });
+        self.w_in = zero(a.edge_features() * edges);
+        self.h = (0..=a.rounds).map(|_| zero(em * nodes)).collect();
+        self.he = (0..=a.rounds).map(|_| zero(em * edges)).collect();
+        self.hs = (0..a.rounds).map(|_| zero(em * edges)).collect();
+        self.hr = (0..a.rounds).map(|_| zero(em * edges)).collect();
+        self.hp = (0..a.rounds).map(|_| zero(em * edges)).collect();
+        self.gp = zero(em * edges);
+        self.msg = zero(em * edges);
+        self.agg = zero(em * nodes);
+        self.glob = zero(em * nodes);
+        self.f_edge = zero(z.d * edges);
+        self.f_body = zero(z.d * nodes);
+        self.out = zero(z.outs);
+        self.geq = zero(z.outs);
+        self.acc = zero(z.outs);
+        self.tgt = zero(z.outs);
+        let record = self.record;
+        self.tapes = (m.mlps.iter())
+            .map(|(_, x)| {
+                if record {
+                    x.tape(z.rmax)
+                } else {
+                    x.inference_tape()
+                }
+            })
+            .collect();
+    }
+
+    /// The constraint's buffers and the by-type ones (one-hot rows, type
+    /// embeddings, type pairs).
+    fn make_constraint(&mut self, m: &Model, z: &Sizes) {
+        let (em, types, bars) = (z.em, z.types, m.plan.bars.len());
+        let zero = |len: usize| vec![0.0; len];
+        self.dq = zero(z.bs * bars * z.d);
+        self.kmat = zero(z.bs * bars.pow(2));
+        self.lam = zero(z.bs * bars);
+        self.piv = vec![0; z.bs * bars];
+        self.rhs = zero(bars);
+        self.solved = vec![false; z.bs];
+        self.inv_m = zero(types);
+        self.g_mass = Vec::with_capacity(types);
+        self.eye = (0..types * types)
+            .map(|k| if k / types == k % types { 1.0 } else { 0.0 })
+            .collect();
+        self.type_embed = zero(em * types);
+        self.node_ty = (0..if m.arch.biases.graph { z.nodes } else { 0 })
+            .map(|r| m.plan.types[r % z.n])
+            .collect();
+        // (`em`, `types`: 0 for NODE.)
+        self.pair = if m.by_type { vec![0; z.edges] } else { vec![] };
+        self.pair_in = zero(3 * em * types * types);
+        self.pair_out = zero(em * types * types);
+    }
+
+    /// The buffers only the reverse pass reads (none for inference).
+    fn make_reverse(&mut self, m: &Model, z: &Sizes) {
+        let a = &m.arch;
+        let (em, nodes, edges, types) = (z.em, z.nodes, z.edges, z.types);
+        let zero = |len: usize| vec![0.0; len];
+        self.gacc = zero(z.outs);
+        self.gout = zero(z.outs);
+        self.gh = zero(em * nodes);
+        self.gh_prev = zero(em * nodes);
+        self.ghe = zero(em * edges);
+        self.ghe_prev = zero(em * edges);
+        self.gs = zero(em * edges);
+        self.gr = zero(em * edges);
+        self.gz = zero(em * z.rmax);
+        self.gmsg = zero(em * edges);
+        self.gglob = zero(em * nodes);
+        self.gf_edge = zero(z.d * edges);
+        self.gminv = zero(nodes);
+        self.gxn = zero(if a.biases.graph {
+            a.node_features() * nodes
+        } else {
+            2 * z.n * z.d * z.bs
+        });
+        self.gw = zero(a.edge_features() * edges);
+        self.gqv = zero(2 * z.d * nodes);
+        self.gdq = zero(z.bs * m.plan.bars.len() * z.d);
+        self.g_pair_out = zero(em * types * types);
+        self.g_pair_in = zero(3 * em * types * types);
+        self.g_type = zero(em * types);
+        self.s1 = zero(z.width * z.rmax);
+        self.s2 = zero(z.width * z.rmax);
+        self.grad = zero(m.layout.len());
     }
 
     /// Directed edges of `bs` states of the graph, in the plan's order
@@ -252,5 +248,54 @@ impl Chunk {
         });
         self.edges = edges;
         self.laid = bs;
+    }
+}
+
+/// What [`Chunk::reserve`] sizes the buffers by.
+struct Sizes {
+    bs: usize,
+    edges: usize,
+    /// Embedding width and particle types: 0 for NODE, whose `embed` and
+    /// `types` size no weight and so must size no buffer either (a corrupt
+    /// file's 2^32 would be an abort).
+    em: usize,
+    types: usize,
+    n: usize,
+    d: usize,
+    nodes: usize,
+    /// The most rows an MLP runs over (its tape's and scratch's length).
+    rmax: usize,
+    /// The widest MLP layer.
+    width: usize,
+    /// The decoder's output, `d × rows`.
+    outs: usize,
+}
+
+impl Sizes {
+    fn new(m: &Model, bs: usize, edges: usize) -> Self {
+        let a = &m.arch;
+        let (em, types) = if a.biases.graph {
+            (a.embed, a.types)
+        } else {
+            (0, 0)
+        };
+        let (n, d) = (m.plan.n, m.plan.dim);
+        let nodes = bs * n;
+        Self {
+            bs,
+            edges,
+            em,
+            types,
+            n,
+            d,
+            nodes,
+            rmax: nodes.max(edges).max(bs).max(types * types).max(1),
+            width: m.mlps.iter().map(|(_, x)| x.width()).max().unwrap_or(1),
+            outs: if a.biases.graph {
+                d * nodes
+            } else {
+                d * n * bs
+            },
+        }
     }
 }
