@@ -27,7 +27,7 @@ mod reverse;
 mod samples;
 mod split;
 
-pub use baseline::BaselineExecutor;
+pub use baseline::{BaselineExecutor, ExecutorModel};
 pub use gns::{Gns, GnsSpec};
 pub use infer::Forward;
 pub use layout::{Layout, LayoutError};
