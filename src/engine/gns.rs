@@ -13,9 +13,9 @@
 //! Checked against candle's autodiff and finite differences
 //! (`tests/gns_engine.rs`).
 
-use super::baseline::ExecutorModel;
 use super::dense::{squareplus_in_place, times_squareplus_grad, Mlp, Tape};
 use super::gather::{copy_row, gather_rows, scatter_add_rows, Gather};
+use super::model::ExecutorModel;
 use super::samples::Samples;
 use super::EngineError;
 use crate::gnode::plan::GraphPlan;

@@ -27,9 +27,9 @@ mod gradient;
 mod mlp;
 
 use super::bars::BarForce;
-use super::baseline::ExecutorModel;
 use super::dense::Mlp;
 use super::gather::{copy_row, gather_rows, scatter_add_rows, Gather};
+use super::model::ExecutorModel;
 use super::named::Named;
 use super::samples::Samples;
 use super::EngineError;

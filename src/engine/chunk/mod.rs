@@ -6,7 +6,7 @@
 //! This file holds the model, the buffers and the entry points (a batch
 //! chunk's [`Chunk::run`], inference's [`Chunk::forward_one`], planning's
 //! [`Chunk::input_vjp`]); the passes live beside it, one file each:
-//! [`buffers`] sizes and lays out, [`inputs`] fills the node inputs,
+//! [`buffers`] sizes and lays out (with [`contacts`]' pairs), [`inputs`] fills the node inputs,
 //! [`forward`] runs the encoder, message passing and decoder, [`constraints`]
 //! applies the bars (both directions), and [`reverse`] is the hand-written
 //! reverse pass. The graph passes run inside one AVX-512/AVX2 copy each
@@ -14,11 +14,12 @@
 
 mod buffers;
 mod constraints;
+mod contacts;
 mod forward;
 mod inputs;
 mod reverse;
 
-use buffers::Contacts;
+use contacts::Contacts;
 
 use super::dense::{Mlp, Tape};
 use super::gather::IndexSums;
