@@ -10,7 +10,7 @@ mod common;
 use common::baselines::{candle_accelerations, candle_loss_grad, rel};
 
 use mcgnode::baselines::{BaselineHyper, BaselineNet, Kind};
-use mcgnode::engine::Gns;
+use mcgnode::engine::{ExecutorModel, Gns};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State};
 use mcgnode::train::flat_params;

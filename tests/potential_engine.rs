@@ -12,7 +12,7 @@ mod common;
 use common::baselines::{candle_accelerations, candle_loss_grad, rel};
 
 use mcgnode::baselines::{BaselineHyper, BaselineNet, Kind};
-use mcgnode::engine::Potential;
+use mcgnode::engine::{ExecutorModel, Potential};
 use mcgnode::physics::{SystemConfig, SystemKind};
 use mcgnode::system::{Graph, State};
 use mcgnode::train::flat_params;

@@ -589,3 +589,210 @@ fn the_path_scan_expands_groups_and_resolves_super() {
     assert_eq!(absolute(&me, &want[3]), ["ros", "e", "f"]);
     assert_eq!(module_of(Path::new("ros/mod.rs")), ["ros"]);
 }
+
+/// `text` with every comment, string and character literal blanked to
+/// spaces (line breaks kept, so line numbers hold): what is left of its
+/// braces is code. Nested block comments, escapes, raw strings
+/// (`r#"…"#`, `br"…"`) and lifetimes (`'a`, not a literal) are told apart.
+fn blank_literals(text: &str) -> String {
+    let c: Vec<char> = text.chars().collect();
+    let mut out: Vec<char> = c.clone();
+    let blank = |out: &mut Vec<char>, from: usize, to: usize| {
+        for x in &mut out[from..to.min(c.len())] {
+            if *x != '\n' {
+                *x = ' ';
+            }
+        }
+    };
+    let mut i = 0;
+    while i < c.len() {
+        let next = c.get(i + 1).copied();
+        if c[i] == '/' && next == Some('/') {
+            let end = (i..c.len()).find(|&k| c[k] == '\n').unwrap_or(c.len());
+            blank(&mut out, i, end);
+            i = end;
+        } else if c[i] == '/' && next == Some('*') {
+            let (mut k, mut depth) = (i + 2, 1);
+            while k < c.len() && depth > 0 {
+                if c[k] == '/' && c.get(k + 1) == Some(&'*') {
+                    depth += 1;
+                    k += 2;
+                } else if c[k] == '*' && c.get(k + 1) == Some(&'/') {
+                    depth -= 1;
+                    k += 2;
+                } else {
+                    k += 1;
+                }
+            }
+            blank(&mut out, i, k);
+            i = k;
+        } else if c[i] == 'r' && matches!(next, Some('"' | '#')) && raw_start(&c, i) {
+            // r"…", r#"…"#, br"…"; r#name is an identifier.
+            let hashes = (i + 1..c.len()).take_while(|&k| c[k] == '#').count();
+            if c.get(i + 1 + hashes) == Some(&'"') {
+                let close: Vec<char> = std::iter::once('"')
+                    .chain(std::iter::repeat_n('#', hashes))
+                    .collect();
+                let end = (i + 2 + hashes..c.len())
+                    .find(|&k| c[k..].starts_with(&close))
+                    .map_or(c.len(), |k| k + close.len());
+                blank(&mut out, i, end);
+                i = end;
+            } else {
+                i += 1;
+            }
+        } else if c[i] == '"' {
+            let mut k = i + 1;
+            while k < c.len() && c[k] != '"' {
+                k += if c[k] == '\\' { 2 } else { 1 };
+            }
+            blank(&mut out, i, k + 1);
+            i = k + 1;
+        } else if c[i] == '\'' {
+            // A literal: '\…' or 'x' (one character then a quote); else a
+            // lifetime or label, left as it is.
+            if next == Some('\\') {
+                let mut k = i + 2;
+                while k < c.len() && c[k] != '\'' {
+                    k += 1;
+                }
+                // '\'' : the escaped quote is the character.
+                if k == i + 2 {
+                    k = i + 3;
+                }
+                blank(&mut out, i, k + 1);
+                i = k + 1;
+            } else if c.get(i + 2) == Some(&'\'') {
+                blank(&mut out, i, i + 3);
+                i += 3;
+            } else {
+                i += 1;
+            }
+        } else {
+            i += 1;
+        }
+    }
+    out.into_iter().collect()
+}
+
+/// Whether the `r` at `i` starts a raw string: not the tail of a name,
+/// unless that name is the `b` of a byte string.
+fn raw_start(c: &[char], i: usize) -> bool {
+    let ident = |k: usize| c[k].is_alphanumeric() || c[k] == '_';
+    i == 0 || !ident(i - 1) || (c[i - 1] == 'b' && (i == 1 || !ident(i - 2)))
+}
+
+/// Each function in `code` (literals blanked): its name, the line its `fn`
+/// is on (from 1) and its length in lines, from that line to the line of
+/// its closing brace, both counted. Declarations without a body (trait
+/// methods, `extern` items) and `fn(…)` pointer types are not functions
+/// here; functions inside functions count on their own too.
+fn functions(code: &str) -> Vec<(String, usize, usize)> {
+    let c: Vec<char> = code.chars().collect();
+    let ident = |x: char| x.is_alphanumeric() || x == '_';
+    let line_at = |k: usize| c[..k].iter().filter(|&&x| x == '\n').count() + 1;
+    let mut found = vec![];
+    for i in 0..c.len().saturating_sub(2) {
+        let word = c[i] == 'f' && c[i + 1] == 'n' && c[i + 2].is_whitespace();
+        if !word || (i > 0 && ident(c[i - 1])) {
+            continue;
+        }
+        let mut k = i + 2;
+        while k < c.len() && c[k].is_whitespace() {
+            k += 1;
+        }
+        let name: String = c[k..].iter().take_while(|&&x| ident(x)).collect();
+        if name.is_empty() {
+            continue;
+        }
+        // The body's `{`: the first at depth 0 of () and [], unless a `;`
+        // (a declaration) comes first.
+        let mut depth = 0i64;
+        let open = loop {
+            match c.get(k) {
+                None => break None,
+                Some('(' | '[') => depth += 1,
+                Some(')' | ']') => depth -= 1,
+                Some(';' | '}') if depth == 0 => break None,
+                Some('{') if depth == 0 => break Some(k),
+                _ => {}
+            }
+            k += 1;
+        };
+        let Some(open) = open else { continue };
+        let mut braces = 0usize;
+        let close = (open..c.len()).find(|&k| {
+            match c[k] {
+                '{' => braces += 1,
+                '}' => braces -= 1,
+                _ => {}
+            }
+            braces == 0
+        });
+        let close = close.unwrap_or_else(|| panic!("`fn {name}` has no closing brace"));
+        let first = line_at(i);
+        found.push((name, first, line_at(close) - first + 1));
+    }
+    found
+}
+
+/// The most lines a file of `src/` may have, and a function in it (from its
+/// `fn` line to its closing brace, both counted, unit tests included): a
+/// file one reads in a sitting, a function on one screen.
+const MAX_FILE_LINES: usize = 700;
+const MAX_FN_LINES: usize = 80;
+
+#[test]
+fn no_file_or_function_is_too_long() {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).expect("src/ is readable") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                out.push(p);
+            }
+        }
+    }
+    let mut files = vec![];
+    walk(&root(), &mut files);
+    assert!(files.len() > 50, "found only {} source files", files.len());
+    let (mut long, mut fns) = (vec![], 0);
+    for p in files {
+        let text = std::fs::read_to_string(&p).expect("source is UTF-8");
+        let name = p.strip_prefix(root()).unwrap().display().to_string();
+        let lines = text.lines().count();
+        if lines > MAX_FILE_LINES {
+            long.push(format!("src/{name}: {lines} lines"));
+        }
+        for (f, line, len) in functions(&blank_literals(&text)) {
+            fns += 1;
+            if len > MAX_FN_LINES {
+                long.push(format!("src/{name}:{line}: fn {f} is {len} lines"));
+            }
+        }
+    }
+    assert!(fns > 1000, "found only {fns} functions");
+    assert!(
+        long.is_empty(),
+        "more than {MAX_FILE_LINES} lines in a file or {MAX_FN_LINES} in a function \
+         (split it by job):\n{}",
+        long.join("\n")
+    );
+}
+
+#[test]
+fn the_length_check_counts_code_braces_only() {
+    let code = "fn a<'x>(s: &'x str) -> char {\n    let _ = \"}}\\\"}\";\n    // }\n    \
+                /* { /* } */ */\n    let _ = (r#\"}\"#, br\"{\", b'}', '\\'');\n    '}'\n}\n\
+                fn b() {}\ntrait T {\n    fn c(&self);\n}\ntype F = fn(u8);\n";
+    let blanked = blank_literals(code);
+    assert_eq!(blanked.lines().count(), code.lines().count());
+    let found = functions(&blanked);
+    assert_eq!(found, [("a".to_string(), 1, 7), ("b".to_string(), 8, 1)]);
+    // One line more than allowed is found.
+    let body = "    x();\n".repeat(MAX_FN_LINES - 1);
+    let long = format!("impl S {{\n    fn long(&self) {{\n{body}    }}\n}}\n");
+    let found = functions(&blank_literals(&long));
+    assert_eq!(found, [("long".to_string(), 2, MAX_FN_LINES + 1)]);
+}

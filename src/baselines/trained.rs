@@ -4,7 +4,7 @@
 use super::file::BaselineFile;
 use super::net::{BaselineHyper, BaselineNet, Kind};
 use crate::dynamics::{Dynamics, DynamicsError, Forces};
-use crate::engine::BaselineExecutor;
+use crate::engine::{BaselineExecutor, ExecutorModel};
 use crate::error::{bail, Result};
 use crate::gnode::arch::ArchError;
 use crate::system::{Graph, State};

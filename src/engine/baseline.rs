@@ -1,7 +1,8 @@
 //! The baselines written on the executor behind one type: GNS ([`Gns`]),
-//! and LGN and HGN ([`Potential`]).
+//! and LGN and HGN ([`Potential`]), each an [`ExecutorModel`].
 
 use super::gns::Gns;
+use super::model::ExecutorModel;
 use super::potential::Potential;
 use super::samples::Samples;
 use crate::system::State;
@@ -15,47 +16,42 @@ pub enum BaselineExecutor {
 }
 
 impl BaselineExecutor {
-    /// `states` and their targets laid out for this network.
-    ///
-    /// # Panics
-    /// As [`Gns::samples`].
-    pub fn samples<'a>(&self, states: &'a [State], targets: &'a [Vec<f64>]) -> Samples<'a> {
+    /// The network, whichever it is.
+    fn net(&self) -> &dyn ExecutorModel {
         match self {
-            Self::Gns(g) => g.samples(states, targets),
-            Self::Potential(p) => p.samples(states, targets),
+            Self::Gns(g) => g,
+            Self::Potential(p) => p,
         }
     }
 
-    /// The loss of the states `idx` and its gradient into `grad`.
-    ///
-    /// # Panics
-    /// As [`Gns::loss_grad`].
-    pub fn loss_grad(
+    fn net_mut(&mut self) -> &mut dyn ExecutorModel {
+        match self {
+            Self::Gns(g) => g,
+            Self::Potential(p) => p,
+        }
+    }
+}
+
+impl ExecutorModel for BaselineExecutor {
+    fn samples<'a>(&self, states: &'a [State], targets: &'a [Vec<f64>]) -> Samples<'a> {
+        self.net().samples(states, targets)
+    }
+
+    fn loss_grad(
         &mut self,
         theta: &[f64],
         samples: &Samples,
         idx: &[usize],
         grad: &mut [f64],
     ) -> f64 {
-        match self {
-            Self::Gns(g) => g.loss_grad(theta, samples, idx, grad),
-            Self::Potential(p) => p.loss_grad(theta, samples, idx, grad),
-        }
+        self.net_mut().loss_grad(theta, samples, idx, grad)
     }
 
-    /// The loss alone.
-    pub fn loss(&mut self, theta: &[f64], samples: &Samples, idx: &[usize]) -> f64 {
-        match self {
-            Self::Gns(g) => g.loss(theta, samples, idx),
-            Self::Potential(p) => p.loss(theta, samples, idx),
-        }
+    fn loss(&mut self, theta: &[f64], samples: &Samples, idx: &[usize]) -> f64 {
+        self.net_mut().loss(theta, samples, idx)
     }
 
-    /// Predicted accelerations of `states` (node-major, one vector each).
-    pub fn accelerations(&mut self, theta: &[f64], states: &[State]) -> Vec<Vec<f64>> {
-        match self {
-            Self::Gns(g) => g.accelerations(theta, states),
-            Self::Potential(p) => p.accelerations(theta, states),
-        }
+    fn accelerations(&mut self, theta: &[f64], states: &[State]) -> Vec<Vec<f64>> {
+        self.net_mut().accelerations(theta, states)
     }
 }

@@ -15,6 +15,7 @@
 
 use super::dense::{squareplus_in_place, times_squareplus_grad, Mlp, Tape};
 use super::gather::{copy_row, gather_rows, scatter_add_rows, Gather};
+use super::model::ExecutorModel;
 use super::samples::Samples;
 use super::EngineError;
 use crate::gnode::plan::GraphPlan;
@@ -113,55 +114,6 @@ impl Gns {
         })
     }
 
-    /// `states` and their target accelerations (one per state, or none)
-    /// packed for this network ([`Samples`]), as [`super::Engine::samples`]
-    /// packs them. Build them once per data set, not per batch.
-    ///
-    /// # Panics
-    /// If a state or target does not fit the graph, or there are targets but
-    /// not one per state.
-    pub fn samples<'a>(&self, states: &'a [State], targets: &'a [Vec<f64>]) -> Samples<'a> {
-        Samples::new(self.plan.n, self.plan.dim, true, states, targets)
-    }
-
-    /// Mean squared error of the free particles' accelerations of the
-    /// states `idx` of `samples` against their targets, and its gradient
-    /// into `grad`.
-    ///
-    /// # Panics
-    /// If `samples` were not made by [`Gns::samples`] for this graph.
-    pub fn loss_grad(
-        &mut self,
-        theta: &[f64],
-        samples: &Samples,
-        idx: &[usize],
-        grad: &mut [f64],
-    ) -> f64 {
-        let count = (idx.len() * self.plan.free_ndof()).max(1) as f64;
-        super::mean_loss(count, Some(grad), |fold| {
-            self.run(theta, samples, idx, Some(1.0 / count), fold);
-        })
-    }
-
-    /// [`Gns::loss_grad`]'s loss alone.
-    pub fn loss(&mut self, theta: &[f64], samples: &Samples, idx: &[usize]) -> f64 {
-        let count = (idx.len() * self.plan.free_ndof()).max(1) as f64;
-        super::mean_loss(count, None, |fold| {
-            self.run(theta, samples, idx, None, fold)
-        })
-    }
-
-    /// Predicted accelerations of `states` (node-major, one vector each):
-    /// the forward pass alone, for rollouts.
-    pub fn accelerations(&mut self, theta: &[f64], states: &[State]) -> Vec<Vec<f64>> {
-        let (n, d) = (self.plan.n, self.plan.dim);
-        let samples = self.samples(states, &[]);
-        let per_state = n + self.plan.recv.len();
-        super::node_major_all(states.len(), (n, d), per_state, |idx, put| {
-            self.run(theta, &samples, idx, None, |c| put(&c.out));
-        })
-    }
-
     /// The chunks of `idx` across the threads, folded in chunk order.
     fn run(
         &mut self,
@@ -181,6 +133,57 @@ impl Gns {
             c.run(net, plan, theta, (samples, &idx[a..b]), scale);
         };
         super::in_waves(&mut self.chunks, self.crew.as_ref(), &parts, work, fold);
+    }
+}
+
+impl ExecutorModel for Gns {
+    /// `states` and their target accelerations (one per state, or none)
+    /// packed for this network ([`Samples`]), as [`super::Engine::samples`]
+    /// packs them. Build them once per data set, not per batch.
+    ///
+    /// # Panics
+    /// If a state or target does not fit the graph, or there are targets but
+    /// not one per state.
+    fn samples<'a>(&self, states: &'a [State], targets: &'a [Vec<f64>]) -> Samples<'a> {
+        Samples::new(self.plan.n, self.plan.dim, true, states, targets)
+    }
+
+    /// Mean squared error of the free particles' accelerations of the
+    /// states `idx` of `samples` against their targets, and its gradient
+    /// into `grad`.
+    ///
+    /// # Panics
+    /// If `samples` were not made by [`Gns::samples`] for this graph.
+    fn loss_grad(
+        &mut self,
+        theta: &[f64],
+        samples: &Samples,
+        idx: &[usize],
+        grad: &mut [f64],
+    ) -> f64 {
+        let count = (idx.len() * self.plan.free_ndof()).max(1) as f64;
+        super::mean_loss(count, Some(grad), |fold| {
+            self.run(theta, samples, idx, Some(1.0 / count), fold);
+        })
+    }
+
+    /// [`Gns::loss_grad`]'s loss alone.
+    fn loss(&mut self, theta: &[f64], samples: &Samples, idx: &[usize]) -> f64 {
+        let count = (idx.len() * self.plan.free_ndof()).max(1) as f64;
+        super::mean_loss(count, None, |fold| {
+            self.run(theta, samples, idx, None, fold)
+        })
+    }
+
+    /// Predicted accelerations of `states` (node-major, one vector each):
+    /// the forward pass alone, for rollouts.
+    fn accelerations(&mut self, theta: &[f64], states: &[State]) -> Vec<Vec<f64>> {
+        let (n, d) = (self.plan.n, self.plan.dim);
+        let samples = self.samples(states, &[]);
+        let per_state = n + self.plan.recv.len();
+        super::node_major_all(states.len(), (n, d), per_state, |idx, put| {
+            self.run(theta, &samples, idx, None, |c| put(&c.out));
+        })
     }
 }
 

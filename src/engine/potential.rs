@@ -22,9 +22,14 @@
 //! Checked against candle's autodiff and finite differences
 //! (`tests/potential_engine.rs`).
 
+mod force;
+mod gradient;
+mod mlp;
+
 use super::bars::BarForce;
-use super::dense::{dot, dots, squareplus_in_place, sum, times_squareplus_grad, Linear, Mlp};
+use super::dense::Mlp;
 use super::gather::{copy_row, gather_rows, scatter_add_rows, Gather};
+use super::model::ExecutorModel;
 use super::named::Named;
 use super::samples::Samples;
 use super::EngineError;
@@ -161,67 +166,6 @@ impl Potential {
         })
     }
 
-    /// `states` and their target accelerations (one per state, or none)
-    /// packed for this network ([`Samples`]). Build them once per data set.
-    ///
-    /// # Panics
-    /// If a state or target does not fit the graph, or there are targets but
-    /// not one per state.
-    pub fn samples<'a>(&self, states: &'a [State], targets: &'a [Vec<f64>]) -> Samples<'a> {
-        Samples::new(self.plan.n, self.plan.dim, true, states, targets)
-    }
-
-    /// The loss of the states `idx` of `samples` against their targets, and
-    /// its gradient into `grad`.
-    ///
-    /// # Panics
-    /// If `samples` were not made by [`Potential::samples`] for this graph
-    /// with targets.
-    pub fn loss_grad(
-        &mut self,
-        theta: &[f64],
-        samples: &Samples,
-        idx: &[usize],
-        grad: &mut [f64],
-    ) -> f64 {
-        let count = (idx.len() * self.plan.ndof()).max(1) as f64;
-        super::mean_loss(count, Some(grad), |fold| {
-            self.run(theta, samples, idx, Some(1.0 / count), fold);
-        })
-    }
-
-    /// [`Potential::loss_grad`]'s loss alone.
-    pub fn loss(&mut self, theta: &[f64], samples: &Samples, idx: &[usize]) -> f64 {
-        let count = (idx.len() * self.plan.ndof()).max(1) as f64;
-        super::mean_loss(count, None, |fold| {
-            self.run(theta, samples, idx, None, fold)
-        })
-    }
-
-    /// Predicted accelerations f / m of `states` (node-major, one vector
-    /// each): the forward pass and the force, for rollouts.
-    pub fn accelerations(&mut self, theta: &[f64], states: &[State]) -> Vec<Vec<f64>> {
-        let (n, d) = (self.plan.n, self.plan.dim);
-        let samples = self.samples(states, &[]);
-        let per_state = n + self.plan.recv.len();
-        let mut out = super::node_major_all(states.len(), (n, d), per_state, |idx, put| {
-            self.run(theta, &samples, idx, None, |c| put(&c.f));
-        });
-        // q̈ = f / m.
-        let m: Vec<f64> = self
-            .plan
-            .types
-            .iter()
-            .map(|&t| self.net.mass(theta, t))
-            .collect();
-        for o in &mut out {
-            for (x, &mp) in o.chunks_exact_mut(d).zip(&m) {
-                x.iter_mut().for_each(|v| *v /= mp);
-            }
-        }
-        out
-    }
-
     /// The chunks of `idx` across the threads, folded in chunk order.
     fn run(
         &mut self,
@@ -241,6 +185,69 @@ impl Potential {
             c.run(net, (plan, masses), theta, (samples, &idx[a..b]), scale);
         };
         super::in_waves(&mut self.chunks, self.crew.as_ref(), &parts, work, fold);
+    }
+}
+
+impl ExecutorModel for Potential {
+    /// `states` and their target accelerations (one per state, or none)
+    /// packed for this network ([`Samples`]). Build them once per data set.
+    ///
+    /// # Panics
+    /// If a state or target does not fit the graph, or there are targets but
+    /// not one per state.
+    fn samples<'a>(&self, states: &'a [State], targets: &'a [Vec<f64>]) -> Samples<'a> {
+        Samples::new(self.plan.n, self.plan.dim, true, states, targets)
+    }
+
+    /// The loss of the states `idx` of `samples` against their targets, and
+    /// its gradient into `grad`.
+    ///
+    /// # Panics
+    /// If `samples` were not made by [`Potential::samples`] for this graph
+    /// with targets.
+    fn loss_grad(
+        &mut self,
+        theta: &[f64],
+        samples: &Samples,
+        idx: &[usize],
+        grad: &mut [f64],
+    ) -> f64 {
+        let count = (idx.len() * self.plan.ndof()).max(1) as f64;
+        super::mean_loss(count, Some(grad), |fold| {
+            self.run(theta, samples, idx, Some(1.0 / count), fold);
+        })
+    }
+
+    /// [`Potential::loss_grad`]'s loss alone.
+    fn loss(&mut self, theta: &[f64], samples: &Samples, idx: &[usize]) -> f64 {
+        let count = (idx.len() * self.plan.ndof()).max(1) as f64;
+        super::mean_loss(count, None, |fold| {
+            self.run(theta, samples, idx, None, fold)
+        })
+    }
+
+    /// Predicted accelerations f / m of `states` (node-major, one vector
+    /// each): the forward pass and the force, for rollouts.
+    fn accelerations(&mut self, theta: &[f64], states: &[State]) -> Vec<Vec<f64>> {
+        let (n, d) = (self.plan.n, self.plan.dim);
+        let samples = self.samples(states, &[]);
+        let per_state = n + self.plan.recv.len();
+        let mut out = super::node_major_all(states.len(), (n, d), per_state, |idx, put| {
+            self.run(theta, &samples, idx, None, |c| put(&c.f));
+        });
+        // q̈ = f / m.
+        let m: Vec<f64> = self
+            .plan
+            .types
+            .iter()
+            .map(|&t| self.net.mass(theta, t))
+            .collect();
+        for o in &mut out {
+            for (x, &mp) in o.chunks_exact_mut(d).zip(&m) {
+                x.iter_mut().for_each(|v| *v /= mp);
+            }
+        }
+        out
     }
 }
 
@@ -442,373 +449,6 @@ impl Chunk {
         );
         edges
     }
-
-    /// The forward pass, keeping every MLP's hidden activations.
-    #[inline(always)]
-    #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
-    fn forward(&mut self, net: &Net, th: &[f64], nodes: usize, edges: usize) {
-        let (l, d, t, rounds) = net.sizes();
-        slots(&mut self.apps, net.mlps.len());
-        slots(&mut self.h, rounds + 1);
-        slots(&mut self.e, rounds + 1);
-        slots(&mut self.ein, rounds);
-        slots(&mut self.nin, rounds);
-        let x = &self.x.v[..(t + d) * nodes];
-        let h0 = room(&mut self.h[0].v, l * nodes);
-        mlp_forward(net.node_em(), th, x, nodes, &mut self.apps[0], h0);
-        squareplus_in_place(h0);
-        let e0 = room(&mut self.e[0].v, l * edges);
-        mlp_forward(
-            net.edge_em(),
-            th,
-            &self.w.v[..d * edges],
-            edges,
-            &mut self.apps[1],
-            e0,
-        );
-        squareplus_in_place(e0);
-        for r in 0..rounds {
-            let (we, wv) = net.round(r);
-            let ein = room(&mut self.ein[r].v, 3 * l * edges);
-            let (e, h) = (&self.e[r].v[..l * edges], &self.h[r].v[..l * nodes]);
-            edge_update_inputs(ein, e, h, (&self.recv, &self.send));
-            let e_new = room(&mut self.e[r + 1].v, l * edges);
-            mlp_forward(we, th, ein, edges, &mut self.apps[2 + 2 * r], e_new);
-            squareplus_in_place(e_new);
-            let nin = room(&mut self.nin[r].v, 2 * l * nodes);
-            node_update_inputs(nin, &self.h[r].v[..l * nodes], e_new, &self.recv);
-            let h_new = room(&mut self.h[r + 1].v, l * nodes);
-            mlp_forward(wv, th, nin, nodes, &mut self.apps[3 + 2 * r], h_new);
-            squareplus_in_place(h_new);
-        }
-        let k = net.readout();
-        let energy = room(&mut self.energy, nodes.max(edges));
-        let h = &self.h[rounds].v[..l * nodes];
-        mlp_forward(
-            &net.mlps[k],
-            th,
-            h,
-            nodes,
-            &mut self.apps[k],
-            &mut energy[..nodes],
-        );
-        let e = &self.e[rounds].v[..l * edges];
-        mlp_forward(
-            &net.mlps[k + 1],
-            th,
-            e,
-            edges,
-            &mut self.apps[k + 1],
-            &mut energy[..edges],
-        );
-    }
-
-    /// The force f = −∂V/∂q into `f` (`d × N`): the reverse pass of V with
-    /// respect to the inputs only.
-    #[inline(always)]
-    #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
-    fn force(&mut self, net: &Net, th: &[f64], nodes: usize, edges: usize) {
-        let (l, d, t, rounds) = net.sizes();
-        let ones = room(&mut self.ones, nodes.max(edges));
-        ones.fill(1.0);
-        let k = net.readout();
-        let s = &mut self.s;
-        let gh = room(&mut self.gh.v, l * nodes);
-        mlp_input_grad(
-            &net.mlps[k],
-            th,
-            &self.apps[k],
-            &ones[..nodes],
-            nodes,
-            gh,
-            s,
-        );
-        let ge = room(&mut self.ge.v, l * edges);
-        mlp_input_grad(
-            &net.mlps[k + 1],
-            th,
-            &self.apps[k + 1],
-            &ones[..edges],
-            edges,
-            ge,
-            s,
-        );
-        for r in (0..rounds).rev() {
-            let (we, wv) = net.round(r);
-            times_squareplus_grad(gh, &self.h[r + 1].v[..l * nodes]);
-            let gnin = room(&mut self.gin.v, 2 * l * nodes);
-            mlp_input_grad(wv, th, &self.apps[3 + 2 * r], gh, nodes, gnin, s);
-            let (gh_part, gagg) = gnin.split_at(l * nodes);
-            gh.copy_from_slice(gh_part);
-            gather_rows(ge, gagg, &self.recv, Gather::Add);
-            times_squareplus_grad(ge, &self.e[r + 1].v[..l * edges]);
-            let gein = room(&mut self.gin.v, 3 * l * edges);
-            mlp_input_grad(we, th, &self.apps[2 + 2 * r], ge, edges, gein, s);
-            let (ge_part, ghrs) = gein.split_at(l * edges);
-            ge.copy_from_slice(ge_part);
-            let (ghr, ghs) = ghrs.split_at(l * edges);
-            scatter_add_rows(gh, ghr, &self.recv);
-            scatter_add_rows(gh, ghs, &self.send);
-        }
-        times_squareplus_grad(gh, &self.h[0].v[..l * nodes]);
-        let gx = room(&mut self.gin.t, (t + d) * nodes);
-        mlp_input_grad(net.node_em(), th, &self.apps[0], gh, nodes, gx, s);
-        times_squareplus_grad(ge, &self.e[0].v[..l * edges]);
-        let gw = room(&mut self.gin.v, d * edges);
-        mlp_input_grad(net.edge_em(), th, &self.apps[1], ge, edges, gw, s);
-        // ∂V/∂q through the node inputs' q rows and the edges' w = q_recv − q_send.
-        let f = room(&mut self.f, d * nodes);
-        f.copy_from_slice(&gx[t * nodes..(t + d) * nodes]);
-        scatter_add_rows(f, gw, &self.recv);
-        gw.iter_mut().for_each(|g| *g = -*g);
-        scatter_add_rows(f, gw, &self.send);
-        f.iter_mut().for_each(|g| *g = -*g);
-    }
-
-    /// The loss of the forces in `f` against the targets, ∂L/∂(∂V/∂q) into
-    /// `u` (times `scale`) and the log-masses' gradients into `grad` (zeroed
-    /// first).
-    #[inline(always)]
-    #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
-    fn seed(
-        &mut self,
-        net: &Net,
-        (plan, masses): (&GraphPlan, &[f64]),
-        th: &[f64],
-        (samples, sel): (&Samples, &[usize]),
-        scale: Option<f64>,
-    ) {
-        let (n, d) = (plan.n, plan.dim);
-        let nodes = sel.len() * n;
-        let sc = scale.unwrap_or(0.0);
-        let grad = room(&mut self.grad, th.len());
-        grad.fill(0.0);
-        let u = room(&mut self.u, d * nodes);
-        let mut sse = 0.0;
-        for (s, &i) in sel.iter().enumerate() {
-            // A record's rows: q, q̇, the target.
-            let rec = samples.record(i).expect("packed samples");
-            let (v, target) = (&rec[d * n..2 * d * n], &rec[2 * d * n..3 * d * n]);
-            for (p, &ty) in plan.types.iter().enumerate() {
-                let (lm, m) = (net.log_mass + ty, net.mass(th, ty));
-                for c in 0..d {
-                    let at = c * nodes + s * n + p;
-                    let (f, tv, vv) = (self.f[at], target[c * n + p], v[c * n + p]);
-                    match net.spec.loss {
-                        PotentialLoss::Acceleration => {
-                            let a = f / m;
-                            let r = a - tv;
-                            sse += r * r;
-                            let ga = 2.0 * r * sc;
-                            u[at] = ga / m;
-                            // ∂a/∂log m = −a.
-                            grad[lm] -= ga * a;
-                        }
-                        PotentialLoss::Hamilton => {
-                            let mt = masses[p];
-                            let qd = mt * vv / m;
-                            let (rq, rp) = (qd - vv, f - mt * tv);
-                            sse += 0.5 * (rq * rq + rp * rp);
-                            u[at] = rp * sc;
-                            grad[lm] -= rq * sc * qd;
-                        }
-                    }
-                }
-            }
-        }
-        self.sse = sse;
-        // ∂L/∂f → ∂L/∂g, g = ∂V/∂q: f = −g, or through the bars' multipliers
-        // (which depend on the masses too: ∂M⁻¹/∂log m = −M⁻¹).
-        if plan.bars.is_empty() {
-            u.iter_mut().for_each(|x| *x = -*x);
-            return;
-        }
-        let gminv = room(&mut self.gminv, d * nodes);
-        gminv.fill(0.0);
-        self.bars
-            .reverse(plan, &self.minv, &self.f[..d * nodes], u, gminv);
-        for s in 0..sel.len() {
-            for (p, &ty) in plan.types.iter().enumerate() {
-                for c in 0..d {
-                    grad[net.log_mass + ty] -= gminv[c * nodes + s * n + p] * self.minv[p];
-                }
-            }
-        }
-    }
-
-    /// The tangent of the forward pass along q̇ = u (= ∂L/∂(∂V/∂q)): every
-    /// latent's tangent and every MLP's hidden tangents.
-    #[inline(always)]
-    #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
-    fn tangent(&mut self, net: &Net, th: &[f64], nodes: usize, edges: usize) {
-        let (l, d, t, rounds) = net.sizes();
-        let xt = &mut self.x.t[..(t + d) * nodes];
-        xt[t * nodes..].copy_from_slice(&self.u[..d * nodes]);
-        let wt = room(&mut self.w.t, d * edges);
-        differences(wt, &self.u[..d * nodes], &self.recv, &self.send);
-        let (h, ht) = self.h[0].tangents(l * nodes);
-        mlp_tangent(net.node_em(), th, xt, nodes, &mut self.apps[0], ht);
-        times_squareplus_grad(ht, h);
-        let (e, et) = self.e[0].tangents(l * edges);
-        mlp_tangent(net.edge_em(), th, wt, edges, &mut self.apps[1], et);
-        times_squareplus_grad(et, e);
-        for r in 0..rounds {
-            let (we, wv) = net.round(r);
-            let eint = room(&mut self.ein[r].t, 3 * l * edges);
-            let (et, ht) = (&self.e[r].t[..l * edges], &self.h[r].t[..l * nodes]);
-            edge_update_inputs(eint, et, ht, (&self.recv, &self.send));
-            let (e_new, et_new) = self.e[r + 1].tangents(l * edges);
-            mlp_tangent(we, th, eint, edges, &mut self.apps[2 + 2 * r], et_new);
-            times_squareplus_grad(et_new, e_new);
-            let nint = room(&mut self.nin[r].t, 2 * l * nodes);
-            node_update_inputs(nint, &self.h[r].t[..l * nodes], et_new, &self.recv);
-            let (h_new, ht_new) = self.h[r + 1].tangents(l * nodes);
-            mlp_tangent(wv, th, nint, nodes, &mut self.apps[3 + 2 * r], ht_new);
-            times_squareplus_grad(ht_new, h_new);
-        }
-        // The readouts' hidden tangents (their output tangent, u·∂V/∂q, is
-        // what the reverse pass starts from, and is not needed itself).
-        let k = net.readout();
-        let out = room(&mut self.energy, nodes.max(edges));
-        let ht = &self.h[rounds].t[..l * nodes];
-        mlp_tangent(
-            &net.mlps[k],
-            th,
-            ht,
-            nodes,
-            &mut self.apps[k],
-            &mut out[..nodes],
-        );
-        let et = &self.e[rounds].t[..l * edges];
-        mlp_tangent(
-            &net.mlps[k + 1],
-            th,
-            et,
-            edges,
-            &mut self.apps[k + 1],
-            &mut out[..edges],
-        );
-    }
-
-    /// The reverse pass of (values, tangents) from the readouts' output
-    /// tangents (seeded 1: ∂L/∂θ = ∂(u·∂V/∂q)/∂θ) to every weight,
-    /// accumulated into `grad`.
-    #[inline(always)]
-    #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
-    fn reverse(&mut self, net: &Net, th: &[f64], nodes: usize, edges: usize) {
-        let (l, d, t, rounds) = net.sizes();
-        let rows = nodes.max(edges);
-        room(&mut self.zeros, rows).fill(0.0);
-        let seed = room(&mut self.ones, rows);
-        seed.fill(1.0);
-        let (seed, zeros) = (&self.ones[..rows], &self.zeros[..rows]);
-        let (grad, s) = (&mut self.grad[..th.len()], &mut self.s);
-        let k = net.readout();
-        let (gh, ght) = self.gh.both(l * nodes);
-        let (h, e) = (&self.h[rounds], &self.e[rounds]);
-        mlp_dual_reverse(
-            &net.mlps[k],
-            (th, &mut *grad),
-            (&h.v[..l * nodes], &h.t[..l * nodes]),
-            &self.apps[k],
-            (&zeros[..nodes], &seed[..nodes], nodes),
-            Some((&mut *gh, &mut *ght)),
-            s,
-        );
-        let (ge, get) = self.ge.both(l * edges);
-        mlp_dual_reverse(
-            &net.mlps[k + 1],
-            (th, &mut *grad),
-            (&e.v[..l * edges], &e.t[..l * edges]),
-            &self.apps[k + 1],
-            (&zeros[..edges], &seed[..edges], edges),
-            Some((&mut *ge, &mut *get)),
-            s,
-        );
-        for r in (0..rounds).rev() {
-            self.reverse_round(net, th, r, (nodes, edges));
-        }
-        let (gh, ght) = self.gh.both(l * nodes);
-        let (ge, get) = self.ge.both(l * edges);
-        let (grad, s) = (&mut self.grad[..th.len()], &mut self.s);
-        let h0 = &self.h[0];
-        act_reverse(&h0.v[..l * nodes], &h0.t[..l * nodes], gh, ght);
-        mlp_dual_reverse(
-            net.node_em(),
-            (th, &mut *grad),
-            (&self.x.v[..(t + d) * nodes], &self.x.t[..(t + d) * nodes]),
-            &self.apps[0],
-            (gh, ght, nodes),
-            None,
-            s,
-        );
-        let e0 = &self.e[0];
-        act_reverse(&e0.v[..l * edges], &e0.t[..l * edges], ge, get);
-        mlp_dual_reverse(
-            net.edge_em(),
-            (th, &mut *grad),
-            (&self.w.v[..d * edges], &self.w.t[..d * edges]),
-            &self.apps[1],
-            (ge, get, edges),
-            None,
-            s,
-        );
-    }
-    /// [`Chunk::reverse`] through round `r`: from the adjoints of its output
-    /// latents (in `gh`, `ge`) to those of its inputs.
-    #[inline(always)]
-    #[allow(clippy::inline_always)] // inside the vector copies of `Chunk::run`
-    fn reverse_round(&mut self, net: &Net, th: &[f64], r: usize, (nodes, edges): (usize, usize)) {
-        let l = net.spec.latent;
-        let (gh, ght) = self.gh.both(l * nodes);
-        let (ge, get) = self.ge.both(l * edges);
-        let (grad, s) = (&mut self.grad[..th.len()], &mut self.s);
-        let (we, wv) = net.round(r);
-        let h1 = &self.h[r + 1];
-        act_reverse(&h1.v[..l * nodes], &h1.t[..l * nodes], gh, ght);
-        let nin = &self.nin[r];
-        let (gn, gnt) = (
-            room(&mut self.gin.v, 2 * l * nodes),
-            room(&mut self.gin.t, 2 * l * nodes),
-        );
-        mlp_dual_reverse(
-            wv,
-            (th, &mut *grad),
-            (&nin.v[..2 * l * nodes], &nin.t[..2 * l * nodes]),
-            &self.apps[3 + 2 * r],
-            (gh, ght, nodes),
-            Some((&mut *gn, &mut *gnt)),
-            s,
-        );
-        gh.copy_from_slice(&gn[..l * nodes]);
-        ght.copy_from_slice(&gnt[..l * nodes]);
-        gather_rows(ge, &gn[l * nodes..], &self.recv, Gather::Add);
-        gather_rows(get, &gnt[l * nodes..], &self.recv, Gather::Add);
-        let e1 = &self.e[r + 1];
-        act_reverse(&e1.v[..l * edges], &e1.t[..l * edges], ge, get);
-        let ein = &self.ein[r];
-        let (gn, gnt) = (
-            room(&mut self.gin.v, 3 * l * edges),
-            room(&mut self.gin.t, 3 * l * edges),
-        );
-        mlp_dual_reverse(
-            we,
-            (th, &mut *grad),
-            (&ein.v[..3 * l * edges], &ein.t[..3 * l * edges]),
-            &self.apps[2 + 2 * r],
-            (ge, get, edges),
-            Some((&mut *gn, &mut *gnt)),
-            s,
-        );
-        ge.copy_from_slice(&gn[..l * edges]);
-        get.copy_from_slice(&gnt[..l * edges]);
-        let (ghr, ghs) = gn[l * edges..].split_at(l * edges);
-        scatter_add_rows(gh, ghr, &self.recv);
-        scatter_add_rows(gh, ghs, &self.send);
-        let (ghr, ghs) = gnt[l * edges..].split_at(l * edges);
-        scatter_add_rows(ght, ghr, &self.recv);
-        scatter_add_rows(ght, ghs, &self.send);
-    }
 }
 
 /// A round's edge-update inputs `[e; h_recv; h_send]` (`3L × E`) from the
@@ -845,211 +485,6 @@ fn differences(w: &mut [f64], q: &[f64], recv: &[usize], send: &[usize]) {
     for (wr, qr) in w.chunks_exact_mut(recv.len()).zip(q.chunks_exact(nodes)) {
         for ((wv, &i), &j) in wr.iter_mut().zip(recv).zip(send) {
             *wv = qr[i] - qr[j];
-        }
-    }
-}
-
-/// `y` (`out × r`) = Wᵀx, plus the bias when `bias`; `x` is `inp × r`.
-#[inline(always)]
-#[allow(clippy::inline_always)]
-fn affine(th: &[f64], l: &Linear, x: &[f64], r: usize, y: &mut [f64], bias: bool) {
-    let y = &mut y[..l.out * r];
-    for (j, yj) in y.chunks_exact_mut(r).enumerate() {
-        yj.fill(if bias { th[l.b + j] } else { 0.0 });
-    }
-    for (i, xi) in x[..l.inp * r].chunks_exact(r).enumerate() {
-        let wi = &th[l.w + i * l.out..][..l.out];
-        for (yj, &wv) in y.chunks_exact_mut(r).zip(wi) {
-            for (yv, xv) in yj.iter_mut().zip(xi) {
-                *yv += wv * xv;
-            }
-        }
-    }
-}
-
-/// `gx` (`inp × r`) = W gy.
-#[inline(always)]
-#[allow(clippy::inline_always)]
-fn affine_t(th: &[f64], l: &Linear, gy: &[f64], r: usize, gx: &mut [f64]) {
-    for (i, gxi) in gx[..l.inp * r].chunks_exact_mut(r).enumerate() {
-        gxi.fill(0.0);
-        let wi = &th[l.w + i * l.out..][..l.out];
-        for (gyj, &wv) in gy[..l.out * r].chunks_exact(r).zip(wi) {
-            for (gv, yv) in gxi.iter_mut().zip(gyj) {
-                *gv += wv * yv;
-            }
-        }
-    }
-}
-
-/// ∂W += x gyᵀ, and ∂b += Σ_rows gy when `bias`.
-#[inline(always)]
-#[allow(clippy::inline_always)]
-fn affine_w(g: &mut [f64], l: &Linear, x: &[f64], gy: &[f64], r: usize, bias: bool) {
-    let gy = &gy[..l.out * r];
-    if bias {
-        for (j, gyj) in gy.chunks_exact(r).enumerate() {
-            g[l.b + j] += sum(gyj);
-        }
-    }
-    let gyj = |j: usize| &gy[j * r..(j + 1) * r];
-    for (i, xi) in x[..l.inp * r].chunks_exact(r).enumerate() {
-        let gw = &mut g[l.w + i * l.out..][..l.out];
-        // Eight, then four outputs per pass over x_i (the AVX2 dots).
-        let mut j = 0;
-        while j + 8 <= l.out {
-            let d: [f64; 8] = dots(xi, std::array::from_fn(|o| gyj(j + o)));
-            gw[j..j + 8].iter_mut().zip(d).for_each(|(g, d)| *g += d);
-            j += 8;
-        }
-        while j + 4 <= l.out {
-            let d: [f64; 4] = dots(xi, std::array::from_fn(|o| gyj(j + o)));
-            gw[j..j + 4].iter_mut().zip(d).for_each(|(g, d)| *g += d);
-            j += 4;
-        }
-        for (o, gv) in gw.iter_mut().enumerate().skip(j) {
-            *gv += dot(xi, gyj(o));
-        }
-    }
-}
-
-/// Through y = sqp(z) in reverse for a (value, tangent) pair: from the
-/// adjoints (ȳ, ẏ̄) in `(g, gt)` to (z̄, ż̄) in place, given y and ẏ:
-/// ż̄ = s'·ẏ̄ and z̄ = s'·ȳ + s''·ż·ẏ̄, where ż = ẏ / s' and, from y alone,
-/// s' = y²/(1 + y²) and s''/s' = 2y/(1 + y²)².
-#[inline(always)]
-#[allow(clippy::inline_always)]
-fn act_reverse(y: &[f64], yt: &[f64], g: &mut [f64], gt: &mut [f64]) {
-    for (((&y, &yt), gv), gtv) in y.iter().zip(yt).zip(g.iter_mut()).zip(gt.iter_mut()) {
-        let q = 1.0 / (1.0 + y * y);
-        let s1 = y * y * q;
-        *gv = s1 * *gv + 2.0 * y * q * q * yt * *gtv;
-        *gtv *= s1;
-    }
-}
-
-/// `y = mlp(x)` over `r` rows (none: nothing to do), keeping the hidden
-/// activations in `app`.
-#[inline(always)]
-#[allow(clippy::inline_always)]
-fn mlp_forward(m: &Mlp, th: &[f64], x: &[f64], r: usize, app: &mut App, y: &mut [f64]) {
-    if r == 0 {
-        return;
-    }
-    let k = m.layers.len();
-    slots(&mut app.a, k - 1);
-    slots(&mut app.at, k - 1);
-    for (li, l) in m.layers.iter().enumerate() {
-        let (done, rest) = app.a.split_at_mut(li);
-        let inp = if li == 0 { x } else { &done[li - 1][..] };
-        if li + 1 == k {
-            affine(th, l, inp, r, y, true);
-        } else {
-            let out = room(&mut rest[0], l.out * r);
-            affine(th, l, inp, r, out, true);
-            squareplus_in_place(out);
-        }
-    }
-}
-
-/// `gx = (∂y/∂x)ᵀ gy` from the activations [`mlp_forward`] kept (inputs
-/// only: no parameter gradients). `s` is scratch.
-#[inline(always)]
-#[allow(clippy::inline_always)]
-fn mlp_input_grad(
-    m: &Mlp,
-    th: &[f64],
-    app: &App,
-    gy: &[f64],
-    r: usize,
-    gx: &mut [f64],
-    s: &mut [Vec<f64>; 4],
-) {
-    if r == 0 {
-        return;
-    }
-    let [cur, next, ..] = s;
-    let mut first = true;
-    for li in (1..m.layers.len()).rev() {
-        let l = &m.layers[li];
-        let g: &[f64] = if first { gy } else { &cur[..l.out * r] };
-        let n = room(next, l.inp * r);
-        affine_t(th, l, g, r, n);
-        times_squareplus_grad(n, &app.a[li - 1][..l.inp * r]);
-        std::mem::swap(cur, next);
-        first = false;
-    }
-    let g: &[f64] = if first { gy } else { cur };
-    affine_t(th, &m.layers[0], g, r, gx);
-}
-
-/// The tangent `ẏ = (∂y/∂x) ẋ`, keeping the hidden tangents in `app`.
-#[inline(always)]
-#[allow(clippy::inline_always)]
-fn mlp_tangent(m: &Mlp, th: &[f64], xt: &[f64], r: usize, app: &mut App, yt: &mut [f64]) {
-    if r == 0 {
-        return;
-    }
-    let k = m.layers.len();
-    for (li, l) in m.layers.iter().enumerate() {
-        let (done, rest) = app.at.split_at_mut(li);
-        let inp = if li == 0 { xt } else { &done[li - 1][..] };
-        if li + 1 == k {
-            affine(th, l, inp, r, yt, false);
-        } else {
-            let out = room(&mut rest[0], l.out * r);
-            affine(th, l, inp, r, out, false);
-            times_squareplus_grad(out, &app.a[li][..l.out * r]);
-        }
-    }
-}
-
-/// The reverse pass of the pair (y, ẏ) = (mlp(x), (∂y/∂x) ẋ): from the
-/// adjoints (ȳ, ẏ̄) over `r` rows, accumulates every weight's gradient into
-/// `g` and, when `gx` is given, writes (x̄, ẋ̄) there. `s` is scratch.
-#[inline(always)]
-#[allow(clippy::inline_always)]
-fn mlp_dual_reverse(
-    m: &Mlp,
-    (th, g): (&[f64], &mut [f64]),
-    (x, xt): (&[f64], &[f64]),
-    app: &App,
-    (gy, gyt, r): (&[f64], &[f64], usize),
-    gx: Option<(&mut [f64], &mut [f64])>,
-    s: &mut [Vec<f64>; 4],
-) {
-    if r == 0 {
-        // No rows (a graph without edges): nothing flows.
-        return;
-    }
-    let [c, ct, n, nt] = s;
-    let mut first = true;
-    for li in (0..m.layers.len()).rev() {
-        let l = &m.layers[li];
-        let (gv, gt): (&[f64], &[f64]) = if first {
-            (gy, gyt)
-        } else {
-            (&c[..l.out * r], &ct[..l.out * r])
-        };
-        let (xi, xti) = if li == 0 {
-            (x, xt)
-        } else {
-            (&app.a[li - 1][..l.inp * r], &app.at[li - 1][..l.inp * r])
-        };
-        affine_w(g, l, xi, gv, r, true);
-        affine_w(g, l, xti, gt, r, false);
-        if li > 0 {
-            let (nv, ntv) = (room(n, l.inp * r), room(nt, l.inp * r));
-            affine_t(th, l, gv, r, nv);
-            affine_t(th, l, gt, r, ntv);
-            act_reverse(xi, xti, nv, ntv);
-            std::mem::swap(c, n);
-            std::mem::swap(ct, nt);
-            first = false;
-        } else if let Some((gxv, gxt)) = gx {
-            affine_t(th, l, gv, r, gxv);
-            affine_t(th, l, gt, r, gxt);
-            return;
         }
     }
 }

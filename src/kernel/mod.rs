@@ -250,7 +250,6 @@ mod tests {
     /// allocated terabytes (an abort), panicked on a capacity overflow or an
     /// index out of bounds, or never finished loading.
     #[test]
-    #[allow(clippy::too_many_lines)] // a table of cases
     fn corrupt_sizes_are_errors_not_aborts() {
         type Edit = fn(&mut ModelFile);
         let cases: [(Variant, Edit, &str); 12] = [
@@ -323,6 +322,11 @@ mod tests {
             let e = load_edited(variant, edit).expect_err(want);
             assert!(e.contains(want), "{variant}: {e:?} does not say {want:?}");
         }
+    }
+
+    /// A normalisation whose scale is zero is refused on loading.
+    #[test]
+    fn a_zero_norm_scale_is_an_error() {
         let e = load_edited(Variant::Gnode, |f| {
             let mut n = Norm::identity(2);
             n.q_scale = 0.0;

@@ -101,21 +101,7 @@ pub fn train(
     // Both engines start from the same seeded initialisation (or the warm start).
     let mut net = Net::new(hyper, &mut rng)?;
     let sp = split(states.len(), cfg, &mut rng);
-    if cfg.normalize && cfg.init.is_none() && net.hyper.norm.is_none() {
-        let s: Vec<&State> = sp.train.iter().map(|&i| &states[i]).collect();
-        let a: Vec<&[f64]> = sp.train.iter().map(|&i| acc[i].as_slice()).collect();
-        net.set_norm(Some(crate::gnode::Norm::from_data(graph, &s, &a)));
-    }
-    if let Some(init) = &cfg.init {
-        if init.hyper != net.hyper {
-            bail!(
-                "--init model has another architecture ({:?}) than the one to train ({:?})",
-                init.hyper,
-                net.hyper
-            );
-        }
-        net.store.load(&init.weights)?;
-    }
+    prepare(&mut net, graph, (states, acc), &sp.train, cfg)?;
     // One flat parameter order for both engines (the architecture's), in
     // which Adam's moments are stored by name too.
     let layout = crate::engine::Layout::new(&net.parts.arch);
@@ -171,6 +157,33 @@ pub fn train(
         report,
         optimizer,
     })
+}
+
+/// The fresh `net`'s normalisation from the training states `train` (when
+/// asked for and not given), or the warm start's weights (`--init`).
+fn prepare(
+    net: &mut Net,
+    graph: &Graph,
+    (states, acc): (&[State], &[Vec<f64>]),
+    train: &[usize],
+    cfg: &TrainConfig,
+) -> Result<()> {
+    if cfg.normalize && cfg.init.is_none() && net.hyper.norm.is_none() {
+        let s: Vec<&State> = train.iter().map(|&i| &states[i]).collect();
+        let a: Vec<&[f64]> = train.iter().map(|&i| acc[i].as_slice()).collect();
+        net.set_norm(Some(crate::gnode::Norm::from_data(graph, &s, &a)));
+    }
+    if let Some(init) = &cfg.init {
+        if init.hyper != net.hyper {
+            bail!(
+                "--init model has another architecture ({:?}) than the one to train ({:?})",
+                init.hyper,
+                net.hyper
+            );
+        }
+        net.store.load(&init.weights)?;
+    }
+    Ok(())
 }
 
 /// Applies `--radius` (when given) to the training graph and says what the

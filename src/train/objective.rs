@@ -1,7 +1,7 @@
 //! What [`fit`](mod@super::fit) minimises: the [`Objective`] trait, with candle's
 //! autodiff and the hand-written engine behind it.
 
-use crate::engine::{BaselineExecutor, Engine, Samples};
+use crate::engine::{BaselineExecutor, Engine, ExecutorModel, Samples};
 use crate::error::{bail, Result};
 use crate::gnode::params::ParamStore;
 use crate::system::State;
