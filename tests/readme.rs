@@ -295,7 +295,10 @@ fn script_paths(text: &str) -> BTreeSet<String> {
             .take_while(|c| c.is_ascii_alphanumeric() || matches!(c, '/' | '_' | '-' | '.'))
             .collect();
         let path = path.trim_end_matches('.');
-        if path.ends_with(".sh") || path.ends_with(".py") {
+        if matches!(
+            Path::new(path).extension().and_then(|e| e.to_str()),
+            Some("sh" | "py")
+        ) {
             out.insert(path.to_string());
         }
     }
@@ -309,7 +312,7 @@ fn every_script_the_docs_show_exists() {
         for path in script_paths(&read(doc)) {
             let file = root().join(&path);
             assert!(file.is_file(), "{doc} shows `{path}`, which does not exist");
-            if path.ends_with(".sh") {
+            if Path::new(&path).extension().is_some_and(|e| e == "sh") {
                 use std::os::unix::fs::PermissionsExt;
                 let mode = std::fs::metadata(&file).unwrap().permissions().mode();
                 assert!(
