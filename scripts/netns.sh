@@ -8,15 +8,22 @@
 #
 # ROS_DOMAIN_ID is taken from the environment, or a random one (1..100) is picked
 # and exported. As root this uses `unshare -n`, otherwise `unshare -rn`.
+#
+# The command also gets its own pid namespace in which it is pid 1: when it exits
+# (or this script is killed), the kernel kills every process it left behind, so no
+# `mcgnode serve` or rclpy driver outlives the test that started it.
 set -euo pipefail
 if [ $# -eq 0 ] || [ "$1" = "-h" ] || [ "$1" = "--help" ]; then
-    sed -n '2,10p' "$0" | sed 's/^# \{0,1\}//'
+    sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'
     echo "usage: scripts/netns.sh COMMAND [ARGS...]"
     [ $# -eq 0 ] && exit 2 || exit 0
 fi
 
 if [ "${MCGNODE_NETNS_INSIDE:-}" != "$$" ]; then
     if [ "$(id -u)" = 0 ]; then unshare=(unshare -n); else unshare=(unshare -rn); fi
+    # --kill-child: SIGKILL to the namespace's pid 1 if unshare itself dies;
+    # --mount-proc: /proc (and pgrep, /proc/self) shows this pid namespace.
+    unshare+=(--pid --fork --kill-child --mount-proc)
     # exec keeps the pid, so the marker proves we are the re-executed script.
     export MCGNODE_NETNS_INSIDE=$$
     exec "${unshare[@]}" bash "$0" "$@"
