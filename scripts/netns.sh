@@ -19,13 +19,13 @@ if [ $# -eq 0 ] || [ "$1" = "-h" ] || [ "$1" = "--help" ]; then
     [ $# -eq 0 ] && exit 2 || exit 0
 fi
 
-if [ "${MCGNODE_NETNS_INSIDE:-}" != "$$" ]; then
+if [ "${MCGNODE_NETNS_INSIDE:-}" != 1 ] || [ "$$" != 1 ]; then
     if [ "$(id -u)" = 0 ]; then unshare=(unshare -n); else unshare=(unshare -rn); fi
     # --kill-child: SIGKILL to the namespace's pid 1 if unshare itself dies;
     # --mount-proc: /proc (and pgrep, /proc/self) shows this pid namespace.
     unshare+=(--pid --fork --kill-child --mount-proc)
-    # exec keeps the pid, so the marker proves we are the re-executed script.
-    export MCGNODE_NETNS_INSIDE=$$
+    # Pid 1 with the marker set proves we are the re-executed script.
+    export MCGNODE_NETNS_INSIDE=1
     exec "${unshare[@]}" bash "$0" "$@"
 fi
 unset MCGNODE_NETNS_INSIDE

@@ -13,8 +13,6 @@ echo "== provisioning .venv (rclpy, mcap readers)"
 step scripts/setup_venv.sh
 echo "== building the mcgnode_msgs interface package"
 step scripts/build_msgs.sh >/dev/null
-echo "== netns.sh leaves no process behind"
-step scripts/test_netns_cleanup.sh
 echo "== cargo test --release"
 # Timestamp cargo's output: each "Running <file>" / "Doc-tests" line starts a
 # test binary; the time until the next one is that file's time.

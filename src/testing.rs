@@ -80,7 +80,7 @@ pub fn random_model_with(
 /// that candle's autodiff reaches positions and velocities through A(q) and
 /// Ȧq̇ (the reference for the executor's reverse pass down to a state).
 pub fn candle_constraint(
-    plan: &crate::gnode::plan::GraphPlan,
+    plan: &crate::gnode::graph_plan::GraphPlan,
     q: &candle_core::Tensor,
     v: &candle_core::Tensor,
 ) -> Result<(
@@ -88,7 +88,7 @@ pub fn candle_constraint(
     candle_core::Tensor,
     candle_core::Tensor,
 )> {
-    use crate::gnode::plan::BarEnd;
+    use crate::gnode::graph_plan::BarEnd;
     use candle_core::{Device, Tensor};
     let (n, d, k) = (plan.n, plan.dim, plan.bars.len());
     let (mut inc, mut fixed) = (vec![0.0; k * n], vec![0.0; k * d]);

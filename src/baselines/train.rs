@@ -9,7 +9,7 @@ use super::net::{BaselineHyper, BaselineNet};
 use super::trained::TrainedBaseline;
 use crate::error::{bail, Result};
 use crate::gnode::batch::Batch;
-use crate::gnode::plan::GraphPlan;
+use crate::gnode::graph_plan::GraphPlan;
 use crate::system::{Graph, State};
 use crate::train::{
     check_data, fit, flat_params, set_flat_params, BaselineObjective, CandleObjective, EngineKind,

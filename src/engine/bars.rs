@@ -5,7 +5,7 @@
 //! the inverse masses. Dense rows per state (a bar touches two particles;
 //! pendulums have a few bars).
 
-use crate::gnode::plan::GraphPlan;
+use crate::gnode::graph_plan::GraphPlan;
 use crate::physics::linalg::solve_in_place;
 use crate::system::State;
 

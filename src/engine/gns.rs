@@ -18,7 +18,7 @@ use super::gather::{copy_row, gather_rows, scatter_add_rows, Gather};
 use super::model::ExecutorModel;
 use super::samples::Samples;
 use super::EngineError;
-use crate::gnode::plan::GraphPlan;
+use crate::gnode::graph_plan::GraphPlan;
 use crate::physics::neighbors::NeighborSearch;
 use crate::system::{Graph, State};
 

@@ -6,7 +6,7 @@
 
 use super::chunk::{Chunk, Model};
 use crate::gnode::arch::{Arch, Decoder};
-use crate::gnode::plan::GraphPlan;
+use crate::gnode::graph_plan::GraphPlan;
 use std::sync::Arc;
 
 /// One graph's forward pass and its buffers.

@@ -39,7 +39,7 @@ pub use samples::Samples;
 pub use split::SPLIT_ROWS;
 
 use crate::gnode::arch::Arch;
-use crate::gnode::plan::GraphPlan;
+use crate::gnode::graph_plan::GraphPlan;
 use crate::gnode::variant::Hyper;
 use crate::system::{Graph, State};
 use chunk::{Chunk, Model};

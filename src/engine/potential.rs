@@ -33,7 +33,7 @@ use super::model::ExecutorModel;
 use super::named::Named;
 use super::samples::Samples;
 use super::EngineError;
-use crate::gnode::plan::GraphPlan;
+use crate::gnode::graph_plan::GraphPlan;
 use crate::system::{Graph, State};
 
 /// What the loss compares.

@@ -5,7 +5,7 @@
 
 use super::chunk::{Chunk, Model};
 use crate::gnode::arch::Arch;
-use crate::gnode::plan::GraphPlan;
+use crate::gnode::graph_plan::GraphPlan;
 
 /// One graph's reverse pass and its buffers (a training chunk of one state).
 #[derive(Clone, Debug)]

@@ -9,8 +9,8 @@
 use super::variant::{Biases, EdgeInput, Hyper, MessageFn, Norm};
 use std::fmt;
 
-use super::plan::GraphPlan;
-pub use super::plan::EDGE_PHYSICS;
+use super::graph_plan::GraphPlan;
+pub use super::graph_plan::EDGE_PHYSICS;
 
 /// The parameter holding learnable log-masses, one per particle type.
 pub const LOG_MASS: &str = "log_mass";

@@ -1,6 +1,6 @@
 //! A batch of states of one graph, as candle tensors.
 
-use super::plan::{GraphPlan, EDGE_PHYSICS};
+use super::graph_plan::{GraphPlan, EDGE_PHYSICS};
 use crate::error::{bail, Result};
 use crate::system::State;
 use candle_core::{Device, Tensor};

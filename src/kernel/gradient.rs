@@ -6,7 +6,7 @@ use super::{Kernel, Workspace};
 use crate::dynamics::StateGradient;
 use crate::engine::Reverse;
 use crate::gnode::arch::ArchError;
-use crate::gnode::plan::GraphPlan;
+use crate::gnode::graph_plan::GraphPlan;
 use crate::physics::Projector;
 use crate::system::Graph;
 

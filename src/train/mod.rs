@@ -18,7 +18,7 @@ use crate::engine::Engine;
 use crate::error::{bail, Result};
 use crate::gnode::batch::Batch;
 use crate::gnode::file::{AdamState, TrainingReport};
-use crate::gnode::plan::GraphPlan;
+use crate::gnode::graph_plan::GraphPlan;
 use crate::gnode::{Hyper, Net};
 use crate::system::{Graph, State};
 use candle_core::Tensor;

@@ -3,7 +3,7 @@
 //! ∂L/∂log m and, for planning, ∂L/∂(q, q̇).
 
 use super::{Chunk, Model};
-use crate::gnode::plan::BarEnd;
+use crate::gnode::graph_plan::BarEnd;
 use crate::gnode::solve::{lu_factor_in_place, lu_solve_one};
 
 impl Chunk {

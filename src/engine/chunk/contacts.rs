@@ -2,7 +2,7 @@
 //! Verlet list in a rollout), and whether the edges laid out last still
 //! fit them.
 
-use crate::gnode::plan::GraphPlan;
+use crate::gnode::graph_plan::GraphPlan;
 use crate::physics::neighbors::NeighborSearch;
 
 /// The contact pairs of a chunk's states: state `s`'s are

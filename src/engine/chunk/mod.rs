@@ -27,7 +27,7 @@ use super::layout::Layout;
 use super::samples::Samples;
 use super::split::{Scratch, Split};
 use crate::gnode::arch::{Arch, Block, Decoder, NodeInput};
-use crate::gnode::plan::{BarEnd, GraphPlan};
+use crate::gnode::graph_plan::{BarEnd, GraphPlan};
 
 /// The read-only part: architecture, parameter offsets, graph.
 #[derive(Clone, Debug)]

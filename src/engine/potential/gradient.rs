@@ -7,7 +7,7 @@ use super::{differences, edge_update_inputs, node_update_inputs, room, Chunk, Ne
 use crate::engine::dense::times_squareplus_grad;
 use crate::engine::gather::{gather_rows, scatter_add_rows, Gather};
 use crate::engine::samples::Samples;
-use crate::gnode::plan::GraphPlan;
+use crate::gnode::graph_plan::GraphPlan;
 
 impl Chunk {
     /// The loss of the forces in `f` against the targets, ∂L/∂(∂V/∂q) into
