@@ -16,6 +16,11 @@ cd "$(dirname "$0")/.."
 root=$PWD
 before=$(pgrep -f 'mcgnode serve' | sort || true)
 step() { local t0=$SECONDS; "$@"; echo "== time: $(( SECONDS - t0 )) s for: $*"; }
+jobs=${TEST_JOBS:-2}
+if ! [[ $jobs =~ ^[1-9][0-9]*$ ]]; then
+    echo "test.sh: TEST_JOBS=$jobs is not a positive count of test binaries to run at once (e.g. TEST_JOBS=2)" >&2
+    exit 2
+fi
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
@@ -76,7 +81,7 @@ while IFS=$'\t' read -r name dir exe; do
     printf '%s\t%s\t%s\t%s\n' "$(rank "$name")" "$name" "$dir" "$exe"
 done <"$work/binaries" | sort -s -n -k1,1 | cut -f2- >"$work/queue"
 
-run_one() { # name dir exe -> prints the output and one timing line; status in $work/status
+run_one() { # name dir exe: prints its output and appends its time; a failure to $work/failed
     local name=$1 dir=$2 exe=$3 out t0 rc
     out=$(mktemp -p "$work")
     t0=$SECONDS
@@ -101,7 +106,7 @@ run_one() { # name dir exe -> prints the output and one timing line; status in $
     rm -f "$out"
 }
 
-echo "== running $(wc -l <"$work/queue") test binaries, ${TEST_JOBS:-2} at a time"
+echo "== running $(wc -l <"$work/queue") test binaries, $jobs at a time"
 t0=$SECONDS
 : >"$work/timings"
 exec 8<"$work/queue"
@@ -114,9 +119,9 @@ worker() {
     done
 }
 pids=()
-for _ in $(seq "${TEST_JOBS:-2}"); do worker & pids+=($!); done
+for _ in $(seq "$jobs"); do worker & pids+=($!); done
 for p in "${pids[@]}"; do wait "$p"; done
-echo "== time per test binary (${TEST_JOBS:-2} at a time, $(( SECONDS - t0 )) s in all)"
+echo "== time per test binary ($jobs at a time, $(( SECONDS - t0 )) s in all)"
 cat "$work/timings"
 
 status=0
