@@ -19,6 +19,8 @@ mod vector;
 // options with these Args and trains through `train::train`.
 pub mod train;
 
+use std::ffi::OsString;
+
 use clap::{Parser, Subcommand};
 
 pub use vector::Vector;
@@ -87,10 +89,24 @@ fn quiet_on_closed_pipe() {
     }
 }
 
+/// As every ROS 2 executable, `mcgnode` with no arguments, or with `--ros-args
+/// …` first (what `ros2 run mcgnode mcgnode --ros-args …` and a launch file's
+/// `Node(package='mcgnode', executable='mcgnode')` pass), runs the node: it is
+/// read as `mcgnode serve --ros-args …`. Every subcommand stays as it is.
+fn ros_native_argv(args: impl IntoIterator<Item = OsString>) -> Vec<OsString> {
+    let mut argv: Vec<OsString> = args.into_iter().collect();
+    match argv.get(1) {
+        None => argv.push("serve".into()),
+        Some(first) if first == "--ros-args" => argv.insert(1, "serve".into()),
+        Some(_) => {}
+    }
+    argv
+}
+
 /// Parses the command line and runs the subcommand.
 pub fn run() -> anyhow::Result<()> {
     crate::alloc::prepare_for_candle();
-    let cli = Cli::parse();
+    let cli = Cli::parse_from(ros_native_argv(std::env::args_os()));
     if !matches!(cli.command, Command::Serve(_)) {
         quiet_on_closed_pipe();
     }
@@ -106,5 +122,54 @@ pub fn run() -> anyhow::Result<()> {
         Command::Reproduce(a) => reproduce::run(a),
         Command::Serve(a) => serve::run(a),
         Command::Bag(a) => bag::run(a),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn argv(a: &[&str]) -> Vec<String> {
+        ros_native_argv(a.iter().map(OsString::from))
+            .into_iter()
+            .map(|s| s.into_string().unwrap())
+            .collect()
+    }
+
+    #[test]
+    fn ros_2_style_starts_serve_the_node() {
+        assert_eq!(argv(&["mcgnode"]), ["mcgnode", "serve"]);
+        assert_eq!(
+            argv(&["mcgnode", "--ros-args", "-r", "__ns:=/robot1"]),
+            ["mcgnode", "serve", "--ros-args", "-r", "__ns:=/robot1"]
+        );
+        let cli = Cli::parse_from(ros_native_argv(
+            [
+                "mcgnode",
+                "--ros-args",
+                "-r",
+                "__ns:=/robot1",
+                "--params-file",
+                "f.yaml",
+            ]
+            .map(OsString::from),
+        ));
+        let Command::Serve(s) = cli.command else {
+            panic!("not serve")
+        };
+        let ros = serve::ros_args(&s).unwrap();
+        assert_eq!(ros.namespace.as_deref(), Some("/robot1"));
+        assert_eq!(ros.params_files.len(), 1);
+    }
+
+    #[test]
+    fn subcommands_and_flags_are_left_as_they_are() {
+        for a in [
+            &["mcgnode", "serve", "--ros-args"][..],
+            &["mcgnode", "--help"],
+            &["mcgnode", "train", "--data", "b.mcap"],
+        ] {
+            assert_eq!(argv(a), a);
+        }
     }
 }

@@ -223,11 +223,12 @@ impl RosArgs {
             };
             match a.as_str() {
                 "--ros-args" => {}
-                "--" => {
-                    if let Some(extra) = it.next() {
-                        return bad(format!("unexpected {extra:?} after --"));
-                    }
-                }
+                // `--` ends a `--ros-args` block; rcl allows another after it.
+                "--" => match it.next() {
+                    None => {}
+                    Some(next) if next == "--ros-args" => {}
+                    Some(extra) => return bad(format!("unexpected {extra:?} after --")),
+                },
                 "-r" | "--remap" => {
                     let rule = value(a)?;
                     let Some((lhs, to)) = rule.split_once(":=") else {
@@ -330,6 +331,13 @@ mod tests {
             .names()
             .unwrap();
         assert_eq!(n.resolve("~/rollout").unwrap(), "/r");
+        // Two `--ros-args … --` blocks, as rcl takes them.
+        let r = RosArgs::parse(&args(
+            "--ros-args -r __ns:=/a -- --ros-args -p horizon:=3 --",
+        ))
+        .unwrap();
+        assert_eq!(r.namespace.as_deref(), Some("/a"));
+        assert_eq!(r.params, vec![("horizon".into(), "3".into())]);
     }
 
     #[test]

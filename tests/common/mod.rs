@@ -5,6 +5,7 @@
 pub mod bags;
 pub mod baselines;
 pub mod cli;
+pub mod fleet;
 
 use std::fs;
 use std::os::unix::process::CommandExt;
