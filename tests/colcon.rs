@@ -244,7 +244,7 @@ fn the_launch_file_and_its_config_are_installed_and_its_defaults_serve_the_shipp
     let params = read("default.params");
     let model = share.join("models/spring5-mcgnode.json");
     assert!(
-        params.contains(&format!("model: {}", model.display())),
+        params.contains(&format!("model: \"{}\"", model.display())),
         "{report}"
     );
     assert!(
@@ -254,7 +254,7 @@ fn the_launch_file_and_its_config_are_installed_and_its_defaults_serve_the_shipp
     let ns: Vec<Vec<String>> = serde_json::from_str(&read("ns.json")).expect("JSON");
     assert!(ns[0].contains(&"__ns:=/robot7".to_string()), "{report}");
     assert!(
-        read("ns.params").contains("model: truth:pendulum"),
+        read("ns.params").contains("model: \"truth:pendulum\""),
         "{report}"
     );
 }

@@ -95,7 +95,9 @@ fn every_command_in_the_docs_parses_as_written() {
             cmds.len()
         );
         for cmd in &cmds {
-            if let Err(e) = mcgnode::cli::Cli::try_parse_from(words(cmd)) {
+            if let Err(e) =
+                mcgnode::cli::Cli::try_parse_from(mcgnode::cli::ros_native_argv(words(cmd)))
+            {
                 panic!("{doc}: command `{cmd}` does not parse:\n{e}");
             }
         }
@@ -417,7 +419,8 @@ fn committed_reproduce_reports_hold() {
             .find_map(|l| l.strip_prefix("Command: `"))
             .and_then(|l| l.split('`').next())
             .unwrap_or_else(|| panic!("{} states no command", report.display()));
-        if let Err(e) = mcgnode::cli::Cli::try_parse_from(words(cmd)) {
+        if let Err(e) = mcgnode::cli::Cli::try_parse_from(mcgnode::cli::ros_native_argv(words(cmd)))
+        {
             panic!("{}: command `{cmd}` does not parse:\n{e}", report.display());
         }
         for prefix in ["/work/", "/home/", "/tmp/", "/root/", "/usr/"] {

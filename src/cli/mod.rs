@@ -93,8 +93,9 @@ fn quiet_on_closed_pipe() {
 /// …` first (what `ros2 run mcgnode mcgnode --ros-args …` and a launch file's
 /// `Node(package='mcgnode', executable='mcgnode')` pass), runs the node: it is
 /// read as `mcgnode serve --ros-args …`. Every subcommand stays as it is.
-fn ros_native_argv(args: impl IntoIterator<Item = OsString>) -> Vec<OsString> {
-    let mut argv: Vec<OsString> = args.into_iter().collect();
+/// Public so that tests parse documented commands as the binary does.
+pub fn ros_native_argv<T: Into<OsString>>(args: impl IntoIterator<Item = T>) -> Vec<OsString> {
+    let mut argv: Vec<OsString> = args.into_iter().map(Into::into).collect();
     match argv.get(1) {
         None => argv.push("serve".into()),
         Some(first) if first == "--ros-args" => argv.insert(1, "serve".into()),
@@ -130,7 +131,7 @@ mod tests {
     use super::*;
 
     fn argv(a: &[&str]) -> Vec<String> {
-        ros_native_argv(a.iter().map(OsString::from))
+        ros_native_argv(a.iter().copied())
             .into_iter()
             .map(|s| s.into_string().unwrap())
             .collect()
