@@ -28,6 +28,7 @@ pub mod data;
 pub mod dynamics;
 pub mod engine;
 pub mod error;
+pub mod estimate;
 pub mod evaluate;
 pub mod gnode;
 pub mod kernel;

@@ -58,11 +58,12 @@ pub struct Args {
     #[arg(long)]
     pub positions_only: bool,
     /// Velocity estimate for those starts, as the node's velocity_smoother:
-    /// none (three-point difference at the newest state) or poly (fit over
-    /// the last --smoother-window states).
+    /// none (three-point difference at the newest state), poly (fit over
+    /// the last --smoother-window states) or model (the start of those
+    /// states fitted through the model's own rollout; GNODE-family models).
     #[arg(long, default_value = "none", value_parser = clap::builder::PossibleValuesParser::new(SMOOTHERS))]
     pub smoother: String,
-    /// States in a poly smoother's fit.
+    /// States in a poly or model smoother's fit.
     #[arg(long, default_value_t = 15)]
     pub smoother_window: usize,
     /// Degree of a poly smoother's polynomial.

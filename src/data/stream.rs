@@ -44,14 +44,22 @@ pub enum Smoother {
         /// Degree of the polynomial (1 to 4).
         order: usize,
     },
+    /// The start of the last `window` states fitted through the model's own
+    /// rollout (`crate::estimate`). The history holds the window; its own
+    /// estimate is a degree-2 poly fit's, which the model's fit replaces
+    /// where a model is at hand (`replay`, the node).
+    Model {
+        /// States in the fit (3 to 1000).
+        window: usize,
+    },
 }
 
 /// Smoother names, as the `velocity_smoother` parameter and `--smoother` take them.
-pub const SMOOTHERS: &[&str] = &["none", "poly"];
+pub const SMOOTHERS: &[&str] = &["none", "poly", "model"];
 
 impl Smoother {
-    /// `name` ("none" or "poly") with a poly fit's `window` and `order`; the
-    /// error names what is accepted.
+    /// `name` ("none", "poly" or "model") with a fit's `window` (and a poly
+    /// fit's `order`); the error names what is accepted.
     pub fn new(name: &str, window: usize, order: usize) -> Result<Smoother, DataError> {
         let bad = |m: String| Err(DataError::Invalid(m));
         match name {
@@ -69,6 +77,14 @@ impl Smoother {
                 }
                 Ok(Smoother::Poly { window, order })
             }
+            "model" => {
+                if !(4..=1000).contains(&window) {
+                    return bad(format!(
+                        "model smoother window {window} must be 4 to 1000 states"
+                    ));
+                }
+                Ok(Smoother::Model { window })
+            }
             other => bad(format!(
                 "unknown velocity smoother {other:?}; one of {}",
                 SMOOTHERS.join(", ")
@@ -80,7 +96,7 @@ impl Smoother {
     pub fn needs(&self) -> usize {
         match self {
             Smoother::None => 3,
-            Smoother::Poly { window, .. } => *window,
+            Smoother::Poly { window, .. } | Smoother::Model { window } => *window,
         }
     }
 }
@@ -175,6 +191,14 @@ impl History {
         self.stamps.is_empty()
     }
 
+    /// The held stamps and positions, oldest first.
+    pub fn window(&self) -> (Vec<Nanos>, Vec<&[f64]>) {
+        (
+            self.stamps.iter().copied().collect(),
+            self.positions.iter().map(Vec::as_slice).collect(),
+        )
+    }
+
     /// Adds the positions `q` of `graph` at `t` and estimates the state there.
     /// Returns why the history was emptied first, if it was.
     pub fn push(
@@ -249,6 +273,9 @@ impl History {
                 &(m - window..m).map(|k| -secs(k)).collect::<Vec<_>>(),
                 order,
             ),
+            Smoother::Model { window } => {
+                poly_weights(&(m - window..m).map(|k| -secs(k)).collect::<Vec<_>>(), 2)
+            }
         };
         let first = m - wq.len();
         let n = q[m - 1].len();

@@ -101,6 +101,9 @@ fn start_velocities(bag: &Bag, trajs: &[&Trajectory], opts: &ReplayOptions) -> S
         Smoother::Poly { window, order } => {
             format!("degree-{order} fit over the last {window} states")
         }
+        Smoother::Model { window } => {
+            format!("the model's rollout fitted to the last {window} states")
+        }
     };
     let which = if derived == trajs.len() {
         "every trajectory".to_string()

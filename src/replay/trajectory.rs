@@ -2,9 +2,10 @@
 //! later recorded states within the horizon, and the errors binned by lead.
 
 use crate::data::bag::Bag;
-use crate::data::stream::{Estimate, History, StreamOptions};
+use crate::data::stream::{Estimate, History, Smoother, StreamOptions};
 use crate::dynamics::{Dynamics, DynamicsError, Timing};
 use crate::error::{bail, Result};
+use crate::estimate::{FitOptions, ModelFit};
 use crate::metrics::error_curves;
 use crate::system::{State, Trajectory};
 
@@ -34,21 +35,41 @@ fn advance(
 /// The state each recorded state starts a prediction from: the recorded one,
 /// or with `causal` its positions with velocities estimated from it and the
 /// states before ([`History`], as the node does; `None` while warming up).
-fn start_states(tr: &Trajectory, causal: bool, stream: &StreamOptions) -> Vec<Option<State>> {
+/// The model smoother fits the history's window through `model` (steps of at
+/// most `dt`); where its rollout diverges the history's own estimate stands.
+fn start_states(
+    model: &dyn Dynamics,
+    tr: &Trajectory,
+    (causal, stream): (bool, &StreamOptions),
+    dt: f64,
+) -> Result<Vec<Option<State>>> {
     if !causal {
-        return tr.samples.iter().map(|s| Some(s.state.clone())).collect();
+        return Ok(tr.samples.iter().map(|s| Some(s.state.clone())).collect());
     }
+    let mut fit = match stream.smoother {
+        Smoother::Model { .. } => Some(
+            ModelFit::new(model, &tr.graph, FitOptions::with_dt(dt))
+                .map_err(|e| crate::error::err!("trajectory {}: {e}", tr.id))?,
+        ),
+        _ => None,
+    };
     let mut h = History::default();
-    tr.samples
-        .iter()
-        .map(|s| {
-            let t = (s.t * 1e9).round() as crate::data::stream::Nanos;
-            match h.push(stream, &tr.graph, t, &s.state.q).1 {
-                Estimate::Ready(state) => Some(state),
-                Estimate::WarmingUp { .. } => None,
-            }
-        })
-        .collect()
+    let starts = tr.samples.iter().map(|s| {
+        let t = (s.t * 1e9).round() as crate::data::stream::Nanos;
+        let (reset, est) = h.push(stream, &tr.graph, t, &s.state.q);
+        let Estimate::Ready(state) = est else {
+            return None;
+        };
+        let Some(fit) = fit.as_mut() else {
+            return Some(state);
+        };
+        if reset.is_some() {
+            fit.reset();
+        }
+        let (stamps, positions) = h.window();
+        Some(fit.fit(&stamps, &positions).map_or(state, |f| f.state))
+    });
+    Ok(starts.collect())
 }
 
 /// The reference trajectory for `tr`: same id, graph, and stamps (to 1 µs).
@@ -97,7 +118,7 @@ pub(super) fn replay_trajectory(
     // Leads a little past the horizon (stamp round-off) still count.
     let limit = p.horizon + 1e-6 * p.bin_width;
     let s = &tr.samples;
-    let starts = start_states(tr, causal, stream);
+    let starts = start_states(model, tr, (causal, stream), p.dt)?;
     let truth_of = |j: usize| truth.map_or(&s[j].state, |r| &r.samples[j].state);
     for k in (0..s.len()).step_by(stride) {
         let Some(start) = &starts[k] else {
