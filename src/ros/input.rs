@@ -63,6 +63,13 @@ pub fn stream_options(p: &NodeParams) -> Result<StreamOptions, DataError> {
             "velocity_smoother, smoother_window, smoother_order: {e}"
         ))
     })?;
+    if let Smoother::Model { .. } = smoother {
+        // Not silently a poly fit: the node does not fit through its model yet.
+        return Err(DataError::Invalid(
+            "velocity_smoother model is offered by `mcgnode replay --smoother model` only,              not yet by the node; use none or poly"
+                .into(),
+        ));
+    }
     Ok(StreamOptions {
         smoother,
         max_gap: p.input_max_gap,
