@@ -5,6 +5,7 @@
 //! states (plus slack for what was still in flight) may be lost.
 
 use std::fs;
+use std::path::Path;
 use std::time::Duration;
 
 mod common;
@@ -60,45 +61,8 @@ fn a_killed_recorder_leaves_a_bag_every_reader_reads() {
     );
     assert!(!node_log.contains("shutting down"), "not killed\n{report}");
 
-    // The independent readers, on the files as the kill left them.
-    let py = common::run_bounded(
-        std::process::Command::new(".venv/bin/python3")
-            .args(["tests/ros/kill_record.py", "read"])
-            .arg(&rec),
-        Duration::from_secs(60),
-        dir.path(),
-    );
-    let line = py
-        .stdout
-        .lines()
-        .find_map(|l| l.strip_prefix("READ "))
-        .unwrap_or_else(|| panic!("no READ line\n{}\n{}\n{report}", py.stdout, py.stderr));
-    let steps = |key: &str| -> Vec<u32> {
-        let at = line.find(&format!("\"{key}\": [")).expect(key) + key.len() + 5;
-        let list = &line[at..at + line[at..].find(']').expect("]")];
-        list.split(", ")
-            .filter(|s| !s.is_empty())
-            .map(|s| s.parse().expect("a step"))
-            .collect()
-    };
-    let (via_rosbags, via_mcap) = (steps("rosbags"), steps("mcap"));
-
-    // Ours: every CRC, the footer and the end magic checked.
-    let mut ours = Vec::new();
-    let mut bags: Vec<_> = fs::read_dir(&rec)
-        .expect("record_dir")
-        .map(|e| e.expect("entry").path())
-        .collect();
-    bags.sort();
-    for bag in &bags {
-        scan_bag(bag, |m| {
-            if m.schema_name.ends_with("ParticleState") {
-                ours.push(ParticleState::from_cdr(m.data)?.step);
-            }
-            Ok(())
-        })
-        .unwrap_or_else(|e| panic!("our reader: {e}\n{report}"));
-    }
+    let (via_rosbags, via_mcap) = python_steps(&rec, dir.path(), &report);
+    let ours = our_steps(&rec, &report);
     let slack = 10;
     let allowed = (FLUSH_SECONDS * RATE) as usize + slack;
     println!(
@@ -118,4 +82,51 @@ fn a_killed_recorder_leaves_a_bag_every_reader_reads() {
         "lost {} of {STATES} states, more than {allowed}\n{report}",
         STATES - ours.len()
     );
+}
+
+/// The ParticleState steps `rosbags` and the `mcap` streaming reader find in
+/// the bags of `rec`, as the kill left them.
+fn python_steps(rec: &Path, tmp: &Path, report: &str) -> (Vec<u32>, Vec<u32>) {
+    let py = run_bounded(
+        std::process::Command::new(".venv/bin/python3")
+            .args(["tests/ros/kill_record.py", "read"])
+            .arg(rec),
+        Duration::from_secs(60),
+        tmp,
+    );
+    let line = py
+        .stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("READ "))
+        .unwrap_or_else(|| panic!("no READ line\n{}\n{}\n{report}", py.stdout, py.stderr));
+    let steps = |key: &str| -> Vec<u32> {
+        let at = line.find(&format!("\"{key}\": [")).expect(key) + key.len() + 5;
+        let list = &line[at..at + line[at..].find(']').expect("]")];
+        list.split(", ")
+            .filter(|s| !s.is_empty())
+            .map(|s| s.parse().expect("a step"))
+            .collect()
+    };
+    (steps("rosbags"), steps("mcap"))
+}
+
+/// The ParticleState steps our reader finds (every CRC, the footer and the
+/// end magic checked).
+fn our_steps(rec: &Path, report: &str) -> Vec<u32> {
+    let mut ours = Vec::new();
+    let mut bags: Vec<_> = fs::read_dir(rec)
+        .expect("record_dir")
+        .map(|e| e.expect("entry").path())
+        .collect();
+    bags.sort();
+    for bag in &bags {
+        scan_bag(bag, |m| {
+            if m.schema_name.ends_with("ParticleState") {
+                ours.push(ParticleState::from_cdr(m.data)?.step);
+            }
+            Ok(())
+        })
+        .unwrap_or_else(|e| panic!("our reader: {e}\n{report}"));
+    }
+    ours
 }
