@@ -392,6 +392,14 @@ pub fn check_bag(
 /// Training scales beyond which an input counts as out of range, by default.
 pub const OUT_OF_RANGE_SIGMAS: f64 = 10.0;
 
+/// Training scales beyond which an input is refused whatever
+/// `out_of_range_refuse` says: no model extrapolates that far meaningfully.
+pub const ABSURD_SIGMAS: f64 = 1e6;
+
+/// Largest position or velocity component predicted from, in any model's
+/// units: beyond it squares and products of coordinates overflow.
+pub const ABSURD_MAGNITUDE: f64 = 1e100;
+
 /// The range of inputs a model saw in training, from the scales its file
 /// stores ([`crate::gnode::Norm`]: RMS position about the mean, velocity,
 /// edge vector, stiffness): an input many scales beyond them is outside

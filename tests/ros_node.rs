@@ -153,7 +153,10 @@ fn node_flags_states_outside_what_its_model_saw() {
     );
     let (summary, node_log, report) = driver_outcome(&o, &log, "RANGE_SUMMARY ");
     println!("rclpy range driver summary: {summary}");
-    assert_eq!(summary_number(&summary, "rejected"), 4, "{report}");
+    // Three unseen edges, one 1e300 state (absurd, refused by default), one
+    // refused with out_of_range_refuse.
+    assert_eq!(summary_number(&summary, "rejected"), 5, "{report}");
+    assert!(node_log.contains("absurd state"), "{report}");
     assert_eq!(summary_number(&summary, "out_of_range"), 2, "{report}");
     assert!(node_log.contains("out-of-range input"), "{report}");
     assert!(!node_log.contains("panicked"), "{report}");

@@ -338,6 +338,28 @@ impl RecorderHandle {
         }
     }
 
+    /// Finishes the open chunk on a timer, every [`Recorder::flush_period`],
+    /// so an idle stream's last messages reach the file too; returns at once
+    /// when the node does not record or every message finishes its chunk.
+    pub async fn flush_loop(self: Arc<Self>) {
+        let Some(r) = &self.recorder else {
+            return;
+        };
+        let period = r
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .flush_period();
+        let Some(period) = period else {
+            return;
+        };
+        let mut tick = tokio::time::interval(period);
+        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        loop {
+            tick.tick().await;
+            self.record(|r| r.flush_due(Instant::now(), period));
+        }
+    }
+
     /// Closes the open bag (its footer written, so it reads back whole) and
     /// returns the folder and every bag finished so far; `None` when the node
     /// does not record.

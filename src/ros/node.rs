@@ -106,6 +106,7 @@ pub fn serve(
             }
         });
         endpoints.spawn(&h, &trainer);
+        tokio::spawn(h.recorder.clone().flush_loop());
         super::plan_action::spawn(h.clone(), plan_action);
         spawn_training(trainer, servers, action_server);
         super::lifecycle_services::spawn(

@@ -361,6 +361,12 @@ node_params! {
     /// Start a new bag after this many seconds (0 = no duration limit).
     record_split_seconds: f64 = 0.0, Kind::Double(false), restart,
         "split bags after this many seconds (0 = never)";
+    /// Finish the open MCAP chunk once its oldest message has waited this
+    /// long (checked at each write and on a timer), so a killed node loses at
+    /// most this much; 0 = after every message.
+    record_flush_seconds: f64 = 0.25, Kind::Double(false), restart,
+        "finish the recording's open chunk once its oldest message is this many seconds old \
+         (a killed node loses at most that much; 0 = after every message)";
     /// Lead times (seconds) at which live accuracy compares incoming states
     /// with what was predicted for them; empty disables live accuracy.
     accuracy_lead_times: Vec<f64> = Vec::new(), Kind::Doubles(16), runtime,

@@ -44,6 +44,12 @@ pub enum PredictError {
     /// `out_of_range_refuse` is set.
     #[error("refused (out_of_range_refuse): {0}")]
     OutOfRange(crate::compat::OutOfRange),
+    /// A state no model can meaningfully predict (a coordinate above
+    /// [`crate::compat::ABSURD_MAGNITUDE`], an input
+    /// [`crate::compat::ABSURD_SIGMAS`] training scales out), or a prediction
+    /// that is not finite: refused whatever `out_of_range_refuse` says.
+    #[error("refused (absurd state): {0}")]
+    Absurd(String),
     /// The model cannot run this graph.
     #[error("unsupported system: {0}")]
     Unsupported(#[source] DynamicsError),
@@ -190,8 +196,44 @@ pub fn predict_served(
             return Err(PredictError::OutOfRange(o.clone()));
         }
     }
+    refuse_absurd(model, input)?;
     predict_into(model, &input.graph, &input.state, params.timing(), out)?;
+    let finite = |x: &[f64]| x.iter().all(|v| v.is_finite());
+    let states_finite =
+        (0..out.states.len()).all(|k| finite(out.states.q(k)) && finite(out.states.v(k)));
+    if !(states_finite && finite(&out.forces.total)) {
+        return Err(PredictError::Absurd(
+            "the model's prediction is not finite (it overflowed): nothing published".into(),
+        ));
+    }
     Ok(outside)
+}
+
+/// Refuses a state whose coordinates are beyond
+/// [`crate::compat::ABSURD_MAGNITUDE`] or, for a model that states its
+/// training range, an input [`crate::compat::ABSURD_SIGMAS`] training scales
+/// out.
+fn refuse_absurd(model: &dyn Dynamics, input: &Input) -> Result<(), PredictError> {
+    use crate::compat::{ABSURD_MAGNITUDE, ABSURD_SIGMAS};
+    let s = &input.state;
+    let big = |x: &[f64]| x.iter().position(|v| v.abs() > ABSURD_MAGNITUDE);
+    let d = input.graph.dim.max(1);
+    for (what, xs) in [("position", &s.q), ("velocity", &s.v)] {
+        if let Some(i) = big(xs) {
+            return Err(PredictError::Absurd(format!(
+                "{what} component {} of particle {} is {:.3e}, beyond {ABSURD_MAGNITUDE:e}: \
+                 send states in the model's units",
+                i % d,
+                i / d,
+                xs[i]
+            )));
+        }
+    }
+    let range = model.trained_for().and_then(|t| t.range.as_ref());
+    if let Some(o) = range.and_then(|r| r.check(&input.graph, s, ABSURD_SIGMAS)) {
+        return Err(PredictError::Absurd(o.to_string()));
+    }
+    Ok(())
 }
 
 /// The wire messages of `p`, predicted from `input` (parsed as `graph`)
@@ -391,6 +433,44 @@ mod tests {
         // Without a field stated, the predictions do not invent one.
         let p = predict(model.as_ref(), &spring_state(), Timing::new(0.001, 1, 3)).unwrap();
         assert!((0..3).all(|k| p.trajectory.state(k).unwrap().field_status == 0));
+    }
+
+    /// The 1e300-scaled state of the issue is refused with the reason (by
+    /// default, `out_of_range_refuse` off); the same state unscaled is
+    /// predicted.
+    #[test]
+    fn absurd_states_are_refused_with_the_reason() {
+        use crate::ros::input::{Accepted, Inputs};
+        let model = load_truth("truth:spring").unwrap();
+        let params = NodeParams::default();
+        let served = |msg: ParticleState| {
+            let Accepted::Ready(input) = Inputs::default().accept(&params, msg).unwrap() else {
+                panic!("a state with velocities is ready at once");
+            };
+            let mut out = Predicted::default();
+            predict_served(
+                (model.as_ref(), 1),
+                &Passed::default(),
+                &input,
+                &params,
+                &mut out,
+            )
+        };
+        assert!(served(spring_state()).is_ok());
+        let mut huge = spring_state();
+        for p in &mut huge.positions {
+            (p.x, p.y) = (p.x * 1e300, p.y * 1e300);
+        }
+        let e = served(huge).unwrap_err();
+        assert!(matches!(e, PredictError::Absurd(_)), "{e}");
+        assert!(e.to_string().contains("beyond 1e100"), "{e}");
+        let mut fast = spring_state();
+        fast.velocities[2].y = -1e200;
+        let e = served(fast).unwrap_err();
+        assert!(
+            e.to_string().contains("velocity component 1 of particle 2"),
+            "{e}"
+        );
     }
 
     #[test]

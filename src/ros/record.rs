@@ -2,14 +2,21 @@
 //! readable by mcap-ros2-support and rosbags): incoming states, predicted
 //! trajectories and forces, each on its topic with its full schema.
 //!
-//! Bags are written straight to an unbuffered file, so every finished chunk is
-//! on disk: a SIGKILL loses at most the chunk in memory (≤ 1 MiB of messages).
-//! Bags split by size or duration; [`Recorder::finish`] closes the open one.
+//! A chunk is finished when its oldest message has waited
+//! `record_flush_seconds` (checked at each write and on the node's timer,
+//! [`Recorder::flush_due`]) or at 1 MiB, and then reaches the file with a
+//! provisional footer ([`crate::data::bag::commit`]): a SIGKILL loses only the
+//! open chunk's messages, and leaves a summary-less MCAP that `rosbags`,
+//! `mcap` and our readers read as it is. Log times never go back within a
+//! recording (a message logged before the last one is logged at its time), as
+//! a summary-less file is read in file order. Bags split by size or duration;
+//! [`Recorder::finish`] closes the open one.
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+use crate::data::bag::commit::{commit_file, CommitFile, CommitHandle};
 use crate::data::msg::{
     encode_cdr, ros2msg_schema, DEP_HEADER, DEP_POINT, DEP_TIME, DEP_VECTOR3, PARTICLE_STATE_MSG,
 };
@@ -42,12 +49,22 @@ pub fn particle_forces_schema() -> String {
     ros2msg_schema(PARTICLE_FORCES_MSG, &[DEP_HEADER, DEP_TIME, DEP_VECTOR3])
 }
 
+/// Uncompressed bytes at which a chunk is finished whatever its age (MCAP's
+/// default chunk size).
+const CHUNK_BYTES: u64 = mcap::WriteOptions::DEFAULT_CHUNK_SIZE;
+
 /// One open bag and its channels.
 struct OpenBag {
-    writer: BagWriter<File>,
+    writer: BagWriter<CommitFile>,
     path: PathBuf,
-    file: File,
+    /// Commits finished chunks to the file.
+    file: CommitHandle,
     opened: Instant,
+    /// When the oldest message of the open chunk was written (`None`: no
+    /// chunk open).
+    oldest: Option<Instant>,
+    /// Uncompressed bytes in the open chunk.
+    chunk_bytes: u64,
     /// States, trajectories, forces, markers (the order of `Recorder::topics`).
     channels: [ChannelId; 4],
 }
@@ -58,6 +75,10 @@ pub struct Recorder {
     topics: [String; 4],
     split_bytes: u64,
     split_after: Option<Duration>,
+    /// `record_flush_seconds`.
+    flush_after: Duration,
+    /// The last log time written: later ones never go back.
+    last_log_ns: u64,
     metadata: BagMetadata,
     /// Distinguishes this run's bags from earlier runs' in the same folder.
     run: u64,
@@ -135,6 +156,9 @@ impl Recorder {
             split_bytes: u64::from(params.record_split_mb) << 20,
             split_after: (params.record_split_seconds > 0.0)
                 .then(|| Duration::from_secs_f64(params.record_split_seconds)),
+            flush_after: Duration::try_from_secs_f64(params.record_flush_seconds)
+                .unwrap_or(Duration::ZERO),
+            last_log_ns: 0,
             metadata,
             run,
             index: 0,
@@ -154,9 +178,10 @@ impl Recorder {
             source: e,
         };
         let file = File::create(&path).map_err(|e| ctx(e.into()))?;
-        // Unbuffered on purpose: finished chunks reach the file at once.
-        let handle = file.try_clone().map_err(|e| ctx(e.into()))?;
-        let mut writer = BagWriter::new(file).map_err(|e| ctx(e.into()))?;
+        // Committed a chunk at a time, each with a provisional footer.
+        let (file, handle) = commit_file(file);
+        let mut writer =
+            BagWriter::with_chunk_size(file, path.clone(), None).map_err(|e| ctx(e.into()))?;
         let types = [
             (
                 ParticleState::TYPE_NAME,
@@ -179,13 +204,56 @@ impl Recorder {
         writer
             .add_metadata(METADATA_NAME, &metadata)
             .map_err(|e| ctx(e.into()))?;
+        // Readable (schemas, channels, metadata, no message) from the start.
+        handle.commit(true).map_err(|e| ctx(e.into()))?;
         Ok(self.open.insert(OpenBag {
             writer,
             path,
             file: handle,
             opened: Instant::now(),
+            oldest: None,
+            chunk_bytes: 0,
             channels,
         }))
+    }
+
+    /// Finishes the open bag's open chunk, if any, and commits it to the
+    /// file.
+    fn flush_chunk(&mut self) -> Result<(), RecordError> {
+        let Some(bag) = &mut self.open else {
+            return Ok(());
+        };
+        bag.writer.finish_chunk().map_err(|e| RecordError::Write {
+            path: bag.path.clone(),
+            source: e.into(),
+        })?;
+        bag.oldest = None;
+        bag.chunk_bytes = 0;
+        bag.file.commit(true).map_err(|e| RecordError::Write {
+            path: bag.path.clone(),
+            source: e.into(),
+        })
+    }
+
+    /// Finishes the open chunk if its oldest message will have waited
+    /// `record_flush_seconds` by `now + lookahead` (the timer passes its
+    /// period, so no message waits longer than that for the next tick).
+    pub fn flush_due(&mut self, now: Instant, lookahead: Duration) -> Result<(), RecordError> {
+        let due = (self.open.as_ref())
+            .and_then(|b| b.oldest)
+            .is_some_and(|t| (now + lookahead).saturating_duration_since(t) >= self.flush_after);
+        if due {
+            self.flush_chunk()?;
+        }
+        Ok(())
+    }
+
+    /// How often the node's timer should call [`Recorder::flush_due`]
+    /// (`None`: never, every message finishes its chunk).
+    pub fn flush_period(&self) -> Option<Duration> {
+        (!self.flush_after.is_zero()).then(|| {
+            (self.flush_after / 4).clamp(Duration::from_millis(5), Duration::from_millis(250))
+        })
     }
 
     /// Closes the open bag if it reached its size or duration limit.
@@ -193,7 +261,7 @@ impl Recorder {
         let Some(bag) = &self.open else {
             return Ok(());
         };
-        let size = bag.file.metadata().map(|m| m.len()).unwrap_or(0);
+        let size = bag.file.len();
         let too_big = self.split_bytes > 0 && size >= self.split_bytes;
         let too_old = self.split_after.is_some_and(|d| bag.opened.elapsed() >= d);
         if too_big || too_old {
@@ -207,6 +275,8 @@ impl Recorder {
             return Ok(());
         }
         self.maybe_split()?;
+        let log_time_ns = log_time_ns.max(self.last_log_ns);
+        self.last_log_ns = log_time_ns;
         let bag = match self.open {
             Some(ref mut b) => b,
             None => self.open_next()?,
@@ -217,7 +287,15 @@ impl Recorder {
             .map_err(|e| RecordError::Write {
                 path: bag.path.clone(),
                 source: e.into(),
-            })
+            })?;
+        let now = Instant::now();
+        let oldest = *bag.oldest.get_or_insert(now);
+        // A message record: opcode, length, 22 bytes of header, the data.
+        bag.chunk_bytes += 31 + cdr.len() as u64;
+        if bag.chunk_bytes >= CHUNK_BYTES || now.duration_since(oldest) >= self.flush_after {
+            self.flush_chunk()?;
+        }
+        Ok(())
     }
 
     /// The served model changed: later bags name `model`, and the open bag gets
@@ -231,9 +309,15 @@ impl Recorder {
                 source: e.into(),
             };
             let map = self.metadata.to_map().map_err(write)?;
+            // A metadata record finishes the open chunk.
             bag.writer
                 .add_metadata(METADATA_NAME, &map)
                 .map_err(write)?;
+            bag.oldest = None;
+            bag.chunk_bytes = 0;
+            bag.file
+                .commit(true)
+                .map_err(|e| write(DataError::io(&bag.path, "writing", e)))?;
         }
         Ok(())
     }
@@ -270,6 +354,12 @@ impl Recorder {
                 return Err(RecordError::Close {
                     path: bag.path,
                     source: e,
+                });
+            }
+            if let Err(e) = bag.file.commit(false) {
+                return Err(RecordError::Close {
+                    source: DataError::io(&bag.path, "writing", e),
+                    path: bag.path,
                 });
             }
             self.finished.push(bag.path);
@@ -421,23 +511,114 @@ mod tests {
         assert!(particle_forces_schema().contains("MSG: geometry_msgs/Vector3"));
     }
 
-    /// A killed node never finishes its bag: everything but the chunk still in
-    /// memory must be readable from the file as it is.
+    /// A recorder for `dir` finishing chunks after `flush` seconds.
+    fn recorder(dir: &Path, flush: f64) -> Recorder {
+        let params = NodeParams {
+            record_dir: dir.to_string_lossy().into_owned(),
+            record_flush_seconds: flush,
+            ..NodeParams::default()
+        };
+        Recorder::new(&params, "truth:spring").unwrap()
+    }
+
+    fn state(step: u32) -> ParticleState {
+        ParticleState {
+            dimension: 2,
+            step,
+            masses: vec![1.0; 5],
+            ..ParticleState::default()
+        }
+    }
+
+    /// Log times and steps of the states in the file as it is on disk, read
+    /// by our reader (every CRC, the footer and the end magic checked).
+    fn on_disk(path: &Path) -> Vec<(u64, u32)> {
+        let mut got = Vec::new();
+        scan_bag(path, |m| {
+            if m.schema_name.ends_with("ParticleState") {
+                let s = ParticleState::from_cdr(m.data)?;
+                got.push((m.log_time, s.step));
+            }
+            Ok(())
+        })
+        .unwrap();
+        got
+    }
+
+    /// With `record_flush_seconds` 0 every message is in the file, and the
+    /// file of a killed recorder reads whole, by our reader and by the mcap
+    /// crate's strict one (footer and end magic required).
+    #[test]
+    fn flush_zero_leaves_every_message_readable_after_a_kill() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut r = recorder(dir.path(), 0.0);
+        assert_eq!(r.flush_period(), None);
+        for i in 0..40 {
+            r.state(1000 + u64::from(i), &state(i)).unwrap();
+        }
+        let path = r.open.as_ref().unwrap().path.clone();
+        std::mem::forget(r); // as SIGKILL: no finish, no Drop
+        let got = on_disk(&path);
+        assert_eq!(got.len(), 40, "{got:?}");
+        assert!(got.iter().enumerate().all(|(i, g)| g.1 == i as u32));
+        let bytes = std::fs::read(&path).unwrap();
+        let strict = mcap::MessageStream::new(&bytes).unwrap();
+        assert_eq!(strict.map(Result::unwrap).count(), 40);
+    }
+
+    /// A chunk waits in memory until its oldest message is
+    /// `record_flush_seconds` old, as the timer sees it (with its lookahead).
+    #[test]
+    fn chunks_are_finished_by_age_on_the_timer() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut r = recorder(dir.path(), 3600.0);
+        assert_eq!(r.flush_period(), Some(Duration::from_millis(250)));
+        r.flush_due(Instant::now(), Duration::ZERO).unwrap(); // nothing open: no-op
+        for i in 0..5 {
+            r.state(u64::from(i), &state(i)).unwrap();
+        }
+        let path = r.open.as_ref().unwrap().path.clone();
+        assert!(on_disk(&path).is_empty(), "flushed before its time");
+        r.flush_due(Instant::now(), Duration::from_secs(60))
+            .unwrap();
+        assert!(on_disk(&path).is_empty(), "flushed an hour early");
+        r.flush_due(Instant::now(), Duration::from_secs(3600))
+            .unwrap();
+        assert_eq!(on_disk(&path).len(), 5);
+        r.state(5, &state(5)).unwrap();
+        assert_eq!(on_disk(&path).len(), 5, "a new chunk waits again");
+        r.flush_due(Instant::now() + Duration::from_secs(3600), Duration::ZERO)
+            .unwrap();
+        assert_eq!(on_disk(&path).len(), 6);
+        // Closing writes the summary: the file reads whole, and once.
+        r.state(6, &state(6)).unwrap();
+        r.close().unwrap();
+        assert_eq!(on_disk(&path).len(), 7);
+    }
+
+    /// A message logged before the last one written is logged at the last
+    /// one's time: a summary-less file is read in file order.
+    #[test]
+    fn log_times_never_go_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut r = recorder(dir.path(), 0.0);
+        r.state(50, &state(0)).unwrap();
+        r.state(20, &state(1)).unwrap();
+        r.state(70, &state(2)).unwrap();
+        let path = r.open.as_ref().unwrap().path.clone();
+        r.close().unwrap();
+        assert_eq!(on_disk(&path), [(50, 0), (50, 1), (70, 2)]);
+    }
+
+    /// A killed node never finishes its bag: with a long `record_flush_seconds`,
+    /// everything but the chunk still in memory (≤ 1 MiB) must be readable
+    /// from the file as it is.
     #[test]
     fn a_kill_loses_at_most_the_last_chunk() {
         let dir = tempfile::tempdir().unwrap();
-        let params = NodeParams {
-            record_dir: dir.path().to_string_lossy().into_owned(),
-            ..NodeParams::default()
-        };
-        let mut r = Recorder::new(&params, "truth:spring").unwrap();
-        let state = ParticleState {
-            dimension: 2,
-            masses: vec![1.0; 5],
-            ..ParticleState::default()
-        };
+        let mut r = recorder(dir.path(), 3600.0);
         let traj = PredictedTrajectory {
-            initial: state,
+            initial: state(0),
             steps: 100,
             positions: vec![0.0; 1000],
             velocities: vec![0.0; 1000],
@@ -454,17 +635,10 @@ mod tests {
         let path = r.open.as_ref().unwrap().path.clone();
         std::mem::forget(r); // as SIGKILL: no finish, no Drop
         let bytes = std::fs::read(&path).unwrap();
-        let stream = mcap::MessageStream::new_with_options(
-            &bytes,
-            mcap::read::Options::IgnoreEndMagic.into(),
-        )
-        .unwrap();
+        let stream = mcap::MessageStream::new(&bytes).unwrap();
         let read = stream
-            .take_while(Result::is_ok)
-            .filter(|m| {
-                m.as_ref()
-                    .is_ok_and(|m| m.channel.topic.ends_with("trajectory"))
-            })
+            .map(Result::unwrap)
+            .filter(|m| m.channel.topic.ends_with("trajectory"))
             .count();
         let per_chunk = (1 << 20) / size + 1;
         assert!(read > 0 && read < total, "read {read} of {total}");

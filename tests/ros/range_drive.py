@@ -8,11 +8,13 @@ first failed check; on success prints `RANGE_SUMMARY {json}`.
 
 Checks, in order (none of these states is accepted silently):
   * a plain spring state is predicted, out_of_range stays 0;
-  * velocities of 1e300 are predicted anyway but counted in
-    NodeDiagnostics.out_of_range and warned about on /rosout;
+  * velocities of 1e3 (far beyond out_of_range_sigmas) are predicted anyway
+    but counted in NodeDiagnostics.out_of_range and warned about on /rosout;
+  * velocities of 1e300 are refused by default (an absurd state), with the
+    reason, counted as rejected, and not predicted;
   * a spring of stiffness 5, one of rest length 2 and one of stiffness -1 are
     rejected (the model cannot see edges), naming --edge-physics;
-  * with out_of_range_refuse set at run time, 1e300 velocities are rejected.
+  * with out_of_range_refuse set at run time, 1e3 velocities are rejected.
 """
 
 import argparse
@@ -76,12 +78,20 @@ def main():
 
     def fast(m):
         for v in m.velocities:
-            v.x = v.y = 1e300
+            v.x = v.y = 1e3
     send(2, fast)
     wait(lambda: 2 in trajs, "the prediction of an out-of-range state (predicted with a warning)")
     wait(lambda: last().out_of_range >= 1, "out_of_range counted")
     wait(lambda: any("out-of-range input" in g.msg and "velocity" in g.msg for g in logs),
          "an out-of-range warning on /rosout")
+
+    def absurd(m):
+        for v in m.velocities:
+            v.x = v.y = 1e300
+    rejected_a = last().rejected
+    send(10, absurd)
+    wait(lambda: last().rejected >= rejected_a + 1, "a 1e300 state refused by default")
+    drive.check("absurd state" in last().last_error, f"last_error {last().last_error!r}")
 
     rejected0 = last().rejected
     bad_edges = {
@@ -98,6 +108,7 @@ def main():
     send(6)
     wait(lambda: 6 in trajs, "a prediction after the rejections")
     drive.check(not any(s in trajs for s in bad_edges), "a state with an unseen edge was predicted")
+    drive.check(10 not in trajs, "a 1e300 state was predicted")
 
     client = AsyncParameterClient(node, "mcgnode")
     drive.check(client.wait_for_services(timeout_sec=a.timeout), "no parameter services")

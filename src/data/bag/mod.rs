@@ -3,11 +3,13 @@
 //! `ParticleState` trajectories back with full validation.
 //!
 //! - [`write`](mod@write): the streaming writer, and writing trajectories as a bag.
+//! - [`commit`]: a file that is a readable MCAP after every finished chunk.
 //! - [`scan`]: every message of a bag argument in order, as stored (MCAP,
 //!   rosbag2 sqlite3 and directories, decompressed).
 //! - `schema`: which ParticleState layout a bag's schema declares.
 //! - [`read`]: ParticleState messages back into validated trajectories.
 
+pub mod commit;
 pub mod read;
 pub mod scan;
 mod schema;

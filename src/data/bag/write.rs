@@ -45,7 +45,19 @@ impl<W: Write + Seek> BagWriter<W> {
 
     /// Starts a bag on any seekable stream; errors name `path` (the file it writes).
     pub fn with_path(w: W, path: PathBuf) -> Result<Self, DataError> {
+        Self::with_chunk_size(w, path, Some(mcap::WriteOptions::DEFAULT_CHUNK_SIZE))
+    }
+
+    /// [`BagWriter::with_path`] with chunks finished at `chunk_size`
+    /// uncompressed bytes (MCAP's default: 1 MiB), or (`None`) only by
+    /// [`BagWriter::finish_chunk`].
+    pub fn with_chunk_size(
+        w: W,
+        path: PathBuf,
+        chunk_size: Option<u64>,
+    ) -> Result<Self, DataError> {
         let inner = mcap::WriteOptions::new()
+            .chunk_size(chunk_size)
             .profile("ros2")
             .library(format!("mcgnode {}", env!("CARGO_PKG_VERSION")))
             .compression(Some(mcap::Compression::Zstd))
@@ -138,6 +150,12 @@ impl<W: Write + Seek> BagWriter<W> {
                 metadata: metadata.clone(),
             })
             .map_err(|e| self.err(e))
+    }
+
+    /// Finishes the open chunk, if any (its message indexes written after
+    /// it), and flushes the stream: what was written is then whole records.
+    pub fn finish_chunk(&mut self) -> Result<(), DataError> {
+        self.inner.flush().map_err(|e| self.err(e))
     }
 
     /// Writes the summary and footer, flushes, and returns the stream.
