@@ -15,7 +15,9 @@ use super::diagnostics::diagnostics_loop;
 use super::handles::Handles;
 use super::input_loop::{input_loop, Outputs};
 use super::params::NodeParams;
-use super::qos::{clock_qos, publisher, reliable_qos, server, subscription, topic_qos};
+use super::qos::{
+    clock_qos, input_qos, publisher, reliable_qos, server, subscription, topic_qos,
+};
 use super::resource_names::Names;
 use super::service::{self, OnFailure::Warn};
 use super::topics::{
@@ -55,7 +57,7 @@ impl Endpoints {
     ) -> crate::error::Result<Endpoints> {
         let qos = topic_qos(params);
         Ok(Endpoints {
-            input: subscription(node, names, &params.input_topic, &qos)?,
+            input: subscription(node, names, &params.input_topic, &input_qos(params))?,
             trajectory: publisher(node, names, &params.trajectory_topic, &qos)?,
             forces: publisher(node, names, &params.forces_topic, &qos)?,
             accuracy: publisher(node, names, LIVE_ACCURACY_TOPIC, &qos)?,

@@ -335,6 +335,17 @@ node_params! {
     /// Keep-last history depth of the topics.
     qos_depth: u32 = 10, Kind::Int(1, 10_000), restart,
         "keep-last history depth";
+    /// QoS of the input subscriptions (ParticleState, PoseArray,
+    /// PointCloud2); the outputs keep `qos_reliable`/`qos_depth`.
+    input_qos: String = "topics".into(), Kind::Choice(INPUT_QOS), restart,
+        "QoS of the input subscriptions (ParticleState, PoseArray, PointCloud2): topics = as \
+         qos_reliable and qos_depth; reliable = reliable, keep-last input_qos_depth (hears \
+         reliable publishers only); best_effort = best effort, keep-last input_qos_depth; \
+         sensor_data = best effort, keep-last 5 (SensorDataQoS); best effort hears both";
+    /// Keep-last depth of the input subscriptions with `input_qos` =
+    /// `reliable` or `best_effort`.
+    input_qos_depth: u32 = 10, Kind::Int(1, 10_000), restart,
+        "keep-last depth of the input subscriptions when input_qos is reliable or best_effort";
     /// Stamp diagnostics, swaps and recordings with `/clock` (bag playback)
     /// instead of the system clock; read at start.
     use_sim_time: bool = false, Kind::Bool, restart,
@@ -442,6 +453,9 @@ node_params! {
         "input streams (trajectory ids) followed at once for velocities and live accuracy; \
          the least recently seen is dropped";
 }
+
+/// The words `input_qos` takes (see [`super::qos::input_qos`]).
+pub const INPUT_QOS: &[&str] = &["topics", "reliable", "best_effort", "sensor_data"];
 
 /// What a parameter holds, for type checking and messages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
