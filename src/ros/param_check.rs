@@ -14,7 +14,7 @@ impl NodeParams {
         };
         let given = Given { key, value };
         let checked = match kind {
-            Kind::Str | Kind::Topic => Put::Str(given.text(kind, from_cli)?),
+            Kind::Str | Kind::Topic | Kind::OptTopic => Put::Str(given.text(kind, from_cli)?),
             Kind::Choice(words) => Put::Str(given.choice(words)?),
             Kind::Bool => Put::Bool(given.flag()?),
             Kind::Int(lo, hi) => Put::Int(given.int(lo, hi)?),
@@ -76,16 +76,18 @@ impl Given<'_> {
         }
     }
 
-    /// Text ([`Kind::Str`]) or a ROS 2 name ([`Kind::Topic`]).
+    /// Text ([`Kind::Str`]) or a ROS 2 name ([`Kind::Topic`]; [`Kind::OptTopic`]
+    /// also empty).
     fn text(&self, kind: Kind, from_cli: bool) -> Result<String, ParamError> {
         let value = self.value;
         let s = match value {
             Scalar::Str(s) => s.clone(),
-            Scalar::Null if kind == Kind::Str => String::new(),
+            Scalar::Null if kind != Kind::Topic => String::new(),
             Scalar::Bool(_) | Scalar::Int(_) | Scalar::Float(_) if from_cli => value.to_string(),
             _ => return Err(self.ill("a string")),
         };
-        if kind == Kind::Topic && !is_ros_name(&s) {
+        let off = kind == Kind::OptTopic && s.is_empty();
+        if matches!(kind, Kind::Topic | Kind::OptTopic) && !off && !is_ros_name(&s) {
             return Err(ParamError::BadName {
                 key: self.key.to_string(),
                 name: s,

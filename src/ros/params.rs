@@ -302,6 +302,25 @@ node_params! {
     /// Topic the node reads `ParticleState` from.
     input_topic: String = topics::INPUT_TOPIC.into(), Kind::Topic, restart,
         "topic of incoming ParticleState messages";
+    /// Topic of `geometry_msgs/PoseArray` tracker input (empty: none).
+    pose_array_topic: String = String::new(), Kind::OptTopic, restart,
+        "topic of geometry_msgs/PoseArray tracker input, one pose per particle of \
+         input_template (positions only; velocities from velocity_smoother); empty = off";
+    /// Topic of `sensor_msgs/PointCloud2` tracker input (empty: none).
+    point_cloud_topic: String = String::new(), Kind::OptTopic, restart,
+        "topic of sensor_msgs/PointCloud2 tracker input, one point per particle of \
+         input_template (x, y, z FLOAT32/FLOAT64 fields by name, any point_step, organised \
+         or not, either byte order); empty = off";
+    /// The particles behind PoseArray/PointCloud2 input: a bag (its first
+    /// state) or a YAML file of ParticleState fields.
+    input_template: String = String::new(), Kind::Str, restart,
+        "what PoseArray and PointCloud2 input cannot say (types, masses, graph, kinematic \
+         flags, field): a bag (its first state) or a .yaml file of ParticleState fields; \
+         needed with pose_array_topic or point_cloud_topic";
+    /// The frame PoseArray/PointCloud2 input must be in.
+    frame_id: String = crate::data::msg::FRAME_ID.into(), Kind::Str, runtime,
+        "header.frame_id PoseArray and PointCloud2 input must carry (no tf2 lookup: \
+         messages in other frames are refused, naming both)";
     /// Topic of the predicted trajectories.
     trajectory_topic: String = topics::TRAJECTORY_TOPIC.into(), Kind::Topic, restart,
         "topic of PredictedTrajectory messages";
@@ -464,6 +483,8 @@ pub enum Kind {
     Str,
     /// A ROS 2 name: absolute, relative to the namespace, or private (`~/`).
     Topic,
+    /// A ROS 2 name as [`Kind::Topic`], or empty (off).
+    OptTopic,
     /// `true` or `false`.
     Bool,
     /// An integer in `lo..=hi`.
@@ -498,7 +519,7 @@ impl NodeParams {
     /// The value of `key` as parameter-file text (strings quoted).
     pub fn value_text(&self, key: &str) -> String {
         match spec(key).map(|s| s.kind) {
-            Some(Kind::Str | Kind::Topic | Kind::Choice(_)) => {
+            Some(Kind::Str | Kind::Topic | Kind::OptTopic | Kind::Choice(_)) => {
                 format!("{:?}", self.raw_value(key))
             }
             _ => self.raw_value(key),
@@ -549,7 +570,7 @@ mod tests {
             let fits = matches!(
                 (kind, p.value(name)),
                 (
-                    Kind::Str | Kind::Topic | Kind::Choice(_),
+                    Kind::Str | Kind::Topic | Kind::OptTopic | Kind::Choice(_),
                     Some(ParamValue::Str(_))
                 ) | (Kind::Bool, Some(ParamValue::Bool(_)))
                     | (Kind::Int(..), Some(ParamValue::Int(_)))

@@ -222,8 +222,10 @@ mod tests {
         let (r, h) = of(&[("qos_reliable", "false"), ("qos_depth", "3")]);
         assert_eq!((r, h), (best_effort, H::KeepLast { depth: 3 }));
         // The outputs keep theirs.
-        let mut p = NodeParams::default();
-        p.input_qos = "sensor_data".into();
+        let p = NodeParams {
+            input_qos: "sensor_data".into(),
+            ..NodeParams::default()
+        };
         assert!(matches!(
             topic_qos(&p).reliability,
             Reliability::Reliable { .. }
