@@ -135,11 +135,23 @@ def main():
     best_effort = ru.qos_profile(reliable=False, depth=10)
     msg_type = {"state": ParticleState, "pose": PoseArray, "cloud": PointCloud2}[a.mode]
     pub = node.create_publisher(msg_type, a.topic, best_effort)
-    sent, arrived, out = {}, {}, {"diagnostics": None}
+    sent, arrived, out = {}, {}, {"diagnostics": None, "worst_position_error": 0.0, "frames": []}
+    by_stamp = {stamp_of(d): d for d in states}
 
     def on_traj(m):
         key = (m.header.stamp.sec, m.header.stamp.nanosec)
         arrived.setdefault(key, time.monotonic())
+        if m.header.frame_id not in out["frames"]:
+            out["frames"].append(m.header.frame_id)
+        # The prediction starts where the tracker said the particles are (a
+        # poly smoother would fit them; the default takes them as they are).
+        d = by_stamp.get(key)
+        if d is not None:
+            worst = max((abs(getattr(p, a) - float(q[a])) for p, q in zip(m.initial.positions, d["positions"])
+                         for a in "xyz"), default=1e9)
+            if len(m.initial.positions) != len(d["positions"]):
+                worst = 1e9
+            out["worst_position_error"] = max(out["worst_position_error"], worst)
 
     def on_diag(m):
         out["diagnostics"] = {k: getattr(m, k) for k in (
