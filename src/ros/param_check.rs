@@ -39,8 +39,17 @@ impl NodeParams {
     }
 
     /// Checks what single parameters cannot: a poly smoother's window holds
-    /// at least `smoother_order + 2` states.
+    /// at least `smoother_order + 2` states, and tracker topics have a
+    /// template.
     pub fn check_together(&self) -> Result<(), ParamError> {
+        let tracker = !self.pose_array_topic.is_empty() || !self.point_cloud_topic.is_empty();
+        if tracker && self.input_template.is_empty() {
+            return Err(ParamError::Together(
+                "pose_array_topic, point_cloud_topic: need input_template, a bag or a .yaml \
+                 file of ParticleState fields giving the particles' types, masses and graph"
+                    .into(),
+            ));
+        }
         crate::data::stream::Smoother::new(
             &self.velocity_smoother,
             self.smoother_window as usize,

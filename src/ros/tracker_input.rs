@@ -313,6 +313,29 @@ mod tests {
         assert_eq!(graph.n(), 3);
     }
 
+    /// The template of docs/ros.md, as a file.
+    #[test]
+    fn the_documented_yaml_template_loads() {
+        let doc = include_str!("../../docs/ros.md");
+        let start = doc
+            .find("```yaml\ndimension")
+            .expect("the template in docs/ros.md")
+            + 8;
+        let yaml = &doc[start..start + doc[start..].find("```").expect("its end")];
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("ring.yaml");
+        std::fs::write(&path, yaml).unwrap();
+        let t = Template::load(path.to_str().unwrap()).unwrap();
+        assert_eq!(t.expect("world").n, 3);
+        // Tracker topics without a template are refused before the node starts.
+        let p = NodeParams {
+            pose_array_topic: "/tracker/poses".into(),
+            ..NodeParams::default()
+        };
+        let e = p.check_together().unwrap_err().to_string();
+        assert!(e.contains("need input_template"), "{e}");
+    }
+
     #[test]
     fn bad_templates_are_refused_with_the_reason() {
         let e = from_yaml("typs: [0]\n").unwrap_err().to_string();
