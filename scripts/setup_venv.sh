@@ -57,7 +57,7 @@ ensure_packages \
     "ros-kilted-rclpy[fastrtps]==9.1.2" ros-kilted-std-msgs==5.5.1 \
     ros-kilted-geometry-msgs==5.5.1 ros-kilted-std-srvs==5.5.1 \
     ros-kilted-diagnostic-msgs==5.5.1 ros-kilted-rosgraph-msgs==2.3.0 \
-    ros-kilted-visualization-msgs==5.5.1 \
+    ros-kilted-visualization-msgs==5.5.1 ros-kilted-sensor-msgs==5.5.1 \
     ros-kilted-ament-cmake==2.7.3 ros-kilted-ament-package==0.17.2 \
     ros-kilted-ament-cmake-ros-core==0.14.5 \
     ros-kilted-ament-cmake-include-directories==2.7.3 ros-kilted-ament-cmake-libraries==2.7.3 \

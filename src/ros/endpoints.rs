@@ -15,12 +15,13 @@ use super::diagnostics::diagnostics_loop;
 use super::handles::Handles;
 use super::input_loop::{input_loop, Outputs};
 use super::params::NodeParams;
-use super::qos::{clock_qos, publisher, reliable_qos, server, subscription, topic_qos};
+use super::qos::{clock_qos, input_qos, publisher, reliable_qos, server, subscription, topic_qos};
 use super::resource_names::Names;
 use super::service::{self, OnFailure::Warn};
 use super::topics::{
     CLOCK_TOPIC, LIVE_ACCURACY_TOPIC, PLAN_SERVICE, REPLAY_SERVICE, STANDARD_DIAGNOSTICS_TOPIC,
 };
+use super::tracker_input::TrackerInputs;
 use super::trainer::{Trainer, TrainingServers};
 use super::training_services;
 use super::wire::{ClockMsg, LoadModel, MarkerArray, Plan, Replay, Rollout, RosService, Train};
@@ -44,6 +45,8 @@ pub(super) struct Endpoints {
     plan: Server<PlanRequest, PlanResponse>,
     /// With `use_sim_time` only.
     clock: Option<Subscription<ClockMsg>>,
+    /// PoseArray and PointCloud2 input, when a topic is set.
+    trackers: Option<TrackerInputs>,
 }
 
 impl Endpoints {
@@ -55,7 +58,7 @@ impl Endpoints {
     ) -> crate::error::Result<Endpoints> {
         let qos = topic_qos(params);
         Ok(Endpoints {
-            input: subscription(node, names, &params.input_topic, &qos)?,
+            input: subscription(node, names, &params.input_topic, &input_qos(params))?,
             trajectory: publisher(node, names, &params.trajectory_topic, &qos)?,
             forces: publisher(node, names, &params.forces_topic, &qos)?,
             accuracy: publisher(node, names, LIVE_ACCURACY_TOPIC, &qos)?,
@@ -75,6 +78,7 @@ impl Endpoints {
             } else {
                 None
             },
+            trackers: TrackerInputs::create(node, params, names)?,
         })
     }
 
@@ -88,7 +92,13 @@ impl Endpoints {
             markers: Arc::new(self.markers),
             last_markers: None,
         };
-        let input = input_loop(h.clone(), self.input, outputs, trainer.clone());
+        // Tracker states wait here for the input loop (a few: the input QoS
+        // history holds the rest, and keeps the newest).
+        let (tx, rx) = tokio::sync::mpsc::channel(4);
+        if let Some(t) = self.trackers {
+            t.spawn(h, &tx);
+        }
+        let input = input_loop(h.clone(), self.input, rx, outputs, trainer.clone());
         tokio::spawn(input);
         tokio::spawn(diagnostics_loop(
             h.clone(),

@@ -153,33 +153,50 @@ fn log_alarm(h: &Handles, level: Level, why: &str) {
     h.diag.log(log_level, &format!("{prefix}{why}"));
 }
 
-/// For each incoming state: predict, publish trajectory and forces, and the
-/// live accuracy when the state was compared with earlier predictions; a
-/// drift alarm starts a retraining with `trainer` when `accuracy_retrain` is on.
+/// The next ParticleState of the input topic (sequence gaps counted as
+/// dropped), or why it was refused; counted as received either way.
+async fn take_state(
+    h: &Handles,
+    input: &Subscription<ParticleState>,
+    last_seen: &mut std::collections::HashMap<String, i64>,
+) -> Option<ParticleState> {
+    let stats = &h.diag.stats;
+    let taken = input.async_take().await;
+    stats.received.fetch_add(1, Ordering::Relaxed);
+    match taken {
+        Ok((msg, info)) => {
+            let gap = sequence_gap(last_seen, &info);
+            stats.dropped.fetch_add(gap, Ordering::Relaxed);
+            Some(msg)
+        }
+        Err(e) => {
+            // A sample that does not decode as a ParticleState.
+            h.diag.reject(&format!("undecodable ParticleState: {e:?}"));
+            None
+        }
+    }
+}
+
+/// For each incoming state (of the input topic, or from `trackers`: the
+/// PoseArray and PointCloud2 tasks, which count them as received): predict,
+/// publish trajectory and forces, and the live accuracy when the state was
+/// compared with earlier predictions; a drift alarm starts a retraining with
+/// `trainer` when `accuracy_retrain` is on.
 pub(super) async fn input_loop(
     h: Handles,
     input: Subscription<ParticleState>,
+    mut trackers: tokio::sync::mpsc::Receiver<ParticleState>,
     mut out: Outputs,
     trainer: Arc<Trainer>,
 ) {
-    let stats = &h.diag.stats;
     // Last sequence number seen from each publisher.
     let mut last_seen: std::collections::HashMap<String, i64> = Default::default();
     loop {
-        let msg = match input.async_take().await {
-            Ok((msg, info)) => {
-                let gap = sequence_gap(&mut last_seen, &info);
-                stats.dropped.fetch_add(gap, Ordering::Relaxed);
-                msg
-            }
-            Err(e) => {
-                // A sample that does not decode as a ParticleState.
-                stats.received.fetch_add(1, Ordering::Relaxed);
-                h.diag.reject(&format!("undecodable ParticleState: {e:?}"));
-                continue;
-            }
+        let taken = tokio::select! {
+            taken = take_state(&h, &input, &mut last_seen) => taken,
+            Some(state) = trackers.recv() => Some(state),
         };
-        stats.received.fetch_add(1, Ordering::Relaxed);
+        let Some(msg) = taken else { continue };
         let received_ns = h.clock.now_log_ns();
         let worker = h.clone();
         let job = tokio::task::spawn_blocking(move || handle_state(&worker, msg, received_ns));

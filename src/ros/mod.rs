@@ -14,6 +14,9 @@
 //!   name, one file per family;
 //! - `resource_names`: ROS 2 names and `--ros-args` as rcl reads them (namespace,
 //!   node name, remaps);
+//! - `tracker`: PoseArray and PointCloud2 decoded into positions and
+//!   checked (no DDS); `tracker_input`: the template they fill and the
+//!   tasks that take them;
 //! - `input`: an incoming state parsed once, with the velocities of
 //!   position-only streams estimated from their history (no DDS);
 //! - `predict`: input checks and building the outputs (no ROS);
@@ -76,6 +79,8 @@ pub(crate) mod record;
 pub(crate) mod resource_names;
 pub(crate) mod service;
 pub(crate) mod topics;
+pub(crate) mod tracker;
+pub(crate) mod tracker_input;
 pub(crate) mod trainer;
 pub(crate) mod training;
 pub(crate) mod training_services;

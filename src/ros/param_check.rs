@@ -14,7 +14,7 @@ impl NodeParams {
         };
         let given = Given { key, value };
         let checked = match kind {
-            Kind::Str | Kind::Topic => Put::Str(given.text(kind, from_cli)?),
+            Kind::Str | Kind::Topic | Kind::OptTopic => Put::Str(given.text(kind, from_cli)?),
             Kind::Choice(words) => Put::Str(given.choice(words)?),
             Kind::Bool => Put::Bool(given.flag()?),
             Kind::Int(lo, hi) => Put::Int(given.int(lo, hi)?),
@@ -39,8 +39,17 @@ impl NodeParams {
     }
 
     /// Checks what single parameters cannot: a poly smoother's window holds
-    /// at least `smoother_order + 2` states.
+    /// at least `smoother_order + 2` states, and tracker topics have a
+    /// template.
     pub fn check_together(&self) -> Result<(), ParamError> {
+        let tracker = !self.pose_array_topic.is_empty() || !self.point_cloud_topic.is_empty();
+        if tracker && self.input_template.is_empty() {
+            return Err(ParamError::Together(
+                "pose_array_topic, point_cloud_topic: need input_template, a bag or a .yaml \
+                 file of ParticleState fields giving the particles' types, masses and graph"
+                    .into(),
+            ));
+        }
         crate::data::stream::Smoother::new(
             &self.velocity_smoother,
             self.smoother_window as usize,
@@ -76,16 +85,18 @@ impl Given<'_> {
         }
     }
 
-    /// Text ([`Kind::Str`]) or a ROS 2 name ([`Kind::Topic`]).
+    /// Text ([`Kind::Str`]) or a ROS 2 name ([`Kind::Topic`]; [`Kind::OptTopic`]
+    /// also empty).
     fn text(&self, kind: Kind, from_cli: bool) -> Result<String, ParamError> {
         let value = self.value;
         let s = match value {
             Scalar::Str(s) => s.clone(),
-            Scalar::Null if kind == Kind::Str => String::new(),
+            Scalar::Null if kind != Kind::Topic => String::new(),
             Scalar::Bool(_) | Scalar::Int(_) | Scalar::Float(_) if from_cli => value.to_string(),
             _ => return Err(self.ill("a string")),
         };
-        if kind == Kind::Topic && !is_ros_name(&s) {
+        let off = kind == Kind::OptTopic && s.is_empty();
+        if matches!(kind, Kind::Topic | Kind::OptTopic) && !off && !is_ros_name(&s) {
             return Err(ParamError::BadName {
                 key: self.key.to_string(),
                 name: s,

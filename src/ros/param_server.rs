@@ -72,6 +72,7 @@ fn descriptor(
         Kind::Topic => "a ROS 2 name: absolute (/a), relative to the namespace (a) or to the \
                         node (~/a)"
             .to_string(),
+        Kind::OptTopic => "a ROS 2 name (/a, a or ~/a), or empty = off".to_string(),
         Kind::Double(true) => "finite and > 0".to_string(),
         Kind::Double(false) => "finite and >= 0".to_string(),
         Kind::Doubles(max) => format!("at most {max} finite numbers > 0"),

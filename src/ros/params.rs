@@ -302,6 +302,25 @@ node_params! {
     /// Topic the node reads `ParticleState` from.
     input_topic: String = topics::INPUT_TOPIC.into(), Kind::Topic, restart,
         "topic of incoming ParticleState messages";
+    /// Topic of `geometry_msgs/PoseArray` tracker input (empty: none).
+    pose_array_topic: String = String::new(), Kind::OptTopic, restart,
+        "topic of geometry_msgs/PoseArray tracker input, one pose per particle of \
+         input_template (positions only; velocities from velocity_smoother); empty = off";
+    /// Topic of `sensor_msgs/PointCloud2` tracker input (empty: none).
+    point_cloud_topic: String = String::new(), Kind::OptTopic, restart,
+        "topic of sensor_msgs/PointCloud2 tracker input, one point per particle of \
+         input_template (x, y, z FLOAT32/FLOAT64 fields by name, any point_step, organised \
+         or not, either byte order); empty = off";
+    /// The particles behind PoseArray/PointCloud2 input: a bag (its first
+    /// state) or a YAML file of ParticleState fields.
+    input_template: String = String::new(), Kind::Str, restart,
+        "what PoseArray and PointCloud2 input cannot say (types, masses, graph, kinematic \
+         flags, field): a bag (its first state) or a .yaml file of ParticleState fields; \
+         needed with pose_array_topic or point_cloud_topic";
+    /// The frame PoseArray/PointCloud2 input must be in.
+    frame_id: String = crate::data::msg::FRAME_ID.into(), Kind::Str, runtime,
+        "header.frame_id PoseArray and PointCloud2 input must carry (no tf2 lookup: \
+         messages in other frames are refused, naming both)";
     /// Topic of the predicted trajectories.
     trajectory_topic: String = topics::TRAJECTORY_TOPIC.into(), Kind::Topic, restart,
         "topic of PredictedTrajectory messages";
@@ -335,6 +354,17 @@ node_params! {
     /// Keep-last history depth of the topics.
     qos_depth: u32 = 10, Kind::Int(1, 10_000), restart,
         "keep-last history depth";
+    /// QoS of the input subscriptions (ParticleState, PoseArray,
+    /// PointCloud2); the outputs keep `qos_reliable`/`qos_depth`.
+    input_qos: String = "topics".into(), Kind::Choice(INPUT_QOS), restart,
+        "QoS of the input subscriptions (ParticleState, PoseArray, PointCloud2): topics = as \
+         qos_reliable and qos_depth; reliable = reliable, keep-last input_qos_depth (hears \
+         reliable publishers only); best_effort = best effort, keep-last input_qos_depth; \
+         sensor_data = best effort, keep-last 5 (SensorDataQoS); best effort hears both";
+    /// Keep-last depth of the input subscriptions with `input_qos` =
+    /// `reliable` or `best_effort`.
+    input_qos_depth: u32 = 10, Kind::Int(1, 10_000), restart,
+        "keep-last depth of the input subscriptions when input_qos is reliable or best_effort";
     /// Stamp diagnostics, swaps and recordings with `/clock` (bag playback)
     /// instead of the system clock; read at start.
     use_sim_time: bool = false, Kind::Bool, restart,
@@ -449,6 +479,9 @@ node_params! {
          the least recently seen is dropped";
 }
 
+/// The words `input_qos` takes (see [`super::qos::input_qos`]).
+pub const INPUT_QOS: &[&str] = &["topics", "reliable", "best_effort", "sensor_data"];
+
 /// What a parameter holds, for type checking and messages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
@@ -456,6 +489,8 @@ pub enum Kind {
     Str,
     /// A ROS 2 name: absolute, relative to the namespace, or private (`~/`).
     Topic,
+    /// A ROS 2 name as [`Kind::Topic`], or empty (off).
+    OptTopic,
     /// `true` or `false`.
     Bool,
     /// An integer in `lo..=hi`.
@@ -490,7 +525,7 @@ impl NodeParams {
     /// The value of `key` as parameter-file text (strings quoted).
     pub fn value_text(&self, key: &str) -> String {
         match spec(key).map(|s| s.kind) {
-            Some(Kind::Str | Kind::Topic | Kind::Choice(_)) => {
+            Some(Kind::Str | Kind::Topic | Kind::OptTopic | Kind::Choice(_)) => {
                 format!("{:?}", self.raw_value(key))
             }
             _ => self.raw_value(key),
@@ -541,7 +576,7 @@ mod tests {
             let fits = matches!(
                 (kind, p.value(name)),
                 (
-                    Kind::Str | Kind::Topic | Kind::Choice(_),
+                    Kind::Str | Kind::Topic | Kind::OptTopic | Kind::Choice(_),
                     Some(ParamValue::Str(_))
                 ) | (Kind::Bool, Some(ParamValue::Bool(_)))
                     | (Kind::Int(..), Some(ParamValue::Int(_)))

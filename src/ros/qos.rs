@@ -25,6 +25,28 @@ pub fn topic_qos(p: &NodeParams) -> QosProfile {
     }
 }
 
+/// QoS of the input subscriptions (`input_qos`): as the topics
+/// ([`topic_qos`]), reliable or best effort keep-last `input_qos_depth`, or
+/// `sensor_data` (rclpy's SensorDataQoS: best effort, keep-last 5). A
+/// best-effort subscriber matches reliable and best-effort publishers; a
+/// reliable one only reliable publishers.
+pub fn input_qos(p: &NodeParams) -> QosProfile {
+    let keep = |depth: u32| {
+        QosProfile::publisher_default()
+            .durability(Durability::Volatile)
+            .history(History::KeepLast {
+                depth: depth as usize,
+            })
+    };
+    match p.input_qos.as_str() {
+        "reliable" => keep(p.input_qos_depth).reliability_reliable(WhenFull::DEFAULT),
+        "best_effort" => keep(p.input_qos_depth).reliability_best_effort(),
+        "sensor_data" => keep(5).reliability_best_effort(),
+        // "topics" (the parameter's kind admits no other word).
+        _ => topic_qos(p),
+    }
+}
+
 /// `/clock` QoS: best-effort keep-last 1 (as rclpy's time source), which
 /// matches reliable and best-effort publishers.
 pub fn clock_qos() -> QosProfile {
@@ -170,4 +192,43 @@ where
         let _ = server.publish_feedback(handle.clone(), fb).await;
     }
     done
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ros2_client::qos::{History as H, Reliability};
+
+    fn of(words: &[(&str, &str)]) -> (Reliability, H) {
+        let mut p = NodeParams::default();
+        for (k, v) in words {
+            let v = crate::ros::yaml::Scalar::parse_plain(v);
+            p.set(k, &v, true).unwrap();
+        }
+        let q = input_qos(&p);
+        (q.reliability, q.history)
+    }
+
+    #[test]
+    fn input_qos_is_its_own_and_outputs_keep_theirs() {
+        let best_effort = Reliability::BestEffort;
+        let (r, h) = of(&[("input_qos", "sensor_data")]);
+        assert_eq!((r, h), (best_effort, H::KeepLast { depth: 5 }));
+        let (r, h) = of(&[("input_qos", "best_effort"), ("input_qos_depth", "7")]);
+        assert_eq!((r, h), (best_effort, H::KeepLast { depth: 7 }));
+        let (r, _) = of(&[("input_qos", "reliable"), ("qos_reliable", "false")]);
+        assert!(matches!(r, Reliability::Reliable { .. }), "{r:?}");
+        // `topics` follows qos_reliable and qos_depth, as before.
+        let (r, h) = of(&[("qos_reliable", "false"), ("qos_depth", "3")]);
+        assert_eq!((r, h), (best_effort, H::KeepLast { depth: 3 }));
+        // The outputs keep theirs.
+        let p = NodeParams {
+            input_qos: "sensor_data".into(),
+            ..NodeParams::default()
+        };
+        assert!(matches!(
+            topic_qos(&p).reliability,
+            Reliability::Reliable { .. }
+        ));
+    }
 }

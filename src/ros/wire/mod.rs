@@ -11,6 +11,7 @@
 //! - [`lifecycle`], `lifecycle_msgs`;
 //! - [`markers`], `visualization_msgs/MarkerArray` and its parts;
 //! - [`clock`], `rosgraph_msgs/Clock`;
+//! - [`tracker`], `geometry_msgs/PoseArray` and `sensor_msgs/PointCloud2`;
 //! - [`state`], the type names of ParticleState and its parts, whose structs
 //!   live in [`crate::data::msg`] because the library reads bags without ROS.
 
@@ -142,6 +143,7 @@ pub mod markers;
 pub mod mcgnode;
 pub mod services;
 pub mod state;
+pub mod tracker;
 
 pub use action::{
     PlanAction, PlanFeedback, PlanGoal, PlanResult, TrainAction, TrainFeedback, TrainGoal,
@@ -165,3 +167,4 @@ pub use services::{
     ReplayRequest, ReplayResponse, Rollout, RolloutRequest, RolloutResponse, Train, TrainRequest,
     TrainResponse,
 };
+pub use tracker::{PointCloud2, PointField, Pose, PoseArray};
