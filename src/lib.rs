@@ -31,6 +31,7 @@ pub mod error;
 pub mod evaluate;
 pub mod gnode;
 pub mod kernel;
+pub mod lagrange_metrics;
 pub mod metrics;
 pub mod models;
 pub mod names;
