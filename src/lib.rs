@@ -32,6 +32,7 @@ pub mod estimate;
 pub mod evaluate;
 pub mod gnode;
 pub mod kernel;
+pub mod lagrange_metrics;
 pub mod metrics;
 pub mod models;
 pub mod names;
