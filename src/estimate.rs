@@ -249,7 +249,7 @@ impl ModelFit {
             let h = span / steps as f64;
             for j in 0..steps {
                 self.step(&mut q, &mut v, &mut a, h)
-                    .map_err(|_| DynamicsError::Diverged(states.len() * steps + j))?;
+                    .map_err(|()| DynamicsError::Diverged(states.len() * steps + j))?;
             }
             states.push(State {
                 q: q.clone(),

@@ -119,7 +119,7 @@ fn velocity_errors(kind: SystemKind, model: &str, every: usize, dt: f64, noise: 
         let Estimate::Ready(p) = est else { continue };
         let w: Vec<&[f64]> = noisy[k + 1 - window..=k]
             .iter()
-            .map(|q| q.as_slice())
+            .map(Vec::as_slice)
             .collect();
         let f = fit.fit(&t[k + 1 - window..=k], &w).expect("fit");
         let truth = &tr.samples[k].state;
