@@ -158,17 +158,11 @@ fn check_tracker_run(s: &serde_json::Value, report: &str, warmup: u64, reasons: 
     }
 }
 
-#[test]
-fn best_effort_pose_arrays_are_predicted_and_malformed_ones_refused() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let d = dir.path();
-    states(&d.join("states.json"), 5, 3, 10);
-    let params = tracker_params(d, "pose_array_topic", 20);
-    let args = "--mode pose --topic /tracker/points --rate 100 --malformed --every 4";
-    let (s, report) = drive(d, &params, args);
+/// Prints a tracker run's counts and latencies, with the machine's load.
+fn print_run(label: &str, s: &serde_json::Value) {
     println!(
-        "best-effort PoseArray, 5 particles at 100 Hz: {} of {} predicted, {} malformed sent, \
-         {} rejected; latency p50 {} ms, p99 {} ms, max {} ms ({})",
+        "{label}: {} of {} predicted, {} malformed sent, {} rejected; \
+         latency p50 {} ms, p99 {} ms, max {} ms ({})",
         s["predicted"],
         s["published"],
         s["malformed"],
@@ -178,6 +172,17 @@ fn best_effort_pose_arrays_are_predicted_and_malformed_ones_refused() {
         s["max_ms"],
         load()
     );
+}
+
+#[test]
+fn best_effort_pose_arrays_are_predicted_and_malformed_ones_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    states(&d.join("states.json"), 5, 3, 10);
+    let params = tracker_params(d, "pose_array_topic", 20);
+    let args = "--mode pose --topic /tracker/points --rate 100 --malformed --every 4";
+    let (s, report) = drive(d, &params, args);
+    print_run("best-effort PoseArray, 5 particles at 100 Hz", &s);
     let reasons = [
         "PoseArray has 4 points; the template (input_template) has 5 particles",
         "PoseArray has 6 points",
@@ -198,18 +203,7 @@ fn point_clouds_of_1000_points_are_predicted_and_malformed_ones_refused() {
     let params = tracker_params(d, "point_cloud_topic", 10);
     let args = "--mode cloud --topic /tracker/points --rate 10 --malformed --every 2 --warmup 3";
     let (s, report) = drive(d, &params, args);
-    println!(
-        "best-effort PointCloud2, 1000 points at 10 Hz: {} of {} predicted, {} malformed sent, \
-         {} rejected; latency p50 {} ms, p99 {} ms, max {} ms ({})",
-        s["predicted"],
-        s["published"],
-        s["malformed"],
-        s["diagnostics"]["rejected"],
-        s["p50_ms"],
-        s["p99_ms"],
-        s["max_ms"],
-        load()
-    );
+    print_run("best-effort PointCloud2, 1000 points at 10 Hz", &s);
     let reasons = [
         "PointCloud2 has 999 points; the template (input_template) has 1000 particles",
         "PointCloud2 frame_id \"camera\" is not the frame_id parameter \"world\"",

@@ -1,6 +1,6 @@
 //! What trackers and cameras publish: `geometry_msgs/PoseArray` and
 //! `sensor_msgs/PointCloud2` (decoded into positions by
-//! [`crate::ros::tracker`]).
+//! `ros/tracker.rs`).
 
 use serde::{Deserialize, Serialize};
 
