@@ -40,6 +40,7 @@ pub use table::table;
 use std::time::Instant;
 
 use crate::data::bag::Bag;
+use crate::data::stream::Smoother;
 use crate::data::stream::StreamOptions;
 use crate::dynamics::{Dynamics, Timing};
 use crate::error::{bail, Context as _, Result};
@@ -60,7 +61,15 @@ pub fn replay(model: &dyn Dynamics, bag: &Bag, opts: &ReplayOptions) -> Result<R
     let mut report = replay_model(model, bag, opts)?;
     let reference = crate::dynamics::Still;
     if model.describe() != reference.describe() {
-        let still = replay_model(&reference, bag, opts)?;
+        // Standing still has no rollout to fit through: with the model
+        // smoother it starts from the window's degree-2 fit, the positions
+        // the model's fit starts from (it predicts no motion, so velocities
+        // do not matter).
+        let mut still_opts = opts.clone();
+        if let Smoother::Model { window } = opts.stream.smoother {
+            still_opts.stream.smoother = Smoother::Poly { window, order: 2 };
+        }
+        let still = replay_model(&reference, bag, &still_opts)?;
         report.still = Some(StillReference::new(&still.summary, report.averages.re));
     }
     Ok(report)
