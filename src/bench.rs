@@ -157,13 +157,14 @@ pub fn contact_packing(side: usize) -> (Graph, State) {
     (g, State { q, v })
 }
 
-/// Median time of one round of `candidates` random candidates, each 5
-/// control steps of 10 integration steps (50 steps), through a random MCGNODE
-/// on a chain of 19 links and its gripper (20 particles), on every core.
-pub fn plan_seconds(candidates: usize, repeats: usize) -> Result<f64> {
+/// Median time of one round of `candidates` random candidates, each
+/// `control_steps` control steps of 10 integration steps, through a random
+/// MCGNODE on a chain of 19 links and its gripper (20 particles), on every core.
+pub fn plan_seconds(candidates: usize, control_steps: usize, repeats: usize) -> Result<f64> {
     use crate::plan::{plan, Sampler};
     let (cfg, g, start, m) = plan_setup()?;
-    let problem = plan_problem(&cfg, &g, &start, &m);
+    let mut problem = plan_problem(&cfg, &g, &start, &m);
+    problem.timing = problem.timing.with_horizon(control_steps);
     let sampler = Sampler::Random {
         candidates,
         sigma: 0.5,
@@ -454,9 +455,19 @@ fn plan_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figure>>
     if want(name) {
         out.push(Figure {
             name: name.into(),
-            value: plan_seconds(256, r.min(5))?,
+            value: plan_seconds(256, 5, r.min(5))?,
             unit: "s".into(),
             repeats: r.min(5),
+        });
+    }
+    let name = "plan: 20,000 candidates x 20 steps of the same chain (MCGNODE, one round)";
+    if want(name) {
+        let repeats = if quick { 1 } else { 3 };
+        out.push(Figure {
+            name: name.into(),
+            value: plan_seconds(20_000, 2, repeats)?,
+            unit: "s".into(),
+            repeats,
         });
     }
     let name = "plan gradient: d cost / d controls through 50 steps of the same chain (MCGNODE)";

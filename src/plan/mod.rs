@@ -9,7 +9,8 @@
 //!   each control step) and the smooth motion it gives them;
 //! * [`cost`]: distance of chosen particles to targets, at the end or along
 //!   the horizon, plus control effort;
-//! * [`search`]: the samplers and the parallel evaluation of candidates;
+//! * [`search`]: the samplers and the parallel evaluation of candidates,
+//!   small systems stepped several candidates at a time (`lanes`);
 //! * [`gradient`]: ∂cost/∂controls by reverse mode through the rollout, and
 //!   gradient steps that refine a search's best candidate;
 //! * [`mpc`]: closed-loop episodes (plan, execute the first control, repeat).
@@ -17,6 +18,7 @@
 pub mod controls;
 pub mod cost;
 pub mod gradient;
+mod lanes;
 pub mod mpc;
 pub mod search;
 

@@ -227,13 +227,28 @@ impl Problem<'_> {
 
     /// The costs of many candidates, spread over the cores (each candidate's
     /// cost does not depend on which thread computes it).
+    /// Systems small enough are stepped [`super::lanes`] at a time.
     pub fn costs(&self, candidates: &[Controls]) -> Result<Vec<f64>, PlanError> {
+        let lanes = super::lanes::Lanes::new(self);
+        let group = lanes.as_ref().map_or(1, |l| l.width);
         let threads = crate::engine::all_cores().min(candidates.len()).max(1);
-        let per = candidates.len().div_ceil(threads).max(1);
+        // Whole groups per thread, so that only the last part has a remainder.
+        let per = candidates.len().div_ceil(threads).div_ceil(group).max(1) * group;
+        let lanes = lanes.as_ref();
+        let part_costs = move |part: &[Controls]| -> Result<Vec<f64>, PlanError> {
+            let Some(l) = lanes else {
+                return part.iter().map(|c| self.cost_of(c)).collect();
+            };
+            let mut out = Vec::with_capacity(part.len());
+            for g in part.chunks(l.width) {
+                out.extend(l.costs(self, g)?);
+            }
+            Ok(out)
+        };
         let parts: Vec<Result<Vec<f64>, PlanError>> = std::thread::scope(|s| {
             let handles: Vec<_> = candidates
                 .chunks(per)
-                .map(|part| s.spawn(move || part.iter().map(|c| self.cost_of(c)).collect()))
+                .map(|part| s.spawn(move || part_costs(part)))
                 .collect();
             handles
                 .into_iter()
