@@ -4,15 +4,17 @@
 # ground truth at 100 Hz (unseen seed), observed by `mcgnode bag observe` as
 # positions only with Gaussian noise of 0, 0.1 % and 1 % of the particle
 # spacing, replayed the way the node predicts from such a stream (velocities
-# estimated causally, without and with the poly smoother) and scored against
+# estimated causally: without a smoother, with the poly smoother, and with the
+# model smoother, fitted through the model's own rollout) and scored against
 # the noise-free truth (`replay --reference`). RE at lead 0.1 s and 1 s,
 # beside standing still's (predicting that nothing moves) on the same starts.
 #
 #   scripts/noise.sh [OUT_DIR]      # bags in OUT_DIR (default: a temporary folder)
 #
 # Environment: MCGNODE (the binary; default target/release/mcgnode, built if
-# missing), TRAJECTORIES (default 4), WINDOWS (the poly smoother's windows
-# tried, default "9 25").
+# missing), TRAJECTORIES (default 4), STATES (per trajectory, default 301),
+# WINDOWS (the poly and model smoothers'
+# windows tried, default "9 25").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=${MCGNODE:-target/release/mcgnode}
@@ -21,6 +23,7 @@ BIN=$(realpath "$BIN")
 OUT=${1:-$(mktemp -d)}
 mkdir -p "$OUT"
 TRAJ=${TRAJECTORIES:-4}
+STATES=${STATES:-301}
 WINDOWS=${WINDOWS:-9 25}
 
 # Mean RE at leads 0.1 s and 1 s of one replay (JSON on stdin), then the
@@ -43,7 +46,7 @@ for system in spring pendulum; do
     # 100 Hz: the pendulum's simulator saves every 1000 of its 1e-5 s steps.
     if [ "$system" = spring ]; then every=10; dt=0.001; else every=1000; dt=0.0001; fi
     truth="$OUT/$system-truth.mcap"
-    "$BIN" simulate --system "$system" --save-every "$every" --states 301 \
+    "$BIN" simulate --system "$system" --save-every "$every" --states "$STATES" \
         --trajectories "$TRAJ" --seed 7 --out "$truth" >/dev/null 2>&1
     replay() {
         "$BIN" replay --bag "$1" --model "$model" --horizon 1.0 --stride 10 --dt "$dt" \
@@ -58,6 +61,8 @@ for system in spring pendulum; do
         for w in $WINDOWS; do
             echo "| $system | $label | poly $w | $(replay "$bag" --reference "$truth" \
                 --smoother poly --smoother-window "$w") |"
+            echo "| $system | $label | model $w | $(replay "$bag" --reference "$truth" \
+                --smoother model --smoother-window "$w") |"
         done
     done
 done

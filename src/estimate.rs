@@ -25,6 +25,10 @@ use crate::dynamics::{Dynamics, DynamicsError, StateGradient};
 use crate::physics::{verlet, Projector};
 use crate::system::{Graph, State};
 
+/// The relative gain in the residuals' sum of squares below which a fit
+/// stops: at the noise floor the estimate no longer moves.
+const CONVERGED: f64 = 1e-4;
+
 /// Bounds on one fit.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FitOptions {
@@ -33,8 +37,8 @@ pub struct FitOptions {
     pub dt: f64,
     /// Levenberg–Marquardt iterations at most.
     pub iterations: usize,
-    /// Wall time at most; the fit stops after the iteration that passes it
-    /// (the best state so far is returned).
+    /// Wall time at most: no iteration is started that, as slow as the
+    /// slowest before it, would pass it (the best state so far is returned).
     pub budget: Duration,
 }
 
@@ -145,7 +149,11 @@ impl ModelFit {
         let rms_start = rms_of(&r);
         let mut lambda = 1e-3;
         let mut iterations = 0;
-        while iterations < self.opts.iterations && t0.elapsed() < self.opts.budget {
+        // An iteration is not started when one more like the slowest so far
+        // would pass the budget.
+        let mut slowest = Duration::ZERO;
+        while iterations < self.opts.iterations && t0.elapsed() + slowest < self.opts.budget {
+            let started = Instant::now();
             iterations += 1;
             let jac = self.jacobian(stamps, &x, &r, &y)?;
             match self.lm_step(&jac, &r, &x, lambda, stamps, &y) {
@@ -153,7 +161,9 @@ impl ModelFit {
                     let gain = 1.0 - dot(&rn, &rn) / dot(&r, &r);
                     (x, r, traj) = (xn, rn, tn);
                     lambda = (lambda * 0.3).max(1e-9);
-                    if gain < 1e-10 {
+                    // Converged: a further step would move the residuals'
+                    // sum of squares by less than this fraction.
+                    if gain < CONVERGED {
                         break;
                     }
                 }
@@ -164,6 +174,7 @@ impl ModelFit {
                     }
                 }
             }
+            slowest = slowest.max(started.elapsed());
         }
         let state = traj.last().expect("a window of ≥ 3 states").clone();
         self.previous = stamps.iter().copied().zip(traj).collect();

@@ -195,7 +195,7 @@ fn observed_bags_replay_as_the_node_predicts_them() {
     assert!(!e.status.success() && err.contains("window 3"), "{err}");
 }
 
-/// scripts/noise.sh (smaller: 1 trajectory) prints the README's table; what
+/// scripts/noise.sh (smaller: 1 trajectory of 201 states) prints the README's table; what
 /// the README says of it holds.
 #[test]
 fn noise_script_makes_the_readme_table() {
@@ -206,6 +206,8 @@ fn noise_script_makes_the_readme_table() {
         .arg(dir.path())
         .env("MCGNODE", BIN)
         .env("TRAJECTORIES", "1")
+        // Shorter than the README's 301: the model rows fit every state.
+        .env("STATES", "201")
         .output()
         .expect("running scripts/noise.sh");
     let table = ok(&o);
@@ -220,7 +222,9 @@ fn noise_script_makes_the_readme_table() {
             (c[0].into(), c[1].into(), c[2].into(), x(3), x(4))
         })
         .collect();
-    assert_eq!(rows.len(), 20, "{table}");
+    // Per system: full states, and at 3 noise levels none, poly 9, model 9,
+    // poly 25, model 25.
+    assert_eq!(rows.len(), 32, "{table}");
     for r in &rows {
         assert!(r.3 > 0.0 && r.3 < 1.0 && r.4 > 0.0 && r.4 < 1.0, "{r:?}");
     }
@@ -272,5 +276,19 @@ fn noise_script_makes_the_readme_table() {
             .map(|s| get(system, "positions, noise 0.1 %", s).0)
             .fold(f64::MAX, f64::min);
         assert!(best < none, "{system}: {best} vs {none}");
+        // The model smoother's best row is below the best poly row.
+        let model = ["model 9", "model 25"]
+            .iter()
+            .map(|s| get(system, "positions, noise 0.1 %", s).0)
+            .fold(f64::MAX, f64::min);
+        println!(
+            "{system}, 0.1 % noise, RE at 0.1 s: best model {model:.2e}, best poly {best:.2e} \
+             ({:.1}x below)",
+            best / model
+        );
+        assert!(
+            model < best,
+            "{system}: model {model} vs poly {best}\n{table}"
+        );
     }
 }

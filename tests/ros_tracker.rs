@@ -3,8 +3,10 @@
 //! SensorDataQoS publish) is heard with `input_qos: sensor_data`; a 100 Hz
 //! PoseArray stream of 5 particles and a 1,000-point PointCloud2 stream at
 //! 10 Hz, interleaved with malformed messages, are predicted from a bag's
-//! template while the malformed ones are refused with their reasons. Each
-//! prints its latency from publish to the prediction's arrival (not
+//! template while the malformed ones are refused with their reasons; a
+//! reliable PoseArray stream is predicted through `velocity_smoother:
+//! model`, its cost per state read from /diagnostics. Each prints its
+//! latency from publish to the prediction's arrival (not
 //! asserted: timings depend on the machine).
 //!
 //! Needs the rclpy venv (`scripts/setup_venv.sh`).
@@ -216,4 +218,58 @@ fn point_clouds_of_1000_points_are_predicted_and_malformed_ones_refused() {
     ];
     // float32 fields: positions as rounded to single precision.
     check_tracker_run(&s, &report, 3, &reasons, 1e-4);
+}
+
+/// `velocity_smoother: model` in the node: a reliable 100 Hz PoseArray
+/// stream of 5 particles (positions only) predicted through the shipped
+/// MCGNODE model, each state's start fitted through its rollout over the
+/// last 15 positions. Every state after the warm-up gets its prediction,
+/// starting near where the tracker put the particles, and /diagnostics
+/// carries the fit's cost per state (printed, not asserted).
+#[test]
+fn pose_arrays_are_predicted_through_the_model_smoother() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    states(&d.join("states.json"), 5, 3, 10);
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("bags/models/spring5-mcgnode.json");
+    let params = format!(
+        "mcgnode:\n  ros__parameters:\n    model: {}\n    dt: 0.01\n    substeps: 10\n    \
+         horizon: 20\n    diagnostics_period: 0.2\n    markers: false\n    \
+         velocity_smoother: model\n    smoother_window: 15\n    \
+         pose_array_topic: /tracker/points\n    input_template: {}\n    frame_id: world\n",
+        model.display(),
+        d.join("template.mcap").display()
+    );
+    let args = "--mode pose --topic /tracker/points --rate 100 --reliable --warmup 15";
+    let (s, report) = drive(d, &params, args);
+    print_run(
+        "reliable PoseArray, 5 particles at 100 Hz, model smoother",
+        &s,
+    );
+    let std = &s["standard"];
+    let ms = |k: &str| std[k].as_str().and_then(|v| v.parse::<f64>().ok());
+    println!(
+        "model smoother cost per state in the node: median {:?} ms, p99 {:?} ms over {} fits; \
+         fitted start {} from the tracker's positions ({})",
+        ms("smoother_cost_median_ms"),
+        ms("smoother_cost_p99_ms"),
+        std["smoother_fits"],
+        s["worst_position_error"],
+        load()
+    );
+    let n = count(&s, "published");
+    // Window 15: the 15th state is the first predicted.
+    assert_eq!(count(&s, "predicted_after_warmup"), n - 15, "{report}");
+    assert_eq!(s["diagnostics"]["rejected"], 0, "{report}");
+    for k in ["smoother_cost_median_ms", "smoother_cost_p99_ms"] {
+        assert!(ms(k).is_some_and(f64::is_finite), "no finite {k}\n{report}");
+    }
+    let fits: u64 = std["smoother_fits"]
+        .as_str()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0);
+    assert!(fits >= n - 15, "{fits} fits\n{report}");
+    // Noise-free positions: the fit through the model stays close to them.
+    let worst = s["worst_position_error"].as_f64().unwrap_or(f64::NAN);
+    assert!(worst < 1e-2, "fitted start {worst} off\n{report}");
 }

@@ -76,6 +76,28 @@ pub fn standard_diagnostics(
     }
 }
 
+/// The model smoother's cost per state over its last fits (up to 1,000):
+/// `smoother_cost_median_ms`, `smoother_cost_p99_ms`, `smoother_fits`;
+/// nothing before its first fit.
+pub fn smoother_cost_values(cost: Option<super::smoother::CostSummary>) -> Vec<KeyValue> {
+    cost.map_or_else(Vec::new, |c| {
+        vec![
+            KeyValue {
+                key: "smoother_cost_median_ms".into(),
+                value: format!("{:.4}", c.median_ms),
+            },
+            KeyValue {
+                key: "smoother_cost_p99_ms".into(),
+                value: format!("{:.4}", c.p99_ms),
+            },
+            KeyValue {
+                key: "smoother_fits".into(),
+                value: c.fits.to_string(),
+            },
+        ]
+    })
+}
+
 /// Live accuracy as a standard diagnostic status, `mcgnode: live accuracy`:
 /// the drift alarm's level and message, and per lead time the running and
 /// latest RE and EE and the number of comparisons (`re_mean@0.5s`, ...).
@@ -121,6 +143,9 @@ pub(super) async fn diagnostics_loop(
         let d = node_diagnostics(&h);
         let dropped = h.diag.stats.dropped.load(Ordering::Relaxed);
         let mut array = standard_diagnostics(&d, dropped, before);
+        array.status[0]
+            .values
+            .extend(smoother_cost_values(h.inputs.smoother_cost()));
         if let Some((figures, level, why, overflowed)) = h.accuracy.figures(&h.params.get()) {
             array
                 .status

@@ -39,7 +39,11 @@ fn handle_state(
     predict::check_size(&msg, params.max_particles)?;
     h.recorder.record(|r| r.state(received_ns, &msg));
     let id = msg.trajectory_id;
-    let input = match h.inputs.accept(&params, msg)? {
+    let (model, generation) = h.model.served();
+    let input = match h
+        .inputs
+        .accept_with(&params, msg, Some((model.as_ref(), generation)))?
+    {
         Accepted::Ready(input) => {
             note_reset(h, id, input.reset.as_ref());
             if input.derived {
@@ -53,7 +57,6 @@ fn handle_state(
             return Ok(None);
         }
     };
-    let (model, generation) = h.model.served();
     // The buffers of the last prediction, refilled: the input loop awaits
     // each state's job, so they are never wanted twice at once.
     let mut kept = h.predicted.lock().unwrap_or_else(PoisonError::into_inner);

@@ -78,6 +78,7 @@ pub(crate) mod qos;
 pub(crate) mod record;
 pub(crate) mod resource_names;
 pub(crate) mod service;
+pub(crate) mod smoother;
 pub(crate) mod topics;
 pub(crate) mod tracker;
 pub(crate) mod tracker_input;

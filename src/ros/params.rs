@@ -455,15 +455,18 @@ node_params! {
         "start as an unconfigured managed node: predict only after configure and activate \
          (lifecycle_msgs services /mcgnode/change_state ...); false: start active. Read at start";
     /// Velocity estimate of position-only streams: "none" (three-point
-    /// difference at the newest state) or "poly" (local polynomial fit).
+    /// difference at the newest state), "poly" (local polynomial fit) or
+    /// "model" (fitted through the served model's rollout).
     velocity_smoother: String = "none".into(), Kind::Choice(crate::data::stream::SMOOTHERS), runtime,
         "velocities of position-only states (empty velocities): none = three-point difference \
          at the newest state (3 states of warm-up); poly = least-squares polynomial over the \
          last smoother_window states, evaluated at the newest stamp (no lag; averages tracker \
-         noise)";
-    /// States in a poly smoother's fit (also its warm-up).
+         noise); model = the start of the last smoother_window states fitted through the \
+         served model's rollout (GNODE family, no kinematic particles)";
+    /// States in a poly or model smoother's fit (also its warm-up).
     smoother_window: u32 = 15, Kind::Int(3, 1000), runtime,
-        "poly smoother: states in the fit, also its warm-up (at least smoother_order + 2)";
+        "poly and model smoothers: states in the fit, also its warm-up (poly: at least \
+         smoother_order + 2; model: at least 4)";
     /// Degree of a poly smoother's polynomial.
     smoother_order: u32 = 2, Kind::Int(1, 4), runtime,
         "poly smoother: degree of the polynomial";

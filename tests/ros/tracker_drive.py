@@ -8,14 +8,16 @@ what comes back (run by tests/ros_tracker.rs inside scripts/netns.sh).
   --mode cloud: their positions as sensor_msgs/PointCloud2 (x, y, z float32,
                 an extra intensity field, point_step 16) on --topic.
 
-Publishers are best effort (as trackers and SensorDataQoS publish), at --rate
+Publishers are best effort (as trackers and SensorDataQoS publish; reliable
+with --reliable), at --rate
 Hz, each message stamped with its state's stamp. With --malformed, after
 every --every-th good message one malformed message (of a list that differs
 per mode) is published. Listens to /mcgnode/predicted_trajectory (reliable)
 and /mcgnode/diagnostics; a prediction is matched to its input by stamp, and
 its latency is its arrival minus the input's publish time. Prints
 `TRACKER_SUMMARY {json}`: published, malformed sent, predictions matched,
-latencies (ms) p50/p99/max after warm-up, and the last NodeDiagnostics.
+latencies (ms) p50/p99/max after warm-up, the last NodeDiagnostics, and the
+values of the last /diagnostics `predictions` status (`standard`).
 """
 
 import argparse
@@ -34,6 +36,11 @@ from builtin_interfaces.msg import Time  # noqa: E402
 from geometry_msgs.msg import Pose, PoseArray  # noqa: E402
 from mcgnode_msgs.msg import NodeDiagnostics, ParticleState, PredictedTrajectory  # noqa: E402
 from sensor_msgs.msg import PointCloud2, PointField  # noqa: E402
+try:
+    from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+except ImportError:
+    print("FAIL: diagnostic_msgs is not installed in the venv; run scripts/setup_venv.sh", flush=True)
+    sys.exit(1)
 
 
 def stamp_of(d):
@@ -125,6 +132,7 @@ def main():
     ap.add_argument("--rate", type=float, default=100.0)
     ap.add_argument("--warmup", type=int, default=20, help="states left out of the latencies")
     ap.add_argument("--malformed", action="store_true")
+    ap.add_argument("--reliable", action="store_true", help="a reliable publisher (default best effort)")
     ap.add_argument("--every", type=int, default=5)
     ap.add_argument("--timeout", type=float, default=60.0)
     a = ap.parse_args()
@@ -132,10 +140,11 @@ def main():
         states = json.load(f)
     rclpy.init()
     node = rclpy.create_node("tracker_drive")
-    best_effort = ru.qos_profile(reliable=False, depth=10)
+    best_effort = ru.qos_profile(reliable=a.reliable, depth=10)
     msg_type = {"state": ParticleState, "pose": PoseArray, "cloud": PointCloud2}[a.mode]
     pub = node.create_publisher(msg_type, a.topic, best_effort)
-    sent, arrived, out = {}, {}, {"diagnostics": None, "worst_position_error": 0.0, "frames": []}
+    sent, arrived = {}, {}
+    out = {"diagnostics": None, "standard": None, "worst_position_error": 0.0, "frames": []}
     by_stamp = {stamp_of(d): d for d in states}
 
     def on_traj(m):
@@ -157,6 +166,12 @@ def main():
         out["diagnostics"] = {k: getattr(m, k) for k in (
             "received", "rejected", "predicted", "derived", "warming_up", "last_error")}
 
+    def on_standard(m):
+        for st in m.status:
+            if st.name.endswith("predictions"):
+                out["standard"] = {kv.key: kv.value for kv in st.values}
+
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_standard, 10)
     subs = [
         node.create_subscription(PredictedTrajectory, "/mcgnode/predicted_trajectory", on_traj,
                                  ru.qos_profile(reliable=True, depth=100)),
