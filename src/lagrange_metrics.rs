@@ -330,28 +330,49 @@ pub fn sinkhorn_divergence(x: &[f64], y: &[f64], d: usize) -> Result<f64, Lagran
 /// outweighs its scheduling, small enough to spread 2,500 rows over cores.
 const ROWS_PER_TASK: usize = 64;
 
+/// Sinkhorn's own pool, one thread per core: the process-wide rayon pool
+/// is kept at one thread for candle (`crate::alloc`). `None` if it cannot
+/// be built (then rows run on the calling thread).
+fn pool() -> Option<&'static rayon::ThreadPool> {
+    static POOL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
+    POOL.get_or_init(|| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(crate::engine::all_cores())
+            .thread_name(|i| format!("sinkhorn-{i}"))
+            .build()
+            .ok()
+    })
+    .as_ref()
+}
+
 /// −ε log Σ_j exp((h_j − C_ij) / ε) for each i (rows of x against the
-/// points of y with their potentials h). Rows are independent: chunks of
-/// [`ROWS_PER_TASK`] run on rayon's global pool, each with its own scratch
-/// row, so the result does not depend on the number of threads.
+/// points of y with their potentials h). Rows are independent: above
+/// [`ROWS_PER_TASK`] rows, chunks of that many run on [`pool`], each with
+/// its own scratch row, so the result does not depend on the threads.
 fn soft_min(x: &[f64], y: &[f64], d: usize, h: &[f64], eps: f64, out: &mut [f64]) {
     use rayon::prelude::*;
     let m = h.len();
-    out.par_chunks_mut(ROWS_PER_TASK)
-        .enumerate()
-        .for_each(|(c, rows)| {
-            let mut z = vec![0.0; m];
-            for (k, o) in rows.iter_mut().enumerate() {
-                let i = c * ROWS_PER_TASK + k;
-                let mut top = f64::NEG_INFINITY;
-                for (j, zj) in z.iter_mut().enumerate() {
-                    *zj = (h[j] - cost(x, y, d, i, j)) / eps;
-                    top = top.max(*zj);
-                }
-                let s: f64 = z.iter().map(|v| (v - top).exp()).sum();
-                *o = -eps * (top + s.ln());
+    let chunk = |(c, rows): (usize, &mut [f64])| {
+        let mut z = vec![0.0; m];
+        for (k, o) in rows.iter_mut().enumerate() {
+            let i = c * ROWS_PER_TASK + k;
+            let mut top = f64::NEG_INFINITY;
+            for (j, zj) in z.iter_mut().enumerate() {
+                *zj = (h[j] - cost(x, y, d, i, j)) / eps;
+                top = top.max(*zj);
             }
-        });
+            let s: f64 = z.iter().map(|v| (v - top).exp()).sum();
+            *o = -eps * (top + s.ln());
+        }
+    };
+    match pool() {
+        Some(p) if out.len() > ROWS_PER_TASK => p.install(|| {
+            out.par_chunks_mut(ROWS_PER_TASK)
+                .enumerate()
+                .for_each(chunk)
+        }),
+        _ => out.chunks_mut(ROWS_PER_TASK).enumerate().for_each(chunk),
+    }
 }
 
 /// ott-jax's `reg_ot_cost` of uniform weights on `x` and `y` after Sinkhorn
