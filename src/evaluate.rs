@@ -5,6 +5,7 @@ use crate::data::bag::Bag;
 use crate::data::field::{bag_field, bag_system, stamp_interval, unknown_field_error};
 use crate::dynamics::{Dynamics, Timing};
 use crate::error::{bail, Result};
+use crate::lagrange_metrics::{self as lb, LagrangeMetrics};
 use crate::metrics::{error_curves, summarize, ErrorCurves, StillReference, Summary};
 use crate::physics::{Field, SystemConfig};
 use crate::system::{fingerprint, State, Trajectory};
@@ -23,6 +24,21 @@ pub struct EvalOptions {
     pub max_trajectories: Option<usize>,
     /// Evaluate even if test starts coincide with training starts.
     pub allow_overlap: bool,
+    /// Particle spacing of LagrangeBench's E_kin (volume dx^d); default: the
+    /// bag metadata's `dx`, else 1 (unit volume).
+    pub dx: Option<f64>,
+    /// Sinkhorn on at most this many particles (evenly strided); default all.
+    pub sinkhorn_particles: Option<usize>,
+}
+
+/// Bag metadata key of the particle spacing (LagrangeBench's `dx`).
+pub const KEY_DX: &str = "dx";
+
+/// The benchmark metrics' settings, resolved.
+#[derive(Clone, Copy, Debug)]
+struct LbSettings {
+    dx: f64,
+    sinkhorn_particles: Option<usize>,
 }
 
 /// Result of an evaluation.
@@ -58,6 +74,18 @@ pub struct Evaluation {
     /// The "nothing moves" reference on the same trajectories (`None` when
     /// the model is that reference).
     pub still: Option<StillReference>,
+    /// LagrangeBench's metrics (MSE5/10/20, Sinkhorn, E_kin MSE) of the
+    /// model, mean over trajectories ([`crate::lagrange_metrics`]).
+    pub lagrange: LagrangeMetrics,
+    /// The same of the standing-still predictor on the same starts (`None`
+    /// when the model is that predictor).
+    pub still_lagrange: Option<LagrangeMetrics>,
+    /// Particle spacing behind E_kin, and where it came from.
+    pub dx: f64,
+    /// Where `dx` came from.
+    pub dx_source: String,
+    /// Particles Sinkhorn was computed on (`None`: all).
+    pub sinkhorn_particles: Option<usize>,
     /// Per-trajectory curves.
     #[serde(skip)]
     pub curves: Vec<ErrorCurves>,
@@ -92,18 +120,25 @@ pub fn evaluate(
         refuse_overlap(&trajs, train_starts)?;
     }
     let groups = group(&trajs, dt)?;
+    let (dx, dx_source) = spacing(bag, opts)?;
+    let lbs = LbSettings {
+        dx,
+        sinkhorn_particles: opts.sinkhorn_particles,
+    };
     let start = Instant::now();
-    let (curves, diverged, steps_total) = score(model, &trajs, &groups, dt, &field)?;
+    let (scored, diverged, steps_total) = score(model, &trajs, &groups, dt, &field, lbs)?;
     let rollout_seconds = start.elapsed().as_secs_f64();
+    let (curves, lagrange) = split(scored)?;
     let summary = summarize(&curves)?;
     let averages = summary.time_average();
     let reference = crate::dynamics::Still;
-    let still = if model.describe() == reference.describe() {
-        None
+    let (still, still_lagrange) = if model.describe() == reference.describe() {
+        (None, None)
     } else {
-        let (c, _, _) = score(&reference, &trajs, &groups, dt, &field)?;
+        let (c, _, _) = score(&reference, &trajs, &groups, dt, &field, lbs)?;
+        let (c, l) = split(c)?;
         let s = summarize(&c)?;
-        Some(StillReference::new(&s, averages.re))
+        (Some(StillReference::new(&s, averages.re)), Some(l))
     };
     Ok(Evaluation {
         averages,
@@ -120,8 +155,42 @@ pub fn evaluate(
         diverged,
         summary,
         still,
+        lagrange,
+        still_lagrange,
+        dx,
+        dx_source,
+        sinkhorn_particles: opts.sinkhorn_particles,
         curves,
     })
+}
+
+/// The particle spacing of E_kin: `--dx`, the bag metadata's `dx`, or 1.
+fn spacing(bag: &Bag, opts: &EvalOptions) -> Result<(f64, String)> {
+    let (dx, source) = match (opts.dx, bag.metadata.get(KEY_DX)) {
+        (Some(dx), _) => (dx, "--dx".to_string()),
+        (None, Some(v)) => match v.trim().parse::<f64>() {
+            Ok(dx) => (dx, "the bag metadata's dx".to_string()),
+            Err(e) => bail!("bag metadata {KEY_DX} = {v:?} is not a number ({e}); pass --dx"),
+        },
+        (None, None) => (
+            1.0,
+            "unit volume (the bag says no dx; pass --dx)".to_string(),
+        ),
+    };
+    if !(dx.is_finite() && dx > 0.0) {
+        bail!("the particle spacing dx must be finite and positive, got {dx} (from {source})");
+    }
+    Ok((dx, source))
+}
+
+/// Curves and the mean of the benchmark metrics of scored trajectories.
+fn split(
+    scored: Vec<(ErrorCurves, LagrangeMetrics)>,
+) -> Result<(Vec<ErrorCurves>, LagrangeMetrics)> {
+    let (curves, lagrange): (Vec<_>, Vec<_>) = scored.into_iter().unzip();
+    let mean =
+        lb::average(&lagrange).ok_or_else(|| crate::error::err!("no trajectory to score"))?;
+    Ok((curves, mean))
 }
 
 /// Whether a recording moves its kinematic particles (a gripper, a pusher):
@@ -234,17 +303,21 @@ fn group(trajs: &[&Trajectory], dt: f64) -> Result<Vec<Group>> {
     Ok(groups)
 }
 
+/// A scored trajectory: its error curves and benchmark metrics.
+type Scored = (ErrorCurves, LagrangeMetrics);
+
 /// Rolls `model` out over every group and scores each trajectory: the
-/// curves in trajectory order, how many diverged, and the steps of the last
-/// group.
+/// curves and benchmark metrics in trajectory order, how many diverged, and
+/// the steps of the last group.
 fn score(
     model: &dyn Dynamics,
     trajs: &[&crate::system::Trajectory],
     groups: &[Group],
     dt: f64,
     field: &Field,
-) -> Result<(Vec<ErrorCurves>, usize, usize)> {
-    let mut curves: Vec<Option<ErrorCurves>> = vec![None; trajs.len()];
+    lbs: LbSettings,
+) -> Result<(Vec<Scored>, usize, usize)> {
+    let mut scored: Vec<Option<Scored>> = vec![None; trajs.len()];
     let mut steps_total = 0;
     let mut diverged = 0;
     for (every, steps, members) in groups {
@@ -267,25 +340,51 @@ fn score(
         };
         steps_total = *steps;
         for (&i, r) in members.iter().zip(rollouts) {
-            let tr = trajs[i];
-            let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
-            let k = r.states.len().min(times.len());
-            let truth: Vec<State> = tr.samples[..k].iter().map(|s| s.state.clone()).collect();
-            let c = error_curves(g, field, &truth, &r.states[..k], &times[..k])
-                .map_err(|e| crate::error::err!("trajectory {}: {e}", tr.id))?;
-            curves[i] = Some(if r.diverged_at.is_some() {
-                diverged += 1;
-                ErrorCurves::diverged(c, &times)
-            } else {
-                c
-            });
+            diverged += usize::from(r.diverged_at.is_some());
+            scored[i] = Some(score_one(trajs[i], field, &r, lbs)?);
         }
     }
     Ok((
-        curves.into_iter().flatten().collect(),
+        scored.into_iter().flatten().collect(),
         diverged,
         steps_total,
     ))
+}
+
+/// The error curves and benchmark metrics of one rollout `r` of `tr`.
+fn score_one(
+    tr: &Trajectory,
+    field: &Field,
+    r: &crate::dynamics::Rollout,
+    lbs: LbSettings,
+) -> Result<Scored> {
+    let g = &tr.graph;
+    let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
+    let k = r.states.len().min(times.len());
+    let truth: Vec<State> = tr.samples[..k].iter().map(|s| s.state.clone()).collect();
+    let c = error_curves(g, field, &truth, &r.states[..k], &times[..k])
+        .map_err(|e| crate::error::err!("trajectory {}: {e}", tr.id))?;
+    if r.diverged_at.is_some() {
+        let frames = times.len().saturating_sub(1).min(lb::HORIZON);
+        return Ok((ErrorCurves::diverged(c, &times), lb::diverged(frames)));
+    }
+    fn frames(states: &[State]) -> lb::Frames<'_> {
+        lb::Frames {
+            q: states.iter().map(|s| s.q.as_slice()).collect(),
+        }
+    }
+    let (t, p) = (&truth[..], &r.states[..k]);
+    let frame_dt = if k > 1 { times[1] - times[0] } else { 0.0 };
+    let m = lb::trajectory_metrics_sampled(
+        &frames(t),
+        &frames(p),
+        g.dim,
+        frame_dt,
+        lbs.dx,
+        lbs.sinkhorn_particles,
+    )
+    .map_err(|e| crate::error::err!("trajectory {}: LagrangeBench metrics: {e}", tr.id))?;
+    Ok((c, m))
 }
 
 /// A plain-text table of a summary at a few times.
@@ -338,9 +437,39 @@ pub fn table(e: &Evaluation, rows: usize) -> String {
     if let Some(r) = still {
         out += &r.verdict(a.re);
     }
+    out += &lagrange_table(e);
     out += &format!(
         "(dt from {}; field for EE from {})\n",
         e.dt_source, e.field_source
     );
+    out
+}
+
+/// The benchmark metrics of the model and of standing still, a row each.
+fn lagrange_table(e: &Evaluation) -> String {
+    let cell = |v: Option<f64>| v.map_or(format!("{:>10}", "-"), |v| format!("{v:>10.3e}"));
+    let row = |name: &str, m: &LagrangeMetrics| {
+        format!(
+            "{name:>8}  {}  {}  {}  {}  {}\n",
+            cell(m.mse5),
+            cell(m.mse10),
+            cell(m.mse20),
+            cell(Some(m.sinkhorn)),
+            cell(m.e_kin_mse)
+        )
+    };
+    let sampled = e
+        .sinkhorn_particles
+        .filter(|&k| k < e.particles)
+        .map_or(String::new(), |k| format!(", Sinkhorn on {k} particles"));
+    let mut out = format!(
+        "LagrangeBench metrics over the first {} frames (dx {} from {}{sampled}):\n\
+         {:>8}  {:>10}  {:>10}  {:>10}  {:>10}  {:>10}\n",
+        e.lagrange.frames, e.dx, e.dx_source, "", "MSE5", "MSE10", "MSE20", "Sinkhorn", "E_kin MSE"
+    );
+    out += &row("model", &e.lagrange);
+    if let Some(s) = &e.still_lagrange {
+        out += &row("still", s);
+    }
     out
 }

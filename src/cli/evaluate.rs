@@ -41,6 +41,15 @@ pub struct Args {
     /// Evaluate even if test trajectories start where training ones did.
     #[arg(long)]
     pub allow_overlap: bool,
+    /// Particle spacing of the E_kin metric (volume dx^d per particle, as
+    /// LagrangeBench); default: the bag metadata's `dx`, else 1.
+    #[arg(long)]
+    pub dx: Option<f64>,
+    /// Compute the Sinkhorn metric on this many evenly strided particles
+    /// (the same ones in truth and prediction) instead of all: it costs
+    /// O(N²) per iteration. Default: all particles.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub sinkhorn_particles: Option<u64>,
 }
 
 /// Runs `evaluate`.
@@ -64,6 +73,8 @@ pub fn run(a: Args) -> Result<()> {
         field: flag_field,
         max_trajectories: a.trajectories,
         allow_overlap: a.allow_overlap,
+        dx: a.dx,
+        sinkhorn_particles: a.sinkhorn_particles.map(|k| k as usize),
     };
     let e = evaluate(
         model.dynamics.as_ref(),

@@ -170,6 +170,8 @@ impl Lab<'_> {
             &EvalOptions {
                 dt,
                 max_trajectories: Some(max),
+                // The tables here report RE/EE/ME only: keep Sinkhorn cheap.
+                sinkhorn_particles: Some(256),
                 ..EvalOptions::default()
             },
         )
