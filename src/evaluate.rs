@@ -58,6 +58,8 @@ pub struct Evaluation {
     /// The "nothing moves" reference on the same trajectories (`None` when
     /// the model is that reference).
     pub still: Option<StillReference>,
+    /// The ensemble's spread beside its error ([`crate::calibration`]).
+    pub calibration: crate::calibration::Calibration,
     /// Per-trajectory curves.
     #[serde(skip)]
     pub curves: Vec<ErrorCurves>,
@@ -93,7 +95,8 @@ pub fn evaluate(
     }
     let groups = group(&trajs, dt)?;
     let start = Instant::now();
-    let (curves, diverged, steps_total) = score(model, &trajs, &groups, dt, &field)?;
+    let (curves, diverged, steps_total, samples) = score(model, &trajs, &groups, dt, &field)?;
+    let calibration = crate::calibration::Calibration::new(model.members(), &samples);
     let rollout_seconds = start.elapsed().as_secs_f64();
     let summary = summarize(&curves)?;
     let averages = summary.time_average();
@@ -101,7 +104,7 @@ pub fn evaluate(
     let still = if model.describe() == reference.describe() {
         None
     } else {
-        let (c, _, _) = score(&reference, &trajs, &groups, dt, &field)?;
+        let (c, _, _, _) = score(&reference, &trajs, &groups, dt, &field)?;
         let s = summarize(&c)?;
         Some(StillReference::new(&s, averages.re))
     };
@@ -120,6 +123,7 @@ pub fn evaluate(
         diverged,
         summary,
         still,
+        calibration,
         curves,
     })
 }
@@ -234,16 +238,20 @@ fn group(trajs: &[&Trajectory], dt: f64) -> Result<Vec<Group>> {
     Ok(groups)
 }
 
-/// Rolls `model` out over every group and scores each trajectory: the
-/// curves in trajectory order, how many diverged, and the steps of the last
-/// group.
+/// What [`score`] returns: the curves in trajectory order, how many
+/// diverged, the steps of the last group, and the spread beside the error
+/// of each rollout that neither diverged nor was driven.
+type Scored = (Vec<ErrorCurves>, usize, usize, Vec<crate::calibration::Sample>);
+
+/// Rolls `model` out over every group and scores each trajectory.
 fn score(
     model: &dyn Dynamics,
     trajs: &[&crate::system::Trajectory],
     groups: &[Group],
     dt: f64,
     field: &Field,
-) -> Result<(Vec<ErrorCurves>, usize, usize)> {
+) -> Result<Scored> {
+    let mut samples = vec![];
     let mut curves: Vec<Option<ErrorCurves>> = vec![None; trajs.len()];
     let mut steps_total = 0;
     let mut diverged = 0;
@@ -255,24 +263,31 @@ fn score(
             .collect();
         let driven = members.iter().any(|&i| kinematic_moves(trajs[i]));
         let timing = Timing::integration(dt, *steps, *every);
-        let rollouts = if driven {
+        let rollouts: Vec<_> = if driven {
             members
                 .iter()
-                .map(|&i| driven_rollout(model, trajs[i], timing))
+                .map(|&i| Ok((driven_rollout(model, trajs[i], timing)?, None)))
                 .collect::<Result<Vec<_>>>()?
         } else {
             model
-                .rollout_many(g, &starts, timing)
+                .rollout_many_spread(g, &starts, timing)
                 .map_err(|e| crate::error::err!("trajectory {}: {e}", trajs[members[0]].id))?
+                .into_iter()
+                .map(|(r, s)| (r, Some(s)))
+                .collect()
         };
         steps_total = *steps;
-        for (&i, r) in members.iter().zip(rollouts) {
+        for (&i, (r, spread)) in members.iter().zip(rollouts) {
             let tr = trajs[i];
             let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
             let k = r.states.len().min(times.len());
             let truth: Vec<State> = tr.samples[..k].iter().map(|s| s.state.clone()).collect();
             let c = error_curves(g, field, &truth, &r.states[..k], &times[..k])
                 .map_err(|e| crate::error::err!("trajectory {}: {e}", tr.id))?;
+            if let (Some(sp), None) = (&spread, r.diverged_at) {
+                let (t, p) = (&times[..k], &r.states[..k]);
+                samples.push(crate::calibration::Sample::new(g.dim, t, &truth, p, sp));
+            }
             curves[i] = Some(if r.diverged_at.is_some() {
                 diverged += 1;
                 ErrorCurves::diverged(c, &times)
@@ -285,6 +300,7 @@ fn score(
         curves.into_iter().flatten().collect(),
         diverged,
         steps_total,
+        samples,
     ))
 }
 
@@ -337,6 +353,23 @@ pub fn table(e: &Evaluation, rows: usize) -> String {
     );
     if let Some(r) = still {
         out += &r.verdict(a.re);
+    }
+    let c = &e.calibration;
+    if c.members > 1 {
+        let leads: Vec<String> = c
+            .spread_at_leads
+            .iter()
+            .map(|l| format!("{} s {:.2e}", l.lead, l.mean_spread))
+            .collect();
+        let opt = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.2}"));
+        out += &format!(
+            "ensemble of {}: mean spread {}; Spearman(spread, error) at 1 s {}, \
+             within 2 spreads {}\n",
+            c.members,
+            leads.join(", "),
+            opt(c.spearman_spread_error_1s),
+            opt(c.within_2_spreads)
+        );
     }
     out += &format!(
         "(dt from {}; field for EE from {})\n",
