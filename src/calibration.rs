@@ -39,7 +39,11 @@ impl Sample {
         spread: &[Vec<f64>],
     ) -> Self {
         let d = dim.max(1);
-        let k = times.len().min(truth.len()).min(pred.len()).min(spread.len());
+        let k = times
+            .len()
+            .min(truth.len())
+            .min(pred.len())
+            .min(spread.len());
         let t0 = times.first().copied().unwrap_or(0.0);
         let error = (0..k)
             .map(|s| {

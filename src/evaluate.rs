@@ -241,7 +241,12 @@ fn group(trajs: &[&Trajectory], dt: f64) -> Result<Vec<Group>> {
 /// What [`score`] returns: the curves in trajectory order, how many
 /// diverged, the steps of the last group, and the spread beside the error
 /// of each rollout that neither diverged nor was driven.
-type Scored = (Vec<ErrorCurves>, usize, usize, Vec<crate::calibration::Sample>);
+type Scored = (
+    Vec<ErrorCurves>,
+    usize,
+    usize,
+    Vec<crate::calibration::Sample>,
+);
 
 /// Rolls `model` out over every group and scores each trajectory.
 fn score(

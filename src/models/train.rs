@@ -109,9 +109,7 @@ pub fn train_ensemble_from_bags(
         );
     }
     if cfg.checkpoint.is_some() && k > 1 {
-        crate::error::bail!(
-            "--checkpoint saves one run: drop it or train with --ensemble 1"
-        );
+        crate::error::bail!("--checkpoint saves one run: drop it or train with --ensemble 1");
     }
     let mut first: Option<ModelFile> = None;
     let mut seconds = 0.0;
