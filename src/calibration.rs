@@ -104,6 +104,9 @@ pub struct Calibration {
     /// `None` with fewer than 3 starts reaching 1 s, or when either side is
     /// constant (a single model's spread).
     pub spearman_spread_error_1s: Option<f64>,
+    /// Per start reaching 1 s, its mean spread and error there (what the
+    /// Spearman correlation ranks), so that evaluations can be pooled.
+    pub spread_error_1s: Vec<[f64; 2]>,
     /// Fraction of (kept state after the start, particle) whose error is at
     /// most two spreads.
     pub within_2_spreads: Option<f64>,
@@ -139,6 +142,7 @@ impl Calibration {
             }
         }
         let spearman_spread_error_1s = (s1.len() >= 3).then(|| spearman(&s1, &e1)).flatten();
+        let spread_error_1s = s1.iter().zip(&e1).map(|(s, e)| [*s, *e]).collect();
         let (mut within, mut all) = (0usize, 0usize);
         for x in samples {
             for (e, s) in x.error.iter().zip(&x.spread).skip(1) {
@@ -151,6 +155,7 @@ impl Calibration {
             starts: samples.len(),
             spread_at_leads,
             spearman_spread_error_1s,
+            spread_error_1s,
             within_2_spreads: (all > 0).then(|| within as f64 / all as f64),
         }
     }
@@ -242,6 +247,7 @@ mod tests {
         let c = Calibration::new(3, &samples);
         assert_eq!(c.starts, 4);
         assert_eq!(c.spread_at_leads.len(), 2, "0.5 s and 1 s are reached");
+        assert_eq!(c.spread_error_1s.len(), 4, "one pair per start");
         assert!((c.spearman_spread_error_1s.unwrap() - 1.0).abs() < 1e-12);
         // error i·k·0.1/√2 <= 2·0.05·k ⇔ i <= √2: only i = 1 of 1..=3.
         assert!((c.within_2_spreads.unwrap() - 1.0 / 3.0).abs() < 1e-12);
