@@ -237,10 +237,10 @@ mod tests {
         // One particle in 2D, errors 0.1·i/√2 at lead i·0.5 s; spread 0.1.
         let samples: Vec<Sample> = (1..=4)
             .map(|k| {
-                let times: Vec<f64> = (0..4).map(|i| 0.5 * i as f64).collect();
+                let times: Vec<f64> = (0..4).map(|i| 0.5 * f64::from(i)).collect();
                 let truth: Vec<State> = (0..4).map(|_| st(0.0)).collect();
-                let pred: Vec<State> = (0..4).map(|i| st(0.1 * (i * k) as f64)).collect();
-                let spread = vec![vec![0.05 * k as f64]; 4];
+                let pred: Vec<State> = (0..4).map(|i| st(0.1 * f64::from(i * k))).collect();
+                let spread = vec![vec![0.05 * f64::from(k)]; 4];
                 Sample::new(2, &times, &truth, &pred, &spread)
             })
             .collect();

@@ -94,7 +94,10 @@ fn mean_rollout(dim: usize, runs: &[Vec<State>]) -> Vec<State> {
 
 impl Dynamics for Ensemble {
     fn describe(&self) -> String {
-        let first = self.members.first().map_or(String::new(), |m| m.describe());
+        let first = self
+            .members
+            .first()
+            .map_or(String::new(), Dynamics::describe);
         format!("ensemble of {} × {first}", self.members.len())
     }
 

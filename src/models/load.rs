@@ -74,9 +74,9 @@ pub fn load_any_model(model: &ModelRef) -> Result<LoadedModel> {
         Arc::new(crate::kernel::Ensemble::from_file(&m.file)?)
     };
     Ok(LoadedModel {
+        dynamics,
         name,
         start_fingerprints,
-        dynamics,
     })
 }
 

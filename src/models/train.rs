@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 
 /// A trained model's file, of either kind, not yet saved.
 #[derive(Clone, Debug)]
+#[allow(clippy::large_enum_variant)] // one per training, moved rarely
 pub enum TrainedFile {
     /// The GNODE family.
     Family(ModelFile),
