@@ -86,6 +86,8 @@ pub struct Evaluation {
     pub dx_source: String,
     /// Particles Sinkhorn was computed on (`None`: all).
     pub sinkhorn_particles: Option<usize>,
+    /// The ensemble's spread beside its error ([`crate::calibration`]).
+    pub calibration: crate::calibration::Calibration,
     /// Per-trajectory curves.
     #[serde(skip)]
     pub curves: Vec<ErrorCurves>,
@@ -126,7 +128,8 @@ pub fn evaluate(
         sinkhorn_particles: opts.sinkhorn_particles,
     };
     let start = Instant::now();
-    let (scored, diverged, steps_total) = score(model, &trajs, &groups, dt, &field, lbs)?;
+    let (scored, diverged, steps_total, samples) = score(model, &trajs, &groups, dt, &field, lbs)?;
+    let calibration = crate::calibration::Calibration::new(model.members(), &samples);
     let rollout_seconds = start.elapsed().as_secs_f64();
     let (curves, lagrange) = split(scored)?;
     let summary = summarize(&curves)?;
@@ -135,7 +138,7 @@ pub fn evaluate(
     let (still, still_lagrange) = if model.describe() == reference.describe() {
         (None, None)
     } else {
-        let (c, _, _) = score(&reference, &trajs, &groups, dt, &field, lbs)?;
+        let (c, _, _, _) = score(&reference, &trajs, &groups, dt, &field, lbs)?;
         let (c, l) = split(c)?;
         let s = summarize(&c)?;
         (Some(StillReference::new(&s, averages.re)), Some(l))
@@ -160,6 +163,7 @@ pub fn evaluate(
         dx,
         dx_source,
         sinkhorn_particles: opts.sinkhorn_particles,
+        calibration,
         curves,
     })
 }
@@ -309,6 +313,11 @@ type Scored = (ErrorCurves, LagrangeMetrics);
 /// Rolls `model` out over every group and scores each trajectory: the
 /// curves and benchmark metrics in trajectory order, how many diverged, and
 /// the steps of the last group.
+
+/// What [`score`] returns: the scored trajectories in trajectory order, how
+/// many diverged, the steps of the last group, and the spread beside the
+/// error of each rollout that neither diverged nor was driven.
+type Scores = (Vec<Scored>, usize, usize, Vec<crate::calibration::Sample>);
 fn score(
     model: &dyn Dynamics,
     trajs: &[&crate::system::Trajectory],
@@ -316,7 +325,8 @@ fn score(
     dt: f64,
     field: &Field,
     lbs: LbSettings,
-) -> Result<(Vec<Scored>, usize, usize)> {
+) -> Result<Scores> {
+    let mut samples = vec![];
     let mut scored: Vec<Option<Scored>> = vec![None; trajs.len()];
     let mut steps_total = 0;
     let mut diverged = 0;
@@ -328,19 +338,25 @@ fn score(
             .collect();
         let driven = members.iter().any(|&i| kinematic_moves(trajs[i]));
         let timing = Timing::integration(dt, *steps, *every);
-        let rollouts = if driven {
+        let rollouts: Vec<_> = if driven {
             members
                 .iter()
-                .map(|&i| driven_rollout(model, trajs[i], timing))
+                .map(|&i| Ok((driven_rollout(model, trajs[i], timing)?, None)))
                 .collect::<Result<Vec<_>>>()?
         } else {
             model
-                .rollout_many(g, &starts, timing)
+                .rollout_many_spread(g, &starts, timing)
                 .map_err(|e| crate::error::err!("trajectory {}: {e}", trajs[members[0]].id))?
+                .into_iter()
+                .map(|(r, s)| (r, Some(s)))
+                .collect()
         };
         steps_total = *steps;
-        for (&i, r) in members.iter().zip(rollouts) {
+        for (&i, (r, spread)) in members.iter().zip(rollouts) {
             diverged += usize::from(r.diverged_at.is_some());
+            if let (Some(sp), None) = (&spread, r.diverged_at) {
+                samples.push(calibration_sample(trajs[i], &r, sp));
+            }
             scored[i] = Some(score_one(trajs[i], field, &r, lbs)?);
         }
     }
@@ -348,7 +364,21 @@ fn score(
         scored.into_iter().flatten().collect(),
         diverged,
         steps_total,
+        samples,
     ))
+}
+
+/// The spread beside the error of one rollout that neither diverged nor
+/// was driven.
+fn calibration_sample(
+    tr: &Trajectory,
+    r: &crate::dynamics::Rollout,
+    spread: &[Vec<f64>],
+) -> crate::calibration::Sample {
+    let times: Vec<f64> = tr.samples.iter().map(|s| s.t).collect();
+    let k = r.states.len().min(times.len());
+    let truth: Vec<State> = tr.samples[..k].iter().map(|s| s.state.clone()).collect();
+    crate::calibration::Sample::new(tr.graph.dim, &times[..k], &truth, &r.states[..k], spread)
 }
 
 /// The error curves and benchmark metrics of one rollout `r` of `tr`.
@@ -438,6 +468,23 @@ pub fn table(e: &Evaluation, rows: usize) -> String {
         out += &r.verdict(a.re);
     }
     out += &lagrange_table(e);
+    let c = &e.calibration;
+    if c.members > 1 {
+        let leads: Vec<String> = c
+            .spread_at_leads
+            .iter()
+            .map(|l| format!("{} s {:.2e}", l.lead, l.mean_spread))
+            .collect();
+        let opt = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.2}"));
+        out += &format!(
+            "ensemble of {}: mean spread {}; Spearman(spread, error) at 1 s {}, \
+             within 2 spreads {}\n",
+            c.members,
+            leads.join(", "),
+            opt(c.spearman_spread_error_1s),
+            opt(c.within_2_spreads)
+        );
+    }
     out += &format!(
         "(dt from {}; field for EE from {})\n",
         e.dt_source, e.field_source

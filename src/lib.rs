@@ -22,6 +22,7 @@
 pub mod alloc;
 pub mod baselines;
 pub mod bench;
+pub mod calibration;
 pub mod cli;
 pub mod compat;
 pub mod data;

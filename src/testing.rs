@@ -69,6 +69,7 @@ pub fn random_model_with(
         },
         weights: net.store.weights()?,
         optimizer: None,
+        members: vec![],
     };
     let m = TrainedModel::from_file(file)?;
     Ok((net, m))

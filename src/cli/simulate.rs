@@ -32,6 +32,15 @@ pub struct Args {
     /// spheres 1000, colliding lattices 100, falling chain 1e4).
     #[arg(long)]
     pub contact_stiffness: Option<f64>,
+    /// Spring stiffness k (default: held chain 500, colliding lattices 10,
+    /// others 1); e.g. 2x the training data's for held-out data outside its
+    /// range.
+    #[arg(long)]
+    pub stiffness: Option<f64>,
+    /// Factor on every start's velocities (e.g. 3 for held-out data faster
+    /// than the training data).
+    #[arg(long, default_value_t = 1.0)]
+    pub velocity_scale: f64,
     /// Number of trajectories (random initial conditions).
     #[arg(long, default_value_t = 100)]
     pub trajectories: usize,
@@ -87,6 +96,10 @@ pub fn config(a: &Args) -> Result<SystemConfig> {
     if let Some(k) = a.contact_stiffness {
         c.contact_stiffness = k;
     }
+    if let Some(k) = a.stiffness {
+        c.stiffness = k;
+    }
+    c.velocity_scale = a.velocity_scale;
     if let Some(d) = a.drag {
         c.field.drag = d;
     }

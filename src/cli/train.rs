@@ -147,6 +147,13 @@ pub struct Args {
         requires = "checkpoint"
     )]
     pub checkpoint_every: f64,
+    /// Train an ensemble of K members of the GNODE family into one model
+    /// file: the same recipe, seeds --seed, --seed + 1, … (initialisation,
+    /// split and data order). Consumers predict the members' mean and report
+    /// their spread.
+    #[arg(long, value_name = "K", default_value_t = 1,
+          value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub ensemble: u32,
     /// Print nothing but errors.
     #[arg(long)]
     pub quiet: bool,
@@ -291,6 +298,19 @@ pub fn train(
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainingReport> {
     let (opts, cfg) = a.settings()?;
+    if a.ensemble > 1 {
+        let f = crate::models::train_ensemble_from_bags(
+            a.model,
+            &a.data,
+            &opts,
+            &cfg,
+            a.ensemble as usize,
+            log,
+            on_epoch,
+        )?;
+        f.save(&a.out)?;
+        return Ok(f.training().clone());
+    }
     Ok(train_any_from_bags(
         a.model, &a.data, &opts, &cfg, log, on_epoch, &a.out,
     )?)

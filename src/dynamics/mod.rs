@@ -332,7 +332,36 @@ pub trait Dynamics: Send + Sync {
             self.acceleration_batch(graph, s, a)
         })
     }
+
+    /// Models whose prediction is the mean of this many (an ensemble,
+    /// [`crate::kernel::Ensemble`]); 1 for a single model.
+    fn members(&self) -> usize {
+        1
+    }
+
+    /// [`Dynamics::rollout_many`] with each kept state's [`Spread`]. A
+    /// single model's spread is zero; an ensemble's is its members'.
+    fn rollout_many_spread(
+        &self,
+        graph: &Graph,
+        starts: &[State],
+        timing: Timing,
+    ) -> Result<Vec<(Rollout, Spread)>, DynamicsError> {
+        let n = graph.n();
+        Ok(self
+            .rollout_many(graph, starts, timing)?
+            .into_iter()
+            .map(|r| {
+                let zero = vec![vec![0.0; n]; r.states.len()];
+                (r, zero)
+            })
+            .collect())
+    }
 }
+
+/// Per kept state, each particle's spread: the ensemble members' standard
+/// deviation of its position, √(mean over axes of the variance).
+pub type Spread = Vec<Vec<f64>>;
 
 /// The name under which [`Still`] is loaded (`--model still`).
 pub const STILL: &str = "still";

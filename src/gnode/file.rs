@@ -257,6 +257,42 @@ pub struct ModelFile {
     /// continue where it stopped (absent in files written before it existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub optimizer: Option<AdamState>,
+    /// The other members of an ensemble (`train --ensemble K`: K − 1 of
+    /// them; this file's own weights are the first member). Absent in
+    /// single-model files, which load unchanged.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub members: Vec<Member>,
+}
+
+/// One more member of an ensemble: the same architecture and data, trained
+/// from another seed (initialisation, split and data order).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Member {
+    /// How its training went (its seed among them).
+    pub training: TrainingReport,
+    /// Its parameters.
+    pub weights: Weights,
+}
+
+impl ModelFile {
+    /// The members of the ensemble this file holds, each as a single-model
+    /// file (one for a single model).
+    pub fn member_files(&self) -> Vec<ModelFile> {
+        let first = ModelFile {
+            members: vec![],
+            ..self.clone()
+        };
+        let mut out = vec![first.clone()];
+        for m in &self.members {
+            out.push(ModelFile {
+                training: m.training.clone(),
+                weights: m.weights.clone(),
+                optimizer: None,
+                ..first.clone()
+            });
+        }
+        out
+    }
 }
 
 /// Adam's moments (named like the weights) and step count.

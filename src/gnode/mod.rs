@@ -23,4 +23,4 @@ pub use solve::solve;
 pub use variant::{ArchPreset, EdgeInput, Hyper, MessageFn, Norm, Variant};
 pub(crate) mod file;
 
-pub use file::ModelFile;
+pub use file::{Member, ModelFile};

@@ -4,6 +4,7 @@
 //! [`Workspace`]. Rollouts and the ROS node run on this; candle is the
 //! reference it is tested against (to 1e-12).
 
+pub mod ensemble;
 pub mod gradient;
 pub mod trained;
 
@@ -15,6 +16,7 @@ use crate::gnode::params::Weights;
 use crate::gnode::variant::Hyper;
 use crate::physics::Projector;
 use crate::system::Graph;
+pub use ensemble::Ensemble;
 pub use gradient::KernelGradient;
 use rand::SeedableRng;
 pub use trained::TrainedModel;

@@ -125,4 +125,18 @@ impl Dynamics for Checked {
         self.check(graph)?;
         self.inner.rollout_many(graph, starts, timing)
     }
+
+    fn members(&self) -> usize {
+        self.inner.members()
+    }
+
+    fn rollout_many_spread(
+        &self,
+        graph: &Graph,
+        starts: &[State],
+        timing: crate::dynamics::Timing,
+    ) -> Result<Vec<(Rollout, crate::dynamics::Spread)>, DynamicsError> {
+        self.check(graph)?;
+        self.inner.rollout_many_spread(graph, starts, timing)
+    }
 }

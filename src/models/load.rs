@@ -66,10 +66,17 @@ pub fn load_any_model(model: &ModelRef) -> Result<LoadedModel> {
         });
     }
     let m = TrainedModel::load(path)?;
+    let name = m.file.hyper.variant.name().to_string();
+    let start_fingerprints = m.file.trained_on.start_fingerprints.clone();
+    let dynamics: Arc<dyn Dynamics> = if m.file.members.is_empty() {
+        Arc::new(m)
+    } else {
+        Arc::new(crate::kernel::Ensemble::from_file(&m.file)?)
+    };
     Ok(LoadedModel {
-        name: m.file.hyper.variant.name().to_string(),
-        start_fingerprints: m.file.trained_on.start_fingerprints.clone(),
-        dynamics: Arc::new(m),
+        dynamics,
+        name,
+        start_fingerprints,
     })
 }
 

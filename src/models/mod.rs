@@ -18,5 +18,5 @@ pub use checked::Checked;
 pub use kind::ModelKind;
 pub use load::{load_any_model, load_model, trained_for, LoadedModel};
 pub use reference::ModelRef;
-pub use train::{train_any_from_bags, train_from_bags, TrainedFile};
+pub use train::{train_any_from_bags, train_ensemble_from_bags, train_from_bags, TrainedFile};
 pub use truth::Truth;

@@ -4,12 +4,13 @@
 use super::ModelKind;
 use crate::baselines::BaselineFile;
 use crate::error::{Context, Result};
-use crate::gnode::file::{ModelFile, TrainingReport};
+use crate::gnode::file::{Member, ModelFile, TrainingReport};
 use crate::train::{EpochReport, ModelOptions, TrainConfig};
 use std::path::{Path, PathBuf};
 
 /// A trained model's file, of either kind, not yet saved.
 #[derive(Clone, Debug)]
+#[allow(clippy::large_enum_variant)] // one per training, moved rarely
 pub enum TrainedFile {
     /// The GNODE family.
     Family(ModelFile),
@@ -85,4 +86,57 @@ pub fn train_any_from_bags(
     let f = train_from_bags(kind, bags, opts, cfg, log, on_epoch)?;
     f.save(out)?;
     Ok(f.training().clone())
+}
+
+/// An ensemble of `k` GNODE-family members trained as [`train_from_bags`]
+/// would train one, member `i` with seed `cfg.seed + i` (initialisation,
+/// split and data order), one after another, into one file: the first
+/// member's, with the others in [`ModelFile::members`]. Its training report
+/// is the first member's, with the seconds of all of them.
+pub fn train_ensemble_from_bags(
+    kind: ModelKind,
+    bags: &[PathBuf],
+    opts: &ModelOptions,
+    cfg: &TrainConfig,
+    k: usize,
+    mut log: impl FnMut(&str),
+    mut on_epoch: impl FnMut(&EpochReport) -> bool,
+) -> Result<TrainedFile> {
+    if !matches!(kind, ModelKind::Family(_)) {
+        crate::error::bail!(
+            "--ensemble is for the GNODE family (node, gnode, cgnode, cdgnode, mcgnode); \
+             train {} without it",
+            kind.name()
+        );
+    }
+    if cfg.checkpoint.is_some() && k > 1 {
+        crate::error::bail!("--checkpoint saves one run: drop it or train with --ensemble 1");
+    }
+    let mut first: Option<ModelFile> = None;
+    let mut seconds = 0.0;
+    for i in 0..k.max(1) {
+        let member_cfg = TrainConfig {
+            seed: cfg.seed.wrapping_add(i as u64),
+            ..cfg.clone()
+        };
+        log(&format!(
+            "ensemble member {} of {k} (seed {})",
+            i + 1,
+            member_cfg.seed
+        ));
+        let f = train_from_bags(kind, bags, opts, &member_cfg, &mut log, &mut on_epoch)?
+            .into_family()
+            .ok_or_else(|| crate::error::err!("an ensemble member is not of the GNODE family"))?;
+        seconds += f.training.seconds;
+        match first.as_mut() {
+            None => first = Some(f),
+            Some(m) => m.members.push(Member {
+                training: f.training,
+                weights: f.weights,
+            }),
+        }
+    }
+    let mut file = first.ok_or_else(|| crate::error::err!("an ensemble needs K >= 1"))?;
+    file.training.seconds = seconds;
+    Ok(TrainedFile::Family(file))
 }

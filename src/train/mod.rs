@@ -253,6 +253,7 @@ pub(crate) fn train_from_bags(
         training: trained.report,
         weights: trained.net.store.weights()?,
         optimizer: Some(trained.optimizer),
+        members: vec![],
     })
 }
 

@@ -1,0 +1,222 @@
+//! Ensembles (`train --ensemble K`): one model file of K members whose
+//! mean is the prediction and whose spread `evaluate --json` reports;
+//! single-model files load and predict as before.
+
+mod common;
+
+use common::cli::{evaluate_json, mcgnode, ok};
+use mcgnode::dynamics::{Dynamics, Timing};
+use mcgnode::gnode::{Member, ModelFile};
+use mcgnode::kernel::{Ensemble, TrainedModel};
+use mcgnode::models::{load_any_model, ModelRef};
+use mcgnode::physics::{SystemConfig, SystemKind};
+use std::path::Path;
+
+const SHIPPED: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/bags/models/spring5-mcgnode.json"
+);
+
+fn spreads(e: &serde_json::Value) -> Vec<f64> {
+    e["calibration"]["spread_at_leads"]
+        .as_array()
+        .expect("spread_at_leads")
+        .iter()
+        .map(|l| l["mean_spread"].as_f64().expect("mean_spread"))
+        .collect()
+}
+
+#[test]
+fn an_ensemble_reports_its_spread_and_a_single_model_none() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sim = |seed: &str, n: &str, states: &str, out: &str| {
+        ok(&mcgnode(
+            &[
+                "simulate",
+                "--system",
+                "spring",
+                "--particles",
+                "5",
+                "--trajectories",
+                n,
+                "--seed",
+                seed,
+                "--states",
+                states,
+                "--out",
+                out,
+            ],
+            d,
+        ))
+    };
+    sim("1", "8", "30", "train.mcap");
+    sim("2", "6", "21", "test.mcap");
+    let train = |k: &str, out: &str| {
+        ok(&mcgnode(
+            &[
+                "train",
+                "--model",
+                "mcgnode",
+                "--data",
+                "train.mcap",
+                "--epochs",
+                "5",
+                "--ensemble",
+                k,
+                "--out",
+                out,
+                "--quiet",
+            ],
+            d,
+        ))
+    };
+    train("2", "k2.json");
+    train("1", "k1.json");
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("k2.json")).unwrap()).unwrap();
+    let members = file["members"].as_array().expect("members of a K = 2 file");
+    assert_eq!(
+        members.len(),
+        1,
+        "the file's own weights are the first member"
+    );
+    assert_ne!(members[0]["weights"], file["weights"], "members differ");
+    assert_ne!(members[0]["training"]["seed"], file["training"]["seed"]);
+
+    let e2 = evaluate_json(d, &["--model", "k2.json", "--bag", "test.mcap"]);
+    let c = &e2["calibration"];
+    assert_eq!(c["members"], 2);
+    let keys: Vec<&String> = c.as_object().unwrap().keys().collect();
+    assert!(keys.iter().any(|k| k.contains("spearman")), "{keys:?}");
+    assert!(keys.iter().any(|k| k.contains("spread")), "{keys:?}");
+    let s2 = spreads(&e2);
+    assert!(!s2.is_empty(), "leads reached by 2 s trajectories: {c}");
+    assert!(s2.iter().all(|s| *s > 0.0), "spread of two members: {s2:?}");
+    assert!(c["spearman_spread_error_1s"].is_number(), "{c}");
+    let f = c["within_2_spreads"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&f));
+
+    let e1 = evaluate_json(d, &["--model", "k1.json", "--bag", "test.mcap"]);
+    assert_eq!(e1["calibration"]["members"], 1);
+    let s1 = spreads(&e1);
+    assert!(!s1.is_empty() && s1.iter().all(|s| *s == 0.0), "{s1:?}");
+    assert!(e1["calibration"]["spearman_spread_error_1s"].is_null());
+}
+
+#[test]
+fn a_baseline_ensemble_is_refused_with_what_to_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(&mcgnode(
+        &[
+            "simulate",
+            "--particles",
+            "3",
+            "--trajectories",
+            "2",
+            "--states",
+            "5",
+            "--out",
+            "t.mcap",
+        ],
+        d,
+    ));
+    let o = mcgnode(
+        &[
+            "train",
+            "--model",
+            "gns",
+            "--data",
+            "t.mcap",
+            "--epochs",
+            "1",
+            "--ensemble",
+            "2",
+            "--out",
+            "m.json",
+        ],
+        d,
+    );
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("GNODE family") && err.contains("without it"),
+        "{err}"
+    );
+}
+
+fn positions(model: &dyn Dynamics) -> Vec<f64> {
+    let c = SystemConfig::new(SystemKind::Spring, 5);
+    let g = c.graph();
+    let start = c.start_for(&g, 11, 0);
+    model
+        .rollout(&g, &start, Timing::integration(1e-3, 500, 50))
+        .unwrap()
+        .iter()
+        .flat_map(|s| s.q.clone())
+        .collect()
+}
+
+#[test]
+fn a_model_file_from_before_ensembles_loads_and_predicts_as_before() {
+    let text = std::fs::read_to_string(SHIPPED).unwrap();
+    assert!(
+        !text.contains("\"members\""),
+        "the shipped file predates ensembles"
+    );
+    let single = TrainedModel::from_file(ModelFile::load(Path::new(SHIPPED)).unwrap()).unwrap();
+    let loaded = load_any_model(&ModelRef::from_path(Path::new(SHIPPED)).unwrap()).unwrap();
+    assert_eq!(loaded.dynamics.members(), 1);
+    assert_eq!(positions(loaded.dynamics.as_ref()), positions(&single));
+    // Saved again, it is the same document: no members field appears.
+    let dir = tempfile::tempdir().unwrap();
+    let again = dir.path().join("again.json");
+    single.file.save(&again).unwrap();
+    let parse = |p: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let (mut before, mut after) = (parse(Path::new(SHIPPED)), parse(&again));
+    before.as_object_mut().unwrap().remove("crate_version");
+    after.as_object_mut().unwrap().remove("crate_version");
+    assert_eq!(before, after);
+}
+
+#[test]
+fn identical_members_predict_the_single_model_with_no_spread() {
+    let file = ModelFile::load(Path::new(SHIPPED)).unwrap();
+    let single = TrainedModel::from_file(file.clone()).unwrap();
+    let mut twice = file.clone();
+    twice.members.push(Member {
+        training: file.training.clone(),
+        weights: file.weights.clone(),
+    });
+    let ens = Ensemble::from_file(&twice).unwrap();
+    assert_eq!(ens.members(), 2);
+    let (a, b) = (positions(&ens), positions(&single));
+    assert!(a
+        .iter()
+        .zip(&b)
+        .all(|(x, y)| (x - y).abs() <= 1e-12 * y.abs().max(1.0)));
+    let c = SystemConfig::new(SystemKind::Spring, 5);
+    let g = c.graph();
+    let starts = [c.start_for(&g, 11, 0), c.start_for(&g, 11, 1)];
+    let out = ens
+        .rollout_many_spread(&g, &starts, Timing::integration(1e-3, 200, 50))
+        .unwrap();
+    assert_eq!(out.len(), 2);
+    for (r, s) in &out {
+        assert_eq!(r.states.len(), s.len());
+        assert!(s.iter().flatten().all(|x| *x == 0.0));
+    }
+    // Members that differ spread apart.
+    let mut other = twice.clone();
+    for w in other.members[0].weights.values_mut() {
+        w.data.iter_mut().for_each(|x| *x *= 1.05);
+    }
+    let ens = Ensemble::from_file(&other).unwrap();
+    let out = ens
+        .rollout_many_spread(&g, &starts, Timing::integration(1e-3, 200, 50))
+        .unwrap();
+    assert!(out[0].1.last().unwrap().iter().all(|x| *x > 0.0));
+}
