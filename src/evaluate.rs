@@ -310,14 +310,12 @@ fn group(trajs: &[&Trajectory], dt: f64) -> Result<Vec<Group>> {
 /// A scored trajectory: its error curves and benchmark metrics.
 type Scored = (ErrorCurves, LagrangeMetrics);
 
-/// Rolls `model` out over every group and scores each trajectory: the
-/// curves and benchmark metrics in trajectory order, how many diverged, and
-/// the steps of the last group.
-
 /// What [`score`] returns: the scored trajectories in trajectory order, how
 /// many diverged, the steps of the last group, and the spread beside the
 /// error of each rollout that neither diverged nor was driven.
 type Scores = (Vec<Scored>, usize, usize, Vec<crate::calibration::Sample>);
+
+/// Rolls `model` out over every group and scores each trajectory.
 fn score(
     model: &dyn Dynamics,
     trajs: &[&crate::system::Trajectory],
