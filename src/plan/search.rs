@@ -227,7 +227,7 @@ impl Problem<'_> {
 
     /// The costs of many candidates, spread over the cores (each candidate's
     /// cost does not depend on which thread computes it).
-    /// Systems small enough are stepped [`super::lanes`] at a time.
+    /// Systems small enough are stepped several candidates at a time (`plan/lanes.rs`).
     pub fn costs(&self, candidates: &[Controls]) -> Result<Vec<f64>, PlanError> {
         let lanes = super::lanes::Lanes::new(self);
         let group = lanes.as_ref().map_or(1, |l| l.width);
