@@ -171,6 +171,15 @@ pub trait Dynamics: Send + Sync {
         None
     }
 
+    /// Whether a rollout of `L` disjoint copies of a graph costs about `L`
+    /// rollouts of one (message passing and per-edge physics do; a dense
+    /// mass-matrix solve over the whole system, LGN's or HGN's, costs L³),
+    /// so that a planner may step candidates together
+    /// ([`crate::plan::Problem::costs`]). Off unless a model says so.
+    fn steps_copies_together(&self) -> bool {
+        false
+    }
+
     /// Accelerations at a state, written to `out` (`n * dim`).
     fn acceleration(
         &self,

@@ -101,6 +101,10 @@ impl Dynamics for Ensemble {
         format!("ensemble of {} × {first}", self.members.len())
     }
 
+    fn steps_copies_together(&self) -> bool {
+        self.members.iter().all(Dynamics::steps_copies_together)
+    }
+
     fn supports(&self, graph: &Graph) -> Result<(), DynamicsError> {
         self.each(|m| m.supports(graph)).map(|_| ())
     }

@@ -263,6 +263,12 @@ impl Dynamics for TrainedModel {
         Ok(self.kernel.supports(graph)?)
     }
 
+    /// Message passing over the edges (bars excepted: [`crate::plan`]'s
+    /// lanes leave them out).
+    fn steps_copies_together(&self) -> bool {
+        true
+    }
+
     fn state_gradient(
         &self,
         graph: &Graph,

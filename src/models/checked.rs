@@ -51,6 +51,10 @@ impl Dynamics for Checked {
         Some(&self.trained)
     }
 
+    fn steps_copies_together(&self) -> bool {
+        self.inner.steps_copies_together()
+    }
+
     fn acceleration(
         &self,
         graph: &Graph,

@@ -239,6 +239,11 @@ impl Dynamics for TruthModel {
         self.truth.supports(graph)
     }
 
+    /// Forces edge by edge.
+    fn steps_copies_together(&self) -> bool {
+        true
+    }
+
     fn acceleration(
         &self,
         graph: &crate::system::Graph,

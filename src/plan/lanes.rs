@@ -32,11 +32,13 @@ pub(crate) struct Lanes {
 
 impl Lanes {
     /// The lanes for `problem`, or `None` when its candidates must run one
-    /// by one (contacts, bars, or a system already large enough).
+    /// by one (a model whose cost grows faster than its graph, contacts,
+    /// bars, or a system already large enough).
     pub fn new(problem: &Problem) -> Option<Self> {
         let g = problem.graph;
         let lanes = LANE_PARTICLES / g.n().max(1);
-        if lanes < 2 || g.interaction_radius > 0.0 || g.n_bars() > 0 {
+        let linear = problem.model.steps_copies_together();
+        if !linear || lanes < 2 || g.interaction_radius > 0.0 || g.n_bars() > 0 {
             return None;
         }
         Some(Lanes {
@@ -211,6 +213,15 @@ mod tests {
             },
             max_speed: 1.0,
         };
+        let alone = Problem {
+            model: &crate::dynamics::Still,
+            ..problem
+        };
+        assert!(
+            Lanes::new(&alone).is_none(),
+            "a model that does not say its cost is linear in copies has no lanes"
+        );
+        let problem = Problem { model, ..alone };
         let lanes = Lanes::new(&problem).expect("a chain without contacts or bars has lanes");
         let width = problem.width();
         let group: Vec<Controls> = (0..lanes.width)
