@@ -30,6 +30,7 @@ pub(crate) mod neighbors;
 pub(crate) mod projection;
 pub(crate) mod rk4;
 pub(crate) mod scenes;
+mod trajectories;
 pub mod verlet;
 
 use serde::{Deserialize, Serialize};

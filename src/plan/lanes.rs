@@ -5,14 +5,15 @@
 //! a 20-particle graph's padded ones) and the per-rollout overhead is paid
 //! once per `L` candidates.
 //!
-//! Exact only when the copies cannot interact: no contact radius (contacts
-//! would be found between copies lying on top of each other) and no bars (one
-//! constraint solve over all copies costs O((L · bars)³)). Otherwise, or when
-//! a group diverges or the model refuses the larger graph, its candidates run
-//! one by one as before: the costs never depend on the lanes.
+//! Exact only when the copies cannot interact and cost what they are: no
+//! contact radius (contacts would be found between copies lying on top of
+//! each other), no bars (one constraint solve over all copies costs
+//! O((L · bars)³)), and a model that says its cost is linear in copies
+//! ([`Dynamics::steps_copies_together`]). Otherwise, or when a group
+//! diverges or the model refuses the larger graph, the planner runs its
+//! candidates one by one as before: the costs never depend on the lanes.
 
-use super::controls::Controls;
-use super::search::{PlanError, Problem};
+use crate::dynamics::{Dynamics, Timing};
 use crate::physics::Drive;
 use crate::system::{Edge, Endpoint, Graph, State};
 
@@ -22,7 +23,7 @@ use crate::system::{Edge, Endpoint, Graph, State};
 /// with its own share of the candidates).
 const LANE_PARTICLES: usize = 320;
 
-/// A problem's system copied `lanes` times into one graph.
+/// A system copied `width` times into one graph, from one start.
 pub(crate) struct Lanes {
     /// Copies per group.
     pub width: usize,
@@ -31,58 +32,43 @@ pub(crate) struct Lanes {
 }
 
 impl Lanes {
-    /// The lanes for `problem`, or `None` when its candidates must run one
-    /// by one (a model whose cost grows faster than its graph, contacts,
-    /// bars, or a system already large enough).
-    pub fn new(problem: &Problem) -> Option<Self> {
-        let g = problem.graph;
-        let lanes = LANE_PARTICLES / g.n().max(1);
-        let linear = problem.model.steps_copies_together();
-        if !linear || lanes < 2 || g.interaction_radius > 0.0 || g.n_bars() > 0 {
+    /// The lanes for `graph` from `start` under `model`, or `None` when
+    /// candidates must run one by one (see the module's conditions, or a
+    /// system already large enough).
+    pub fn new(model: &dyn Dynamics, graph: &Graph, start: &State) -> Option<Self> {
+        let width = LANE_PARTICLES / graph.n().max(1);
+        let exact = graph.interaction_radius == 0.0 && graph.n_bars() == 0;
+        if width < 2 || !exact || !model.steps_copies_together() {
             return None;
         }
         Some(Lanes {
-            width: lanes,
-            graph: copies(g, lanes),
+            width,
+            graph: copies(graph, width),
             start: State {
-                q: problem.start.q.repeat(lanes),
-                v: problem.start.v.repeat(lanes),
+                q: start.q.repeat(width),
+                v: start.v.repeat(width),
             },
         })
     }
 
-    /// The costs of `group` (at most `lanes` candidates of equal steps).
-    pub fn costs(&self, problem: &Problem, group: &[Controls]) -> Result<Vec<f64>, PlanError> {
-        match self.together(problem, group) {
-            Some(costs) => Ok(costs),
-            None => group.iter().map(|c| problem.cost_of(c)).collect(),
-        }
-    }
-
-    /// The costs of a full group of equal steps from one joined rollout;
-    /// `None` for a short or mixed group, a diverged copy or a graph the
-    /// model refuses at this size (each candidate alone then says which,
-    /// and costs +∞ or errs as before).
-    fn together(&self, problem: &Problem, group: &[Controls]) -> Option<Vec<f64>> {
-        let steps = group.first()?.steps;
-        if group.len() != self.width || group.iter().any(|c| c.steps != steps) {
+    /// Each copy's kept states under its own drive (`drives`: one per copy,
+    /// `width` of them), from one joined rollout; `None` for another count,
+    /// a diverged copy, or a graph the model refuses at this size.
+    pub fn rollouts(
+        &self,
+        model: &dyn Dynamics,
+        timing: Timing,
+        drives: &[Drive],
+    ) -> Option<Vec<Vec<State>>> {
+        if drives.len() != self.width {
             return None;
         }
-        let (driven, g) = (problem.driven(), problem.graph);
-        let drives: Vec<Drive> = group
-            .iter()
-            .map(|c| c.drive(&driven, g.dim, problem.start, problem.timing))
-            .collect();
-        let timing = problem.timing.with_horizon(steps);
-        let states = problem
-            .model
-            .rollout_driven(&self.graph, &self.start, timing, &joined(&drives, g.n()))
+        let n = self.graph.n() / self.width;
+        let states = model
+            .rollout_driven(&self.graph, &self.start, timing, &joined(drives, n))
             .ok()?;
-        let cost = |(k, c): (usize, &Controls)| {
-            let own = lane(&states, k, g.ndof());
-            problem.cost.of(&own, g.dim, c, problem.timing)
-        };
-        Some(group.iter().enumerate().map(cost).collect())
+        let ndof = n * self.graph.dim;
+        Some((0..self.width).map(|k| lane(&states, k, ndof)).collect())
     }
 }
 
@@ -154,9 +140,8 @@ fn lane(states: &[State], k: usize, ndof: usize) -> Vec<State> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dynamics::Timing;
     use crate::physics::{SystemConfig, SystemKind};
-    use crate::plan::{Cost, CostKind};
+    use crate::plan::Controls;
 
     /// Copies conserve the graph: counts, and every copy's edges within it.
     #[test]
@@ -177,77 +162,53 @@ mod tests {
         }
     }
 
-    /// The held chain's candidates cost the same in lanes as one by one (the
-    /// copies do not see each other): for the exact simulator and for an
-    /// MCGNODE on the kernel.
+    /// Each copy of the held chain moves in the joined rollout as it does
+    /// alone under its drive (the copies do not see each other): for the
+    /// exact simulator and for an MCGNODE on the kernel; a model that does
+    /// not say its cost is linear in copies gets no lanes.
     #[test]
-    fn lanes_cost_what_one_by_one_costs() {
+    fn each_lane_moves_as_it_does_alone() {
         let cfg = SystemConfig::new(SystemKind::HeldChain, 9);
         let g = cfg.graph();
         let start = cfg.start_for(&g, 5, 0);
+        assert!(Lanes::new(&crate::dynamics::Still, &g, &start).is_none());
         let (_, net) = crate::testing::random_model(crate::gnode::Variant::Mcgnode, &g, 3)
             .expect("a random MCGNODE");
         let truth = crate::models::truth::truth(SystemKind::HeldChain);
-        for model in [truth.as_ref(), &net as &dyn crate::dynamics::Dynamics] {
-            same_costs(model, &cfg, &g, &start);
+        for model in [truth.as_ref(), &net as &dyn Dynamics] {
+            same_motion(model, &cfg, &g, &start);
         }
     }
 
-    fn same_costs(
-        model: &dyn crate::dynamics::Dynamics,
-        cfg: &SystemConfig,
-        g: &Graph,
-        start: &State,
-    ) {
-        let problem = Problem {
-            model,
-            graph: g,
-            start,
-            timing: Timing::of_step(cfg.dt, 4, 3),
-            cost: Cost {
-                kind: CostKind::Along,
-                particles: vec![8],
-                targets: vec![1.0, -8.0],
-                effort: 1e-3,
-                speed: 0.1,
-            },
-            max_speed: 1.0,
-        };
-        let alone = Problem {
-            model: &crate::dynamics::Still,
-            ..problem
-        };
-        assert!(
-            Lanes::new(&alone).is_none(),
-            "a model that does not say its cost is linear in copies has no lanes"
-        );
-        let problem = Problem { model, ..alone };
-        let lanes = Lanes::new(&problem).expect("a chain without contacts or bars has lanes");
-        let width = problem.width();
-        let group: Vec<Controls> = (0..lanes.width)
+    fn same_motion(model: &dyn Dynamics, cfg: &SystemConfig, g: &Graph, start: &State) {
+        let lanes = Lanes::new(model, g, start).expect("a chain without contacts or bars");
+        let timing = Timing::of_step(cfg.dt, 4, 3);
+        let driven: Vec<usize> = (0..g.n()).filter(|&i| g.is_kinematic(i)).collect();
+        let width = driven.len() * g.dim;
+        let drives: Vec<Drive> = (0..lanes.width)
             .map(|k| {
                 let u = (0..3 * width).map(|j| ((k * 7 + j) as f64).sin() * 0.4);
-                Controls {
+                let c = Controls {
                     steps: 3,
                     width,
                     u: u.collect(),
-                }
+                };
+                c.drive(&driven, g.dim, start, timing)
             })
             .collect();
         let together = lanes
-            .together(&problem, &group)
+            .rollouts(model, timing, &drives)
             .expect("the joined rollout runs");
-        for (c, t) in group.iter().zip(&together) {
-            let alone = problem.cost_of(c).expect("one");
-            assert!(
-                (alone - t).abs() <= 1e-9 * alone.abs().max(1e-12),
-                "lane cost {t} vs alone {alone}"
-            );
+        for (d, states) in drives.iter().zip(&together) {
+            let alone = model.rollout_driven(g, start, timing, d).expect("alone");
+            assert_eq!(alone.len(), states.len());
+            for (a, b) in alone.iter().zip(states) {
+                for (x, y) in a.q.iter().chain(&a.v).zip(b.q.iter().chain(&b.v)) {
+                    assert!((x - y).abs() <= 1e-12 * x.abs().max(1.0), "{x} vs {y}");
+                }
+            }
         }
-        assert!(
-            together.windows(2).any(|w| w[0] != w[1]),
-            "candidates differ"
-        );
-        assert!(together.iter().all(|c| c.is_finite()), "{together:?}");
+        let last = |s: &Vec<State>| s.last().map(|x| x.q.clone());
+        assert_ne!(last(&together[0]), last(&together[1]), "lanes differ");
     }
 }

@@ -225,11 +225,30 @@ impl Problem<'_> {
         }
     }
 
+    /// The costs of `group` (candidates of equal steps) from one joined
+    /// rollout of `lanes`; `None` where they must run one by one (each alone
+    /// then costs +∞ or errs as it would).
+    fn together(&self, lanes: &super::lanes::Lanes, group: &[Controls]) -> Option<Vec<f64>> {
+        let steps = group.first()?.steps;
+        if group.iter().any(|c| c.steps != steps) {
+            return None;
+        }
+        let (driven, g) = (self.driven(), self.graph);
+        let drives: Vec<_> = group
+            .iter()
+            .map(|c| c.drive(&driven, g.dim, self.start, self.timing))
+            .collect();
+        let states = lanes.rollouts(self.model, self.timing.with_horizon(steps), &drives)?;
+        let cost = |(s, c): (&Vec<State>, &Controls)| self.cost.of(s, g.dim, c, self.timing);
+        Some(states.iter().zip(group).map(cost).collect())
+    }
+
     /// The costs of many candidates, spread over the cores (each candidate's
     /// cost does not depend on which thread computes it).
-    /// Systems small enough are stepped several candidates at a time (`plan/lanes.rs`).
+    /// Systems small enough are stepped several candidates at a time
+    /// (`plan/lanes.rs`).
     pub fn costs(&self, candidates: &[Controls]) -> Result<Vec<f64>, PlanError> {
-        let lanes = super::lanes::Lanes::new(self);
+        let lanes = super::lanes::Lanes::new(self.model, self.graph, self.start);
         let group = lanes.as_ref().map_or(1, |l| l.width);
         let threads = crate::engine::all_cores().min(candidates.len()).max(1);
         // Whole groups per thread, so that only the last part has a remainder.
@@ -241,7 +260,14 @@ impl Problem<'_> {
             };
             let mut out = Vec::with_capacity(part.len());
             for g in part.chunks(l.width) {
-                out.extend(l.costs(self, g)?);
+                match self.together(l, g) {
+                    Some(costs) => out.extend(costs),
+                    None => out.extend(
+                        g.iter()
+                            .map(|c| self.cost_of(c))
+                            .collect::<Result<Vec<_>, _>>()?,
+                    ),
+                }
             }
             Ok(out)
         };
