@@ -90,6 +90,7 @@ class TrainOptions(TypedDict, total=False):
     init: PathLike
     checkpoint: PathLike
     checkpoint_every: float
+    ensemble: int
     quiet: bool
 
 def train(

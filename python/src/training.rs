@@ -51,6 +51,7 @@ pub(crate) const OPTIONS: &[&str] = &[
     "init",
     "checkpoint",
     "checkpoint_every",
+    "ensemble",
     "quiet",
 ];
 
@@ -219,6 +220,13 @@ fn set(s: &mut Settings, k: &str, v: &Bound<'_, PyAny>) -> PyResult<()> {
             let path: PathBuf = get(k, v)?;
             let file = mcgnode::gnode::ModelFile::load(&path).map_err(lib_err)?;
             c.init = Some(Box::new(file));
+        }
+        "ensemble" => {
+            let n: usize = get(k, v)?;
+            if !(1..=64).contains(&n) {
+                return Err(bad(k, format!("{n} members: give 1 to 64")));
+            }
+            c.ensemble = n;
         }
         "quiet" => s.quiet = get(k, v)?,
         _ => unreachable!("{k} is in OPTIONS but not handled"),

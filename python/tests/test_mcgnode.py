@@ -486,3 +486,19 @@ def test_the_stubs_name_what_the_module_has():
         m = re.search(rf"    def {meth}\((.*?)\) ->", stub, re.S)
         assert stub_params(m[1]) == params, meth
     assert mcgnode.read_bag.__doc__ and mcgnode.Model.rollout.__doc__
+
+
+def test_train_ensemble_writes_its_members_as_the_cli_does(bags, tmp_path):
+    # ensemble=K goes the CLI's way (one file, K - 1 members beside its own
+    # weights); out of 1..64 it is a ValueError naming it.
+    py_out, cli_out = tmp_path / "py.json", tmp_path / "cli.json"
+    with pytest.warns(UserWarning):
+        mcgnode.train(bags["spring"], py_out, variant="mcgnode", epochs=2, ensemble=3,
+                      quiet=True)
+    cli("train", "--data", bags["spring"], "--out", cli_out, "--model", "mcgnode",
+        "--epochs", 2, "--ensemble", 3, "--quiet")
+    py, via_cli = (json.loads(p.read_text()) for p in (py_out, cli_out))
+    assert len(py["members"]) == len(via_cli["members"]) == 2
+    assert py["members"][0]["weights"] == via_cli["members"][0]["weights"]
+    with pytest.raises(ValueError, match="ensemble"):
+        mcgnode.train(bags["spring"], py_out, variant="mcgnode", ensemble=0, quiet=True)

@@ -248,6 +248,7 @@ impl Args {
                 every: a.checkpoint_every,
             }),
             threads: a.threads.unwrap_or_else(crate::engine::all_cores),
+            ensemble: a.ensemble as usize,
             normalize: !a.no_normalize,
             init: a
                 .init
@@ -298,19 +299,6 @@ pub fn train(
     on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainingReport> {
     let (opts, cfg) = a.settings()?;
-    if a.ensemble > 1 {
-        let f = crate::models::train_ensemble_from_bags(
-            a.model,
-            &a.data,
-            &opts,
-            &cfg,
-            a.ensemble as usize,
-            log,
-            on_epoch,
-        )?;
-        f.save(&a.out)?;
-        return Ok(f.training().clone());
-    }
     Ok(train_any_from_bags(
         a.model, &a.data, &opts, &cfg, log, on_epoch, &a.out,
     )?)

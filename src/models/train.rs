@@ -73,7 +73,9 @@ pub fn train_from_bags(
     })
 }
 
-/// [`train_from_bags`], then saves the file to `out`; returns its training figures.
+/// [`train_from_bags`] (or, with `cfg.ensemble` above 1,
+/// [`train_ensemble_from_bags`]), then saves the file to `out`; returns its
+/// training figures.
 pub fn train_any_from_bags(
     kind: ModelKind,
     bags: &[PathBuf],
@@ -83,12 +85,16 @@ pub fn train_any_from_bags(
     on_epoch: impl FnMut(&EpochReport) -> bool,
     out: &Path,
 ) -> Result<TrainingReport> {
-    let f = train_from_bags(kind, bags, opts, cfg, log, on_epoch)?;
+    let f = if cfg.ensemble > 1 {
+        train_ensemble_from_bags(kind, bags, opts, cfg, log, on_epoch)?
+    } else {
+        train_from_bags(kind, bags, opts, cfg, log, on_epoch)?
+    };
     f.save(out)?;
     Ok(f.training().clone())
 }
 
-/// An ensemble of `k` GNODE-family members trained as [`train_from_bags`]
+/// An ensemble of `cfg.ensemble` GNODE-family members trained as [`train_from_bags`]
 /// would train one, member `i` with seed `cfg.seed + i` (initialisation,
 /// split and data order), one after another, into one file: the first
 /// member's, with the others in [`ModelFile::members`]. Its training report
@@ -98,10 +104,10 @@ pub fn train_ensemble_from_bags(
     bags: &[PathBuf],
     opts: &ModelOptions,
     cfg: &TrainConfig,
-    k: usize,
     mut log: impl FnMut(&str),
     mut on_epoch: impl FnMut(&EpochReport) -> bool,
 ) -> Result<TrainedFile> {
+    let k = cfg.ensemble;
     if !matches!(kind, ModelKind::Family(_)) {
         crate::error::bail!(
             "--ensemble is for the GNODE family (node, gnode, cgnode, cdgnode, mcgnode); \

@@ -49,6 +49,10 @@ pub struct TrainConfig {
     /// Save the run's state as it goes, and resume from the file when it
     /// exists (see [`checkpoint`](super::checkpoint)).
     pub checkpoint: Option<super::checkpoint::Checkpointing>,
+    /// Members of an ensemble trained into one model file, seeds `seed`,
+    /// `seed + 1`, … (1: one model; GNODE family only, see
+    /// `crate::models::train_any_from_bags`).
+    pub ensemble: usize,
     /// Settings the default recipe chooses from the data instead of taking
     /// them from this config ([`super::recipe`]; none by default).
     pub auto: Auto,
@@ -130,6 +134,7 @@ impl Default for TrainConfig {
             lr_drops: vec![],
             time_budget: None,
             checkpoint: None,
+            ensemble: 1,
             auto: Auto::default(),
         }
     }
