@@ -224,7 +224,6 @@ mod tests {
     fn spearman_with_ties_matches_the_textbook_value() {
         // Ranks x: 1, 2.5, 2.5, 4; y: 1, 2, 3, 4. Pearson of the ranks:
         // Σ dx·dy = 4.5, Σ dx² = 4.5, Σ dy² = 5, so 4.5 / √22.5 = 0.94868...
-        // (scipy.stats.spearmanr gives 0.9486832980505138).
         let r = spearman(&[1.0, 2.0, 2.0, 3.0], &[1.0, 2.0, 3.0, 4.0]).unwrap();
         assert!((r - 4.5 / 22.5f64.sqrt()).abs() < 1e-12, "{r}");
     }
