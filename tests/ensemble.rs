@@ -220,3 +220,44 @@ fn identical_members_predict_the_single_model_with_no_spread() {
         .unwrap();
     assert!(out[0].1.last().unwrap().iter().all(|x| *x > 0.0));
 }
+
+#[test]
+fn the_node_s_prediction_the_rollout_and_the_batch_agree_on_the_spread() {
+    // What the node publishes (predict_into), what the Rollout service and
+    // Python answer (rollout_spread) and what evaluate uses
+    // (rollout_many_spread) are one mean and one spread.
+    let file = ModelFile::load(Path::new(SHIPPED)).unwrap();
+    let mut other = file.clone();
+    let mut weights = file.weights.clone();
+    for w in weights.values_mut() {
+        w.data.iter_mut().for_each(|x| *x *= 0.97);
+    }
+    other.members.push(Member {
+        training: file.training.clone(),
+        weights,
+    });
+    let ens = Ensemble::from_file(&other).unwrap();
+    let c = SystemConfig::new(SystemKind::Spring, 5);
+    let g = c.graph();
+    let start = c.start_for(&g, 11, 0);
+    let timing = Timing::integration(1e-3, 200, 50);
+    let (states, spread) = ens.rollout_spread(&g, &start, timing, None).unwrap();
+    let mut p = mcgnode::dynamics::Predicted::default();
+    ens.predict_into(&g, &start, timing, &mut p).unwrap();
+    assert_eq!(p.states.to_states(), states);
+    assert_eq!(p.spread, spread.concat());
+    assert_eq!(spread.len(), states.len());
+    assert!(spread.last().unwrap().iter().all(|x| *x > 0.0));
+    let many = ens
+        .rollout_many_spread(&g, std::slice::from_ref(&start), timing)
+        .unwrap();
+    assert_eq!(many[0].0.states, states);
+    assert_eq!(many[0].1, spread);
+    // A single model has none.
+    let single = TrainedModel::from_file(file).unwrap();
+    assert!(single
+        .rollout_spread(&g, &start, timing, None)
+        .unwrap()
+        .1
+        .is_empty());
+}

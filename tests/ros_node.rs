@@ -520,3 +520,130 @@ fn concurrent_message_builds_all_succeed() {
         "build/msgs/env.sh was read half written"
     );
 }
+
+/// Trains a 3-member ensemble on the shipped spring bag into `dir` and
+/// writes parameters serving it (horizon 8, dt 0.01); the parameter file.
+fn ensemble_params(dir: &Path) -> PathBuf {
+    let model = dir.join("ensemble.json");
+    let train = Command::new(BIN)
+        .args([
+            "train",
+            "--data",
+            "bags/spring5-sample.mcap",
+            "--model",
+            "mcgnode",
+        ])
+        .args(["--epochs", "3", "--ensemble", "3", "--quiet", "--out"])
+        .arg(&model)
+        .current_dir(ROOT)
+        .output()
+        .expect("running train");
+    assert!(train.status.success(), "{train:?}");
+    let params = dir.join("params.yaml");
+    fs::write(
+        &params,
+        format!(
+            "mcgnode:\n  ros__parameters:\n    model: {:?}\n    horizon: 8\n    dt: 0.01\n    \
+             diagnostics_period: 0.25\n",
+            model.display()
+        ),
+    )
+    .expect("writing params");
+    params
+}
+
+/// A JSON array of numbers.
+fn numbers(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .expect("an array")
+        .iter()
+        .map(|x| x.as_f64().expect("a number"))
+        .collect()
+}
+
+/// The number under `key` in the first status of an echoed DiagnosticArray.
+fn diagnostic_value(diag: &serde_json::Value, key: &str) -> f64 {
+    diag["status"][0]["values"]
+        .as_array()
+        .expect("values")
+        .iter()
+        .find(|kv| kv["key"] == key)
+        .unwrap_or_else(|| panic!("no {key} in {diag}"))["value"]
+        .as_str()
+        .expect("a string")
+        .parse()
+        .expect("a number")
+}
+
+/// An ensemble (`train --ensemble 3`) served: each PredictedTrajectory carries
+/// its spread (`steps × n` numbers, finite, growing from ~0), the Rollout
+/// reply for the same input carries the same spread, and `/diagnostics`
+/// reports the latest prediction's largest spread as `spread_max`.
+#[test]
+fn node_publishes_an_ensembles_spread() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let params = ensemble_params(dir.path());
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$PARAMS" 2>"$DIR/node.log" &
+        node=$!
+        python3 scripts/ros/echo.py /mcgnode/predicted_trajectory --json --count 3 --timeout 60 \
+            >"$DIR/echo.out" 2>"$DIR/echo.err" &
+        echo_pid=$!
+        for _ in $(seq 400); do grep -q listening "$DIR/echo.err" && break; sleep 0.05; done
+        grep -q listening "$DIR/echo.err" || { echo "echo never matched"; cat "$DIR/echo.err"; exit 2; }
+        python3 scripts/ros/play_bag.py bags/spring5-sample.mcap --rate 20 --limit 3 --timeout 30 \
+            || exit 3
+        wait $echo_pid || { echo "echo failed"; cat "$DIR/echo.err"; exit 4; }
+        sleep 0.5
+        python3 scripts/ros/echo.py /diagnostics --json --count 1 --timeout 30 \
+            >"$DIR/diag.out" || exit 5
+        python3 -c 'import json,sys; t=json.loads(open(sys.argv[1]).readlines()[-1]); print(json.dumps({"initial": t["initial"], "steps": t["steps"], "dt": t["dt"]}))' \
+            "$DIR/echo.out" >"$DIR/req.json" || exit 6
+        python3 scripts/ros/call.py /mcgnode/rollout mcgnode_msgs/srv/Rollout --file "$DIR/req.json" \
+            --json --timeout 30 >"$DIR/call.out" || exit 7
+        kill -INT $node; wait $node
+    "#;
+    let o = run_bounded(
+        in_netns(script, &params, &env_sh).env("DIR", dir.path()),
+        Duration::from_secs(150),
+        dir.path(),
+    );
+    let read = |name: &str| fs::read_to_string(dir.path().join(name)).unwrap_or_default();
+    expect_success(&o, &dir.path().join("node.log"));
+    let json = |text: &str| -> serde_json::Value { serde_json::from_str(text).expect("JSON") };
+    let out = read("echo.out");
+    let last = json(out.lines().last().expect("three predictions"));
+    let (steps, n) = (
+        8,
+        last["initial"]["masses"].as_array().expect("masses").len(),
+    );
+    assert_eq!(last["steps"], steps, "{last}");
+    let spread = numbers(&last["spread"]);
+    assert_eq!(spread.len(), steps * n, "steps × particles numbers");
+    assert!(
+        spread.iter().all(|s| s.is_finite() && *s >= 0.0),
+        "{spread:?}"
+    );
+    let (first, end) = (&spread[..n], &spread[(steps - 1) * n..]);
+    assert!(
+        end.iter().sum::<f64>() > first.iter().sum::<f64>(),
+        "the members drift apart along the horizon: {first:?} .. {end:?}"
+    );
+    let call = json(read("call.out").trim());
+    assert_eq!(call["success"], true, "{call}");
+    assert_eq!(
+        numbers(&call["trajectory"]["spread"]),
+        spread,
+        "the topic's spread"
+    );
+    let diag = json(read("diag.out").trim());
+    let reported = diagnostic_value(&diag, "spread_max");
+    let max = spread.iter().copied().fold(0.0, f64::max);
+    assert!(
+        (reported - max).abs() <= 1e-6 * max,
+        "spread_max {reported} against the latest prediction's {max}"
+    );
+}

@@ -122,6 +122,10 @@ class Model:
     @property
     def predicts_forces(self) -> bool:
         """Whether forces() answers (CGNODE, CDGNODE, MCGNODE, truth, still)."""
+    @property
+    def members(self) -> int:
+        """Models averaged in its predictions: K for a file trained with
+        ``--ensemble K``, else 1."""
     def describe(self) -> str:
         """A one-line description of the model."""
     def rollout(
@@ -141,7 +145,10 @@ class Model:
         particles, dim) moves the kinematic particles along it (velocities by
         central differences), else they are held. Checks the graph and field
         against what the model was trained on; a start out of its training
-        range warns (RuntimeWarning)."""
+        range warns (RuntimeWarning). The result has "positions" and
+        "velocities" (states, particles, dim) and "stamps"; an ensemble's
+        also "spread" (states, particles): its members' standard deviation of
+        position, per particle and state."""
     def rollout_arrays(
         self,
         positions: ArrayLike,

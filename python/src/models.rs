@@ -102,11 +102,8 @@ impl Model {
             return Err(lib_err(DynamicsError::TimeStep(dt)));
         }
         let timing = Timing::integration(dt, steps, every.max(1));
-        let states = py
-            .detach(|| match drive {
-                Some(d) => self.dynamics.rollout_driven(graph, start, timing, d),
-                None => self.dynamics.rollout(graph, start, timing),
-            })
+        let (states, spread) = py
+            .detach(|| self.dynamics.rollout_spread(graph, start, timing, drive))
             .map_err(lib_err)?;
         let (n, d) = (graph.n(), graph.dim);
         let shape = [states.len(), n, d];
@@ -121,6 +118,11 @@ impl Model {
         out.set_item("positions", to_numpy(py, q, &shape)?)?;
         out.set_item("velocities", to_numpy(py, v, &shape)?)?;
         out.set_item("stamps", PyArray1::from_vec(py, stamps))?;
+        // An ensemble's spread, (states, particles); a single model has none.
+        if !spread.is_empty() {
+            let flat: Vec<f64> = spread.iter().flatten().copied().collect();
+            out.set_item("spread", to_numpy(py, flat, &[spread.len(), n])?)?;
+        }
         Ok(out)
     }
 
@@ -197,6 +199,13 @@ impl Model {
     #[getter]
     fn predicts_forces(&self) -> bool {
         self.force_kind().is_some()
+    }
+
+    /// Models averaged in its predictions: K for a file trained with
+    /// `--ensemble K`, else 1.
+    #[getter]
+    fn members(&self) -> usize {
+        self.dynamics.members()
     }
 
     /// A one-line description of the model.

@@ -502,3 +502,25 @@ def test_train_ensemble_writes_its_members_as_the_cli_does(bags, tmp_path):
     assert py["members"][0]["weights"] == via_cli["members"][0]["weights"]
     with pytest.raises(ValueError, match="ensemble"):
         mcgnode.train(bags["spring"], py_out, variant="mcgnode", ensemble=0, quiet=True)
+    # Its rollout is the members' mean with their spread, each member rolled
+    # out alone as a single-model file (numpy's mean and deviation, not ours).
+    ens = mcgnode.load_model(cli_out)
+    assert ens.members == 3 and mcgnode.load_model(SPRING_MODEL).members == 1
+    tr = mcgnode.read_bag(bags["spring"])[0]
+    got = ens.rollout(tr, 100, 1e-3)
+    alone = []
+    for k, member in enumerate([None, *via_cli["members"]]):
+        one = dict(via_cli, members=[])
+        if member is not None:
+            one.update(weights=member["weights"], training=member["training"], optimizer=None)
+        path = tmp_path / f"member{k}.json"
+        path.write_text(json.dumps(one))
+        alone.append(mcgnode.load_model(path).rollout(tr, 100, 1e-3)["positions"])
+    alone = np.stack(alone)
+    assert np.allclose(got["positions"], alone.mean(axis=0), rtol=0, atol=1e-12)
+    want = np.sqrt(alone.var(axis=0).mean(axis=-1))
+    assert got["spread"].shape == want.shape == got["positions"].shape[:2]
+    assert np.allclose(got["spread"], want, rtol=0, atol=1e-12)
+    # The start is common (rounding of the mean only); the members then part.
+    assert got["spread"][0].max() < 1e-12 and (got["spread"][-1] > 1e-9).all()
+    assert "spread" not in mcgnode.load_model(SPRING_MODEL).rollout(tr, 10, 1e-3)

@@ -87,6 +87,8 @@ def to_plain(msg):
         return [to_plain(x) for x in msg]
     if hasattr(msg, "item"):  # numpy scalar
         return msg.item()
+    if isinstance(msg, bytes):  # a `byte` field (DiagnosticStatus.level): its number(s)
+        return msg[0] if len(msg) == 1 else list(msg)
     return msg
 
 

@@ -342,6 +342,23 @@ pub trait Dynamics: Send + Sync {
         })
     }
 
+    /// [`Dynamics::rollout`] (or [`Dynamics::rollout_driven`] along `drive`)
+    /// with each kept state's [`Spread`]; empty for a single model, whose
+    /// prediction has none.
+    fn rollout_spread(
+        &self,
+        graph: &Graph,
+        start: &State,
+        timing: Timing,
+        drive: Option<&Drive>,
+    ) -> Result<(Vec<State>, Spread), DynamicsError> {
+        let states = match drive {
+            Some(d) => self.rollout_driven(graph, start, timing, d)?,
+            None => self.rollout(graph, start, timing)?,
+        };
+        Ok((states, Vec::new()))
+    }
+
     /// Models whose prediction is the mean of this many (an ensemble,
     /// [`crate::kernel::Ensemble`]); 1 for a single model.
     fn members(&self) -> usize {

@@ -137,6 +137,9 @@ pub struct Predicted {
     pub states: KeptStates,
     /// Forces at the start.
     pub forces: FlatForces,
+    /// An ensemble's spread ([`super::Spread`]) flat, `n` numbers per kept
+    /// state in the order of `states`; empty for a single model.
+    pub spread: Vec<f64>,
 }
 
 #[cfg(test)]

@@ -4,7 +4,7 @@
 //! position (the root of the mean over axes of the variance).
 
 use super::TrainedModel;
-use crate::dynamics::{Dynamics, DynamicsError, Forces, Rollout, Spread, Timing};
+use crate::dynamics::{Dynamics, DynamicsError, Forces, Predicted, Rollout, Spread, Timing};
 use crate::error::Result;
 use crate::gnode::file::ModelFile;
 use crate::physics::Drive;
@@ -87,11 +87,6 @@ pub fn mean_and_spread(dim: usize, runs: &[&[State]]) -> (Vec<State>, Spread) {
     (states, spread)
 }
 
-fn mean_rollout(dim: usize, runs: &[Vec<State>]) -> Vec<State> {
-    let refs: Vec<&[State]> = runs.iter().map(Vec::as_slice).collect();
-    mean_and_spread(dim, &refs).0
-}
-
 impl Dynamics for Ensemble {
     fn describe(&self) -> String {
         let first = self
@@ -150,8 +145,7 @@ impl Dynamics for Ensemble {
         start: &State,
         timing: Timing,
     ) -> Result<Vec<State>, DynamicsError> {
-        let runs = self.each(|m| m.rollout(graph, start, timing))?;
-        Ok(mean_rollout(graph.dim, &runs))
+        Ok(self.rollout_spread(graph, start, timing, None)?.0)
     }
 
     fn rollout_driven(
@@ -161,8 +155,41 @@ impl Dynamics for Ensemble {
         timing: Timing,
         drive: &Drive,
     ) -> Result<Vec<State>, DynamicsError> {
-        let runs = self.each(|m| m.rollout_driven(graph, start, timing, drive))?;
-        Ok(mean_rollout(graph.dim, &runs))
+        Ok(self.rollout_spread(graph, start, timing, Some(drive))?.0)
+    }
+
+    fn rollout_spread(
+        &self,
+        graph: &Graph,
+        start: &State,
+        timing: Timing,
+        drive: Option<&Drive>,
+    ) -> Result<(Vec<State>, Spread), DynamicsError> {
+        let runs = self.each(|m| match drive {
+            Some(d) => m.rollout_driven(graph, start, timing, d),
+            None => m.rollout(graph, start, timing),
+        })?;
+        let refs: Vec<&[State]> = runs.iter().map(Vec::as_slice).collect();
+        Ok(mean_and_spread(graph.dim, &refs))
+    }
+
+    /// The members' mean and spread, and their mean forces at `start`.
+    fn predict_into(
+        &self,
+        graph: &Graph,
+        start: &State,
+        timing: Timing,
+        out: &mut Predicted,
+    ) -> Result<(), DynamicsError> {
+        let (states, spread) = self.rollout_spread(graph, start, timing, None)?;
+        let forces = self
+            .forces(graph, start)
+            .map_err(|e| DynamicsError::Forces(Box::new(e)))?;
+        out.states.fill(graph.ndof(), &states);
+        out.forces.fill(&forces);
+        out.spread.clear();
+        spread.iter().for_each(|s| out.spread.extend_from_slice(s));
+        Ok(())
     }
 
     fn rollout_many(

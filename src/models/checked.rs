@@ -143,4 +143,15 @@ impl Dynamics for Checked {
         self.check(graph)?;
         self.inner.rollout_many_spread(graph, starts, timing)
     }
+
+    fn rollout_spread(
+        &self,
+        graph: &Graph,
+        start: &State,
+        timing: crate::dynamics::Timing,
+        drive: Option<&crate::physics::Drive>,
+    ) -> Result<(Vec<State>, crate::dynamics::Spread), DynamicsError> {
+        self.check(graph)?;
+        self.inner.rollout_spread(graph, start, timing, drive)
+    }
 }

@@ -6,7 +6,7 @@
 use super::controls::Controls;
 use super::cost::Cost;
 use crate::dynamics::Timing;
-use crate::dynamics::{Dynamics, DynamicsError};
+use crate::dynamics::{Dynamics, DynamicsError, Spread};
 use crate::system::{Graph, State};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -214,6 +214,18 @@ impl Problem<'_> {
         let timing = self.timing.with_horizon(controls.steps);
         self.model
             .rollout_driven(self.graph, self.start, timing, &drive)
+    }
+
+    /// [`Problem::rollout`] with each state's spread, empty for a single
+    /// model ([`Dynamics::rollout_spread`]).
+    pub fn rollout_spread(
+        &self,
+        controls: &Controls,
+    ) -> Result<(Vec<State>, Spread), DynamicsError> {
+        let drive = controls.drive(&self.driven(), self.graph.dim, self.start, self.timing);
+        let timing = self.timing.with_horizon(controls.steps);
+        self.model
+            .rollout_spread(self.graph, self.start, timing, Some(&drive))
     }
 
     /// The cost of `controls`: +∞ when its rollout diverges.

@@ -98,6 +98,18 @@ pub fn smoother_cost_values(cost: Option<super::smoother::CostSummary>) -> Vec<K
     })
 }
 
+/// An ensemble's spread: `spread_max`, the largest particle spread along
+/// the latest prediction's horizon (positions' units); nothing for a single
+/// model.
+pub fn spread_values(spread_max: Option<f64>) -> Vec<KeyValue> {
+    spread_max.map_or_else(Vec::new, |m| {
+        vec![KeyValue {
+            key: "spread_max".into(),
+            value: format!("{m:.6e}"),
+        }]
+    })
+}
+
 /// Live accuracy as a standard diagnostic status, `mcgnode: live accuracy`:
 /// the drift alarm's level and message, and per lead time the running and
 /// latest RE and EE and the number of comparisons (`re_mean@0.5s`, ...).
@@ -146,6 +158,9 @@ pub(super) async fn diagnostics_loop(
         array.status[0]
             .values
             .extend(smoother_cost_values(h.inputs.smoother_cost()));
+        array.status[0]
+            .values
+            .extend(spread_values(h.diag.stats.spread_max()));
         if let Some((figures, level, why, overflowed)) = h.accuracy.figures(&h.params.get()) {
             array
                 .status

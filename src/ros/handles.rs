@@ -127,6 +127,29 @@ pub struct Stats {
     pub dropped: AtomicU64,
     /// Latest failure reason.
     pub last_error: Mutex<String>,
+    /// An ensemble's latest prediction: its largest particle spread along
+    /// the horizon; `None` for a single model or before a prediction.
+    pub spread_max: Mutex<Option<f64>>,
+}
+
+impl Stats {
+    /// Notes the spread of the latest prediction (flat, empty for a single
+    /// model).
+    pub fn note_spread(&self, spread: &[f64]) {
+        let max = spread.iter().copied().reduce(f64::max);
+        *self
+            .spread_max
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) = max;
+    }
+
+    /// The latest prediction's largest spread, `None` for a single model.
+    pub fn spread_max(&self) -> Option<f64> {
+        *self
+            .spread_max
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+    }
 }
 
 /// At most one warning per period; the next one says how many were held back.

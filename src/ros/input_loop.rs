@@ -80,6 +80,7 @@ fn handle_state(
         );
     }
     let p = predict::messages(&input.message, &input.graph, params.dt, &kept)?;
+    h.diag.stats.note_spread(&kept.spread);
     h.recorder
         .record(|r| r.prediction(h.clock.now_log_ns(), &p.trajectory, &p.forces));
     let scored = h.accuracy.update(&params, &input, &kept.states);

@@ -227,6 +227,7 @@ impl MarkerSource {
             steps: (positions.len() / per_state) as u32,
             positions,
             velocities: vec![],
+            spread: vec![],
         };
         Self {
             part,

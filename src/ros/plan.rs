@@ -251,6 +251,11 @@ fn respond(
     let drive = p.best.drive(&driven, d, problem.start, problem.timing);
     let (kinematic_positions, kinematic_velocities) = motion(&drive);
     let best = p.best.u.chunks(d).map(Vector3::from_coords).collect();
+    // An ensemble's plan carries its spread along the best rollout.
+    let (states, spread) = match problem.model.members() {
+        1 => (p.predicted, Vec::new()),
+        _ => problem.rollout_spread(&p.best).map_err(|e| no(&e))?,
+    };
     Ok(PlanResponse {
         success: true,
         message: format!(
@@ -267,7 +272,7 @@ fn respond(
             &req.initial,
             problem.graph,
             s.timing.dt,
-            &p.predicted[1..],
+            (&states, &spread),
         ),
         costs: p.costs,
         seconds,

@@ -9,7 +9,7 @@
 use crate::compat::{OutOfRange, Passed};
 use crate::data::msg::{Header, ParticleState, Vector3};
 use crate::data::DataError;
-use crate::dynamics::{Dynamics, DynamicsError, FlatForces, KeptStates, Predicted, Timing};
+use crate::dynamics::{Dynamics, DynamicsError, FlatForces, KeptStates, Predicted, Spread, Timing};
 use crate::system::{Graph, State};
 
 use super::input::Input;
@@ -119,8 +119,13 @@ pub fn trajectory(
     start: &State,
     timing: Timing,
 ) -> Result<PredictedTrajectory, PredictError> {
-    let states = integrate(timing, |t| model.rollout(graph, start, t))?;
-    Ok(trajectory_of(input, graph, timing.kept_dt(), &states[1..]))
+    let (states, spread) = integrate(timing, |t| model.rollout_spread(graph, start, t, None))?;
+    Ok(trajectory_of(
+        input,
+        graph,
+        timing.kept_dt(),
+        (&states, &spread),
+    ))
 }
 
 /// [`trajectory`] with the kinematic particles moved along `drive` (one row
@@ -131,20 +136,30 @@ pub fn trajectory_driven(
     timing: Timing,
     drive: &crate::physics::Drive,
 ) -> Result<PredictedTrajectory, PredictError> {
-    let states = integrate(timing, |t| model.rollout_driven(graph, start, t, drive))?;
-    Ok(trajectory_of(input, graph, timing.kept_dt(), &states[1..]))
+    let (states, spread) = integrate(timing, |t| {
+        model.rollout_spread(graph, start, t, Some(drive))
+    })?;
+    Ok(trajectory_of(
+        input,
+        graph,
+        timing.kept_dt(),
+        (&states, &spread),
+    ))
 }
 
-/// The wire message of `states` predicted after `input`, `dt` apart.
+/// The wire message of a rollout from `input` (its kept states, the start
+/// first, and their [`crate::dynamics::Spread`], empty for a single model),
+/// `dt` apart: the start is not repeated.
 pub fn trajectory_of(
     input: &ParticleState,
     graph: &Graph,
     dt: f64,
-    states: &[State],
+    (states, spread): (&[State], &[Vec<f64>]),
 ) -> PredictedTrajectory {
     let mut kept = KeptStates::default();
     kept.fill(graph.ndof(), states);
-    trajectory_msg(input, dt, &kept, 0)
+    let flat: Vec<f64> = spread.iter().flatten().copied().collect();
+    trajectory_msg(input, dt, (&kept, &flat), 1)
 }
 
 /// The model's states as `timing` keeps them from `start` (the first is
@@ -159,6 +174,8 @@ pub fn predict_into(
     out: &mut Predicted,
 ) -> Result<(), PredictError> {
     model.supports(graph).map_err(PredictError::Unsupported)?;
+    // Only an ensemble fills it.
+    out.spread.clear();
     model
         .predict_into(graph, start, checked(timing)?, out)
         .map_err(|e| match e {
@@ -245,7 +262,7 @@ pub fn messages(
     p: &Predicted,
 ) -> Result<Prediction, PredictError> {
     Ok(Prediction {
-        trajectory: trajectory_msg(input, dt, &p.states, 1),
+        trajectory: trajectory_msg(input, dt, (&p.states, &p.spread), 1),
         forces: forces_msg(&input.header, graph.dim, &p.forces)?,
     })
 }
@@ -264,29 +281,31 @@ fn no_states() -> PredictError {
 }
 
 /// Runs `roll(timing)` after checking its step, refusing an empty answer
-/// (its states).
+/// (its states and their spread).
 fn integrate(
     timing: Timing,
-    roll: impl FnOnce(Timing) -> Result<Vec<State>, DynamicsError>,
-) -> Result<Vec<State>, PredictError> {
-    let states = roll(checked(timing)?).map_err(PredictError::Rollout)?;
+    roll: impl FnOnce(Timing) -> Result<(Vec<State>, Spread), DynamicsError>,
+) -> Result<(Vec<State>, Spread), PredictError> {
+    let (states, spread) = roll(checked(timing)?).map_err(PredictError::Rollout)?;
     if states.is_empty() {
         return Err(no_states());
     }
-    Ok(states)
+    Ok((states, spread))
 }
 
-/// The wire message of the predicted `states` from the `skip`-th on, after
-/// `input`, `dt` apart.
+/// The wire message of the predicted `states` (and their flat spread, `n`
+/// numbers a state, or none) from the `skip`-th on, after `input`, `dt` apart.
 fn trajectory_msg(
     input: &ParticleState,
     dt: f64,
-    states: &KeptStates,
+    (states, spread): (&KeptStates, &[f64]),
     skip: usize,
 ) -> PredictedTrajectory {
     // The wire's layout is the kept states' own: n·d numbers a state.
     let kept = states.len().saturating_sub(skip);
     let (positions, velocities) = (states.q_from(skip).to_vec(), states.v_from(skip).to_vec());
+    let n = input.positions.len();
+    let spread = spread.get(skip * n..).unwrap_or_default().to_vec();
     PredictedTrajectory {
         header: input.header.clone(),
         initial: input.clone(),
@@ -294,6 +313,7 @@ fn trajectory_msg(
         steps: u32::try_from(kept).unwrap_or(u32::MAX),
         positions,
         velocities,
+        spread,
     }
 }
 

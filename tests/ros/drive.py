@@ -184,6 +184,7 @@ class Driver:
         check(traj.steps == a.horizon and len(states) == a.horizon,
               f"{traj.steps} predicted states, horizon is {a.horizon}")
         n, d = len(state.positions), state.dimension
+        check(len(traj.spread) == 0, "a single model's prediction has no spread")
         check(len(traj.positions) == len(traj.velocities) == a.horizon * n * d,
               f"{len(traj.positions)} coordinates for {a.horizon} states of {n} particles in {d}D")
         check(abs(traj.dt - a.dt) < 1e-15, f"trajectory dt {traj.dt} != {a.dt}")

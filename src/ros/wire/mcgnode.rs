@@ -34,6 +34,10 @@ pub struct PredictedTrajectory {
     pub positions: Vec<f64>,
     /// `velocities[(k * n + i) * d + c]`, laid out as `positions`.
     pub velocities: Vec<f64>,
+    /// An ensemble's spread: `spread[k * n + i]` is particle `i`'s in state
+    /// `k` (the members' standard deviation of position); empty for a
+    /// single model.
+    pub spread: Vec<f64>,
 }
 
 impl PredictedTrajectory {

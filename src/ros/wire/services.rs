@@ -147,6 +147,7 @@ mod tests {
                 steps: 2,
                 positions: vec![0.5, -1.0, 2.0, 0.25, 1.5, 3.0, -0.5, 4.0],
                 velocities: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0],
+                spread: vec![0.125, 0.25, 0.5, 1.0],
             },
         };
         let back: RolloutResponse = decode_cdr(&encode_cdr(&resp).unwrap()).unwrap();
