@@ -129,6 +129,33 @@ pub fn rollout_seconds(
     graph_rollout_seconds(&g, &s0, cfg.dt, variant, steps, repeats)
 }
 
+/// Median time of a `steps`-step rollout of an ensemble of `k` random
+/// MCGNODE members on `n` springs over the time of one of them, both through
+/// [`Dynamics::rollout`] as every consumer calls it.
+pub fn ensemble_cost_ratio(n: usize, k: usize, steps: usize, repeats: usize) -> Result<f64> {
+    use crate::dynamics::Dynamics;
+    let cfg = SystemConfig::new(SystemKind::Spring, n);
+    let g = cfg.graph();
+    let s0 = cfg.start_for(&g, 5, 0);
+    let members = (0..k as u64)
+        .map(|seed| Ok(random_model(Variant::Mcgnode, &g, seed)?.1))
+        .collect::<Result<Vec<_>>>()?;
+    let single = members[0].clone();
+    let ensemble = crate::kernel::Ensemble { members };
+    let timing = Timing::integration(cfg.dt, steps, steps);
+    let time = |m: &dyn Dynamics| -> Result<f64> {
+        let mut times = Vec::with_capacity(repeats);
+        for _ in 0..repeats.max(1) {
+            let t = Instant::now();
+            m.rollout(&g, &s0, timing)
+                .map_err(crate::error::Error::msg)?;
+            times.push(t.elapsed().as_secs_f64());
+        }
+        Ok(median(times))
+    };
+    Ok(time(&ensemble)? / time(&single)?)
+}
+
 /// `side`² free particles on a triangular lattice 0.8 apart, jittered by
 /// 2 %, with contacts within radius 1: six neighbours each inside (a dense
 /// granular packing), the graph the contact rollout figure runs on, at rest.
@@ -434,6 +461,19 @@ fn rollout_figures(quick: bool, want: &dyn Fn(&str) -> bool) -> Result<Vec<Figur
             unit: "s".into(),
             repeats: r.min(7),
         });
+    }
+    for (n, steps) in [(50usize, 2_000usize), (5, 25)] {
+        let name = format!(
+            "ensemble: K = 5 MCGNODE members, {n}-spring {steps}-step rollout, cost against one model"
+        );
+        if want(&name) {
+            out.push(Figure {
+                name,
+                value: ensemble_cost_ratio(n, 5, steps, r.min(5) * if n < 10 { 200 } else { 1 })?,
+                unit: "x".into(),
+                repeats: r.min(5),
+            });
+        }
     }
     for n in [5usize, 50, 500] {
         let name = format!("{n}-spring MCGNODE rollout speed");

@@ -261,3 +261,37 @@ fn the_node_s_prediction_the_rollout_and_the_batch_agree_on_the_spread() {
         .1
         .is_empty());
 }
+
+#[test]
+fn members_shared_among_the_cores_predict_as_one_by_one() {
+    // Long enough (5 particles × 5,000 steps) for the members to run on all
+    // cores: the same mean and spread as the members rolled out one by one.
+    let file = ModelFile::load(Path::new(SHIPPED)).unwrap();
+    let mut three = file.clone();
+    for scale in [0.98, 1.03] {
+        let mut weights = file.weights.clone();
+        weights
+            .values_mut()
+            .for_each(|w| w.data.iter_mut().for_each(|x| *x *= scale));
+        three.members.push(Member {
+            training: file.training.clone(),
+            weights,
+        });
+    }
+    let ens = Ensemble::from_file(&three).unwrap();
+    let c = SystemConfig::new(SystemKind::Spring, 5);
+    let g = c.graph();
+    let start = c.start_for(&g, 11, 0);
+    let timing = Timing::integration(1e-3, 5_000, 500);
+    assert!(g.n() * timing.steps() >= mcgnode::kernel::ensemble::PARALLEL_WORK);
+    let (states, spread) = ens.rollout_spread(&g, &start, timing, None).unwrap();
+    let alone: Vec<Vec<mcgnode::system::State>> = ens
+        .members
+        .iter()
+        .map(|m| m.rollout(&g, &start, timing).unwrap())
+        .collect();
+    let refs: Vec<&[mcgnode::system::State]> = alone.iter().map(Vec::as_slice).collect();
+    let (want_states, want_spread) = mcgnode::kernel::ensemble::mean_and_spread(2, &refs);
+    assert_eq!(states, want_states);
+    assert_eq!(spread, want_spread);
+}

@@ -34,7 +34,46 @@ impl Ensemble {
     ) -> Result<Vec<T>, DynamicsError> {
         self.members.iter().map(f).collect()
     }
+
+    /// [`Ensemble::each`] with the members shared among the cores when the
+    /// job (`work` particle-steps per member) is long enough to pay for
+    /// starting threads ([`PARALLEL_WORK`]); results in member order.
+    fn each_parallel<T: Send>(
+        &self,
+        work: usize,
+        f: impl Fn(&TrainedModel) -> Result<T, DynamicsError> + Sync,
+    ) -> Result<Vec<T>, DynamicsError> {
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
+        let lanes = cores.min(self.members.len());
+        if lanes < 2 || work < PARALLEL_WORK {
+            return self.each(f);
+        }
+        let per = self.members.len().div_ceil(lanes);
+        let f = &f;
+        std::thread::scope(|s| {
+            let jobs: Vec<_> = self
+                .members
+                .chunks(per)
+                .map(|chunk| s.spawn(move || chunk.iter().map(f).collect::<Vec<_>>()))
+                .collect();
+            let mut out = Vec::with_capacity(self.members.len());
+            for j in jobs {
+                let results = j
+                    .join()
+                    .map_err(|_| DynamicsError::Model("an ensemble member panicked".into()))?;
+                for r in results {
+                    out.push(r?);
+                }
+            }
+            Ok(out)
+        })
+    }
 }
+
+/// Particle-steps of one member's rollout above which the members run on
+/// all cores: below it (the node's 5 particles × 25 steps) starting threads
+/// costs more than it saves.
+pub const PARALLEL_WORK: usize = 20_000;
 
 /// The mean of equally long vectors.
 fn mean_of(rows: &[&[f64]]) -> Vec<f64> {
@@ -165,7 +204,8 @@ impl Dynamics for Ensemble {
         timing: Timing,
         drive: Option<&Drive>,
     ) -> Result<(Vec<State>, Spread), DynamicsError> {
-        let runs = self.each(|m| match drive {
+        let work = graph.n() * timing.steps();
+        let runs = self.each_parallel(work, |m| match drive {
             Some(d) => m.rollout_driven(graph, start, timing, d),
             None => m.rollout(graph, start, timing),
         })?;
@@ -213,7 +253,8 @@ impl Dynamics for Ensemble {
         starts: &[State],
         timing: Timing,
     ) -> Result<Vec<(Rollout, Spread)>, DynamicsError> {
-        let runs = self.each(|m| m.rollout_many(graph, starts, timing))?;
+        let work = graph.n() * timing.steps() * starts.len();
+        let runs = self.each_parallel(work, |m| m.rollout_many(graph, starts, timing))?;
         Ok((0..starts.len())
             .map(|s| {
                 let refs: Vec<&[State]> = runs.iter().map(|r| r[s].states.as_slice()).collect();
