@@ -544,7 +544,7 @@ fn ensemble_params(dir: &Path) -> PathBuf {
         &params,
         format!(
             "mcgnode:\n  ros__parameters:\n    model: {:?}\n    horizon: 8\n    dt: 0.01\n    \
-             diagnostics_period: 0.25\n",
+             diagnostics_period: 0.25\n    spread_warn: 1.0e-12\n",
             model.display()
         ),
     )
@@ -642,6 +642,16 @@ fn node_publishes_an_ensembles_spread() {
     let diag = json(read("diag.out").trim());
     let reported = diagnostic_value(&diag, "spread_max");
     let max = spread.iter().copied().fold(0.0, f64::max);
+    let alarm = diag["status"]
+        .as_array()
+        .expect("statuses")
+        .iter()
+        .find(|s| s["name"] == "mcgnode: spread")
+        .unwrap_or_else(|| panic!("no spread status in {diag}"));
+    assert_eq!(
+        alarm["level"], 1,
+        "spread_warn 1e-12 is passed: WARN, {alarm}"
+    );
     assert!(
         (reported - max).abs() <= 1e-6 * max,
         "spread_max {reported} against the latest prediction's {max}"

@@ -110,6 +110,28 @@ pub fn spread_values(spread_max: Option<f64>) -> Vec<KeyValue> {
     })
 }
 
+/// An ensemble's spread alarm as a standard diagnostic status, `mcgnode:
+/// spread`: WARN when the latest prediction's largest particle spread
+/// passes `warn` (0 = never); nothing for a single model.
+pub fn spread_status(spread_max: Option<f64>, warn: f64) -> Option<DiagnosticStatus> {
+    let max = spread_max?;
+    let (level, message) = if warn > 0.0 && (max > warn || max.is_nan()) {
+        (
+            Level::Warn,
+            format!("the ensemble disagrees: largest spread {max:.3e}, above spread_warn = {warn}"),
+        )
+    } else {
+        (Level::Ok, format!("largest spread {max:.3e}"))
+    };
+    Some(DiagnosticStatus {
+        level: level as u8,
+        name: format!("{NODE_NAME}: spread"),
+        message,
+        hardware_id: NODE_NAME.into(),
+        values: spread_values(Some(max)),
+    })
+}
+
 /// Live accuracy as a standard diagnostic status, `mcgnode: live accuracy`:
 /// the drift alarm's level and message, and per lead time the running and
 /// latest RE and EE and the number of comparisons (`re_mean@0.5s`, ...).
@@ -161,6 +183,10 @@ pub(super) async fn diagnostics_loop(
         array.status[0]
             .values
             .extend(spread_values(h.diag.stats.spread_max()));
+        let spread = h.diag.stats.spread_max();
+        array
+            .status
+            .extend(spread_status(spread, h.params.get().spread_warn));
         if let Some((figures, level, why, overflowed)) = h.accuracy.figures(&h.params.get()) {
             array
                 .status
@@ -242,6 +268,26 @@ pub(super) fn finish_recording(h: &Handles) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_spread_alarm_warns_above_its_threshold_only() {
+        assert!(
+            spread_status(None, 1e-3).is_none(),
+            "a single model has none"
+        );
+        let ok = spread_status(Some(5e-4), 1e-3).unwrap();
+        assert_eq!(ok.level, Level::Ok as u8);
+        assert_eq!(ok.values[0].key, "spread_max");
+        let warn = spread_status(Some(2e-3), 1e-3).unwrap();
+        assert_eq!(warn.level, Level::Warn as u8);
+        assert!(warn.message.contains("spread_warn"), "{}", warn.message);
+        assert_eq!(
+            spread_status(Some(2e-3), 0.0).unwrap().level,
+            Level::Ok as u8
+        );
+        let nan = spread_status(Some(f64::NAN), 1e-3).unwrap();
+        assert_eq!(nan.level, Level::Warn as u8, "a NaN spread is not trusted");
+    }
 
     #[test]
     fn standard_diagnostics_warn_on_new_rejections_only() {

@@ -414,6 +414,11 @@ node_params! {
     /// Drift alarm: ERROR when a running RE exceeds this (0 = never).
     accuracy_error_re: f64 = 0.05, Kind::Double(false), runtime,
         "drift alarm: ERROR when a running RE exceeds this (0 = never)";
+    /// Spread alarm: WARN when an ensemble's latest prediction has a particle
+    /// spread above this (positions' units), before any error is observed.
+    spread_warn: f64 = 0.0, Kind::Double(false), runtime,
+        "spread alarm: WARN on /diagnostics when an ensemble's (train --ensemble K) latest \
+         prediction has a particle spread above this, in the positions' units (0 = never)";
     /// Retrain when the drift alarm is raised: warm-start the served model on
     /// what is recorded after the alarm, swapped in only if it beats the old
     /// one on the most recent (held-out) recording.
