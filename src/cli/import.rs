@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 
 use crate::data::import::{read_gns, write_gns_bag, GnsSource};
+use crate::physics::Field;
 
 /// The formats `bag import` reads.
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
@@ -57,6 +58,15 @@ pub struct ImportArgs {
     /// (needed when it has none).
     #[arg(long)]
     pub dt: Option<f64>,
+    /// Gravity g along −y, stated in every message as the whole field (the
+    /// datasets do not say it). Default: the field is left unknown, and
+    /// training MCGNODE then asks for --body-force.
+    #[arg(long, conflicts_with = "closed")]
+    pub gravity: Option<f64>,
+    /// State in every message that nothing acts besides the particles (no
+    /// gravity, drag or force).
+    #[arg(long)]
+    pub closed: bool,
     /// The MCAP bag to write.
     #[arg(long)]
     pub out: PathBuf,
@@ -81,8 +91,13 @@ fn gns(a: &ImportArgs) -> Result<()> {
         metadata: a.metadata.clone(),
         dt: a.dt,
     })?;
-    let states =
-        write_gns_bag(&imp, &a.out).with_context(|| format!("writing {}", a.out.display()))?;
+    let field = (a.closed || a.gravity.is_some()).then(|| Field {
+        gravity: a.gravity.unwrap_or(0.0),
+        drag: 0.0,
+        force: vec![],
+    });
+    let states = write_gns_bag(&imp, &a.out, field.as_ref())
+        .with_context(|| format!("writing {}", a.out.display()))?;
     let n: Vec<usize> = imp.trajectories.iter().map(|t| t.graph.n()).collect();
     let kin: usize = imp.trajectories.iter().map(|t| t.graph.n_kinematic()).sum();
     println!(

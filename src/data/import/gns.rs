@@ -411,3 +411,33 @@ pub fn read_gns(s: &GnsSource) -> Result<GnsImport, DataError> {
         metadata: (meta_path, text),
     })
 }
+
+/// One trajectory framed as a GNS TFRecord record (`steps`: per step, the
+/// n × dim positions), as GNS's files hold them: for tests and fuzzing.
+pub fn encode_record(key: i64, types: &[i64], steps: &[Vec<f32>]) -> Vec<u8> {
+    let bytes = |b: Vec<u8>| Feature {
+        kind: Some(Kind::Bytes(BytesList { value: vec![b] })),
+    };
+    let mut context = BTreeMap::new();
+    context.insert(
+        "key".to_string(),
+        Feature {
+            kind: Some(Kind::Int64(Int64List { value: vec![key] })),
+        },
+    );
+    let tb = types.iter().flat_map(|t| t.to_le_bytes()).collect();
+    context.insert("particle_type".to_string(), bytes(tb));
+    let feature = steps
+        .iter()
+        .map(|q| bytes(q.iter().flat_map(|x| x.to_le_bytes()).collect()))
+        .collect();
+    let mut lists = BTreeMap::new();
+    lists.insert("position".to_string(), FeatureList { feature });
+    let ex = SequenceExample {
+        context: Some(Features { feature: context }),
+        feature_lists: Some(FeatureLists {
+            feature_list: lists,
+        }),
+    };
+    tfrecord::frame(&ex.encode_to_vec())
+}

@@ -7,11 +7,14 @@
 pub mod gns;
 pub mod tfrecord;
 
-pub use gns::{read_gns, GnsImport, GnsMetadata, GnsSource, KINEMATIC_TYPE};
+pub use gns::{
+    encode_record, gns_trajectories, read_gns, GnsImport, GnsMetadata, GnsSource, KINEMATIC_TYPE,
+};
 
 use std::path::Path;
 
-use crate::data::{write_trajectories, BagMetadata, DataError};
+use crate::data::{write_trajectories_with_field, BagMetadata, DataError};
+use crate::physics::Field;
 
 /// Metadata key: the format a bag was imported from.
 pub const KEY_IMPORTED_FROM: &str = "imported_from";
@@ -22,9 +25,14 @@ pub const KEY_IMPORT_METADATA: &str = "import_metadata";
 /// Metadata key: how the velocities were made.
 pub const KEY_VELOCITIES: &str = "velocities";
 
-/// Writes an imported GNS split as a bag at `out` (the field left unknown:
-/// GNS's metadata does not state gravity). Returns the number of states.
-pub fn write_gns_bag(imp: &GnsImport, out: &Path) -> Result<usize, DataError> {
+/// Writes an imported GNS split as a bag at `out`, every message stating
+/// `field` when given (GNS's metadata does not state gravity, so by default
+/// the field is left unknown). Returns the number of states.
+pub fn write_gns_bag(
+    imp: &GnsImport,
+    out: &Path,
+    field: Option<&Field>,
+) -> Result<usize, DataError> {
     let mut meta = BagMetadata {
         generator: Some(format!(
             "mcgnode {} bag import --from gns",
@@ -49,6 +57,6 @@ pub fn write_gns_bag(imp: &GnsImport, out: &Path) -> Result<usize, DataError> {
             imp.meta.dt
         ),
     );
-    write_trajectories(out, &imp.trajectories, &meta.to_map()?)?;
+    write_trajectories_with_field(out, &imp.trajectories, &meta.to_map()?, field)?;
     Ok(imp.trajectories.iter().map(|t| t.samples.len()).sum())
 }
