@@ -1298,8 +1298,11 @@ fn mutated_baseline_files() {
 
 // ---------------------------------------------------------------- GNS
 
+/// A seed GNS file: what it is, its metadata, its bytes.
+type GnsSeed = (&'static str, GnsMetadata, Vec<u8>);
+
 /// Valid GNS TFRecord files (2D with a kinematic particle, 3D) and metadata.
-fn gns_seeds() -> (Vec<(&'static str, GnsMetadata, Vec<u8>)>, String) {
+fn gns_seeds() -> (Vec<GnsSeed>, String) {
     let meta_text = r#"{"dim": 2, "dt": 0.0025, "default_connectivity_radius": 0.015,
         "bounds": [[0.1, 0.9], [0.1, 0.9]], "sequence_length": 3}"#
         .to_string();
