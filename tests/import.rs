@@ -210,3 +210,54 @@ fn gns_damage_is_named() {
     );
     assert!(e.contains("HDF5"), "{e}");
 }
+
+/// The guide's GNS import lines, run as written (from a copy of the
+/// repository root's `.venv` and `scripts`, with `mcgnode` on PATH).
+#[test]
+fn the_guides_import_lines_run_as_written() {
+    let guide = std::fs::read_to_string(Path::new(ROOT).join("docs/guide.md")).unwrap();
+    let section = guide
+        .split("### Importing GNS datasets")
+        .nth(1)
+        .expect("the guide has a section `Importing GNS datasets`");
+    let block = section
+        .split("```sh\n")
+        .nth(1)
+        .and_then(|b| b.split("```").next())
+        .expect("the section shows a sh block");
+    let lines: Vec<&str> = block.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.starts_with("mcgnode bag import --from gns")),
+        "{block}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for name in [".venv", "scripts"] {
+        std::os::unix::fs::symlink(Path::new(ROOT).join(name), d.join(name)).unwrap();
+    }
+    let bin_dir = Path::new(common::BIN).parent().unwrap();
+    let path = format!(
+        "{}:{}",
+        bin_dir.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    for line in lines {
+        let o = Command::new("bash")
+            .args(["-c", line])
+            .env("PATH", &path)
+            .current_dir(d)
+            .output()
+            .expect("run bash");
+        assert!(
+            o.status.success(),
+            "guide line `{line}` failed:\n{}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    let bag = read(&d.join("imported.mcap"));
+    assert_eq!(bag.trajectories.len(), 4);
+    assert!(d.join("imported-model.json").exists());
+}
