@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 
 use prost::Message;
 
-use super::tfrecord;
+use super::tfrecord::{self, Damage};
 use crate::data::DataError;
 use crate::system::{Graph, Sample, State, Trajectory};
 
@@ -152,7 +152,7 @@ impl GnsMetadata {
         }
         let bounds = match obj.get("bounds") {
             None => None,
-            Some(b) => Some(parse_bounds(b, d as usize).map_err(|m| bad(path, m))?),
+            Some(b) => Some(parse_bounds(b, d as usize).map_err(|m| bad(path, m.0))?),
         };
         Ok(GnsMetadata {
             dim: d as usize,
@@ -163,8 +163,12 @@ impl GnsMetadata {
     }
 }
 
-fn parse_bounds(b: &serde_json::Value, dim: usize) -> Result<Vec<[f64; 2]>, String> {
-    let msg = || format!("metadata key `bounds` is not {dim} pairs [lo, hi]: {b}");
+fn parse_bounds(b: &serde_json::Value, dim: usize) -> Result<Vec<[f64; 2]>, Damage> {
+    let msg = || {
+        Damage(format!(
+            "metadata key `bounds` is not {dim} pairs [lo, hi]: {b}"
+        ))
+    };
     let axes = b.as_array().filter(|a| a.len() == dim).ok_or_else(msg)?;
     axes.iter()
         .map(|p| match p.as_array().map(Vec::as_slice) {
@@ -179,18 +183,18 @@ fn parse_bounds(b: &serde_json::Value, dim: usize) -> Result<Vec<[f64; 2]>, Stri
 
 /// Little-endian numbers of a feature stored as bytes (or, for int64, as an
 /// int64 list).
-fn feature_bytes<'a>(f: &'a Feature, what: &str) -> Result<&'a [u8], String> {
+fn feature_bytes<'a>(f: &'a Feature, what: &str) -> Result<&'a [u8], Damage> {
     match &f.kind {
         Some(Kind::Bytes(b)) if b.value.len() == 1 => Ok(&b.value[0]),
-        Some(Kind::Bytes(b)) => Err(format!(
+        Some(Kind::Bytes(b)) => Err(Damage(format!(
             "`{what}` holds {} byte strings: expected 1",
             b.value.len()
-        )),
-        _ => Err(format!("`{what}` is not a bytes feature")),
+        ))),
+        _ => Err(Damage(format!("`{what}` is not a bytes feature"))),
     }
 }
 
-fn particle_types(ctx: &Features) -> Result<Vec<i64>, String> {
+fn particle_types(ctx: &Features) -> Result<Vec<i64>, Damage> {
     let f = ctx
         .feature
         .get("particle_type")
@@ -200,10 +204,10 @@ fn particle_types(ctx: &Features) -> Result<Vec<i64>, String> {
     }
     let b = feature_bytes(f, "particle_type")?;
     if b.len() % 8 != 0 {
-        return Err(format!(
+        return Err(Damage(format!(
             "`particle_type` holds {} bytes: not a whole number of int64",
             b.len()
-        ));
+        )));
     }
     Ok(b.chunks_exact(8)
         .map(|c| i64::from_le_bytes(c.try_into().unwrap_or([0; 8])))
@@ -211,18 +215,18 @@ fn particle_types(ctx: &Features) -> Result<Vec<i64>, String> {
 }
 
 /// The positions of one record, `steps × n × dim` f32 widened to f64.
-fn positions(lists: &FeatureLists, n: usize, dim: usize) -> Result<Vec<Vec<f64>>, String> {
+fn positions(lists: &FeatureLists, n: usize, dim: usize) -> Result<Vec<Vec<f64>>, Damage> {
     let steps = &lists
         .feature_list
         .get("position")
         .ok_or("feature list `position` is missing")?
         .feature;
     if steps.len() < 2 {
-        return Err(format!(
+        return Err(Damage(format!(
             "feature list `position` has {} steps: at least 2 are needed (velocities are \
              differences)",
             steps.len()
-        ));
+        )));
     }
     let want = n * dim * 4;
     steps
@@ -231,18 +235,20 @@ fn positions(lists: &FeatureLists, n: usize, dim: usize) -> Result<Vec<Vec<f64>>
         .map(|(t, f)| {
             let b = feature_bytes(f, "position")?;
             if b.len() != want {
-                return Err(format!(
+                return Err(Damage(format!(
                     "`position` step {t} holds {} bytes: expected {n} particles × {dim} × 4 = \
                      {want} (shape (steps, particles, dim) float32)",
                     b.len()
-                ));
+                )));
             }
             let q: Vec<f64> = b
                 .chunks_exact(4)
                 .map(|c| f64::from(f32::from_le_bytes(c.try_into().unwrap_or([0; 4]))))
                 .collect();
             if let Some(i) = q.iter().position(|x| !x.is_finite()) {
-                return Err(format!("`position` step {t}: value {i} is not finite"));
+                return Err(Damage(format!(
+                    "`position` step {t}: value {i} is not finite"
+                )));
             }
             Ok(q)
         })
@@ -255,7 +261,7 @@ fn trajectory(
     id: u32,
     meta: &GnsMetadata,
     system: &str,
-) -> Result<Trajectory, String> {
+) -> Result<Trajectory, Damage> {
     let ex = SequenceExample::decode(record).map_err(|e| format!("not a SequenceExample: {e}"))?;
     let ctx = ex.context.ok_or("no context features")?;
     let id = match ctx.feature.get("key").map(|f| &f.kind) {
@@ -266,12 +272,14 @@ fn trajectory(
     };
     let types = particle_types(&ctx).map_err(|e| format!("key {id}: {e}"))?;
     if types.is_empty() {
-        return Err(format!("key {id}: `particle_type` lists no particle"));
+        return Err(Damage(format!(
+            "key {id}: `particle_type` lists no particle"
+        )));
     }
     if let Some(t) = types.iter().find(|t| !(0..=MAX_TYPE).contains(*t)) {
-        return Err(format!(
+        return Err(Damage(format!(
             "key {id}: particle type {t} is not in 0..={MAX_TYPE}"
-        ));
+        )));
     }
     let lists = ex
         .feature_lists
@@ -326,7 +334,7 @@ pub fn gns_trajectories(
     meta: &GnsMetadata,
     system: &str,
 ) -> Result<Vec<Trajectory>, DataError> {
-    let records = tfrecord::records(bytes).map_err(|e| bad(file, e))?;
+    let records = tfrecord::records(bytes).map_err(|e| bad(file, e.0))?;
     if records.is_empty() {
         return Err(bad(file, "holds no record"));
     }

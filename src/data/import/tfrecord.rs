@@ -2,6 +2,24 @@
 //! CRC-32C of those 8 bytes, the data, and the masked CRC-32C of the data.
 //! Both checksums are verified.
 
+/// What is wrong with a record or its contents, in words; the caller adds
+/// the file ([`crate::data::DataError::Import`]).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct Damage(pub String);
+
+impl From<String> for Damage {
+    fn from(s: String) -> Self {
+        Damage(s)
+    }
+}
+
+impl From<&str> for Damage {
+    fn from(s: &str) -> Self {
+        Damage(s.to_string())
+    }
+}
+
 /// TensorFlow's CRC mask.
 const MASK_DELTA: u32 = 0xa282_ead8;
 
@@ -19,22 +37,22 @@ fn u32_at(bytes: &[u8], at: usize) -> u32 {
 
 /// The records of a TFRecord file, in order. The error says which record,
 /// at which byte offset, and what is wrong (truncated, bad checksum).
-pub fn records(bytes: &[u8]) -> Result<Vec<&[u8]>, String> {
+pub fn records(bytes: &[u8]) -> Result<Vec<&[u8]>, Damage> {
     let mut out = Vec::new();
     let mut at = 0usize;
     while at < bytes.len() {
         let k = out.len();
         let rest = bytes.len() - at;
         if rest < 12 {
-            return Err(format!(
+            return Err(Damage(format!(
                 "record {k} at byte {at}: truncated header ({rest} of 12 bytes)"
-            ));
+            )));
         }
         let len_bytes = &bytes[at..at + 8];
         if u32_at(bytes, at + 8) != masked_crc(len_bytes) {
-            return Err(format!(
+            return Err(Damage(format!(
                 "record {k} at byte {at}: the length's CRC does not match (corrupt file)"
-            ));
+            )));
         }
         let mut lb = [0u8; 8];
         lb.copy_from_slice(len_bytes);
@@ -42,17 +60,17 @@ pub fn records(bytes: &[u8]) -> Result<Vec<&[u8]>, String> {
         let body = at + 12;
         let avail = (bytes.len() - body) as u64;
         if len > avail.saturating_sub(4) {
-            return Err(format!(
+            return Err(Damage(format!(
                 "record {k} at byte {at}: truncated: {len} data bytes and a 4-byte CRC \
                  announced, {avail} bytes left"
-            ));
+            )));
         }
         let len = len as usize;
         let data = &bytes[body..body + len];
         if u32_at(bytes, body + len) != masked_crc(data) {
-            return Err(format!(
+            return Err(Damage(format!(
                 "record {k} at byte {at}: the data's CRC does not match (corrupt file)"
-            ));
+            )));
         }
         out.push(data);
         at = body + len + 4;
@@ -84,9 +102,9 @@ mod tests {
         assert_eq!(r, vec![&b"hello"[..], &b""[..], &[7u8; 300][..]]);
         let mut bad = file.clone();
         bad[13] ^= 1;
-        assert!(records(&bad).unwrap_err().contains("data's CRC"));
+        assert!(records(&bad).unwrap_err().0.contains("data's CRC"));
         let cut = &file[..file.len() - 3];
-        assert!(records(cut).unwrap_err().contains("record 2"));
+        assert!(records(cut).unwrap_err().0.contains("record 2"));
     }
 
     #[test]
