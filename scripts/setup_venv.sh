@@ -46,6 +46,10 @@ fi
 # Independent MCAP/ROS 2 bag decoders (tests/bag_python.rs, scripts/decode_bag.py).
 ensure_packages mcap==1.6.0 mcap-ros2-support==0.6.0 rosbags==0.11.9 numpy==2.4.6
 
+# GNS-format TFRecord files written without TensorFlow (scripts/bag_to_gns.py,
+# tests/import.rs).
+ensure_packages tfrecord==1.14.6
+
 # The Python package python/ (PyO3): maturin builds its wheel, pytest runs
 # python/tests/ (tests/python.rs).
 ensure_packages maturin==1.16.0 pytest==9.2.0

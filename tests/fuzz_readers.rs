@@ -1,4 +1,5 @@
-//! Hostile bytes (issue 20): mutated MCAP files, CDR messages and model files
+//! Hostile bytes (issue 20): mutated MCAP files, CDR messages, model files
+//! and GNS TFRecord files with their metadata
 //! go through the real readers. Every case must return (never panic), within
 //! a time bound (never hang), and every refusal must say something.
 //!
@@ -27,6 +28,7 @@ use std::time::{Duration, Instant};
 
 use mcap::records::{MessageHeader, Metadata};
 use mcgnode::baselines::{BaselineFile, BaselineHyper, BaselineNet, Kind};
+use mcgnode::data::import::{encode_record, gns_trajectories, GnsMetadata};
 use mcgnode::data::msg::{encode_cdr, particle_state_schema, Layout, ParticleStateV1};
 use mcgnode::data::msg::{PARTICLE_STATE_MSG_V1, PARTICLE_STATE_TYPE};
 use mcgnode::data::{read_trajectories, ParticleState, METADATA_NAME, PARTICLE_STATE_TOPIC};
@@ -41,12 +43,16 @@ use rand::SeedableRng;
 
 /// Cases per property: MCAP 30,000 + 15,000, CDR 100,000, model files
 /// 20,000 + 10,000; 175,000 in all (issue 20 asks for 100,000), about 15 s
-/// on two cores.
+/// on two cores; GNS TFRecord files and metadata 20,000 + 5,000 on top.
 const MCAP_BYTE_CASES: u32 = 30_000;
 const MCAP_MESSAGE_CASES: u32 = 15_000;
 const CDR_CASES: u32 = 100_000;
 const MODEL_CASES: u32 = 20_000;
 const BASELINE_CASES: u32 = 10_000;
+/// GNS TFRecord files: mutated file bytes, and mutated records framed anew
+/// (so that the protobuf decoder, not the CRC, meets them), and metadata.
+const GNS_CASES: u32 = 20_000;
+const GNS_METADATA_CASES: u32 = 5_000;
 
 /// A single case taking longer than this twice in a row fails its property:
 /// the readers take about a millisecond at most on these small inputs, so
@@ -1288,4 +1294,103 @@ fn mutated_model_files() {
 #[test]
 fn mutated_baseline_files() {
     model_property("baseline files", BASELINE_CASES, &seeds().baselines);
+}
+
+// ---------------------------------------------------------------- GNS
+
+/// A seed GNS file: what it is, its metadata, its bytes.
+type GnsSeed = (&'static str, GnsMetadata, Vec<u8>);
+
+/// Valid GNS TFRecord files (2D with a kinematic particle, 3D) and metadata.
+fn gns_seeds() -> (Vec<GnsSeed>, String) {
+    let meta_text = r#"{"dim": 2, "dt": 0.0025, "default_connectivity_radius": 0.015,
+        "bounds": [[0.1, 0.9], [0.1, 0.9]], "sequence_length": 3}"#
+        .to_string();
+    let path = Path::new("metadata.json");
+    let m2 = GnsMetadata::from_json(&meta_text, path, None).expect("seed metadata");
+    let m3 = GnsMetadata {
+        dim: 3,
+        ..m2.clone()
+    };
+    let steps = |n: usize, dim: usize| -> Vec<Vec<f32>> {
+        (0..4)
+            .map(|t| (0..n * dim).map(|i| 0.1 + 0.01 * (i + t) as f32).collect())
+            .collect()
+    };
+    let mut two = encode_record(0, &[5, 5, 3], &steps(3, 2));
+    two.extend(encode_record(1, &[5, 3], &steps(2, 2)));
+    let three = encode_record(7, &[6, 6], &steps(2, 3));
+    for (m, b) in [(&m2, &two), (&m3, &three)] {
+        gns_trajectories(b, Path::new("seed.tfrecord"), m, "gns").expect("seed file reads");
+    }
+    (
+        vec![("2D file", m2, two), ("3D file", m3, three)],
+        meta_text,
+    )
+}
+
+/// Reads GNS bytes; accepted trajectories must be valid systems.
+fn read_gns_bytes(data: &[u8], meta: &GnsMetadata) -> Outcome {
+    match gns_trajectories(data, Path::new("fuzz.tfrecord"), meta, "gns") {
+        Ok(trs) => {
+            for tr in &trs {
+                tr.graph.validate().expect("an accepted graph is valid");
+                for s in &tr.samples {
+                    s.state
+                        .validate(&tr.graph)
+                        .expect("an accepted state is valid");
+                }
+            }
+            Outcome::Accepted
+        }
+        Err(e) => rejected(&e),
+    }
+}
+
+#[test]
+fn mutated_gns_records() {
+    let (seeds, _) = gns_seeds();
+    run(
+        "GNS TFRecord",
+        GNS_CASES,
+        (any::<Index>(), any::<bool>(), mutations()),
+        |g, (seed, reframe, muts)| {
+            let (what, meta, bytes) = &seeds[seed.index(seeds.len())];
+            let data = if reframe {
+                // The first record's payload mutated, framed with good CRCs.
+                let len = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+                mcgnode::data::import::tfrecord::frame(&mutated(&bytes[12..12 + len], &muts))
+            } else {
+                mutated(bytes, &muts)
+            };
+            g.case(
+                || format!("{what} (reframed: {reframe}) with {muts:?}"),
+                || read_gns_bytes(&data, meta),
+            )
+        },
+    );
+}
+
+#[test]
+fn mutated_gns_metadata() {
+    let (seeds, text) = gns_seeds();
+    run(
+        "GNS metadata",
+        GNS_METADATA_CASES,
+        mutations(),
+        |g, muts| {
+            let data = mutated(text.as_bytes(), &muts);
+            g.case(
+                || format!("metadata.json with {muts:?}"),
+                || {
+                    let t = String::from_utf8_lossy(&data);
+                    match GnsMetadata::from_json(&t, Path::new("metadata.json"), None) {
+                        Ok(m) if m.dim == 2 => read_gns_bytes(&seeds[0].2, &m),
+                        Ok(m) => read_gns_bytes(&seeds[1].2, &m),
+                        Err(e) => rejected(&e),
+                    }
+                },
+            )
+        },
+    );
 }

@@ -1,4 +1,4 @@
-//! `mcgnode bag info`, `mcgnode bag repair` and `mcgnode bag draw`.
+//! `mcgnode bag info`, `repair`, `draw`, `observe`; `import` is in `import.rs`.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -33,6 +33,12 @@ enum BagCommand {
     /// rate and dropped states as asked. The system description (metadata,
     /// field) is kept, so `replay` and the node read it as before.
     Observe(ObserveArgs),
+    /// Import another project's dataset as a bag: `--from gns` (TFRecord
+    /// SequenceExamples and metadata.json, Sanchez-Gonzalez et al. 2020).
+    /// Interaction radius and dt come from the metadata, kinematic
+    /// (boundary) particles from the types, velocities from finite
+    /// differences of the positions.
+    Import(super::import::ImportArgs),
 }
 
 /// Options of `bag observe`.
@@ -106,6 +112,7 @@ pub fn run(a: Args) -> Result<()> {
         BagCommand::Repair(a) => repair(a),
         BagCommand::Draw(a) => draw(&a),
         BagCommand::Observe(a) => observe(&a),
+        BagCommand::Import(a) => super::import::run(&a),
     }
 }
 

@@ -7,6 +7,7 @@ pub mod choices;
 mod demo;
 mod evaluate;
 mod field;
+mod import;
 mod plan;
 mod replay;
 mod reproduce;

@@ -68,6 +68,14 @@ pub enum DataError {
         /// What is wrong.
         msg: String,
     },
+    /// Another project's dataset (GNS, LagrangeBench) cannot be imported.
+    #[error("{path}: {msg}")]
+    Import {
+        /// The file concerned (records or metadata).
+        path: PathBuf,
+        /// What is wrong, naming the record and key.
+        msg: String,
+    },
     /// Trajectories cannot be turned into a training set, or cannot be written.
     #[error("{0}")]
     Trajectory(String),

@@ -6,6 +6,7 @@
 //! - [`source`]: the storage files of a bag argument and their compression.
 //! - [`meta`]: the `mcgnode` metadata record, typed.
 //! - [`field`]: what a bag says about its system (configuration, field).
+//! - [`import`]: other projects' datasets (GNS TFRecords) as trajectories.
 //! - [`repair`]: rewriting an MCAP file cut short as a complete one.
 //! - [`dataset`]: states and target accelerations for training; bag digests.
 //! - [`load`]: training bags into a dataset and what a model file records about it.
@@ -16,6 +17,7 @@ pub mod bag;
 pub mod dataset;
 mod error;
 pub mod field;
+pub mod import;
 pub mod load;
 pub mod meta;
 pub mod msg;
