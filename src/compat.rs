@@ -400,6 +400,13 @@ pub const ABSURD_SIGMAS: f64 = 1e6;
 /// units: beyond it squares and products of coordinates overflow.
 pub const ABSURD_MAGNITUDE: f64 = 1e100;
 
+/// Largest drift of a momentum-conserving model's predicted total momentum
+/// from its input's, relative to the states' momentum scale (the larger of
+/// the input's and each predicted state's sum of |m v|): pairwise forces
+/// keep it to round-off (about 1e-13 over a 100-step prediction), so a
+/// larger drift is a prediction broken by overflow or lost precision.
+pub const CONSERVATION_TOLERANCE: f64 = 1e-6;
+
 /// The range of inputs a model saw in training, from the scales its file
 /// stores ([`crate::gnode::Norm`]: RMS position about the mean, velocity,
 /// edge vector, stiffness): an input many scales beyond them is outside

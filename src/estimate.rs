@@ -135,11 +135,7 @@ impl ModelFit {
             )));
         }
         let y: Vec<f64> = positions.iter().flat_map(|q| q.iter().copied()).collect();
-        let warm = self
-            .previous
-            .iter()
-            .find(|(t, _)| *t == stamps[0])
-            .map(|(_, s)| s.clone());
+        let warm = self.warm_start(stamps[0]);
         let start = warm
             .clone()
             .unwrap_or_else(|| cold_start(stamps, positions));
@@ -185,6 +181,28 @@ impl ModelFit {
             iterations,
             warm: warm.is_some(),
         })
+    }
+
+    /// The previous fit's state at `t0`: at that stamp if the previous
+    /// window had it, else its newest state before `t0` rolled on to `t0`
+    /// through the model (a caller that fits only some states, as `replay`
+    /// fits the ones it predicts from, keeps its warm start). `None` without
+    /// a previous fit before `t0` or when that roll diverges.
+    fn warm_start(&mut self, t0: Nanos) -> Option<State> {
+        if let Some((_, s)) = self.previous.iter().find(|(t, _)| *t == t0) {
+            return Some(s.clone());
+        }
+        let (t, s) = self.previous.iter().rev().find(|(t, _)| *t < t0)?.clone();
+        let (mut q, mut v) = (s.q, s.v);
+        let mut a = vec![0.0; q.len()];
+        self.model.acceleration(&q, &v, &mut a);
+        let span = (t0 - t) as f64 * 1e-9;
+        let steps = ((span / self.opts.dt) * (1.0 - 1e-9)).ceil().max(1.0) as usize;
+        let h = span / steps as f64;
+        for _ in 0..steps {
+            self.step(&mut q, &mut v, &mut a, h).ok()?;
+        }
+        Some(State { q, v })
     }
 
     /// One damped Gauss–Newton step from `x`: (JᵀJ + λ diag JᵀJ) δ = −Jᵀr.

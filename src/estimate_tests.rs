@@ -75,6 +75,18 @@ fn positions_from_the_model_itself_give_back_its_state() {
     let g = fit.fit(&stamps(13)[1..], &qs).expect("fit");
     assert!(g.warm && g.rms_start < 1e-8, "{g:?}");
     assert!(max_err(&g.state.q, &more.last().unwrap().q) < 1e-8);
+    // A window 5 states on (the ones between not fitted, as replay skips
+    // them): the previous fit rolled on to its oldest stamp starts it.
+    let later = model
+        .rollout(&graph, &start, Timing::integration(1e-3, 170, 10))
+        .expect("rollout");
+    let qs: Vec<&[f64]> = later[6..].iter().map(|s| s.q.as_slice()).collect();
+    let h = fit.fit(&stamps(18)[6..], &qs).expect("fit");
+    assert!(h.warm && h.rms_start < 1e-8, "{h:?}");
+    // With no previous fit before the window, it starts cold.
+    fit.reset();
+    let c = fit.fit(&stamps(18)[6..], &qs).expect("fit");
+    assert!(!c.warm && c.rms_start > 1e-6, "{c:?}");
 }
 
 /// Truth from the simulator (not the model), positions with Gaussian noise

@@ -206,7 +206,7 @@ fn noise_script_makes_the_readme_table() {
         .arg(dir.path())
         .env("MCGNODE", BIN)
         .env("TRAJECTORIES", "1")
-        // Shorter than the README's 301: the model rows fit every state.
+        // Shorter than the default 301: the model rows fit through the rollout.
         .env("STATES", "201")
         .output()
         .expect("running scripts/noise.sh");

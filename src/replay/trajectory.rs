@@ -36,12 +36,15 @@ fn advance(
 /// or with `causal` its positions with velocities estimated from it and the
 /// states before ([`History`], as the node does; `None` while warming up).
 /// The model smoother fits the history's window through `model` (steps of at
-/// most `dt`); where its rollout diverges the history's own estimate stands.
+/// most `dt`) at the states predicted from (every `stride`-th), each fit
+/// warm-started from the one before rolled on to its window; where its
+/// rollout diverges the history's own estimate stands.
 fn start_states(
     model: &dyn Dynamics,
     tr: &Trajectory,
     (causal, stream): (bool, &StreamOptions),
     dt: f64,
+    stride: usize,
 ) -> Result<Vec<Option<State>>> {
     if !causal {
         return Ok(tr.samples.iter().map(|s| Some(s.state.clone())).collect());
@@ -54,7 +57,7 @@ fn start_states(
         _ => None,
     };
     let mut h = History::default();
-    let starts = tr.samples.iter().map(|s| {
+    let starts = tr.samples.iter().enumerate().map(|(k, s)| {
         let t = (s.t * 1e9).round() as crate::data::stream::Nanos;
         let (reset, est) = h.push(stream, &tr.graph, t, &s.state.q);
         let Estimate::Ready(state) = est else {
@@ -65,6 +68,10 @@ fn start_states(
         };
         if reset.is_some() {
             fit.reset();
+        }
+        if k % stride != 0 {
+            // Not predicted from: its estimate is never used.
+            return Some(state);
         }
         let (stamps, positions) = h.window();
         Some(fit.fit(&stamps, &positions).map_or(state, |f| f.state))
@@ -118,7 +125,7 @@ pub(super) fn replay_trajectory(
     // Leads a little past the horizon (stamp round-off) still count.
     let limit = p.horizon + 1e-6 * p.bin_width;
     let s = &tr.samples;
-    let starts = start_states(model, tr, (causal, stream), p.dt)?;
+    let starts = start_states(model, tr, (causal, stream), p.dt, stride)?;
     let truth_of = |j: usize| truth.map_or(&s[j].state, |r| &r.samples[j].state);
     for k in (0..s.len()).step_by(stride) {
         let Some(start) = &starts[k] else {

@@ -50,6 +50,12 @@ pub enum PredictError {
     /// that is not finite: refused whatever `out_of_range_refuse` says.
     #[error("refused (absurd state): {0}")]
     Absurd(String),
+    /// A momentum-conserving model's prediction whose total momentum drifts
+    /// from the input's by more than [`crate::compat::CONSERVATION_TOLERANCE`]
+    /// of the momentum scale: refused and counted as rejected, like
+    /// [`PredictError::Absurd`].
+    #[error("refused (broke conservation): {0}")]
+    BrokeConservation(String),
     /// The model cannot run this graph.
     #[error("unsupported system: {0}")]
     Unsupported(#[source] DynamicsError),
@@ -223,7 +229,66 @@ pub fn predict_served(
             "the model's prediction is not finite (it overflowed): nothing published".into(),
         ));
     }
+    if conserves_momentum(model, input) {
+        check_momentum(&input.graph, &input.state.v, &out.states)?;
+    }
     Ok(outside)
+}
+
+/// Whether the served model conserves total momentum on this input: an
+/// MCGNODE without its body-force branch (pairwise forces only), on a graph
+/// without anchors or kinematic particles, in a free field.
+fn conserves_momentum(model: &dyn Dynamics, input: &Input) -> bool {
+    let closed = model.trained_for().is_some_and(|t| t.closed == Some(true));
+    closed
+        && input.graph.anchors.is_empty()
+        && !input.graph.kinematic.iter().any(|&k| k)
+        && input
+            .field
+            .as_ref()
+            .is_none_or(crate::physics::Field::is_free)
+}
+
+/// Refuses `states` (the prediction, its first the input itself) when a
+/// state's total momentum differs from the input's (`v0`) by more than
+/// [`crate::compat::CONSERVATION_TOLERANCE`] of the momentum scale: the
+/// larger of the input's and that state's sum of |m v|.
+pub fn check_momentum(graph: &Graph, v0: &[f64], states: &KeptStates) -> Result<(), PredictError> {
+    use crate::compat::CONSERVATION_TOLERANCE;
+    let d = graph.dim.max(1);
+    // Total momentum (d components) and the sum of |m v| of velocities `v`.
+    let momentum = |v: &[f64]| {
+        let mut p = [0.0; 3];
+        let mut scale = 0.0;
+        for (m, vi) in graph.masses.iter().zip(v.chunks(d)) {
+            for (pc, x) in p.iter_mut().zip(vi) {
+                *pc += m * x;
+            }
+            scale += m.abs() * vi.iter().map(|x| x * x).sum::<f64>().sqrt();
+        }
+        (p, scale)
+    };
+    let (p0, s0) = momentum(v0);
+    for k in 0..states.len() {
+        let (p, s) = momentum(states.v(k));
+        let drift = p0
+            .iter()
+            .zip(&p)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            .sqrt();
+        let scale = s0.max(s);
+        if drift > CONSERVATION_TOLERANCE * scale {
+            return Err(PredictError::BrokeConservation(format!(
+                "the model conserves momentum, but predicted state {k}'s total momentum drifts \
+                 {drift:.3e} from the input's, {:.1e} of its scale {scale:.3e} (tolerance \
+                 {CONSERVATION_TOLERANCE:e}): nothing published; send states in the range the \
+                 model was trained on",
+                drift / scale
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Refuses a state whose coordinates are beyond
@@ -377,6 +442,35 @@ pub fn predict(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_prediction_that_breaks_momentum_conservation_is_refused() {
+        let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("bags/models/spring5-mcgnode.json");
+        let model = crate::kernel::TrainedModel::load(&p).expect("shipped model");
+        let (graph, start) = accept(&model, &spring_state()).expect("accepted");
+        let mut out = Predicted::default();
+        let timing = Timing::integration(1e-3, 100, 10);
+        predict_into(&model, &graph, &start, timing, &mut out).expect("prediction");
+        assert!(out.states.len() > 5);
+        // The shipped MCGNODE conserves momentum: its real prediction passes.
+        check_momentum(&graph, &start.v, &out.states).expect("a real prediction conserves");
+        // One particle's velocity in one state corrupted by 1e-4 of the speed.
+        let mut states: Vec<State> = (0..out.states.len())
+            .map(|k| State {
+                q: out.states.q(k).to_vec(),
+                v: out.states.v(k).to_vec(),
+            })
+            .collect();
+        let speed = start.v.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+        states[5].v[2] += 1e-4 * speed;
+        let mut bad = KeptStates::default();
+        bad.fill(graph.ndof(), &states);
+        let e = check_momentum(&graph, &start.v, &bad).unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.starts_with("refused (broke conservation): "), "{msg}");
+        assert!(msg.contains("predicted state 5"), "{msg}");
+    }
     use crate::data::msg::{to_vec3, Time};
     use crate::models::truth::load_truth;
     use crate::physics::{SystemConfig, SystemKind};

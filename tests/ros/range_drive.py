@@ -14,11 +14,15 @@ Checks, in order (none of these states is accepted silently):
     reason, counted as rejected, and not predicted;
   * a spring of stiffness 5, one of rest length 2 and one of stiffness -1 are
     rejected (the model cannot see edges), naming --edge-physics;
-  * with out_of_range_refuse set at run time, 1e3 velocities are rejected.
+  * with out_of_range_refuse set at run time, 1e3 velocities are rejected;
+  * every prediction published is finite and keeps its input's total
+    momentum (the model is a closed MCGNODE: the node refuses one that does
+    not, "refused (broke conservation)").
 """
 
 import argparse
 import json
+import math
 import os
 import random
 import sys
@@ -123,6 +127,26 @@ def main():
     send(8)
     wait(lambda: 8 in trajs, "a prediction after the refusal")
     drive.check(7 not in trajs, "a refused out-of-range state was predicted")
+
+    # Nothing absurd published: every prediction is finite and, the model being
+    # a closed MCGNODE, keeps its input's total momentum (to 1e-6 of sum |m v|).
+    for sec, t in trajs.items():
+        ms, vs = list(t.initial.masses), list(t.velocities)
+        n, steps = len(ms), t.steps
+        drive.check(steps > 0 and len(vs) % (steps * n) == 0, f"prediction {sec}: layout")
+        d = len(vs) // (steps * n)
+        drive.check(all(math.isfinite(x) for x in vs), f"prediction {sec} is not finite")
+        v0 = [(v.x, v.y, v.z)[:d] for v in t.initial.velocities]
+        p0 = [sum(m * v[c] for m, v in zip(ms, v0)) for c in range(d)]
+        s0 = sum(m * math.hypot(*v) for m, v in zip(ms, v0))
+        for k in range(steps):
+            row = vs[k * n * d:(k + 1) * n * d]
+            vk = [row[i * d:(i + 1) * d] for i in range(n)]
+            pk = [sum(m * v[c] for m, v in zip(ms, vk)) for c in range(d)]
+            sk = sum(m * math.hypot(*v) for m, v in zip(ms, vk))
+            drift = math.dist(p0, pk)
+            drive.check(drift <= 1e-6 * max(s0, sk),
+                        f"prediction {sec}, state {k}: momentum drifts {drift:.3e}")
 
     d = last()
     print("RANGE_SUMMARY " + json.dumps({"received": d.received, "rejected": d.rejected,
