@@ -325,6 +325,7 @@ impl SystemConfig {
             anchors,
             interaction_radius: self.interaction_radius,
             kinematic: vec![],
+            periodic_box: None,
         }
     }
 

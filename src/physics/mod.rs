@@ -27,6 +27,7 @@ pub(crate) mod forces;
 pub(crate) mod integrator;
 pub(crate) mod linalg;
 pub(crate) mod neighbors;
+pub(crate) mod periodic_cells;
 pub(crate) mod projection;
 pub(crate) mod rk4;
 pub(crate) mod scenes;

@@ -126,6 +126,7 @@ fn with_kinematic(s: &SceneSpec, fixed: usize, edges: Vec<Edge>) -> Graph {
         } else {
             (0..n).map(|i| i >= s.free).collect()
         },
+        periodic_box: None,
     }
 }
 

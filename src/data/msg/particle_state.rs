@@ -315,6 +315,7 @@ impl ParticleState {
             anchors,
             interaction_radius: self.interaction_radius,
             kinematic: self.kinematic.clone(),
+            periodic_box: None,
         };
         graph
             .validate()
