@@ -94,6 +94,22 @@ pub struct ParticleState {
 }
 
 impl ParticleState {
+    /// The anchors' coordinates, `dim` each, checked.
+    fn anchor_coords(&self, dim: usize) -> Result<Vec<Vec<f64>>, DataError> {
+        self.anchors
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let v = Vector3 {
+                    x: p.x,
+                    y: p.y,
+                    z: p.z,
+                };
+                check_vec3("anchors", i, &v, dim).map(|()| [v.x, v.y, v.z][..dim].to_vec())
+            })
+            .collect()
+    }
+
     /// The box these fields describe (`None` when `box_periodic` is empty);
     /// the graph's validation checks it has one flag per axis.
     fn periodic_box(&self, dim: usize) -> Option<crate::system::PeriodicBox> {
@@ -330,19 +346,7 @@ impl ParticleState {
         } else {
             Some(flatten("accelerations", &self.accelerations, dim)?)
         };
-        let anchors = self
-            .anchors
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                let v = Vector3 {
-                    x: p.x,
-                    y: p.y,
-                    z: p.z,
-                };
-                check_vec3("anchors", i, &v, dim).map(|()| [v.x, v.y, v.z][..dim].to_vec())
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+        let anchors = self.anchor_coords(dim)?;
         let edges = self.edges(n)?;
         let graph = Graph {
             dim,
