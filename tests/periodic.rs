@@ -302,6 +302,18 @@ fn a_periodic_bag_says_so_and_an_old_bag_reads_without_a_box() {
     for t in &read_back.trajectories {
         assert_eq!(t.graph.periodic_box, cfg.graph().periodic_box);
     }
+    for model in ["gns", "lgn", "node"] {
+        let o = mcgnode(
+            &[
+                "train", "--model", model, "--data", bag_s, "--epochs", "1", "--out", "m.json",
+            ],
+            d.path(),
+        );
+        let err = String::from_utf8_lossy(&o.stderr);
+        let said =
+            err.contains("no periodic boundaries") || err.contains("which a periodic box wraps");
+        assert!(!o.status.success() && said, "{model}: {err}");
+    }
     let old = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("bags/spring5-sample.mcap");
     let info = ok(&mcgnode(&["bag", "info", old.to_str().unwrap()], d.path()));
     assert!(info.contains("not periodic"), "{info}");
