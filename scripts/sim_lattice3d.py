@@ -149,6 +149,9 @@ def main() -> int:
                 force=V3(x=0.0, y=0.0, z=0.0),
                 interaction_radius=0.0,
                 kinematic=np.zeros(0, dtype=bool),
+                box_lower=V3(x=0.0, y=0.0, z=0.0),
+                box_upper=V3(x=0.0, y=0.0, z=0.0),
+                box_periodic=np.zeros(0, dtype=bool),
             )
             writer.write(conn, ns, bytes(store.serialize_cdr(msg, T)))
     writer.close()

@@ -179,6 +179,7 @@ pub fn contact_packing(side: usize) -> (Graph, State) {
         anchors: vec![],
         interaction_radius: 1.0,
         kinematic: vec![],
+        periodic_box: None,
     };
     let v = vec![0.0; 2 * n];
     (g, State { q, v })

@@ -69,7 +69,7 @@ impl EdgeKinds {
                 anchors: false,
             },
             // Contacts are rebuilt from positions: not among the fixed kinds.
-            SystemKind::SoftSpheres => EdgeKinds::default(),
+            SystemKind::SoftSpheres | SystemKind::PeriodicSpheres => EdgeKinds::default(),
             SystemKind::FallingChain => EdgeKinds {
                 springs: false,
                 bars: true,

@@ -37,6 +37,7 @@ pub mod lagrange_metrics;
 pub mod metrics;
 pub mod models;
 pub mod names;
+pub mod periodic;
 pub mod physics;
 pub mod plan;
 pub mod plot;

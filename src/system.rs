@@ -14,6 +14,8 @@
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
+pub use crate::periodic::PeriodicBox;
+
 /// What an edge is physically.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum EdgeKind {
@@ -74,6 +76,11 @@ pub struct Graph {
     /// none, else one entry per particle.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub kinematic: Vec<bool>,
+    /// The box whose periodic axes wrap positions and make every edge vector
+    /// and contact distance a minimum image (`crate::periodic`); `None` (and
+    /// absent from older files): no box.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub periodic_box: Option<PeriodicBox>,
 }
 
 /// Serde's test for leaving a radius of 0 out, so that a graph without
@@ -130,6 +137,11 @@ impl Graph {
     /// Number of kinematic particles.
     pub fn n_kinematic(&self) -> usize {
         self.kinematic.iter().filter(|k| **k).count()
+    }
+
+    /// The box when one of its axes is periodic.
+    pub fn periodic(&self) -> Option<&PeriodicBox> {
+        self.periodic_box.as_ref().filter(|b| b.any_periodic())
     }
 
     /// Whether contact edges are rebuilt from positions (a radius > 0).
@@ -229,6 +241,45 @@ impl Graph {
                 flags: self.kinematic.len(),
                 particles: n,
             });
+        }
+        self.validate_box()
+    }
+
+    /// The box: one bound and flag per axis, lengths above twice the
+    /// interaction radius on periodic axes, no bars or anchors with it.
+    fn validate_box(&self) -> Result<(), SystemError> {
+        let Some(b) = &self.periodic_box else {
+            return Ok(());
+        };
+        let bad = |problem: String| Err(SystemError::Box(problem));
+        if b.lower.len() != self.dim || b.upper.len() != self.dim || b.periodic.len() != self.dim {
+            return bad(format!(
+                "give {} lower bounds, upper bounds and periodic flags (one per axis)",
+                self.dim
+            ));
+        }
+        for k in 0..self.dim {
+            let (lo, hi) = (b.lower[k], b.upper[k]);
+            if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+                return bad(format!(
+                    "axis {k}: bounds [{lo}, {hi}] must be finite with upper > lower"
+                ));
+            }
+            let r = self.interaction_radius;
+            if b.periodic[k] && b.length(k) <= 2.0 * r {
+                return bad(format!(
+                    "axis {k} is {} long, not more than twice the interaction radius {r}: \
+                     enlarge the box or lower the radius",
+                    b.length(k)
+                ));
+            }
+        }
+        if b.any_periodic() && (self.n_bars() > 0 || !self.anchors.is_empty()) {
+            return bad(
+                "rigid bars and anchors are not supported in a periodic box: \
+                 use springs, or make the axes non-periodic"
+                    .into(),
+            );
         }
         Ok(())
     }
@@ -363,6 +414,9 @@ pub enum SystemError {
     /// The interaction radius is negative or not finite.
     #[error("interaction radius {0} must be a finite number ≥ 0 (0: fixed edges only)")]
     Radius(f64),
+    /// The periodic box does not fit the graph.
+    #[error("periodic box: {0}")]
+    Box(String),
     /// Not one kinematic flag per particle.
     #[error(
         "{flags} kinematic flags for {particles} particles: give one per particle, \

@@ -133,6 +133,8 @@ fn python_decode(bag: &Path, decoder: &str) -> (Vec<(String, ParticleState)>, se
                     .iter()
                     .map(|k| k.as_bool().expect("bool"))
                     .collect(),
+                // The Python side does not dump the periodic box; these bags have none.
+                ..ParticleState::default()
             };
             (m["topic"].as_str().unwrap().to_string(), msg)
         })

@@ -111,6 +111,7 @@ fn contact_force_is_minus_the_gradient_of_the_potential() {
             anchors: vec![],
             interaction_radius: 0.8,
             kinematic: vec![],
+            periodic_box: None,
         };
         let q: Vec<f64> = (0..n * dim).map(|_| rng.random_range(0.0..2.5)).collect();
         let k_c = 37.0;

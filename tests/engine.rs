@@ -38,6 +38,7 @@ fn graph(dim: usize, n: usize, edges: Vec<Edge>, anchors: Vec<Vec<f64>>) -> Grap
         anchors,
         interaction_radius: 0.0,
         kinematic: vec![],
+        periodic_box: None,
     }
 }
 

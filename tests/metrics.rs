@@ -41,6 +41,7 @@ fn two_body() -> (Graph, Field) {
         anchors: vec![],
         interaction_radius: 0.0,
         kinematic: vec![],
+        periodic_box: None,
     };
     (
         g,

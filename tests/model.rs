@@ -456,6 +456,7 @@ fn tree_on_bars(n: usize, seed: u64) -> (Graph, State) {
         anchors: vec![vec![0.0, 0.0]],
         interaction_radius: 0.0,
         kinematic: vec![],
+        periodic_box: None,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (mut q, mut v) = (vec![0.0; 2 * n], vec![0.0; 2 * n]);

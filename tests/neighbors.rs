@@ -52,6 +52,7 @@ fn graph(dim: usize, n: usize, radius: f64, edges: Vec<Edge>) -> Graph {
         anchors: vec![],
         interaction_radius: radius,
         kinematic: vec![],
+        periodic_box: None,
     }
 }
 

@@ -227,6 +227,7 @@ fn triangle_graph() -> Graph {
         anchors: vec![vec![0.0, 0.0], vec![1.5, -0.5]],
         interaction_radius: 0.0,
         kinematic: vec![],
+        periodic_box: None,
     }
 }
 

@@ -46,6 +46,7 @@ fn bar_chain(n: usize) -> (Graph, State) {
         anchors: vec![],
         interaction_radius: 0.0,
         kinematic: (0..=n).map(|i| i == 0).collect(),
+        periodic_box: None,
     };
     let mut q = vec![0.0; 2 * (n + 1)];
     for i in 1..=n {

@@ -81,6 +81,7 @@ fn trajectories() -> Vec<Trajectory> {
         anchors: vec![],
         interaction_radius: 0.0,
         kinematic: vec![],
+        periodic_box: None,
     };
     let pendulum = Graph {
         dim: 3,
@@ -105,6 +106,7 @@ fn trajectories() -> Vec<Trajectory> {
         anchors: vec![vec![0.0, 0.0, 2.0]],
         interaction_radius: 0.0,
         kinematic: vec![],
+        periodic_box: None,
     };
     let traj = |id: u32, g: &Graph, steps: usize| {
         let nd = g.ndof();

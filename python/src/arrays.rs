@@ -98,6 +98,7 @@ impl Parts<'_, '_> {
             anchors,
             interaction_radius: self.radius,
             kinematic,
+            periodic_box: None,
         };
         graph.validate().map_err(lib_err)?;
         let state = State {

@@ -206,9 +206,17 @@ impl Dynamics for TrainedBaseline {
 /// of a closed set of particles) do not model contacts or kinematic particles
 /// and refuse them rather than learn them wrongly; GNS, whose defining
 /// setting is a radius graph with walls as particles, does, for the radius it
-/// was trained with.
+/// was trained with. No baseline models a periodic box.
 pub(crate) fn contact_refusal(hyper: &BaselineHyper, graph: &Graph) -> Option<String> {
     let touches = graph.has_contacts() || graph.n_kinematic() > 0;
+    if graph.periodic().is_some() {
+        return Some(format!(
+            "the {} baseline has no periodic boundaries (its edges would cross the box \
+             the long way): train a GNODE-family model (--model mcgnode, gnode, cgnode or \
+             cdgnode) on a periodic system",
+            hyper.kind
+        ));
+    }
     match hyper.kind {
         Kind::Gns if graph.interaction_radius != hyper.interaction_radius => Some(format!(
             "the GNS model finds contacts within radius {}, the system's radius is {}: \

@@ -297,7 +297,9 @@ fn print_systems(trajs: &[crate::system::Trajectory]) {
 }
 
 /// The interaction radii and kinematic particle counts of the trajectories:
-/// "radius 1 (particles closer touch), 120 kinematic particles" or "none".
+/// "radius 1 (particles closer touch), 120 kinematic particles" or "none",
+/// and the periodic box ("periodic box [0, 2.4) x [0, 2.4) (periodic x, y)"
+/// or "not periodic").
 fn contacts(trajs: &[crate::system::Trajectory]) -> String {
     let mut radii: Vec<f64> = vec![];
     let mut kinematic: Vec<usize> = vec![];
@@ -326,7 +328,16 @@ fn contacts(trajs: &[crate::system::Trajectory]) -> String {
             join(kinematic.iter().map(ToString::to_string).collect())
         )
     };
-    format!("{radius}, {held}")
+    let mut boxes: Vec<String> = vec![];
+    for tr in trajs {
+        let b = tr.graph.periodic().map_or("not periodic".into(), |b| {
+            format!("periodic {}", b.describe())
+        });
+        if !boxes.contains(&b) {
+            boxes.push(b);
+        }
+    }
+    format!("{radius}, {held}, {}", boxes.join("/"))
 }
 
 fn repair(a: RepairArgs) -> Result<()> {

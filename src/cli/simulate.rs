@@ -83,6 +83,7 @@ pub fn config(a: &Args) -> Result<SystemConfig> {
     let particles = a.particles.unwrap_or(match a.system {
         SystemKind::Peridynamic => 125,
         SystemKind::SoftSpheres => 100,
+        SystemKind::PeriodicSpheres => 64,
         SystemKind::CollidingLattices if dim == 3 => 54,
         SystemKind::CollidingLattices => 32,
         SystemKind::FallingChain | SystemKind::HeldChain => 10,

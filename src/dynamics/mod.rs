@@ -104,6 +104,7 @@ pub fn verlet_lockstep(
         }
         for (s, a) in cur.iter_mut().zip(&acc) {
             verlet::drift(&mut s.q, &mut s.v, a, dt);
+            verlet::wrap(graph, &mut s.q);
         }
         accel(&cur, &mut acc)?;
         let mut k = 0;
@@ -234,6 +235,7 @@ pub trait Dynamics: Send + Sync {
         out.push(s.clone());
         for step in 1..=steps {
             verlet::drift(&mut s.q, &mut s.v, &a, dt);
+            verlet::wrap(graph, &mut s.q);
             self.acceleration(graph, &s, &mut a)?;
             verlet::kick(&mut s.v, &a, dt);
             if s.q.iter().chain(&s.v).any(|x| !x.is_finite()) {
@@ -289,7 +291,10 @@ pub trait Dynamics: Send + Sync {
                 &mut a,
                 dt,
                 None,
-                |q, v| drive.place(step, q, v),
+                |q, v| {
+                    verlet::wrap(graph, q);
+                    drive.place(step, q, v);
+                },
                 |q, v, a| {
                     let st = State {
                         q: q.to_vec(),

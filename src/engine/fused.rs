@@ -53,6 +53,8 @@ pub(crate) struct EdgeBlocks<'a> {
     pub(crate) nodes: usize,
     pub(crate) dim: usize,
     pub(crate) w_scale: f64,
+    /// The period of each axis a periodic box wraps (minimum images).
+    pub(crate) period: [Option<f64>; 3],
     /// Receiver and sender of each directed edge.
     pub(crate) recv: &'a [usize],
     pub(crate) send: &'a [usize],
@@ -170,7 +172,8 @@ impl EdgeBlocks<'_> {
         let (recv, send) = (&self.recv[rows.clone()], &self.send[rows]);
         for c in 0..self.dim {
             let q = &self.q[c * self.nodes..(c + 1) * self.nodes];
-            edge_differences(&mut w[c * st..c * st + len], q, recv, send, self.w_scale);
+            let w = &mut w[c * st..c * st + len];
+            edge_differences(w, q, (recv, send), self.w_scale, self.period[c]);
         }
         for f in self.dim..self.features {
             let at = f * self.edges + lo;

@@ -58,18 +58,24 @@ pub(crate) fn scatter_add_rows(dst: &mut [f64], src: &[f64], idx: &[usize]) {
 
 /// One coordinate of the edge vectors: `w[e] = (q[recv[e]] − q[send[e]]) / scale`,
 /// gathered first and divided apart, so that the divisions run in vectors
-/// (the same bits as dividing each in turn).
+/// (the same bits as dividing each in turn). On an axis of a periodic box
+/// (`period`: its length) the difference is its minimum image; the image's
+/// shift is constant between steps, so gradients through w are unchanged.
 #[inline(always)]
 #[allow(clippy::inline_always)] // inside the callers' vector copies
 pub(crate) fn edge_differences(
     w: &mut [f64],
     q: &[f64],
-    recv: &[usize],
-    send: &[usize],
+    (recv, send): (&[usize], &[usize]),
     scale: f64,
+    period: Option<f64>,
 ) {
     for ((wv, &i), &j) in w.iter_mut().zip(recv).zip(send) {
         *wv = q[i] - q[j];
+    }
+    if let Some(l) = period {
+        w.iter_mut()
+            .for_each(|wv| *wv = crate::periodic::min_image_axis(*wv, l));
     }
     w.iter_mut().for_each(|wv| *wv /= scale);
 }

@@ -227,6 +227,9 @@ impl Arch {
                 system: graph.interaction_radius,
             });
         }
+        if !self.biases.graph && graph.periodic().is_some() {
+            return Err(ArchError::Periodic);
+        }
         if !self.biases.graph && graph.n() != self.particles {
             return Err(ArchError::Particles {
                 built: self.particles,
@@ -314,6 +317,12 @@ pub enum ArchError {
     /// The graph is invalid.
     #[error(transparent)]
     System(#[from] crate::system::SystemError),
+    /// A model of absolute positions (NODE) on a periodic box.
+    #[error(
+        "this model reads absolute positions, which a periodic box wraps: \
+         train a graph model (gnode, mcgnode, ...) for a periodic system"
+    )]
+    Periodic,
     /// The model and the system have different dimensions.
     #[error("model is {model}D, system is {system}D")]
     Dimension {

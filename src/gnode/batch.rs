@@ -2,7 +2,7 @@
 
 use super::graph_plan::{GraphPlan, EDGE_PHYSICS};
 use crate::error::{bail, Result};
-use crate::system::State;
+use crate::system::{PeriodicBox, State};
 use candle_core::{Device, Tensor};
 
 /// Inputs (and optionally targets) for `B` states of one graph.
@@ -39,6 +39,9 @@ pub struct Batch {
     pub constraint: Option<(Tensor, Tensor, Tensor)>,
     /// Target accelerations `(B·n, d)`, when training.
     pub target: Option<Tensor>,
+    /// In a periodic box: what turns each directed edge's q_recv − q_send
+    /// into its minimum image, `(2·B·E, d)` (a constant: no gradient).
+    pub image_shift: Option<Tensor>,
 }
 
 impl Batch {
@@ -103,6 +106,13 @@ impl Batch {
             None => None,
         };
         let n_directed = recv.len();
+        let image_shift = match &plan.periodic {
+            Some(bx) => {
+                let shift = image_shifts(bx, &q, d, (&recv, &send));
+                Some(Tensor::from_vec(shift, (n_directed, d), dev)?)
+            }
+            None => None,
+        };
         Ok(Self {
             b,
             n,
@@ -119,8 +129,26 @@ impl Batch {
             free,
             constraint,
             target,
+            image_shift,
         })
     }
+}
+
+/// Per directed edge and axis: minimum image of q_recv − q_send minus the
+/// difference itself (`q` flat over the batch's rows).
+fn image_shifts(bx: &PeriodicBox, q: &[f64], d: usize, (recv, send): (&[u32], &[u32])) -> Vec<f64> {
+    let mut out = Vec::with_capacity(recv.len() * d);
+    for (&r, &s) in recv.iter().zip(send) {
+        for c in 0..d {
+            let w = q[r as usize * d + c] - q[s as usize * d + c];
+            let mut img = [w];
+            if let Some(l) = bx.period(c) {
+                img[0] = crate::periodic::min_image_axis(w, l);
+            }
+            out.push(img[0] - w);
+        }
+    }
+    out
 }
 
 /// Every directed edge of a batch in the plan's order (each state's contacts

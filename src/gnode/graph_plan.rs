@@ -8,7 +8,7 @@
 //! of several states, fixed and contact, in the one order both executors use.
 
 use crate::physics::neighbors::NeighborSearch;
-use crate::system::{EdgeKind, Endpoint, Graph};
+use crate::system::{EdgeKind, Endpoint, Graph, PeriodicBox};
 
 /// Edge-physics input features per edge: rest length and stiffness.
 pub const EDGE_PHYSICS: usize = 2;
@@ -68,6 +68,9 @@ pub struct GraphPlan {
     pub radius: f64,
     /// Which particles are kinematic (motion given): empty = none.
     pub kinematic: Vec<bool>,
+    /// The periodic box every edge vector is a minimum image in (`None`:
+    /// open space).
+    pub periodic: Option<PeriodicBox>,
 }
 
 /// One directed edge of a laid-out set of states: receiver and sender rows
@@ -130,7 +133,14 @@ impl GraphPlan {
             stiffness,
             radius: graph.interaction_radius,
             kinematic: graph.kinematic.clone(),
+            periodic: graph.periodic().cloned(),
         }
+    }
+
+    /// The period of axis `c` when the plan's box wraps it.
+    #[inline]
+    pub fn period(&self, c: usize) -> Option<f64> {
+        self.periodic.as_ref().and_then(|b| b.period(c))
     }
 
     /// Whether contact edges are found at each state.
@@ -156,6 +166,7 @@ impl GraphPlan {
         let e = self.n_edges();
         let bonds = (0..e).map(|k| (self.recv[k], self.send[k]));
         NeighborSearch::excluding(self.n, bonds, self.kinematic.clone())
+            .in_box(self.periodic.clone())
     }
 
     /// The contact pairs (i < j, sorted) at positions `q`, appended to `out`

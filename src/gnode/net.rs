@@ -149,7 +149,11 @@ impl Net {
         if b.n_directed == 0 {
             return Ok((h, None));
         }
-        let mut w = ((gather(&b.q, &b.recv)? - gather(&b.q, &b.send)?)? / arch.norm.w_scale)?;
+        let mut w = (gather(&b.q, &b.recv)? - gather(&b.q, &b.send)?)?;
+        if let Some(shift) = &b.image_shift {
+            w = (w + shift)?;
+        }
+        let mut w = (w / arch.norm.w_scale)?;
         if arch.edge_physics {
             let scale = arch.edge_physics_scale().map(|s| 1.0 / s);
             let scale = Tensor::from_slice(&scale, (1, EDGE_PHYSICS), &Device::Cpu)?;

@@ -51,6 +51,8 @@ pub struct Workspace {
     /// A rollout's q, q̇ and q̈, kept so that the next one on this workspace
     /// allocates nothing.
     rollout: [Vec<f64>; 3],
+    /// The graph's periodic box, which a rollout wraps positions into.
+    periodic: Option<crate::system::PeriodicBox>,
 }
 
 impl Workspace {
@@ -197,6 +199,7 @@ impl Kernel {
             forward: Forward::new(self.arch.clone(), plan),
             projector,
             rollout: [vec![0.0; nd], vec![0.0; nd], vec![0.0; nd]],
+            periodic: graph.periodic().cloned(),
         })
     }
 

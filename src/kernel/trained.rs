@@ -145,9 +145,15 @@ impl TrainedModel {
             // (taking the projector out and back copied it twice a step, 3 %
             // of a 5-spring rollout).
             let Workspace {
-                forward, projector, ..
+                forward,
+                projector,
+                periodic,
+                ..
             } = &mut *ws;
             let place = |q: &mut [f64], v: &mut [f64]| {
+                if let Some(b) = periodic {
+                    b.wrap(q);
+                }
                 if let Some(drive) = drive {
                     drive.place(step, q, v);
                 }

@@ -117,9 +117,10 @@ impl SystemConfig {
     /// chain links); walls, floors and grippers are added to them.
     pub fn new(kind: SystemKind, particles: usize) -> Self {
         let (gravity, dt, save_every) = match kind {
-            SystemKind::Spring | SystemKind::Peridynamic | SystemKind::CollidingLattices => {
-                (0.0, 1e-3, 100)
-            }
+            SystemKind::Spring
+            | SystemKind::Peridynamic
+            | SystemKind::CollidingLattices
+            | SystemKind::PeriodicSpheres => (0.0, 1e-3, 100),
             SystemKind::Pendulum => (10.0, 1e-5, 1000),
             SystemKind::SoftSpheres => (1.0, 1e-3, 100),
             SystemKind::FallingChain => (10.0, 1e-4, 100),
@@ -153,7 +154,7 @@ impl SystemConfig {
     fn contact_defaults(kind: SystemKind) -> (f64, f64, f64) {
         match kind {
             SystemKind::Spring | SystemKind::Pendulum | SystemKind::Peridynamic => (1.0, 0.0, 0.0),
-            SystemKind::SoftSpheres => (1.0, 1.0, 1000.0),
+            SystemKind::SoftSpheres | SystemKind::PeriodicSpheres => (1.0, 1.0, 1000.0),
             SystemKind::CollidingLattices => (10.0, 1.0, 100.0),
             SystemKind::FallingChain => (1.0, 0.5, 1e4),
             SystemKind::HeldChain => (500.0, 0.0, 0.0),
@@ -177,7 +178,7 @@ impl SystemConfig {
     /// Checks every parameter; the error names the offending one.
     pub fn validate(&self) -> Result<(), PhysicsError> {
         let min = match self.kind {
-            SystemKind::Spring | SystemKind::FallingChain => 2,
+            SystemKind::Spring | SystemKind::FallingChain | SystemKind::PeriodicSpheres => 2,
             SystemKind::HeldChain | SystemKind::Pendulum | SystemKind::SoftSpheres => 1,
             SystemKind::Peridynamic => {
                 if cube_side(self.particles).is_none() {
@@ -311,6 +312,7 @@ impl SystemConfig {
                 edges = self.peridynamic_bonds();
             }
             SystemKind::SoftSpheres => return scenes::soft_spheres_graph(&self.scene()),
+            SystemKind::PeriodicSpheres => return scenes::periodic_spheres_graph(&self.scene()),
             SystemKind::CollidingLattices => {
                 return scenes::colliding_lattices_graph(&self.scene())
             }
@@ -325,6 +327,7 @@ impl SystemConfig {
             anchors,
             interaction_radius: self.interaction_radius,
             kinematic: vec![],
+            periodic_box: None,
         }
     }
 
@@ -358,6 +361,9 @@ impl SystemConfig {
             SystemKind::Pendulum => self.pendulum_start(graph, rng),
             SystemKind::Peridynamic => self.peridynamic_start(graph, rng),
             SystemKind::SoftSpheres => scenes::soft_spheres_start(&self.scene(), graph, rng),
+            SystemKind::PeriodicSpheres => {
+                scenes::periodic_spheres_start(&self.scene(), graph, rng)
+            }
             SystemKind::CollidingLattices => {
                 scenes::colliding_lattices_start(&self.scene(), graph, rng)
             }

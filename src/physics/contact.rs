@@ -70,11 +70,11 @@ impl Contacts {
     /// particles have no direction and exert none on each other.
     pub fn add_forces(&mut self, q: &[f64], dim: usize, out: &mut [f64]) {
         let law = self.law;
-        for &(i, j) in self.search.search(q, dim, law.radius) {
+        self.search.search(q, dim, law.radius);
+        for k in 0..self.search.pairs().len() {
+            let (i, j) = self.search.pairs()[k];
             let mut diff = [0.0; 3];
-            for c in 0..dim {
-                diff[c] = q[i * dim + c] - q[j * dim + c];
-            }
+            self.search.delta(q, dim, (i, j), &mut diff);
             let r = diff[..dim].iter().map(|x| x * x).sum::<f64>().sqrt();
             if r == 0.0 {
                 continue;
@@ -90,16 +90,14 @@ impl Contacts {
     /// Total contact energy Σ V(r_ij) at `q`.
     pub fn energy(&mut self, q: &[f64], dim: usize) -> f64 {
         let law = self.law;
-        self.search
-            .search(q, dim, law.radius)
-            .iter()
-            .map(|&(i, j)| {
-                let r2: f64 = (0..dim)
-                    .map(|c| (q[i * dim + c] - q[j * dim + c]).powi(2))
-                    .sum();
-                law.potential(r2.sqrt())
-            })
-            .sum()
+        self.search.search(q, dim, law.radius);
+        let mut diff = [0.0; 3];
+        let mut u = 0.0;
+        for &(i, j) in self.search.pairs() {
+            self.search.delta(q, dim, (i, j), &mut diff);
+            u += law.potential(diff[..dim].iter().map(|x| x * x).sum::<f64>().sqrt());
+        }
+        u
     }
 
     /// The contact pairs of the last evaluation.

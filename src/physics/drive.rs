@@ -273,6 +273,7 @@ mod tests {
             anchors: vec![],
             interaction_radius: 0.0,
             kinematic: vec![false, true],
+            periodic_box: None,
         };
         let path = |t: f64| {
             (

@@ -42,6 +42,9 @@ pub fn applied_forces(graph: &Graph, field: &Field, q: &[f64], v: &[f64], out: &
         for c in 0..d {
             diff[c] = q[a * d + c] - pb[c];
         }
+        if let Some(b) = graph.periodic() {
+            b.min_image(&mut diff[..d]);
+        }
         let r = diff[..d].iter().map(|x| x * x).sum::<f64>().sqrt();
         if r == 0.0 {
             continue;
@@ -66,10 +69,14 @@ pub fn potential_energy(graph: &Graph, field: &Field, q: &[f64]) -> f64 {
     let mut u = 0.0;
     for e in graph.edges.iter().filter(|e| e.kind == EdgeKind::Spring) {
         let pb = end_pos(graph, q, e.b);
-        let r = (0..d)
-            .map(|c| (q[e.a * d + c] - pb[c]).powi(2))
-            .sum::<f64>()
-            .sqrt();
+        let mut diff = [0.0; 3];
+        for c in 0..d {
+            diff[c] = q[e.a * d + c] - pb[c];
+        }
+        if let Some(b) = graph.periodic() {
+            b.min_image(&mut diff[..d]);
+        }
+        let r = diff[..d].iter().map(|x| x * x).sum::<f64>().sqrt();
         u += 0.5 * e.stiffness * (r - e.rest_length).powi(2);
     }
     for (i, m) in graph.masses.iter().enumerate() {

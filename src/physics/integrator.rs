@@ -149,6 +149,7 @@ impl Integrator {
         };
         let (drive, row) = (self.drive.as_ref(), self.steps as usize + 1);
         let place = |q: &mut [f64], v: &mut [f64]| {
+            verlet::wrap(graph, q);
             if let Some(d) = drive {
                 d.place(row.min(d.steps()), q, v);
             }

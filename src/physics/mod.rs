@@ -27,6 +27,7 @@ pub(crate) mod forces;
 pub(crate) mod integrator;
 pub(crate) mod linalg;
 pub(crate) mod neighbors;
+pub(crate) mod periodic_cells;
 pub(crate) mod projection;
 pub(crate) mod rk4;
 pub(crate) mod scenes;
@@ -67,6 +68,10 @@ pub enum SystemKind {
     /// under gravity (`scenes`).
     #[serde(rename = "soft-spheres")]
     SoftSpheres,
+    /// Elastic soft spheres in a box periodic on every axis, no walls and no
+    /// field: a closed system whose edges cross the box's faces (`scenes`).
+    #[serde(rename = "periodic-spheres")]
+    PeriodicSpheres,
     /// Two spring lattices thrown at each other, no field: a closed system
     /// whose lattices touch through contacts.
     #[serde(rename = "colliding-lattices")]
@@ -82,11 +87,12 @@ pub enum SystemKind {
 
 impl SystemKind {
     /// Every kind, in the order they are listed to users.
-    pub const ALL: [SystemKind; 7] = [
+    pub const ALL: [SystemKind; 8] = [
         SystemKind::Spring,
         SystemKind::Pendulum,
         SystemKind::Peridynamic,
         SystemKind::SoftSpheres,
+        SystemKind::PeriodicSpheres,
         SystemKind::CollidingLattices,
         SystemKind::FallingChain,
         SystemKind::HeldChain,
@@ -106,7 +112,10 @@ impl SystemKind {
     pub fn has_contacts(self) -> bool {
         matches!(
             self,
-            SystemKind::SoftSpheres | SystemKind::CollidingLattices | SystemKind::FallingChain
+            SystemKind::SoftSpheres
+                | SystemKind::PeriodicSpheres
+                | SystemKind::CollidingLattices
+                | SystemKind::FallingChain
         )
     }
 
@@ -117,6 +126,7 @@ impl SystemKind {
             SystemKind::Pendulum => "pendulum",
             SystemKind::Peridynamic => "peridynamic",
             SystemKind::SoftSpheres => "soft-spheres",
+            SystemKind::PeriodicSpheres => "periodic-spheres",
             SystemKind::CollidingLattices => "colliding-lattices",
             SystemKind::FallingChain => "falling-chain",
             SystemKind::HeldChain => "held-chain",

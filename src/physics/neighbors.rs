@@ -25,8 +25,12 @@
 //! Particles are counting-sorted by bucket, with copies of their positions
 //! and cells in that order, so a bucket's candidates are contiguous in memory.
 //! Pairs come out sorted (i, then j), so the edges are canonical.
+//!
+//! In a periodic box ([`crate::periodic`]) distances are minimum images and
+//! the cells wrap across periodic faces (`super::periodic_cells`).
 
-use crate::system::{Edge, EdgeKind, Endpoint, Graph};
+use super::periodic_cells::{distance2, PeriodicCells};
+use crate::system::{Edge, EdgeKind, Endpoint, Graph, PeriodicBox};
 
 /// The cell list and every buffer a search needs; reused across calls, so a
 /// search allocates nothing once its buffers have grown to the system's size.
@@ -55,6 +59,9 @@ pub struct NeighborSearch {
     candidates: Vec<(usize, usize)>,
     built_at: Vec<f64>,
     built_radius: f64,
+    /// The periodic box distances are minimum images in (`None`: open space).
+    periodic: Option<PeriodicBox>,
+    periodic_cells: PeriodicCells,
 }
 
 /// The skin of [`NeighborSearch::search_moving`], as a share of the radius:
@@ -67,7 +74,38 @@ impl NeighborSearch {
     /// and the pairs of two of its kinematic particles.
     pub fn new(graph: &Graph) -> Self {
         let bonds = graph.fixed_edges().filter_map(particle_pair);
-        Self::excluding(graph.n(), bonds, graph.kinematic.clone())
+        Self::excluding(graph.n(), bonds, graph.kinematic.clone()).in_box(graph.periodic().cloned())
+    }
+
+    /// This search with distances as minimum images in `periodic` (`None`:
+    /// open space).
+    #[must_use]
+    pub fn in_box(mut self, periodic: Option<PeriodicBox>) -> Self {
+        self.periodic = periodic.filter(PeriodicBox::any_periodic);
+        self
+    }
+
+    /// q_i − q_j into `out[..dim]`: a minimum image in a periodic box.
+    #[inline]
+    pub fn delta(&self, q: &[f64], dim: usize, (i, j): (usize, usize), out: &mut [f64; 3]) {
+        for c in 0..dim.min(3) {
+            out[c] = q[i * dim + c] - q[j * dim + c];
+        }
+        if let Some(b) = &self.periodic {
+            b.min_image(&mut out[..dim.min(3)]);
+        }
+    }
+
+    /// Squared distance between particles `i` and `j` of `q`: a minimum
+    /// image in a periodic box.
+    #[inline]
+    fn distance2(&self, q: &[f64], dim: usize, i: usize, j: usize) -> f64 {
+        match &self.periodic {
+            Some(b) => distance2(q, dim, i, j, b),
+            None => (0..dim)
+                .map(|k| (q[i * dim + k] - q[j * dim + k]).powi(2))
+                .sum(),
+        }
     }
 
     /// A search over `n` particles leaving out the `bonds` pairs and pairs of
@@ -129,6 +167,13 @@ impl NeighborSearch {
         if n < 2 || !(radius.is_finite() && radius > 0.0) {
             return &self.pairs;
         }
+        if let Some(b) = self.periodic.take() {
+            let mut cells = std::mem::take(&mut self.periodic_cells);
+            let mut pairs = std::mem::take(&mut self.pairs);
+            cells.search(q, dim, radius, &b, |i, j| self.excluded(i, j), &mut pairs);
+            (self.periodic, self.periodic_cells, self.pairs) = (Some(b), cells, pairs);
+            return &self.pairs;
+        }
         self.fill_cells(q, dim, n, radius);
         let r2 = radius * radius;
         let reach: [i64; 3] = [1, 1, i64::from(dim == 3)];
@@ -169,7 +214,14 @@ impl NeighborSearch {
             || self.built_at.len() != q.len()
             || dim == 0
             || q.chunks(dim).zip(self.built_at.chunks(dim)).any(|(a, b)| {
-                let d2: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
+                let d2: f64 = (0..a.len())
+                    .map(|k| {
+                        let d = a[k] - b[k];
+                        let p = self.periodic.as_ref().and_then(|bx| bx.period(k));
+                        p.map_or(d, |l| crate::periodic::min_image_axis(d, l))
+                            .powi(2)
+                    })
+                    .sum();
                 // NaN (a diverged state) is stale too.
                 d2 >= limit || d2.is_nan()
             });
@@ -182,6 +234,15 @@ impl NeighborSearch {
         }
         self.pairs.clear();
         let (r2, k) = (radius * radius, dim.min(3));
+        if self.periodic.is_some() {
+            for c in 0..self.candidates.len() {
+                let (i, j) = self.candidates[c];
+                if self.distance2(q, dim, i, j) < r2 {
+                    self.pairs.push((i, j));
+                }
+            }
+            return &self.pairs;
+        }
         for &(i, j) in &self.candidates {
             let (mut a, mut b) = ([0.0; 3], [0.0; 3]);
             a[..k].copy_from_slice(&q[i * dim..i * dim + k]);
@@ -377,8 +438,8 @@ impl ContactEdges {
     }
 }
 
-/// Every pair closer than `radius` and not excluded (bonded, or both
-/// kinematic), by checking all n(n−1)/2 pairs: the reference the cell list is
+/// Every pair closer than `radius` (a minimum image in the graph's periodic
+/// box) and not excluded (bonded, or both kinematic), by checking all n(n−1)/2 pairs: the reference the cell list is
 /// tested against.
 pub fn brute_force_pairs(graph: &Graph, q: &[f64], radius: f64) -> Vec<(usize, usize)> {
     let (n, d) = (graph.n(), graph.dim);
@@ -386,7 +447,7 @@ pub fn brute_force_pairs(graph: &Graph, q: &[f64], radius: f64) -> Vec<(usize, u
     let mut out = vec![];
     for i in 0..n {
         for j in i + 1..n {
-            let d2: f64 = (0..d).map(|k| (q[i * d + k] - q[j * d + k]).powi(2)).sum();
+            let d2 = search.distance2(q, d, i, j);
             if d2 < radius * radius && !search.excluded(i, j) {
                 out.push((i, j));
             }

@@ -14,7 +14,7 @@
 
 use rand::Rng;
 
-use crate::system::{Edge, EdgeKind, Endpoint, Graph, State};
+use crate::system::{Edge, EdgeKind, Endpoint, Graph, PeriodicBox, State};
 
 /// What a scene is made of, from the system configuration.
 #[derive(Clone, Copy, Debug)]
@@ -126,6 +126,7 @@ fn with_kinematic(s: &SceneSpec, fixed: usize, edges: Vec<Edge>) -> Graph {
         } else {
             (0..n).map(|i| i >= s.free).collect()
         },
+        periodic_box: None,
     }
 }
 
@@ -160,6 +161,48 @@ pub fn soft_spheres_start(s: &SceneSpec, graph: &Graph, rng: &mut impl Rng) -> S
     for (k, p) in box_walls(size, d, wall_step(r)).iter().enumerate() {
         let i = s.free + k;
         q[i * d..(i + 1) * d].copy_from_slice(&p[..d]);
+    }
+    State { q, v }
+}
+
+/// The periodic spheres' box: `side` balls per axis, 1.2 R apart, tile it
+/// exactly (at least two per axis, so that each side exceeds 2R).
+fn periodic_box(s: &SceneSpec) -> PeriodicBox {
+    let side = balls_per_side(s.free, s.dim).max(2) as f64;
+    let w = side * BALL_GAP * s.radius;
+    PeriodicBox::all_periodic(vec![0.0; s.dim], vec![w; s.dim])
+}
+
+/// Periodic spheres: `free` balls in a box periodic on every axis.
+pub fn periodic_spheres_graph(s: &SceneSpec) -> Graph {
+    let mut g = with_kinematic(s, 0, vec![]);
+    g.periodic_box = Some(periodic_box(s));
+    g
+}
+
+/// Periodic spheres' start: balls on the grid of spacing 1.2 R that tiles
+/// the box (cell centres), each jittered by U(−0.05, 0.05)·R per
+/// coordinate, velocities U(−0.5, 0.5)·R per unit time and component less
+/// their mean (zero total momentum).
+pub fn periodic_spheres_start(s: &SceneSpec, graph: &Graph, rng: &mut impl Rng) -> State {
+    let (d, r) = (s.dim, s.radius);
+    let side = balls_per_side(s.free, d).max(2);
+    let vscale = r;
+    let mut q = vec![0.0; graph.ndof()];
+    let mut v = vec![0.0; graph.ndof()];
+    for i in 0..s.free {
+        let idx = [i % side, (i / side) % side, i / (side * side)];
+        for c in 0..d {
+            q[i * d + c] = (idx[c] as f64 + 0.5) * BALL_GAP * r + rng.random_range(-0.05..0.05) * r;
+            v[i * d + c] = rng.random_range(-0.5..0.5) * vscale;
+        }
+    }
+    for c in 0..d {
+        let mean = (0..s.free).map(|i| v[i * d + c]).sum::<f64>() / s.free as f64;
+        (0..s.free).for_each(|i| v[i * d + c] -= mean);
+    }
+    if let Some(b) = &graph.periodic_box {
+        b.wrap(&mut q);
     }
     State { q, v }
 }

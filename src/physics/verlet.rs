@@ -7,6 +7,16 @@
 //! With a [`Projector`], SHAKE projects the drift and RATTLE the kick onto the bars.
 
 use super::Projector;
+use crate::system::Graph;
+
+/// Wraps positions into `graph`'s periodic box (nothing without one): every
+/// rollout calls it after the drift.
+#[inline]
+pub fn wrap(graph: &Graph, q: &mut [f64]) {
+    if let Some(b) = graph.periodic() {
+        b.wrap(q);
+    }
+}
 
 /// First half: positions to the new step, velocities half way.
 #[inline]

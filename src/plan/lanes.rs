@@ -98,6 +98,7 @@ fn copies(g: &Graph, copies: usize) -> Graph {
             .collect(),
         interaction_radius: g.interaction_radius,
         kinematic: g.kinematic.repeat(copies),
+        periodic_box: g.periodic_box.clone(),
     }
 }
 

@@ -34,6 +34,7 @@ pub fn chain_2d() -> Graph {
         anchors: vec![],
         interaction_radius: 0.0,
         kinematic: vec![],
+        periodic_box: None,
     }
 }
 
@@ -70,6 +71,7 @@ pub fn pendulum_3d() -> Graph {
         anchors: vec![vec![0.0, 0.0, 2.0], vec![0.5, -0.25, 0.125]],
         interaction_radius: 0.0,
         kinematic: vec![],
+        periodic_box: None,
     }
 }
 

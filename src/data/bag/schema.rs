@@ -2,7 +2,9 @@
 //! is decoded into the right fields.
 
 use super::scan::RawMessage;
-use crate::data::msg::{Layout, PARTICLE_STATE_MSG, PARTICLE_STATE_MSG_V1, PARTICLE_STATE_MSG_V2};
+use crate::data::msg::{
+    Layout, PARTICLE_STATE_MSG, PARTICLE_STATE_MSG_V1, PARTICLE_STATE_MSG_V2, PARTICLE_STATE_MSG_V3,
+};
 use crate::data::DataError;
 
 /// The field declarations of a .msg text in order, then its constants sorted,
@@ -59,6 +61,8 @@ pub(super) fn check_schema(raw: &RawMessage) -> Result<Layout, DataError> {
     let decl = declarations(&main);
     if decl == declarations(PARTICLE_STATE_MSG) {
         Ok(Layout::Current)
+    } else if decl == declarations(PARTICLE_STATE_MSG_V3) {
+        Ok(Layout::V3)
     } else if decl == declarations(PARTICLE_STATE_MSG_V2) {
         Ok(Layout::V2)
     } else if decl == declarations(PARTICLE_STATE_MSG_V1) {

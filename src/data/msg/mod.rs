@@ -19,7 +19,8 @@ pub mod ros_types;
 
 pub use cdr::{decode_cdr, encode_cdr, CDR_LE_HEADER};
 pub use layouts::{
-    Layout, ParticleStateV1, ParticleStateV2, PARTICLE_STATE_MSG_V1, PARTICLE_STATE_MSG_V2,
+    Layout, ParticleStateV1, ParticleStateV2, ParticleStateV3, PARTICLE_STATE_MSG_V1,
+    PARTICLE_STATE_MSG_V2, PARTICLE_STATE_MSG_V3,
 };
 pub use particle_state::{
     particle_state_schema, to_vec3, ParticleState, EDGE_BAR, EDGE_SPRING, FIELD_KNOWN,

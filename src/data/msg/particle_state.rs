@@ -85,6 +85,44 @@ pub struct ParticleState {
     pub interaction_radius: f64,
     /// Per particle: motion given, never predicted; empty when none is.
     pub kinematic: Vec<bool>,
+    /// Lower bounds of the periodic box (z unused in 2D).
+    pub box_lower: Vector3,
+    /// Upper bounds of the periodic box.
+    pub box_upper: Vector3,
+    /// Per axis: whether the box wraps it; empty: no box.
+    pub box_periodic: Vec<bool>,
+}
+
+impl ParticleState {
+    /// The anchors' coordinates, `dim` each, checked.
+    fn anchor_coords(&self, dim: usize) -> Result<Vec<Vec<f64>>, DataError> {
+        self.anchors
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let v = Vector3 {
+                    x: p.x,
+                    y: p.y,
+                    z: p.z,
+                };
+                check_vec3("anchors", i, &v, dim).map(|()| [v.x, v.y, v.z][..dim].to_vec())
+            })
+            .collect()
+    }
+
+    /// The box these fields describe (`None` when `box_periodic` is empty);
+    /// the graph's validation checks it has one flag per axis.
+    fn periodic_box(&self, dim: usize) -> Option<crate::system::PeriodicBox> {
+        if self.box_periodic.is_empty() {
+            return None;
+        }
+        let axes = |v: &Vector3| [v.x, v.y, v.z][..dim.min(3)].to_vec();
+        Some(crate::system::PeriodicBox {
+            lower: axes(&self.box_lower),
+            upper: axes(&self.box_upper),
+            periodic: self.box_periodic.clone(),
+        })
+    }
 }
 
 /// Flat `dim`-vectors to 3-vectors (z = 0 in 2D). Tolerates a bad `dim`: the
@@ -161,6 +199,21 @@ impl ParticleState {
                 .collect(),
             interaction_radius: graph.interaction_radius,
             kinematic: graph.kinematic.clone(),
+            box_lower: graph
+                .periodic_box
+                .as_ref()
+                .map(|b| Vector3::from_coords(&b.lower))
+                .unwrap_or_default(),
+            box_upper: graph
+                .periodic_box
+                .as_ref()
+                .map(|b| Vector3::from_coords(&b.upper))
+                .unwrap_or_default(),
+            box_periodic: graph
+                .periodic_box
+                .as_ref()
+                .map(|b| b.periodic.clone())
+                .unwrap_or_default(),
             ..ParticleState::default()
         }
     }
@@ -293,19 +346,7 @@ impl ParticleState {
         } else {
             Some(flatten("accelerations", &self.accelerations, dim)?)
         };
-        let anchors = self
-            .anchors
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                let v = Vector3 {
-                    x: p.x,
-                    y: p.y,
-                    z: p.z,
-                };
-                check_vec3("anchors", i, &v, dim).map(|()| [v.x, v.y, v.z][..dim].to_vec())
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+        let anchors = self.anchor_coords(dim)?;
         let edges = self.edges(n)?;
         let graph = Graph {
             dim,
@@ -315,6 +356,7 @@ impl ParticleState {
             anchors,
             interaction_radius: self.interaction_radius,
             kinematic: self.kinematic.clone(),
+            periodic_box: self.periodic_box(dim),
         };
         graph
             .validate()

@@ -113,7 +113,8 @@ impl Chunk {
         for c in 0..d {
             let q = &self.x[(t + c) * nodes..(t + c + 1) * nodes];
             let w = &mut self.w_in[c * edges..(c + 1) * edges];
-            edge_differences(w, q, &self.recv, &self.send, a.norm.w_scale);
+            let pair = (&self.recv[..], &self.send[..]);
+            edge_differences(w, q, pair, a.norm.w_scale, m.plan.period(c));
         }
         let i = m.ix(Block::EdgeEmbed).expect("graph model");
         let he0 = &mut self.he[0][..em * edges];
@@ -325,6 +326,7 @@ impl Chunk {
             nodes,
             dim: d,
             w_scale: a.norm.w_scale,
+            period: [0, 1, 2].map(|c| m.plan.period(c)),
             recv: &self.recv[..edges],
             send: &self.send[..edges],
             w_in: &self.w_in[..features * edges],
