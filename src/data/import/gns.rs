@@ -299,6 +299,9 @@ fn trajectory(
         } else {
             vec![]
         },
+        // The GNS datasets' `bounds` are walls the particles stay within,
+        // never a periodic box.
+        periodic_box: None,
     };
     let samples = (0..qs.len())
         .map(|t| {
