@@ -131,7 +131,7 @@ pub fn rollout_seconds(
 
 /// Median time of a `steps`-step rollout of an ensemble of `k` random
 /// MCGNODE members on `n` springs over the time of one of them, both through
-/// [`Dynamics::rollout`] as every consumer calls it.
+/// [`crate::dynamics::Dynamics::rollout`] as every consumer calls it.
 pub fn ensemble_cost_ratio(n: usize, k: usize, steps: usize, repeats: usize) -> Result<f64> {
     use crate::dynamics::Dynamics;
     let cfg = SystemConfig::new(SystemKind::Spring, n);

@@ -410,6 +410,7 @@ fn score_one(
         frame_dt,
         lbs.dx,
         lbs.sinkhorn_particles,
+        g.periodic_box.as_ref(),
     )
     .map_err(|e| crate::error::err!("trajectory {}: LagrangeBench metrics: {e}", tr.id))?;
     Ok((c, m))

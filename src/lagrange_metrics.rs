@@ -26,6 +26,7 @@
 //! iterate Sinkhorn to a marginal error of [`SINKHORN_TOLERANCE`] (it stops
 //! at 1e-4; after [`SINKHORN_MAX_ITERATIONS`] we accept up to that, too); `scripts/check_lagrangebench_metrics.sh` compares the two.
 
+use crate::periodic::PeriodicBox;
 use serde::{Deserialize, Serialize};
 
 /// Predicted frames scored (LagrangeBench's default `n_rollout_steps`).
@@ -113,13 +114,16 @@ pub fn trajectory_metrics(
     frame_dt: f64,
     dx: f64,
 ) -> Result<LagrangeMetrics, LagrangeError> {
-    trajectory_metrics_sampled(truth, pred, d, frame_dt, dx, None)
+    trajectory_metrics_sampled(truth, pred, d, frame_dt, dx, None, None)
 }
 
 /// [`trajectory_metrics`] with Sinkhorn computed on at most
 /// `sinkhorn_particles` particles (the same evenly strided particles of the
 /// truth and the prediction, [`subsample`]; `None`: all). Sinkhorn costs
-/// O(N²) per iteration; the other metrics always use every particle.
+/// O(N²) per iteration; the other metrics always use every particle. In a
+/// periodic box (`periodic`) MSE and the velocities of E_kin take the
+/// minimum image of each difference, so a particle wrapped across a face is
+/// not an error of a box length; Sinkhorn compares the wrapped positions.
 pub fn trajectory_metrics_sampled(
     truth: &Frames,
     pred: &Frames,
@@ -127,6 +131,7 @@ pub fn trajectory_metrics_sampled(
     frame_dt: f64,
     dx: f64,
     sinkhorn_particles: Option<usize>,
+    periodic: Option<&PeriodicBox>,
 ) -> Result<LagrangeMetrics, LagrangeError> {
     if pred.q.len() != truth.q.len() {
         return Err(LagrangeError::Shape {
@@ -147,7 +152,11 @@ pub fn trajectory_metrics_sampled(
         return Err(LagrangeError::Value("the particle spacing dx"));
     }
     let (t, p) = (&truth.q[1..=frames], &pred.q[1..=frames]);
-    let mse: Vec<f64> = t.iter().zip(p).map(|(a, b)| mse(a, b)).collect();
+    let mse: Vec<f64> = t
+        .iter()
+        .zip(p)
+        .map(|(a, b)| mse(a, b, d, periodic))
+        .collect();
     let mean_of = |k: usize| (frames >= k).then(|| mean(&mse[..k]));
     let mut sinkhorn = Vec::with_capacity(frames);
     for (a, b) in t.iter().zip(p) {
@@ -160,7 +169,10 @@ pub fn trajectory_metrics_sampled(
         sinkhorn.push(s);
     }
     let e_kin_mse = (frames >= 2).then(|| {
-        let (et, ep) = (e_kin(t, frame_dt, dx, d), e_kin(p, frame_dt, dx, d));
+        let (et, ep) = (
+            e_kin(t, frame_dt, dx, d, periodic),
+            e_kin(p, frame_dt, dx, d, periodic),
+        );
         mean(
             &et.iter()
                 .zip(&ep)
@@ -269,25 +281,36 @@ fn mean(x: &[f64]) -> f64 {
 }
 
 /// Squared position error averaged over particles and dimensions.
-fn mse(a: &[f64], b: &[f64]) -> f64 {
-    mean(
-        &a.iter()
-            .zip(b)
-            .map(|(x, y)| (x - y) * (x - y))
-            .collect::<Vec<_>>(),
-    )
+/// `a − b` particle by particle, each difference the minimum image in a
+/// periodic box.
+fn differences(a: &[f64], b: &[f64], d: usize, periodic: Option<&PeriodicBox>) -> Vec<f64> {
+    let mut out: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    if let Some(pb) = periodic {
+        out.chunks_mut(d.max(1)).for_each(|c| pb.min_image(c));
+    }
+    out
+}
+
+fn mse(a: &[f64], b: &[f64], d: usize, periodic: Option<&PeriodicBox>) -> f64 {
+    let diff = differences(a, b, d, periodic);
+    mean(&diff.iter().map(|x| x * x).collect::<Vec<_>>())
 }
 
 /// dx^d Σ |v|² of each consecutive pair of `frames`, v by finite differences.
-fn e_kin(frames: &[&[f64]], frame_dt: f64, dx: f64, d: usize) -> Vec<f64> {
+fn e_kin(
+    frames: &[&[f64]],
+    frame_dt: f64,
+    dx: f64,
+    d: usize,
+    periodic: Option<&PeriodicBox>,
+) -> Vec<f64> {
     let volume = dx.powi(d as i32);
     frames
         .windows(2)
         .map(|w| {
-            let s: f64 = w[1]
+            let s: f64 = differences(w[1], w[0], d, periodic)
                 .iter()
-                .zip(w[0])
-                .map(|(b, a)| ((b - a) / frame_dt).powi(2))
+                .map(|x| (x / frame_dt).powi(2))
                 .sum();
             s * volume
         })

@@ -213,7 +213,14 @@ pub fn error_curves(
             k,
             cause,
         })?;
-        let dq = norm(p.q.iter().zip(&s.q).map(|(a, b)| a - b));
+        // In a periodic box a particle wrapped across a face by one side
+        // only is its minimum image away, not a box length.
+        let mut diff: Vec<f64> = p.q.iter().zip(&s.q).map(|(a, b)| a - b).collect();
+        if let Some(pb) = &graph.periodic_box {
+            diff.chunks_mut(graph.dim.max(1))
+                .for_each(|c| pb.min_image(c));
+        }
+        let dq = norm(diff.iter().copied());
         c.re.push(ratio(
             dq,
             norm(p.q.iter().copied()) + norm(s.q.iter().copied()),

@@ -390,3 +390,46 @@ fn bags_of_the_layout_before_the_box_read_as_not_periodic() {
             && t.graph.has_contacts()
             && t.graph.n_kinematic() > 0));
 }
+
+#[test]
+fn errors_in_a_periodic_box_are_minimum_images() {
+    // Side 4 (x in [-1, 3)): the truth at x = 2.9, the prediction wrapped
+    // to -0.9, 0.2 away across the face, not 3.8.
+    let g = boxed(2, 1, 0.5, 4.0, vec![true, true]);
+    let st = |x: f64| State {
+        q: vec![x, 0.5],
+        v: vec![0.0, 0.0],
+    };
+    let (truth, pred) = (vec![st(2.9), st(2.9)], vec![st(2.9), st(-0.9)]);
+    let field = mcgnode::physics::Field::default();
+    let c = mcgnode::metrics::error_curves(&g, &field, &truth, &pred, &[0.0, 1.0]).unwrap();
+    assert!((c.re_abs[1] - 0.2).abs() < 1e-12, "{}", c.re_abs[1]);
+    let open = Graph {
+        periodic_box: None,
+        ..g.clone()
+    };
+    let c = mcgnode::metrics::error_curves(&open, &field, &truth, &pred, &[0.0, 1.0]).unwrap();
+    assert!(
+        (c.re_abs[1] - 3.8).abs() < 1e-12,
+        "an open box: {}",
+        c.re_abs[1]
+    );
+    // LagrangeBench's MSE likewise, over 5 frames: (0.2² + 0) / 2 each.
+    use mcgnode::lagrange_metrics::{trajectory_metrics_sampled, Frames};
+    let truth6 = vec![st(2.9); 6];
+    let mut pred6 = vec![st(-0.9); 6];
+    pred6[0] = st(2.9);
+    fn frames(s: &[State]) -> Frames<'_> {
+        Frames {
+            q: s.iter().map(|s| s.q.as_slice()).collect(),
+        }
+    }
+    let mse5 = |pb: Option<&PeriodicBox>| {
+        trajectory_metrics_sampled(&frames(&truth6), &frames(&pred6), 2, 1.0, 1.0, None, pb)
+            .unwrap()
+            .mse5
+            .expect("5 frames")
+    };
+    assert!((mse5(g.periodic_box.as_ref()) - 0.02).abs() < 1e-12);
+    assert!((mse5(None) - 3.8 * 3.8 / 2.0).abs() < 1e-12, "an open box");
+}

@@ -32,6 +32,8 @@ class Error(Exception):
 #   anchors: (anchors, dim) float64,
 #   interaction_radius: float (0: fixed edges only),
 #   kinematic: (particles,) bool (True: motion given, never predicted),
+#   periodic_box: None or {"lower", "upper": (dim,) float64,
+#                 "periodic": (dim,) bool} (rollout wraps positions in it),
 #   field: {"gravity": float, "drag": float, "force": list[float]} or None,
 #   dt: float or None, save_every: int (mcgnode rollout --initial's defaults),
 #   velocities_derived: bool.

@@ -63,6 +63,8 @@ pub(crate) struct Parts<'a, 'py> {
     /// (particles,) (None: none kinematic).
     pub(crate) radius: f64,
     pub(crate) kinematic: Option<&'a Bound<'py, PyAny>>,
+    /// A periodic box (a read_bag dict's `periodic_box`; None: none).
+    pub(crate) periodic_box: Option<&'a Bound<'py, PyAny>>,
 }
 
 impl Parts<'_, '_> {
@@ -90,6 +92,7 @@ impl Parts<'_, '_> {
         let anchors = anchors(self.anchors, dim)?;
         let types = types(self.types, n)?;
         let kinematic = kinematic(self.kinematic)?;
+        let periodic_box = self.periodic_box.map(periodic_box).transpose()?;
         let graph = Graph {
             dim,
             types,
@@ -98,7 +101,7 @@ impl Parts<'_, '_> {
             anchors,
             interaction_radius: self.radius,
             kinematic,
-            periodic_box: None,
+            periodic_box,
         };
         graph.validate().map_err(lib_err)?;
         let state = State {
@@ -260,4 +263,26 @@ pub(crate) fn field_from(obj: Option<Bound<'_, PyAny>>) -> PyResult<Option<Field
         drag: get("drag")?.extract()?,
         force: get("force")?.extract()?,
     }))
+}
+
+/// A box as read_bag gives it: {"lower", "upper"} (dim,) floats and
+/// "periodic" (dim,) bools.
+fn periodic_box(b: &Bound<'_, PyAny>) -> PyResult<mcgnode::system::PeriodicBox> {
+    let item = |k: &str| {
+        b.get_item(k).map_err(|_| {
+            PyValueError::new_err(format!(
+                "periodic_box must be a dict with \"lower\", \"upper\" and \"periodic\" (no {k:?})"
+            ))
+        })
+    };
+    let floats = |k: &str| -> PyResult<Vec<f64>> { Ok(array(&item(k)?, k)?.1) };
+    let periodic: Vec<bool> = item("periodic")?
+        .try_iter()?
+        .map(|x| x?.is_truthy())
+        .collect::<PyResult<_>>()?;
+    Ok(mcgnode::system::PeriodicBox {
+        lower: floats("lower")?,
+        upper: floats("upper")?,
+        periodic,
+    })
 }

@@ -59,6 +59,8 @@ fn edge_rows(g: &Graph) -> Vec<f64> {
 ///   (closer pairs touch through contact edges rebuilt from positions)
 /// - `kinematic`: bool (particles,), True for a particle whose motion is
 ///   given (a wall, a floor, a pusher); all False when the bag marks none
+/// - `periodic_box`: None, or {"lower", "upper": float64 (dim,), "periodic":
+///   bool (dim,)} when the bag states a box (`rollout` wraps in it)
 /// - `field`: {"gravity", "drag", "force"} as the messages (else the bag's
 ///   simulator record) state it, or None when the bag does not say
 /// - `dt`, `save_every`: the step and saving interval `mcgnode rollout
@@ -131,6 +133,16 @@ pub(crate) fn read_bag<'py>(
         t.set_item("interaction_radius", g.interaction_radius)?;
         let kinematic: Vec<bool> = (0..n).map(|i| g.kinematic.get(i) == Some(&true)).collect();
         t.set_item("kinematic", PyArray1::from_vec(py, kinematic))?;
+        match &g.periodic_box {
+            Some(b) => {
+                let pb = PyDict::new(py);
+                pb.set_item("lower", PyArray1::from_vec(py, b.lower.clone()))?;
+                pb.set_item("upper", PyArray1::from_vec(py, b.upper.clone()))?;
+                pb.set_item("periodic", PyArray1::from_vec(py, b.periodic.clone()))?;
+                t.set_item("periodic_box", pb)?;
+            }
+            None => t.set_item("periodic_box", py.None())?,
+        }
         match &field {
             Some(f) => t.set_item("field", field_dict(py, f)?)?,
             None => t.set_item("field", py.None())?,

@@ -158,6 +158,7 @@ impl Model {
         let (graph, s0) = Parts {
             radius: 0.0,
             kinematic: None,
+            periodic_box: None,
             positions: (per.clone(), q[..len].to_vec()),
             velocities: (per, v[..len].to_vec()),
             masses,
@@ -260,6 +261,7 @@ impl Model {
             .transpose()?
             .unwrap_or(0.0);
         let kinematic = get("kinematic")?;
+        let periodic_box = get("periodic_box")?;
         let (graph, start) = Parts {
             positions,
             velocities,
@@ -269,6 +271,7 @@ impl Model {
             types: types.as_ref(),
             radius,
             kinematic: kinematic.as_ref(),
+            periodic_box: periodic_box.as_ref(),
         }
         .build()?;
         let field = field_from(get("field")?)?;
@@ -327,6 +330,7 @@ impl Model {
             types,
             radius: interaction_radius,
             kinematic,
+            periodic_box: None,
         }
         .build()?;
         let drive = given_motion(&graph, kinematic_positions, steps, dt)?;

@@ -204,12 +204,7 @@ pub trait Dynamics: Send + Sync {
         out: &mut Predicted,
     ) -> Result<(), DynamicsError> {
         let states = self.rollout(graph, start, timing)?;
-        let forces = self
-            .forces(graph, start)
-            .map_err(|e| DynamicsError::Forces(Box::new(e)))?;
-        out.states.fill(graph.ndof(), &states);
-        out.forces.fill(&forces);
-        Ok(())
+        fill_prediction(self, graph, start, &states, out)
     }
 
     /// Velocity-Verlet rollout timed by `timing`: its [`Timing::steps`]
@@ -388,6 +383,22 @@ pub trait Dynamics: Send + Sync {
             })
             .collect())
     }
+}
+
+/// `states` (the start first) and `model`'s forces at `start` into `out`.
+pub fn fill_prediction<M: Dynamics + ?Sized>(
+    model: &M,
+    graph: &Graph,
+    start: &State,
+    states: &[State],
+    out: &mut Predicted,
+) -> Result<(), DynamicsError> {
+    let forces = model
+        .forces(graph, start)
+        .map_err(|e| DynamicsError::Forces(Box::new(e)))?;
+    out.states.fill(graph.ndof(), states);
+    out.forces.fill(&forces);
+    Ok(())
 }
 
 /// Per kept state, each particle's spread: the ensemble members' standard

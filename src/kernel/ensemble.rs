@@ -4,7 +4,9 @@
 //! position (the root of the mean over axes of the variance).
 
 use super::TrainedModel;
-use crate::dynamics::{Dynamics, DynamicsError, Forces, Predicted, Rollout, Spread, Timing};
+use crate::dynamics::{
+    fill_prediction, Dynamics, DynamicsError, Forces, Predicted, Rollout, Spread, Timing,
+};
 use crate::error::Result;
 use crate::gnode::file::ModelFile;
 use crate::physics::Drive;
@@ -222,11 +224,7 @@ impl Dynamics for Ensemble {
         out: &mut Predicted,
     ) -> Result<(), DynamicsError> {
         let (states, spread) = self.rollout_spread(graph, start, timing, None)?;
-        let forces = self
-            .forces(graph, start)
-            .map_err(|e| DynamicsError::Forces(Box::new(e)))?;
-        out.states.fill(graph.ndof(), &states);
-        out.forces.fill(&forces);
+        fill_prediction(self, graph, start, &states, out)?;
         out.spread.clear();
         spread.iter().for_each(|s| out.spread.extend_from_slice(s));
         Ok(())
