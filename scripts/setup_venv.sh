@@ -50,6 +50,10 @@ ensure_packages mcap==1.6.0 mcap-ros2-support==0.6.0 rosbags==0.11.9 numpy==2.4.
 # tests/import.rs).
 ensure_packages tfrecord==1.14.6
 
+# LagrangeBench-format HDF5 datasets (scripts/bag_to_lagrangebench.py,
+# tests/import.rs).
+ensure_packages h5py==3.16.0
+
 # The Python package python/ (PyO3): maturin builds its wheel, pytest runs
 # python/tests/ (tests/python.rs).
 ensure_packages maturin==1.16.0 pytest==9.2.0

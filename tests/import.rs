@@ -1,8 +1,10 @@
-//! `mcgnode bag import --from gns`: a GNS-format dataset written by the
-//! Python `tfrecord` package (scripts/bag_to_gns.py) from a trajectory of our
-//! own simulator reads back bit for bit (positions as f32), with its counts,
-//! types, dt and radius; damaged files are refused with errors naming the
-//! file and the key; training on the imported bag takes the bag's radius.
+//! `mcgnode bag import --from gns|lagrangebench`: GNS-format datasets written
+//! by the Python `tfrecord` package (scripts/bag_to_gns.py) and
+//! LagrangeBench-format ones written by h5py (scripts/bag_to_lagrangebench.py)
+//! from trajectories of our own simulator read back bit for bit, with their
+//! counts, types, dt, radius and (LagrangeBench) periodic box; damaged files
+//! are refused with errors naming the file and the key; training on the
+//! imported bag takes the bag's radius.
 
 // A test is one scenario read top to bottom; splitting it would hide the
 // order its checks depend on.
@@ -208,30 +210,26 @@ fn gns_damage_is_named() {
             "lb.mcap",
         ],
     );
-    assert!(e.contains("HDF5"), "{e}");
+    assert!(e.contains("train.h5") && e.contains("not found"), "{e}");
 }
 
-/// The guide's GNS import lines, run as written (from a copy of the
-/// repository root's `.venv` and `scripts`, with `mcgnode` on PATH).
-#[test]
-fn the_guides_import_lines_run_as_written() {
+/// Runs the first sh block of the guide's section `title` (which must hold
+/// a line starting `must`) as written, in a fresh directory with the
+/// repository root's `.venv` and `scripts` and `mcgnode` on PATH; the
+/// directory.
+fn run_guide_block(title: &str, must: &str) -> tempfile::TempDir {
     let guide = std::fs::read_to_string(Path::new(ROOT).join("docs/guide.md")).unwrap();
     let section = guide
-        .split("### Importing GNS datasets")
+        .split(title)
         .nth(1)
-        .expect("the guide has a section `Importing GNS datasets`");
+        .unwrap_or_else(|| panic!("the guide has a section `{title}`"));
     let block = section
         .split("```sh\n")
         .nth(1)
         .and_then(|b| b.split("```").next())
         .expect("the section shows a sh block");
     let lines: Vec<&str> = block.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert!(
-        lines
-            .iter()
-            .any(|l| l.starts_with("mcgnode bag import --from gns")),
-        "{block}"
-    );
+    assert!(lines.iter().any(|l| l.starts_with(must)), "{block}");
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     for name in [".venv", "scripts"] {
@@ -257,7 +255,223 @@ fn the_guides_import_lines_run_as_written() {
             String::from_utf8_lossy(&o.stderr)
         );
     }
+    dir
+}
+
+/// The guide's LagrangeBench import lines, run as written.
+#[test]
+fn the_guides_lagrangebench_lines_run_as_written() {
+    let dir = run_guide_block(
+        "### Importing LagrangeBench datasets",
+        "mcgnode bag import --from lagrangebench",
+    );
+    let bag = read(&dir.path().join("lb-imported.mcap"));
+    assert_eq!(bag.trajectories.len(), 2);
+    assert!(bag.trajectories[0].graph.periodic_box.is_some());
+}
+
+/// The guide's GNS import lines, run as written (from a copy of the
+/// repository root's `.venv` and `scripts`, with `mcgnode` on PATH).
+#[test]
+fn the_guides_import_lines_run_as_written() {
+    let dir = run_guide_block(
+        "### Importing GNS datasets",
+        "mcgnode bag import --from gns",
+    );
+    let d = dir.path();
     let bag = read(&d.join("imported.mcap"));
     assert_eq!(bag.trajectories.len(), 4);
     assert!(d.join("imported-model.json").exists());
+}
+
+/// Simulates `system` (16 particles, 2 trajectories, 8 states) and writes
+/// it as a LagrangeBench dataset in `d/lb` with h5py; the bag.
+fn lb_dataset(d: &Path, system: &str, extra: &[&str]) -> PathBuf {
+    let args = ["simulate", "--system", system, "--particles", "16"];
+    let more = [
+        "--trajectories",
+        "2",
+        "--states",
+        "8",
+        "--seed",
+        "4",
+        "--out",
+        "sim.mcap",
+    ];
+    ok(&mcgnode(&[&args[..], &more[..]].concat(), d));
+    let out = Command::new(venv_python())
+        .arg(Path::new(ROOT).join("scripts/bag_to_lagrangebench.py"))
+        .args(["sim.mcap", "lb"])
+        .args(extra)
+        .current_dir(d)
+        .output()
+        .expect("run bag_to_lagrangebench.py");
+    assert!(
+        out.status.success(),
+        "bag_to_lagrangebench.py failed (is `h5py` installed? run scripts/setup_venv.sh): {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    d.join("sim.mcap")
+}
+
+/// Imports `d/lb`'s train split to `d/imp.mcap`; the command's output.
+fn lb_import(d: &Path) -> String {
+    let args = [
+        "bag",
+        "import",
+        "--from",
+        "lagrangebench",
+        "lb",
+        "--split",
+        "train",
+    ];
+    ok(&mcgnode(
+        &[&args[..], &["--closed", "--out", "imp.mcap"]].concat(),
+        d,
+    ))
+}
+
+#[test]
+fn lagrangebench_periodic_round_trip() {
+    // float32 positions in a box periodic on every axis: positions bit for
+    // bit (as f32), the box and its flags, dt and radius from the metadata,
+    // velocities the minimum-image differences.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sim = lb_dataset(d, "periodic-spheres", &["--float32"]);
+    let out = lb_import(d);
+    assert!(
+        out.contains("2 trajectories") && out.contains(", periodic;"),
+        "{out}"
+    );
+    let (src, imp) = (read(&sim), read(&d.join("imp.mcap")));
+    assert_eq!(src.trajectories.len(), imp.trajectories.len());
+    for (s, i) in src.trajectories.iter().zip(&imp.trajectories) {
+        assert_eq!(i.graph.periodic_box, s.graph.periodic_box);
+        assert!(i.graph.periodic_box.is_some());
+        assert_eq!(i.graph.interaction_radius, s.graph.interaction_radius);
+        assert_eq!((i.graph.n(), i.graph.dim), (s.graph.n(), s.graph.dim));
+        assert_eq!(i.graph.n_kinematic(), 0);
+        let dt = s.samples[1].t - s.samples[0].t;
+        for (k, (a, b)) in s.samples.iter().zip(&i.samples).enumerate() {
+            let want: Vec<u64> = a
+                .state
+                .q
+                .iter()
+                .map(|x| f64::from(*x as f32).to_bits())
+                .collect();
+            let got: Vec<u64> = b.state.q.iter().map(|x| x.to_bits()).collect();
+            assert_eq!(got, want, "trajectory {} state {k}", s.id);
+            assert!((b.t - k as f64 * dt).abs() < 1e-9, "state {k} at {}", b.t);
+        }
+        let pb = i.graph.periodic_box.as_ref().unwrap();
+        for k in 1..i.samples.len() {
+            let (q0, q1) = (&i.samples[k - 1].state.q, &i.samples[k].state.q);
+            for (j, v) in i.samples[k].state.v.iter().enumerate() {
+                let c = j % i.graph.dim;
+                let l = pb.upper[c] - pb.lower[c];
+                let mut dq = q1[j] - q0[j];
+                dq -= l * (dq / l).round();
+                assert!(
+                    (v - dq / dt).abs() <= 1e-9 * (1.0 + v.abs()),
+                    "velocity {j} of {k}"
+                );
+            }
+        }
+    }
+    let info = ok(&mcgnode(&["bag", "info", "imp.mcap"], d));
+    assert!(
+        info.contains("16 particles") && info.contains("periodic box"),
+        "{info}"
+    );
+}
+
+#[test]
+fn lagrangebench_walls_are_kinematic_and_damage_is_named() {
+    // float64, soft spheres in a box of walls: positions bit for bit, walls
+    // (type 1) kinematic, no periodic box.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sim = lb_dataset(d, "soft-spheres", &[]);
+    let out = lb_import(d);
+    assert!(out.contains("not periodic"), "{out}");
+    let (src, imp) = (read(&sim), read(&d.join("imp.mcap")));
+    for (s, i) in src.trajectories.iter().zip(&imp.trajectories) {
+        assert_eq!(i.graph.kinematic, s.graph.kinematic);
+        assert!(i.graph.n_kinematic() > 0);
+        assert!(i.graph.periodic_box.is_none());
+        for (a, b) in s.samples.iter().zip(&i.samples) {
+            assert_eq!(a.state.q, b.state.q, "float64 positions exactly");
+        }
+    }
+    assert!(ok(&mcgnode(&["bag", "info", "imp.mcap"], d)).contains("not periodic"));
+    // A missing metadata key is named.
+    lb_dataset(
+        d,
+        "soft-spheres",
+        &["--drop", "default_connectivity_radius"],
+    );
+    let args = [
+        "bag",
+        "import",
+        "--from",
+        "lagrangebench",
+        "lb",
+        "--out",
+        "x.mcap",
+    ];
+    let e = refused(d, &args);
+    assert!(
+        e.contains("metadata.json") && e.contains("default_connectivity_radius"),
+        "{e}"
+    );
+    // A truncated HDF5 file names the file.
+    lb_dataset(d, "soft-spheres", &[]);
+    let h5 = d.join("lb/train.h5");
+    let bytes = std::fs::read(&h5).unwrap();
+    std::fs::write(&h5, &bytes[..bytes.len() / 3]).unwrap();
+    let e = refused(d, &args);
+    assert!(e.contains("train.h5"), "{e}");
+    // Another split that is not there.
+    let e = refused(d, &[&args[..], &["--split", "test"]].concat());
+    assert!(e.contains("test.h5") && e.contains("not found"), "{e}");
+}
+
+#[test]
+fn damaged_lagrangebench_files_are_errors_not_panics() {
+    // 400 copies of a real file with 1-8 bytes changed or cut short: each
+    // reads or is refused with the file named, and nothing panics.
+    use rand::{Rng, SeedableRng};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    lb_dataset(d, "soft-spheres", &["--float32"]);
+    let h5 = d.join("lb/train.h5");
+    let good = std::fs::read(&h5).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(48);
+    let (mut read_ok, mut refused) = (0, 0);
+    for case in 0..400 {
+        let mut bytes = good.clone();
+        for _ in 0..rng.random_range(1..=8) {
+            let i = rng.random_range(0..bytes.len());
+            bytes[i] = rng.random();
+        }
+        if case % 10 == 0 {
+            bytes.truncate(rng.random_range(0..bytes.len()));
+        }
+        std::fs::write(&h5, &bytes).unwrap();
+        match mcgnode::data::import::read_lagrangebench(&d.join("lb"), "train", None) {
+            Ok(imp) => {
+                read_ok += 1;
+                for t in &imp.trajectories {
+                    t.graph.validate().expect("an accepted graph is valid");
+                }
+            }
+            Err(e) => {
+                refused += 1;
+                assert!(e.to_string().contains("train.h5"), "case {case}: {e}");
+            }
+        }
+    }
+    println!("{read_ok} read, {refused} refused");
+    assert!(refused > 0, "some damage must be noticed");
 }

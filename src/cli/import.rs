@@ -4,7 +4,9 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 
-use crate::data::import::{read_gns, write_gns_bag, GnsSource};
+use crate::data::import::{
+    read_gns, read_lagrangebench, write_gns_bag, write_lagrangebench_bag, GnsSource,
+};
 use crate::physics::Field;
 
 /// The formats `bag import` reads.
@@ -76,12 +78,50 @@ pub struct ImportArgs {
 pub fn run(a: &ImportArgs) -> Result<()> {
     match a.from {
         ImportFormat::Gns => gns(a),
-        ImportFormat::Lagrangebench => bail!(
-            "--from lagrangebench is not available in this build: reading LagrangeBench's \
-             HDF5 files (.h5) needs an HDF5 reader this build does not include; convert the \
-             split to GNS's format (TFRecord) and use --from gns"
-        ),
+        ImportFormat::Lagrangebench => lagrangebench(a),
     }
+}
+
+/// The field `--gravity` / `--closed` state, if either.
+fn stated_field(a: &ImportArgs) -> Option<Field> {
+    (a.closed || a.gravity.is_some()).then(|| Field {
+        gravity: a.gravity.unwrap_or(0.0),
+        drag: 0.0,
+        force: vec![],
+    })
+}
+
+fn lagrangebench(a: &ImportArgs) -> Result<()> {
+    if !a.src.is_dir() || a.metadata.is_some() {
+        bail!(
+            "--from lagrangebench reads a dataset directory holding {{train,valid,test}}.h5 and \
+             metadata.json (no --metadata): {} is not one",
+            a.src.display()
+        );
+    }
+    let imp = read_lagrangebench(&a.src, a.split.name(), a.dt)?;
+    let states = write_lagrangebench_bag(&imp, &a.out, stated_field(a).as_ref())
+        .with_context(|| format!("writing {}", a.out.display()))?;
+    let n = imp.trajectories.first().map_or(0, |t| t.graph.n());
+    let kin = imp
+        .trajectories
+        .first()
+        .map_or(0, |t| t.graph.n_kinematic());
+    let periodic = match imp.meta.periodic_box() {
+        Some(_) => "periodic",
+        None => "not periodic",
+    };
+    println!(
+        "wrote {}: {} trajectories from {}, {states} states, {n} particles ({kin} kinematic), \
+         dim {}, frame dt {}, interaction radius {}, {periodic}; velocities by finite differences",
+        a.out.display(),
+        imp.trajectories.len(),
+        imp.file.display(),
+        imp.meta.dim,
+        imp.meta.frame_dt,
+        imp.meta.radius
+    );
+    Ok(())
 }
 
 fn gns(a: &ImportArgs) -> Result<()> {
@@ -91,12 +131,7 @@ fn gns(a: &ImportArgs) -> Result<()> {
         metadata: a.metadata.clone(),
         dt: a.dt,
     })?;
-    let field = (a.closed || a.gravity.is_some()).then(|| Field {
-        gravity: a.gravity.unwrap_or(0.0),
-        drag: 0.0,
-        force: vec![],
-    });
-    let states = write_gns_bag(&imp, &a.out, field.as_ref())
+    let states = write_gns_bag(&imp, &a.out, stated_field(a).as_ref())
         .with_context(|| format!("writing {}", a.out.display()))?;
     let n: Vec<usize> = imp.trajectories.iter().map(|t| t.graph.n()).collect();
     let kin: usize = imp.trajectories.iter().map(|t| t.graph.n_kinematic()).sum();
