@@ -21,9 +21,10 @@ use std::path::{Path, PathBuf};
 
 use prost::Message;
 
+use super::frames::samples_from_frames;
 use super::tfrecord::{self, Damage};
 use crate::data::DataError;
-use crate::system::{Graph, Sample, State, Trajectory};
+use crate::system::{Graph, Trajectory};
 
 /// GNS's particle type of kinematic (boundary) particles.
 pub const KINEMATIC_TYPE: i64 = 3;
@@ -303,24 +304,7 @@ fn trajectory(
         // never a periodic box.
         periodic_box: None,
     };
-    let samples = (0..qs.len())
-        .map(|t| {
-            let (a, b) = if t == 0 { (0, 1) } else { (t - 1, t) };
-            let v = qs[b]
-                .iter()
-                .zip(&qs[a])
-                .map(|(x, y)| (x - y) / meta.dt)
-                .collect();
-            Sample {
-                t: t as f64 * meta.dt,
-                state: State {
-                    q: qs[t].clone(),
-                    v,
-                },
-                acc: None,
-            }
-        })
-        .collect();
+    let samples = samples_from_frames(&qs, dim, meta.dt, None);
     Ok(Trajectory {
         id,
         system: system.to_string(),

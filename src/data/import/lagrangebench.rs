@@ -21,8 +21,10 @@ use std::path::{Path, PathBuf};
 
 use hdf5_reader::{Datatype, Hdf5File};
 
+use super::frames::samples_from_frames;
+use super::tfrecord::Damage;
 use crate::data::DataError;
-use crate::system::{Graph, PeriodicBox, Sample, State, Trajectory};
+use crate::system::{Graph, PeriodicBox, Trajectory};
 
 /// LagrangeBench's particle types (`lagrangebench.utils.NodeType`).
 pub const FLUID: i64 = 0;
@@ -143,8 +145,8 @@ fn parse_bounds(b: &serde_json::Value, dim: usize) -> Option<Vec<[f64; 2]>> {
 }
 
 /// A dataset's numbers as f64 (float32 widened exactly).
-fn floats(ds: &hdf5_reader::Dataset) -> Result<Vec<f64>, String> {
-    let e = |e: hdf5_reader::error::Error| e.to_string();
+fn floats(ds: &hdf5_reader::Dataset) -> Result<Vec<f64>, Damage> {
+    let e = |e: hdf5_reader::error::Error| Damage(e.to_string());
     match ds.dtype() {
         Datatype::FloatingPoint { size: 4, .. } => Ok(ds
             .read_array::<f32>()
@@ -155,16 +157,16 @@ fn floats(ds: &hdf5_reader::Dataset) -> Result<Vec<f64>, String> {
         Datatype::FloatingPoint { size: 8, .. } => {
             Ok(ds.read_array::<f64>().map_err(e)?.iter().copied().collect())
         }
-        t => Err(format!("holds {t:?}: expected float32 or float64")),
+        t => Err(Damage(format!("holds {t:?}: expected float32 or float64"))),
     }
 }
 
 /// A dataset's integers as i64.
-fn integers(ds: &hdf5_reader::Dataset) -> Result<Vec<i64>, String> {
+fn integers(ds: &hdf5_reader::Dataset) -> Result<Vec<i64>, Damage> {
     fn all<T: hdf5_reader::H5Type + Copy + Into<i64>>(
         ds: &hdf5_reader::Dataset,
-    ) -> Result<Vec<i64>, String> {
-        let a = ds.read_array::<T>().map_err(|e| e.to_string())?;
+    ) -> Result<Vec<i64>, Damage> {
+        let a = ds.read_array::<T>().map_err(|e| Damage(e.to_string()))?;
         Ok(a.iter().map(|x| (*x).into()).collect())
     }
     match ds.dtype() {
@@ -198,7 +200,7 @@ fn integers(ds: &hdf5_reader::Dataset) -> Result<Vec<i64>, String> {
             signed: false,
             ..
         } => all::<u8>(ds),
-        t => Err(format!("holds {t:?}: expected integers")),
+        t => Err(Damage(format!("holds {t:?}: expected integers"))),
     }
 }
 
@@ -208,7 +210,7 @@ fn trajectory(
     id: u32,
     meta: &LbMetadata,
     system: &str,
-) -> Result<Trajectory, String> {
+) -> Result<Trajectory, Damage> {
     let dataset = |k: &str| group.dataset(k).map_err(|e| format!("dataset `{k}`: {e}"));
     let types = integers(&dataset("particle_type")?).map_err(|e| format!("`particle_type` {e}"))?;
     let pos = dataset("position")?;
@@ -216,27 +218,27 @@ fn trajectory(
     match pos.shape() {
         [t, pn, pd] if *pn as usize == n && *pd as usize == d && *t >= 2 => {}
         s => {
-            return Err(format!(
+            return Err(Damage(format!(
                 "`position` has shape {s:?}: expected (steps ≥ 2, {n} particles, {d})"
-            ))
+            )))
         }
     }
     if let Some(t) = types
         .iter()
         .find(|t| ![FLUID, SOLID_WALL, MOVING_WALL].contains(*t))
     {
-        return Err(format!(
+        return Err(Damage(format!(
             "particle type {t} is not fluid (0), a solid wall (1) or a moving wall (2){}",
             if *t == RIGID_BODY {
                 ": rigid bodies are not supported"
             } else {
                 ""
             }
-        ));
+        )));
     }
     let q = floats(&pos).map_err(|e| format!("`position` {e}"))?;
     if let Some(i) = q.iter().position(|x| !x.is_finite()) {
-        return Err(format!("`position` value {i} is not finite"));
+        return Err(Damage(format!("`position` value {i} is not finite")));
     }
     let kinematic: Vec<bool> = types.iter().map(|t| *t != FLUID).collect();
     let graph = Graph {
@@ -255,28 +257,7 @@ fn trajectory(
     };
     graph.validate().map_err(|e| e.to_string())?;
     let frames: Vec<&[f64]> = q.chunks_exact(n * d).collect();
-    let samples = (0..frames.len())
-        .map(|t| {
-            let (a, b) = if t == 0 { (0, 1) } else { (t - 1, t) };
-            let mut v: Vec<f64> = frames[b]
-                .iter()
-                .zip(frames[a])
-                .map(|(x, y)| x - y)
-                .collect();
-            if let Some(pb) = &graph.periodic_box {
-                v.chunks_mut(d).for_each(|c| pb.min_image(c));
-            }
-            v.iter_mut().for_each(|x| *x /= meta.frame_dt);
-            Sample {
-                t: t as f64 * meta.frame_dt,
-                state: State {
-                    q: frames[t].to_vec(),
-                    v,
-                },
-                acc: None,
-            }
-        })
-        .collect();
+    let samples = samples_from_frames(&frames, d, meta.frame_dt, graph.periodic_box.as_ref());
     Ok(Trajectory {
         id,
         system: system.to_string(),
@@ -332,7 +313,7 @@ pub fn read_lagrangebench(
         .map(|(k, g)| {
             let id = g.name().parse().unwrap_or(k as u32);
             trajectory(g, id, &meta, &system)
-                .map_err(|e| bad(&file, format!("group {:?}: {e}", g.name())))
+                .map_err(|e| bad(&file, format!("group {:?}: {}", g.name(), e.0)))
         })
         .collect::<Result<Vec<_>, _>>()?;
     Ok(LbImport {

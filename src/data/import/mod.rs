@@ -6,6 +6,7 @@
 //! - [`lagrangebench`]: the LagrangeBench datasets (HDF5 groups and their
 //!   `metadata.json`).
 
+mod frames;
 pub mod gns;
 pub mod lagrangebench;
 pub mod tfrecord;
