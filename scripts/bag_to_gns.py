@@ -17,25 +17,11 @@ metadata (as some converted datasets do). Run with the project's venv:
 
 import argparse
 import json
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
+from _particle_bag import TYPE, read_bag
 from tfrecord.writer import TFRecordWriter
-
-TYPE = "mcgnode_msgs/msg/ParticleState"
-
-
-def read_bag(path):
-    trajs = defaultdict(list)
-    with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for schema, _, _, msg in reader.iter_decoded_messages():
-            if schema.name == TYPE:
-                trajs[msg.trajectory_id].append(msg)
-    return trajs
 
 
 def main() -> int:

@@ -19,25 +19,11 @@ key out (to test the importer's refusal). Run with the project's venv:
 
 import argparse
 import json
-from collections import defaultdict
 from pathlib import Path
 
 import h5py
 import numpy as np
-from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
-
-TYPE = "mcgnode_msgs/msg/ParticleState"
-
-
-def read_bag(path):
-    trajs = defaultdict(list)
-    with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for schema, _, _, msg in reader.iter_decoded_messages():
-            if schema.name == TYPE:
-                trajs[msg.trajectory_id].append(msg)
-    return trajs
+from _particle_bag import TYPE, read_bag
 
 
 def main() -> int:
