@@ -295,3 +295,100 @@ fn members_shared_among_the_cores_predict_as_one_by_one() {
     assert_eq!(states, want_states);
     assert_eq!(spread, want_spread);
 }
+
+/// Every number in a JSON value, in order.
+fn numbers(v: &serde_json::Value, out: &mut Vec<f64>) {
+    match v {
+        serde_json::Value::Number(n) => out.extend(n.as_f64()),
+        serde_json::Value::Array(a) => a.iter().for_each(|x| numbers(x, out)),
+        serde_json::Value::Object(o) => o.values().for_each(|x| numbers(x, out)),
+        _ => {}
+    }
+}
+
+/// Each member's weights, as flat numbers: the file's own first.
+fn member_weights(file: &Path) -> Vec<Vec<f64>> {
+    let f: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(file).unwrap()).unwrap();
+    let mut out = vec![f["weights"].clone()];
+    for m in f["members"].as_array().cloned().unwrap_or_default() {
+        out.push(m["weights"].clone());
+    }
+    out.iter()
+        .map(|w| {
+            let mut x = Vec::new();
+            numbers(w, &mut x);
+            x
+        })
+        .collect()
+}
+
+#[test]
+fn an_ensemble_warm_starts_member_by_member() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(&mcgnode(
+        &[
+            "simulate",
+            "--system",
+            "spring",
+            "--particles",
+            "5",
+            "--trajectories",
+            "6",
+            "--states",
+            "30",
+            "--out",
+            "train.mcap",
+        ],
+        d,
+    ));
+    let train = |extra: &[&str], out: &str| {
+        let mut args = vec![
+            "train",
+            "--model",
+            "mcgnode",
+            "--data",
+            "train.mcap",
+            "--quiet",
+            "--out",
+            out,
+        ];
+        args.extend_from_slice(extra);
+        mcgnode(&args, d)
+    };
+    ok(&train(&["--epochs", "20", "--ensemble", "3"], "k3.json"));
+    // Without --ensemble: as many members as the --init model, each from its own.
+    ok(&train(&["--epochs", "1", "--init", "k3.json"], "warm.json"));
+    let (before, after) = (
+        member_weights(&d.join("k3.json")),
+        member_weights(&d.join("warm.json")),
+    );
+    assert_eq!(after.len(), 3, "the warm start keeps the ensemble");
+    let dist = |a: &[f64], b: &[f64]| -> f64 {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    for (i, w) in after.iter().enumerate() {
+        let own = dist(w, &before[i]);
+        for (j, b) in before.iter().enumerate().filter(|(j, _)| *j != i) {
+            assert!(
+                own < dist(w, b),
+                "member {i} after one epoch is {own:.3e} from its own start, {:.3e} from member {j}'s",
+                dist(w, b)
+            );
+        }
+        assert!(own > 0.0, "member {i} trained");
+    }
+    // Another member count is refused, naming the one that works.
+    let o = train(
+        &["--epochs", "1", "--init", "k3.json", "--ensemble", "2"],
+        "bad.json",
+    );
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--ensemble 3"), "{err}");
+}

@@ -25,24 +25,41 @@ const BEFORE: usize = 31;
 const AFTER: usize = 40;
 const CHANGE_AT: f64 = 3.0;
 
-/// The played trajectory: one run, the stiffness changed at [`CHANGE_AT`]
-/// and `after` states after it; every state carries the nominal graph.
-fn drifting_trajectory(after: usize) -> (SystemConfig, mcgnode::system::Trajectory) {
+/// The played run in two parts: [`BEFORE`] states at stiffness 1, then
+/// `after` states from the last of them with the stiffness times `factor`
+/// (stamps continuing, the first state of the second part being the last of
+/// the first). The second part's graph says the new stiffness only when
+/// `reported`; else both carry the nominal graph.
+fn drift_parts(
+    factor: f64,
+    after: usize,
+    reported: bool,
+) -> (SystemConfig, [mcgnode::system::Trajectory; 2]) {
     let mut cfg = SystemConfig::new(SystemKind::Spring, 5);
     cfg.states = BEFORE;
     let graph = cfg.graph();
     let start = cfg.start_for(&graph, 11, 0);
-    let mut traj = cfg.simulate_one(&graph, start, 0);
+    let traj = cfg.simulate_one(&graph, start, 0);
     let mut stiff = cfg.clone();
-    stiff.stiffness *= 1.2;
+    stiff.stiffness *= factor;
     stiff.states = after + 1;
     let last = traj.samples.last().expect("samples").clone();
-    let after = stiff.simulate_one(&stiff.graph(), last.state, 0);
-    // The first state of the second part is the last of the first.
-    for mut s in after.samples.into_iter().skip(1) {
+    let mut second = stiff.simulate_one(&stiff.graph(), last.state, 0);
+    second.samples.remove(0);
+    for s in &mut second.samples {
         s.t += last.t;
-        traj.samples.push(s);
     }
+    if !reported {
+        second.graph = traj.graph.clone();
+    }
+    (cfg, [traj, second])
+}
+
+/// The played trajectory: one run, the stiffness 20 % up at [`CHANGE_AT`]
+/// and `after` states after it; every state carries the nominal graph.
+fn drifting_trajectory(after: usize) -> (SystemConfig, mcgnode::system::Trajectory) {
+    let (cfg, [mut traj, second]) = drift_parts(1.2, after, false);
+    traj.samples.extend(second.samples);
     (cfg, traj)
 }
 
@@ -61,15 +78,15 @@ fn write_bag(dir: &std::path::Path, after: usize) -> std::path::PathBuf {
     bag
 }
 
-/// Serves with `params` in the network namespace, plays `bag` at its
-/// recorded pace while tests/ros/accuracy_drive.py (with `driver_args`)
+/// Serves with `params` in the network namespace, plays `bags` one after
+/// another at their recorded pace while tests/ros/accuracy_drive.py (with `driver_args`)
 /// collects `count` live-accuracy messages, then waits (bounded, 30 s) for a
 /// node log line matching `wait_for` when one is given; returns the driver's
 /// summary, the node log and a report (bounded by `limit_s` in all).
 #[allow(clippy::too_many_arguments)]
 fn play(
     dir: &std::path::Path,
-    bag: &std::path::Path,
+    bags: &[&std::path::Path],
     params: &std::path::Path,
     env_sh: &std::path::Path,
     count: usize,
@@ -87,8 +104,10 @@ fn play(
         drive=$!
         for _ in $(seq 400); do grep -q listening "$DIR/drive.err" && break; sleep 0.05; done
         grep -q listening "$DIR/drive.err" || { echo "driver never matched"; cat "$DIR/drive.err"; exit 2; }
-        python3 scripts/ros/play_bag.py "$BAG" --rate 10 --timeout 30 2>"$DIR/play.err" \
-            || { cat "$DIR/play.err"; exit 3; }
+        for bag in $BAGS; do
+            python3 scripts/ros/play_bag.py "$bag" --rate 10 --timeout 30 2>"$DIR/play.err" \
+                || { cat "$DIR/play.err"; exit 3; }
+        done
         wait $drive; rc=$?
         cat "$DIR/drive.out"
         if [ -n "$WAIT_FOR" ]; then
@@ -100,7 +119,13 @@ fn play(
     let o = run_bounded(
         in_netns(script, params, env_sh)
             .env("DIR", dir)
-            .env("BAG", bag)
+            .env(
+                "BAGS",
+                bags.iter()
+                    .map(|b| b.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(" "),
+            )
             .env("COUNT", count.to_string())
             .env("DRIVER_ARGS", driver_args)
             .env("WAIT_FOR", wait_for),
@@ -129,7 +154,7 @@ fn drift_alarm_follows_a_stiffness_change() {
     let compared = BEFORE + AFTER - 1;
     let (summary, node_log, report) = play(
         dir.path(),
-        &bag,
+        &[&bag],
         &params,
         &env_sh,
         compared,
@@ -254,7 +279,7 @@ fn drift_alarm_starts_a_warm_start_retraining() {
     // The retraining decides within the playback; wait (bounded) for its verdict.
     let (summary, node_log, report) = play(
         dir.path(),
-        &bag,
+        &[&bag],
         &params,
         &env_sh,
         compared,
@@ -309,4 +334,188 @@ fn drift_alarm_starts_a_warm_start_retraining() {
         mean_re(CHANGE_AT - 1.0, CHANGE_AT),
         mean_re(end - 1.0, end + 0.01)
     );
+}
+
+/// The spread alarm against the error alarm, with an ensemble (3 members,
+/// `--edge-physics`, so it reads each spring's stiffness) trained on
+/// stiffness 1: the springs stiffen by 30 % after 3 s, and the states say
+/// so (their graph carries the new stiffness, as a robot's state would
+/// when it knows what it picked up). The members disagree on the first
+/// state outside their training, before the error of any prediction can be
+/// observed; the error alarm follows. Nothing is raised before the change.
+/// With `spread_retrain`, the spread alarm starts a retraining that keeps
+/// the ensemble.
+#[test]
+fn spread_alarm_comes_before_the_error_alarm() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    use common::cli::{mcgnode as cli, ok};
+    ok(&cli(
+        &[
+            "simulate",
+            "--system",
+            "spring",
+            "--particles",
+            "5",
+            "--trajectories",
+            "10",
+            "--seed",
+            "1",
+            "--out",
+            "train.mcap",
+        ],
+        d,
+    ));
+    ok(&cli(
+        &[
+            "train",
+            "--model",
+            "mcgnode",
+            "--edge-physics",
+            "--ensemble",
+            "3",
+            "--epochs",
+            "300",
+            "--data",
+            "train.mcap",
+            "--out",
+            "ensemble.json",
+            "--quiet",
+        ],
+        d,
+    ));
+    let (cfg, parts) = drift_parts(1.3, AFTER, true);
+    let bags: Vec<std::path::PathBuf> = parts
+        .iter()
+        .zip(["before.mcap", "after.mcap"])
+        .map(|(t, name)| {
+            let bag = d.join(name);
+            mcgnode::data::write_trajectories_with_field(
+                &bag,
+                std::slice::from_ref(t),
+                &Default::default(),
+                Some(&cfg.field),
+            )
+            .expect("writing a bag");
+            bag
+        })
+        .collect();
+    // Between this ensemble's spreads along the 1 s horizon in range (at
+    // most 5.3e-3 in a run) and at 1.3x (4.4-6.9e-2).
+    let spread_warn = 1.2e-2;
+    let params = d.join("params.yaml");
+    fs::write(
+        &params,
+        format!(
+            "mcgnode:\n  ros__parameters:\n    model: {:?}\n    dt: 0.1\n    substeps: 100\n    \
+             horizon: 10\n    diagnostics_period: 0.2\n    accuracy_lead_times: [0.1, 0.5, 1.0]\n    \
+             accuracy_window: 3\n    accuracy_warn_re: 1.0e-2\n    accuracy_error_re: 5.0e-2\n    \
+             spread_warn: {spread_warn}\n    spread_retrain: true\n    accuracy_retrain_after: 2.0\n    \
+             accuracy_retrain_epochs: 20\n    record_dir: {:?}\n    record_split_seconds: 0.5\n    \
+             model_dir: {:?}\n",
+            d.join("ensemble.json").display(),
+            d.join("rec").display(),
+            d.join("models").display()
+        ),
+    )
+    .expect("writing params");
+    // The first state with the new graph starts live accuracy over (the
+    // predictions before it were for another system): it is not compared.
+    let compared = BEFORE + AFTER - 2;
+    let bag_refs: Vec<&std::path::Path> = bags.iter().map(std::path::PathBuf::as_path).collect();
+    let (summary, node_log, report) = play(
+        d,
+        &bag_refs,
+        &params,
+        &env_sh,
+        compared,
+        "--timeout 90 --predictions",
+        "drift retraining: (swapped|kept)",
+        200,
+    );
+    let s: serde_json::Value = serde_json::from_str(&summary).expect("ACCURACY_SUMMARY is JSON");
+    let num = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+    let predictions = s["predictions"].as_array().expect("predictions");
+    let live = s["live"].as_array().expect("live");
+    let in_range = |m: &&serde_json::Value| num(m, "stamp") <= CHANGE_AT + 1e-6;
+    let spread_before = predictions
+        .iter()
+        .filter(in_range)
+        .map(|m| num(m, "spread_max"))
+        .fold(0.0, f64::max);
+    let re_before = live
+        .iter()
+        .filter(in_range)
+        .flat_map(|m| m["re_mean"].as_array().cloned().unwrap_or_default())
+        .filter_map(|x| x.as_f64())
+        .fold(0.0, f64::max);
+    println!("in range: largest spread {spread_before:.2e}, largest running RE {re_before:.2e}");
+    assert!(
+        predictions.iter().filter(in_range).count() >= BEFORE - 1,
+        "{report}"
+    );
+    assert!(
+        spread_before < spread_warn,
+        "a spread alarm in range\n{report}"
+    );
+    assert!(
+        live.iter().filter(in_range).all(|m| m["level"] == 0),
+        "an error alarm in range\n{report}"
+    );
+    let spread_at = predictions
+        .iter()
+        .find(|m| num(m, "spread_max") > spread_warn)
+        .map(|m| num(m, "stamp"))
+        .unwrap_or_else(|| panic!("the spread never passed {spread_warn}\n{report}"));
+    let error_at = live
+        .iter()
+        .find(|m| m["level"].as_u64().unwrap_or(0) >= 1)
+        .map(|m| num(m, "stamp"))
+        .unwrap_or_else(|| panic!("no error alarm\n{report}"));
+    println!(
+        "change at {CHANGE_AT} s: spread alarm at {spread_at:.1} s, error alarm at {error_at:.1} s \
+         ({:.1} s later)",
+        error_at - spread_at
+    );
+    assert!(spread_at > CHANGE_AT, "{report}");
+    assert!(
+        error_at - spread_at >= 0.5 - 1e-6,
+        "the spread alarm came {:.2} s before the error alarm\n{report}",
+        error_at - spread_at
+    );
+    // On /diagnostics and in the log, and the retraining it started.
+    let spread_diags = s["spread_diagnostics"].as_array().expect("spread statuses");
+    assert!(
+        spread_diags.iter().any(|m| m["level"] == 1),
+        "no WARN of `mcgnode: spread`\n{report}"
+    );
+    assert!(
+        node_log.contains("spread alarm: the ensemble disagrees"),
+        "{report}"
+    );
+    assert!(
+        node_log.contains("drift retraining after \"spread alarm"),
+        "{report}"
+    );
+    let verdict = node_log
+        .lines()
+        .find(|l| l.contains("drift retraining: swapped") || l.contains("drift retraining: kept"))
+        .unwrap_or_else(|| panic!("no retraining verdict\n{report}"));
+    println!("{verdict}");
+    if verdict.contains("swapped in") {
+        let path = verdict
+            .split("swapped in ")
+            .nth(1)
+            .and_then(|r| r.split(':').next())
+            .expect("the swapped file");
+        let file: serde_json::Value =
+            serde_json::from_str(&fs::read_to_string(path).expect("the retrained file"))
+                .expect("JSON");
+        assert_eq!(
+            file["members"].as_array().map(Vec::len),
+            Some(2),
+            "the retrained model is still an ensemble of 3"
+        );
+    }
 }

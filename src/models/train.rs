@@ -47,7 +47,29 @@ impl TrainedFile {
 
 /// Trains any model from bags (the GNODE family with `opts`; baselines use
 /// their paper architecture, and `opts.topic` only) and returns its file.
+/// From an ensemble (`cfg.init` with members) it trains an ensemble of as
+/// many members, each warm-started from its own weights.
 pub fn train_from_bags(
+    kind: ModelKind,
+    bags: &[PathBuf],
+    opts: &ModelOptions,
+    cfg: &TrainConfig,
+    log: impl FnMut(&str),
+    on_epoch: impl FnMut(&EpochReport) -> bool,
+) -> Result<TrainedFile> {
+    // An ensemble's members each warm-start from their own weights.
+    if let Some(members) = init_members(cfg) {
+        let cfg = TrainConfig {
+            ensemble: members,
+            ..cfg.clone()
+        };
+        return train_ensemble_from_bags(kind, bags, opts, &cfg, log, on_epoch);
+    }
+    train_one(kind, bags, opts, cfg, log, on_epoch)
+}
+
+/// [`train_from_bags`] of one model (`cfg.init`, if any, a single model).
+fn train_one(
     kind: ModelKind,
     bags: &[PathBuf],
     opts: &ModelOptions,
@@ -71,6 +93,14 @@ pub fn train_from_bags(
             )?)
         }
     })
+}
+
+/// The members of `cfg.init` when it is an ensemble (at least 2).
+fn init_members(cfg: &TrainConfig) -> Option<usize> {
+    cfg.init
+        .as_ref()
+        .filter(|f| !f.members.is_empty())
+        .map(|f| f.members.len() + 1)
 }
 
 /// [`train_from_bags`] (or, with `cfg.ensemble` above 1,
@@ -118,11 +148,23 @@ pub fn train_ensemble_from_bags(
     if cfg.checkpoint.is_some() && k > 1 {
         crate::error::bail!("--checkpoint saves one run: drop it or train with --ensemble 1");
     }
+    let inits = cfg.init.as_ref().map(|f| f.member_files());
+    if let Some(m) = init_members(cfg).filter(|&m| m != k.max(1)) {
+        crate::error::bail!(
+            "the --init model is an ensemble of {m} members, each warm-started from its own \
+             weights: train with --ensemble {m} (or without --ensemble)"
+        );
+    }
     let mut first: Option<ModelFile> = None;
     let mut seconds = 0.0;
     for i in 0..k.max(1) {
         let member_cfg = TrainConfig {
             seed: cfg.seed.wrapping_add(i as u64),
+            // Member i of an ensemble --init from member i (a single model
+            // --init starts every member from its weights).
+            init: inits
+                .as_ref()
+                .map(|f| Box::new(f[i.min(f.len() - 1)].clone())),
             ..cfg.clone()
         };
         log(&format!(
@@ -130,7 +172,7 @@ pub fn train_ensemble_from_bags(
             i + 1,
             member_cfg.seed
         ));
-        let f = train_from_bags(kind, bags, opts, &member_cfg, &mut log, &mut on_epoch)?
+        let f = train_one(kind, bags, opts, &member_cfg, &mut log, &mut on_epoch)?
             .into_family()
             .ok_or_else(|| crate::error::err!("an ensemble member is not of the GNODE family"))?;
         seconds += f.training.seconds;

@@ -9,7 +9,7 @@
 //! service): they all import it, so the module graph has no cycle.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError, RwLock};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -130,17 +130,33 @@ pub struct Stats {
     /// An ensemble's latest prediction: its largest particle spread along
     /// the horizon; `None` for a single model or before a prediction.
     pub spread_max: Mutex<Option<f64>>,
+    /// Whether the spread alarm (`spread_warn`) is raised: its changes are
+    /// logged, and may start a retraining (`spread_retrain`).
+    pub spread_alarmed: AtomicBool,
 }
 
 impl Stats {
     /// Notes the spread of the latest prediction (flat, empty for a single
-    /// model).
-    pub fn note_spread(&self, spread: &[f64]) {
+    /// model) against the alarm threshold `warn` (0 = off), and returns
+    /// the alarm's change, if it changed: raised (`true`) or cleared, with
+    /// why. A NaN spread raises it, as on `/diagnostics`.
+    pub fn note_spread(&self, spread: &[f64], warn: f64) -> Option<(bool, String)> {
         let max = spread.iter().copied().reduce(f64::max);
         *self
             .spread_max
             .lock()
             .unwrap_or_else(PoisonError::into_inner) = max;
+        let max = max?;
+        let raised = warn > 0.0 && (max.is_nan() || max > warn);
+        let was = self.spread_alarmed.swap(raised, Ordering::Relaxed);
+        (raised != was).then(|| {
+            let why = if raised {
+                format!("spread alarm: the ensemble disagrees, largest spread {max:.3e} above spread_warn = {warn}")
+            } else {
+                format!("spread alarm cleared: largest spread {max:.3e}, spread_warn = {warn}")
+            };
+            (raised, why)
+        })
     }
 
     /// The latest prediction's largest spread, `None` for a single model.

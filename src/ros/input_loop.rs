@@ -22,6 +22,10 @@ use super::predict::{self, Prediction};
 use super::trainer::Trainer;
 use super::wire::{LiveAccuracy, MarkerArray, ParticleForces, PredictedTrajectory};
 
+/// A state's prediction, its live-accuracy update, and the spread alarm's
+/// change (raised or cleared, why) if it changed.
+type Handled = (Prediction, accuracy::Update, Option<(bool, String)>);
+
 /// Checks, records and predicts one incoming state, and scores it against
 /// what was predicted for its moment (blocking work). `None`: a
 /// position-only state kept as its stream's history while it warms up.
@@ -29,7 +33,7 @@ fn handle_state(
     h: &Handles,
     msg: ParticleState,
     received_ns: u64,
-) -> Result<Option<(Prediction, accuracy::Update)>, predict::PredictError> {
+) -> Result<Option<Handled>, predict::PredictError> {
     // Refused before anything is recorded or predicted: an oversized state
     // would hold memory and its prediction could not be delivered promptly.
     if let Some(why) = h.lifecycle.refusal() {
@@ -80,11 +84,11 @@ fn handle_state(
         );
     }
     let p = predict::messages(&input.message, &input.graph, params.dt, &kept)?;
-    h.diag.stats.note_spread(&kept.spread);
+    let spread_alarm = h.diag.stats.note_spread(&kept.spread, params.spread_warn);
     h.recorder
         .record(|r| r.prediction(h.clock.now_log_ns(), &p.trajectory, &p.forces));
     let scored = h.accuracy.update(&params, &input, &kept.states);
-    Ok(Some((p, scored)))
+    Ok(Some((p, scored, spread_alarm)))
 }
 
 /// Counts and logs a stream starting over (not rate-limited: it happens once
@@ -185,7 +189,8 @@ async fn take_state(
 /// PoseArray and PointCloud2 tasks, which count them as received): predict,
 /// publish trajectory and forces, and the live accuracy when the state was
 /// compared with earlier predictions; a drift alarm starts a retraining with
-/// `trainer` when `accuracy_retrain` is on.
+/// `trainer` when `accuracy_retrain` is on, a spread alarm when
+/// `spread_retrain` is.
 pub(super) async fn input_loop(
     h: Handles,
     input: Subscription<ParticleState>,
@@ -204,7 +209,7 @@ pub(super) async fn input_loop(
         let received_ns = h.clock.now_log_ns();
         let worker = h.clone();
         let job = tokio::task::spawn_blocking(move || handle_state(&worker, msg, received_ns));
-        let (prediction, scored) = match job.await {
+        let (prediction, scored, spread_alarm) = match job.await {
             Ok(Ok(Some(p))) => p,
             Ok(Ok(None)) => continue,
             Ok(Err(why)) => {
@@ -216,20 +221,36 @@ pub(super) async fn input_loop(
                 continue;
             }
         };
+        let p = h.params.get();
         if let Some((level, why)) = &scored.alarm_changed {
             log_alarm(&h, *level, why);
-            let p = h.params.get();
             if *level != Level::Ok && p.accuracy_retrain {
-                // Off the input loop: it records for a while, then trains.
-                let (trainer, why) = (trainer.clone(), why.clone());
-                tokio::task::spawn_blocking(move || {
-                    // The outcome is logged by retrain_on_drift itself.
-                    let _ = retrain_on_drift(&trainer, &p, &why);
-                });
+                start_retraining(&trainer, &p, why);
+            }
+        }
+        if let Some((raised, why)) = &spread_alarm {
+            let level = if *raised {
+                LogLevel::Warn
+            } else {
+                LogLevel::Info
+            };
+            h.diag.log(level, why);
+            if *raised && p.spread_retrain {
+                start_retraining(&trainer, &p, why);
             }
         }
         out.publish(&h, prediction, scored.message).await;
     }
+}
+
+/// Starts a retraining after an alarm (`why`), off the input loop: it
+/// records for a while, then trains; the outcome is logged by
+/// [`retrain_on_drift`] itself.
+fn start_retraining(trainer: &Arc<Trainer>, p: &Arc<NodeParams>, why: &str) {
+    let (trainer, p, why) = (trainer.clone(), p.clone(), why.to_string());
+    tokio::task::spawn_blocking(move || {
+        let _ = retrain_on_drift(&trainer, &p, &why);
+    });
 }
 
 /// States a publisher sent that never reached us: the gap in its DDS

@@ -419,6 +419,10 @@ node_params! {
     spread_warn: f64 = 0.0, Kind::Double(false), runtime,
         "spread alarm: WARN on /diagnostics when an ensemble's (train --ensemble K) latest \
          prediction has a particle spread above this, in the positions' units (0 = never)";
+    /// Retrain when the spread alarm is raised, as on a drift alarm.
+    spread_retrain: bool = false, Kind::Bool, runtime,
+        "on a spread alarm (spread_warn), retrain as on a drift alarm (accuracy_retrain_after, \
+         accuracy_retrain_epochs; needs record_dir), before any error is observed";
     /// Retrain when the drift alarm is raised: warm-start the served model on
     /// what is recorded after the alarm, swapped in only if it beats the old
     /// one on the most recent (held-out) recording.
