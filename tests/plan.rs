@@ -32,6 +32,7 @@ fn problem<'a>(
             targets: vec![start.q[2 * end] + 0.4, start.q[2 * end + 1] + 0.1],
             effort: 1e-3,
             speed: 0.0,
+            risk: 0.0,
         },
         max_speed: 1.0,
     }

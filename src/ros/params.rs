@@ -419,6 +419,13 @@ node_params! {
     spread_warn: f64 = 0.0, Kind::Double(false), runtime,
         "spread alarm: WARN on /diagnostics when an ensemble's (train --ensemble K) latest \
          prediction has a particle spread above this, in the positions' units (0 = never)";
+    /// Weight of the Plan service's and action's risk term: this × the sum
+    /// over control steps of the free particles' mean ensemble spread along
+    /// each candidate's rollout; a single model refuses a weight above 0.
+    plan_risk: f64 = 0.0, Kind::Double(false), runtime,
+        "Plan service and action: weight of the risk term, this x the sum over control steps \
+         of the free particles' mean spread along each candidate's rollout (needs an ensemble, \
+         train --ensemble K; 0 = none)";
     /// Retrain when the drift alarm is raised: warm-start the served model on
     /// what is recorded after the alarm, swapped in only if it beats the old
     /// one on the most recent (held-out) recording.
