@@ -79,7 +79,9 @@ impl Cost {
             return 0.0;
         }
         let mean = |s: &Vec<f64>| {
-            free.iter().map(|&i| s.get(i).copied().unwrap_or(0.0)).sum::<f64>()
+            free.iter()
+                .map(|&i| s.get(i).copied().unwrap_or(0.0))
+                .sum::<f64>()
                 / free.len() as f64
         };
         self.risk * spread.iter().skip(1).map(mean).sum::<f64>()

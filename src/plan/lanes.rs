@@ -81,7 +81,10 @@ impl Lanes {
         let ndof = n * self.graph.dim;
         let part = |k: usize| -> Spread {
             all.iter()
-                .map(|s| s.get(k * n..(k + 1) * n).map_or_else(Vec::new, <[f64]>::to_vec))
+                .map(|s| {
+                    s.get(k * n..(k + 1) * n)
+                        .map_or_else(Vec::new, <[f64]>::to_vec)
+                })
                 .collect()
         };
         Some(

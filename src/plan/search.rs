@@ -286,9 +286,7 @@ impl Problem<'_> {
             .collect();
         let timing = self.timing.with_horizon(steps);
         let runs = lanes.rollouts(self.model, timing, &drives, self.cost.risk > 0.0)?;
-        let cost = |((s, spread), c): (&(Vec<State>, Spread), &Controls)| {
-            self.scored(s, spread, c)
-        };
+        let cost = |((s, spread), c): (&(Vec<State>, Spread), &Controls)| self.scored(s, spread, c);
         Some(runs.iter().zip(group).map(cost).collect())
     }
 
@@ -531,3 +529,7 @@ impl<'a> Search<'a> {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "risk_tests.rs"]
+mod risk_tests;

@@ -308,7 +308,10 @@ fn planners(trained: &[Trained], o: &MpcOptions) -> Result<Vec<Planner>> {
     out.push(plain("gnode", Some(load(&trained[1].path)?)));
     out.push(Planner {
         knows_world: true,
-        ..plain("truth", Some(crate::models::truth::truth(SystemKind::HeldChain)))
+        ..plain(
+            "truth",
+            Some(crate::models::truth::truth(SystemKind::HeldChain)),
+        )
     });
     out.push(plain("none", None));
     Ok(out)
