@@ -252,6 +252,7 @@ fn plan_problem<'a>(
             targets: vec![1.0, -20.0],
             effort: 1e-3,
             speed: 0.0,
+            risk: 0.0,
         },
         max_speed: 1.0,
     }

@@ -1,6 +1,7 @@
 //! Planning through a model (issue 22): the search against holding still and
 //! against its own replay, the samplers, the CLI's JSON, and the closed loop
-//! (`demo --mpc --quick`). Run with `cargo test --release --test plan`.
+//! (`demo --mpc --quick`, also with a held-out stiffness and the risk term).
+//! Run with `cargo test --release --test plan`.
 
 mod common;
 
@@ -32,6 +33,7 @@ fn problem<'a>(
             targets: vec![start.q[2 * end] + 0.4, start.q[2 * end + 1] + 0.1],
             effort: 1e-3,
             speed: 0.0,
+            risk: 0.0,
         },
         max_speed: 1.0,
     }
@@ -205,6 +207,74 @@ fn demo_mpc_writes_its_report() {
     assert!(r["planners"]["mcgnode"]["explained"].as_f64().is_some());
     assert!(r["planners"]["truth"]["explained"].is_null());
     assert!(d.join("out/mpc.png").metadata().unwrap().len() > 1000);
+}
+
+/// `demo --mpc --quick --held-out-stiffness 250 --risk 2 --ensemble 2`: the
+/// world's springs differ from the training data's, an ensemble plans with
+/// and without the risk term beside the others; weights that cannot be
+/// used and a risk weight on a single model are refused with the fix.
+#[test]
+fn demo_mpc_held_out_stiffness_with_risk() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let args = [
+        "demo",
+        "--mpc",
+        "--quick",
+        "--held-out-stiffness",
+        "250",
+        "--risk",
+        "2",
+        "--ensemble",
+        "2",
+        "--out",
+        "out",
+    ];
+    log_ok(&run_in(d, &args));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("out/mpc.json")).unwrap()).unwrap();
+    let names: Vec<&String> = r["planners"].as_object().unwrap().keys().collect();
+    let want = [
+        "gnode",
+        "mcgnode",
+        "mcgnode_ensemble",
+        "mcgnode_risk",
+        "none",
+        "truth",
+    ];
+    assert_eq!(names, want, "{r}");
+    let settings = r["settings"].as_str().unwrap();
+    assert!(settings.contains("springs k = 250"), "{settings}");
+    assert!(settings.contains("trained at k = 500"), "{settings}");
+    assert!(settings.contains("ensemble of 2 members"), "{settings}");
+    for name in want {
+        assert_eq!(
+            r["planners"][name]["distances"].as_array().unwrap().len(),
+            4
+        );
+    }
+    let refused = |args: &[&str], want: &str| {
+        let o = run_in(d, args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && err.contains(want), "{args:?}: {err}");
+    };
+    refused(
+        &["demo", "--mpc", "--quick", "--risk", "1", "--ensemble", "1"],
+        "an --ensemble of at least 2",
+    );
+    refused(&["demo", "--mpc", "--risk=-1"], "finite weights > 0");
+    refused(
+        &[
+            "plan",
+            "--model",
+            "truth:held-chain",
+            "--target",
+            "1,-4",
+            "--risk",
+            "1",
+        ],
+        "train --ensemble K",
+    );
 }
 
 /// The JSON `mcgnode` printed, after checking it succeeded.

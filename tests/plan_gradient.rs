@@ -83,6 +83,7 @@ fn problem<'a>(model: &'a dyn Dynamics, g: &'a Graph, start: &'a State) -> Probl
             ],
             effort: 0.05,
             speed: 0.3,
+            risk: 0.0,
         },
         max_speed: 2.0,
     }

@@ -34,6 +34,20 @@ pub struct Args {
     /// seeded targets (4 with --quick), into DIR/mpc.json and DIR/mpc.png.
     #[arg(long)]
     pub mpc: bool,
+    /// With --mpc: the world's springs get this stiffness instead of the
+    /// training data's 500; the learned planners still plan as if it were
+    /// 500 (the true physics knows the world's).
+    #[arg(long, requires = "mpc")]
+    pub held_out_stiffness: Option<f64>,
+    /// With --mpc: also train an MCGNODE ensemble (--ensemble members) and
+    /// plan on its mean without (`mcgnode_ensemble`) and with this risk
+    /// weight on its spread (`mcgnode_risk`; see `plan --risk`); several
+    /// weights, comma-separated, give one planner each (`mcgnode_risk_<w>`).
+    #[arg(long, value_delimiter = ',', requires = "mpc")]
+    pub risk: Vec<f64>,
+    /// Members of the --risk ensemble.
+    #[arg(long, default_value_t = 5, requires = "mpc")]
+    pub ensemble: usize,
 }
 
 /// Test sizes: the training size and two zero-shot ones.
@@ -91,7 +105,13 @@ pub fn run(a: Args) -> Result<()> {
 
 /// `demo --mpc`: runs the closed-loop experiment and prints its table.
 fn mpc(lab: &Lab, a: &Args) -> Result<()> {
-    let r = crate::reproduce::mpc::run(lab, a.quick, a.seed)?;
+    let o = crate::reproduce::mpc::MpcOptions {
+        held_out_stiffness: a.held_out_stiffness,
+        risk: a.risk.clone(),
+        ensemble: a.ensemble,
+        ..crate::reproduce::mpc::MpcOptions::plain(a.quick, a.seed)
+    };
+    let r = crate::reproduce::mpc::run(lab, &o)?;
     println!(
         "{:<16} {:>8} {:>15} {:>18}",
         "planner", "success", "final distance", "ms per step"

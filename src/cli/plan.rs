@@ -42,6 +42,12 @@ pub struct Args {
     /// is (bring it there at rest).
     #[arg(long, default_value_t = 0.0)]
     pub speed: f64,
+    /// Weight of the risk term: this × the sum over control steps of the
+    /// free particles' mean spread (the ensemble members' standard
+    /// deviation of position) along each candidate's mean rollout. Needs an
+    /// ensemble (`train --ensemble K`); 0 plans as without it.
+    #[arg(long, default_value_t = 0.0)]
+    pub risk: f64,
     /// Control steps ahead.
     #[arg(long, default_value_t = 10)]
     pub horizon: usize,
@@ -126,6 +132,7 @@ pub fn run(a: Args) -> Result<()> {
             targets: a.target.0.clone(),
             effort: a.effort,
             speed: a.speed,
+            risk: a.risk,
         },
         max_speed: a.max_speed,
     };

@@ -1,9 +1,10 @@
 //! What a plan minimises: how far chosen particles are from their targets
 //! (and how fast they still move), at the end of the horizon or along it,
-//! plus the control effort.
+//! plus the control effort and, for an ensemble, a risk term: how much its
+//! members disagree along the candidate's rollout.
 
 use super::controls::Controls;
-use crate::dynamics::Timing;
+use crate::dynamics::{Spread, Timing};
 use crate::system::State;
 use serde::{Deserialize, Serialize};
 
@@ -33,6 +34,10 @@ pub struct Cost {
     /// distances are: "get there and stay" rather than "fly through".
     #[serde(default)]
     pub speed: f64,
+    /// Weight of the risk term ([`Cost::risk_of`]): an ensemble's spread
+    /// along the rollout; 0 (the default) leaves the cost as without it.
+    #[serde(default)]
+    pub risk: f64,
 }
 
 impl Cost {
@@ -62,6 +67,24 @@ impl Cost {
                     .sum::<f64>()
             })
             .sum()
+    }
+
+    /// The risk term of a rollout whose kept states have `spread` (the
+    /// start, then one per control step; [`Spread`]): `risk` × the sum over
+    /// the control steps k = 1..H of the mean over the `free` particles of
+    /// their spread (the members' standard deviation of position). 0 when
+    /// `risk` is 0, and for a single model (its spread is empty).
+    pub fn risk_of(&self, spread: &Spread, free: &[usize]) -> f64 {
+        if self.risk == 0.0 || free.is_empty() {
+            return 0.0;
+        }
+        let mean = |s: &Vec<f64>| {
+            free.iter()
+                .map(|&i| s.get(i).copied().unwrap_or(0.0))
+                .sum::<f64>()
+                / free.len() as f64
+        };
+        self.risk * spread.iter().skip(1).map(mean).sum::<f64>()
     }
 
     /// The cost of `states` (the start, then one per control step) under

@@ -13,7 +13,7 @@
 //! diverges or the model refuses the larger graph, the planner runs its
 //! candidates one by one as before: the costs never depend on the lanes.
 
-use crate::dynamics::{Dynamics, Timing};
+use crate::dynamics::{Dynamics, Spread, Timing};
 use crate::physics::Drive;
 use crate::system::{Edge, Endpoint, Graph, State};
 
@@ -52,23 +52,46 @@ impl Lanes {
     }
 
     /// Each copy's kept states under its own drive (`drives`: one per copy,
-    /// `width` of them), from one joined rollout; `None` for another count,
-    /// a diverged copy, or a graph the model refuses at this size.
+    /// `width` of them), from one joined rollout, with each copy's spread
+    /// when `spread` asks for it (an ensemble's, [`Dynamics::rollout_spread`];
+    /// else empty); `None` for another count, a diverged copy, or a graph
+    /// the model refuses at this size.
     pub fn rollouts(
         &self,
         model: &dyn Dynamics,
         timing: Timing,
         drives: &[Drive],
-    ) -> Option<Vec<Vec<State>>> {
+        spread: bool,
+    ) -> Option<Vec<(Vec<State>, Spread)>> {
         if drives.len() != self.width {
             return None;
         }
         let n = self.graph.n() / self.width;
-        let states = model
-            .rollout_driven(&self.graph, &self.start, timing, &joined(drives, n))
-            .ok()?;
+        let drive = joined(drives, n);
+        let (states, all) = if spread {
+            model
+                .rollout_spread(&self.graph, &self.start, timing, Some(&drive))
+                .ok()?
+        } else {
+            let states = model
+                .rollout_driven(&self.graph, &self.start, timing, &drive)
+                .ok()?;
+            (states, Vec::new())
+        };
         let ndof = n * self.graph.dim;
-        Some((0..self.width).map(|k| lane(&states, k, ndof)).collect())
+        let part = |k: usize| -> Spread {
+            all.iter()
+                .map(|s| {
+                    s.get(k * n..(k + 1) * n)
+                        .map_or_else(Vec::new, <[f64]>::to_vec)
+                })
+                .collect()
+        };
+        Some(
+            (0..self.width)
+                .map(|k| (lane(&states, k, ndof), part(k)))
+                .collect(),
+        )
     }
 }
 
@@ -198,8 +221,9 @@ mod tests {
             })
             .collect();
         let together = lanes
-            .rollouts(model, timing, &drives)
+            .rollouts(model, timing, &drives, false)
             .expect("the joined rollout runs");
+        let together: Vec<Vec<State>> = together.into_iter().map(|(s, _)| s).collect();
         for (d, states) in drives.iter().zip(&together) {
             let alone = model.rollout_driven(g, start, timing, d).expect("alone");
             assert_eq!(alone.len(), states.len());

@@ -26,6 +26,10 @@ pub struct Episode<'a> {
     pub start: State,
     /// The planner's model; `None` holds still (the do-nothing reference).
     pub planner: Option<&'a dyn Dynamics>,
+    /// The system as the planner believes it (a learned model's training
+    /// system when the world's differs, e.g. in its stiffness); `None`: the
+    /// world's. Same particles, kinematic ones and dimension.
+    pub planner_graph: Option<&'a Graph>,
     /// How the planner searches.
     pub sampler: Sampler,
     /// The planner's rollouts: control step, integration steps per control
@@ -71,6 +75,15 @@ fn picked(cost: &Cost, s: &State, dim: usize) -> Vec<f64> {
 /// Runs one episode.
 pub fn run(ep: &Episode) -> Result<EpisodeReport, PlanError> {
     let (g, d) = (ep.graph, ep.graph.dim);
+    if let Some(pg) = ep.planner_graph {
+        if pg.n() != g.n() || pg.dim != d || pg.kinematic != g.kinematic {
+            return Err(PlanError::Problem(
+                "the planner's system must have the world's particles, kinematic ones and \
+                 dimension"
+                    .into(),
+            ));
+        }
+    }
     let driven: Vec<usize> = (0..g.n()).filter(|&i| g.is_kinematic(i)).collect();
     let width = driven.len() * d;
     let t_control = ep.timing.dt;
@@ -88,7 +101,7 @@ pub fn run(ep: &Episode) -> Result<EpisodeReport, PlanError> {
             Some(model) => {
                 let problem = Problem {
                     model,
-                    graph: g,
+                    graph: ep.planner_graph.unwrap_or(g),
                     start: &state,
                     timing: ep.timing,
                     cost: ep.cost.clone(),

@@ -152,6 +152,13 @@ impl Problem<'_> {
             .collect()
     }
 
+    /// The free particles: the ones the risk term averages over.
+    pub fn free(&self) -> Vec<usize> {
+        (0..self.graph.n())
+            .filter(|&i| !self.graph.is_kinematic(i))
+            .collect()
+    }
+
     /// Numbers per control step.
     pub fn width(&self) -> usize {
         self.driven().len() * self.graph.dim
@@ -193,13 +200,23 @@ impl Problem<'_> {
                 self.cost.particles.len()
             ));
         }
-        let weights_ok = [self.cost.effort, self.cost.speed]
+        let weights_ok = [self.cost.effort, self.cost.speed, self.cost.risk]
             .iter()
             .all(|w| w.is_finite() && *w >= 0.0);
         if self.cost.targets.iter().any(|x| !x.is_finite()) || !weights_ok {
             return bad(
-                "targets must be finite and the effort and speed weights finite and ≥ 0".into(),
+                "targets must be finite and the effort, speed and risk weights finite and ≥ 0"
+                    .into(),
             );
+        }
+        if self.cost.risk > 0.0 && self.model.members() < 2 {
+            return bad(format!(
+                "a risk weight ({}) needs an ensemble, whose members' spread it weighs; {} is a \
+                 single model (spread 0): train one with `mcgnode train --ensemble K`, or use \
+                 risk 0",
+                self.cost.risk,
+                self.model.describe()
+            ));
         }
         self.start
             .validate(self.graph)
@@ -228,13 +245,30 @@ impl Problem<'_> {
             .rollout_spread(self.graph, self.start, timing, Some(&drive))
     }
 
-    /// The cost of `controls`: +∞ when its rollout diverges.
+    /// The cost of `controls`: +∞ when its rollout diverges. With a risk
+    /// weight, the rollout is the ensemble's mean and the risk term its
+    /// spread along it ([`Cost::risk_of`]); without one, exactly the cost
+    /// of the plain rollout.
     pub fn cost_of(&self, controls: &Controls) -> Result<f64, PlanError> {
-        match self.rollout(controls) {
-            Ok(states) => Ok(self.cost.of(&states, self.graph.dim, controls, self.timing)),
+        let rolled = if self.cost.risk == 0.0 {
+            self.rollout(controls).map(|s| (s, Vec::new()))
+        } else {
+            self.rollout_spread(controls)
+        };
+        match rolled {
+            Ok((states, spread)) => Ok(self.scored(&states, &spread, controls)),
             Err(DynamicsError::Diverged(_)) => Ok(f64::INFINITY),
             Err(e) => Err(e.into()),
         }
+    }
+
+    /// The cost of a rollout (`states`, with `spread`) under `controls`.
+    fn scored(&self, states: &[State], spread: &Spread, controls: &Controls) -> f64 {
+        let base = self.cost.of(states, self.graph.dim, controls, self.timing);
+        if self.cost.risk == 0.0 {
+            return base;
+        }
+        base + self.cost.risk_of(spread, &self.free())
     }
 
     /// The costs of `group` (candidates of equal steps) from one joined
@@ -250,9 +284,10 @@ impl Problem<'_> {
             .iter()
             .map(|c| c.drive(&driven, g.dim, self.start, self.timing))
             .collect();
-        let states = lanes.rollouts(self.model, self.timing.with_horizon(steps), &drives)?;
-        let cost = |(s, c): (&Vec<State>, &Controls)| self.cost.of(s, g.dim, c, self.timing);
-        Some(states.iter().zip(group).map(cost).collect())
+        let timing = self.timing.with_horizon(steps);
+        let runs = lanes.rollouts(self.model, timing, &drives, self.cost.risk > 0.0)?;
+        let cost = |((s, spread), c): (&(Vec<State>, Spread), &Controls)| self.scored(s, spread, c);
+        Some(runs.iter().zip(group).map(cost).collect())
     }
 
     /// The costs of many candidates, spread over the cores (each candidate's
@@ -494,3 +529,7 @@ impl<'a> Search<'a> {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "risk_tests.rs"]
+mod risk_tests;

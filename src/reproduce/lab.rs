@@ -111,8 +111,10 @@ impl Lab<'_> {
                 _ => {}
             }
         }
+        // An ensemble's members are trained one after another without
+        // checkpoints (a checkpoint holds one run).
         let cfg = TrainConfig {
-            checkpoint: Some(Checkpointing {
+            checkpoint: (spec.cfg.ensemble <= 1).then_some(Checkpointing {
                 path: checkpoint,
                 every: CHECKPOINT_EVERY,
             }),

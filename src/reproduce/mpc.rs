@@ -5,6 +5,12 @@
 //! free end to a target by moving the held end. Reported per planner over
 //! seeded targets: success rate, mean final distance and planning time per
 //! control step (`mpc.json`), and a picture of one episode (`mpc.png`).
+//!
+//! Two variants ([`MpcOptions`]): a world whose springs have a stiffness the
+//! models never saw (`--held-out-stiffness`; the learned planners still
+//! believe the training system, the true physics knows the world's), and an
+//! MCGNODE ensemble planning on its mean with and without a risk term on its
+//! spread (`--risk`).
 
 use super::lab::{Lab, TrainSpec, Trained};
 use crate::dynamics::{Dynamics, Timing};
@@ -37,9 +43,48 @@ const SPEED_WEIGHT: f64 = 0.1;
 /// Gradient steps after each of `mcgnode_refined`'s searches.
 const REFINE_STEPS: usize = 5;
 
-/// A planner: its name, its model (none: hold still) and the gradient
-/// steps after each of its searches.
-type Planner<'a> = (&'a str, Option<Arc<dyn Dynamics>>, usize);
+/// A planner: its name, its model (none: hold still), the gradient steps
+/// after each of its searches, its risk weight, and whether it plans on the
+/// world's system (the true physics) rather than the training one.
+struct Planner {
+    name: String,
+    model: Option<Arc<dyn Dynamics>>,
+    refine: usize,
+    risk: f64,
+    knows_world: bool,
+}
+
+/// The experiment's options (`demo --mpc`'s flags).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MpcOptions {
+    /// 4 targets, shorter episodes, fewer candidates and less training.
+    pub quick: bool,
+    /// Seed of the data, the trainings and the targets.
+    pub seed: u64,
+    /// The world's spring stiffness instead of the training data's (500):
+    /// the learned planners keep planning on the system they were trained on.
+    pub held_out_stiffness: Option<f64>,
+    /// Risk weights: when given, an MCGNODE ensemble of `ensemble` members
+    /// is trained and plans on its mean without (`mcgnode_ensemble`) and
+    /// with each weight (`mcgnode_risk`, `mcgnode_risk_<w>` for several);
+    /// `mcgnode` is then its first member alone.
+    pub risk: Vec<f64>,
+    /// Members of that ensemble.
+    pub ensemble: usize,
+}
+
+impl MpcOptions {
+    /// Today's experiment: no held-out stiffness, no ensemble.
+    pub fn plain(quick: bool, seed: u64) -> Self {
+        MpcOptions {
+            quick,
+            seed,
+            held_out_stiffness: None,
+            risk: vec![],
+            ensemble: 5,
+        }
+    }
+}
 
 /// One planner's results over every target.
 #[derive(Clone, Debug, Serialize)]
@@ -69,9 +114,9 @@ pub struct MpcReport {
     pub settings: String,
 }
 
-/// Runs the closed-loop experiment into `lab.dir` (`quick`: 4 targets,
-/// shorter episodes, fewer candidates and less training).
-pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
+/// Runs the closed-loop experiment into `lab.dir`.
+pub fn run(lab: &Lab, o: &MpcOptions) -> Result<MpcReport> {
+    let (quick, seed) = (o.quick, o.seed);
     let mut cfg = SystemConfig::new(SystemKind::HeldChain, LINKS);
     cfg.states = 31;
     let (n_train, epochs, n_targets, steps, candidates) = if quick {
@@ -79,14 +124,27 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
     } else {
         (100, 1000, 20, 60, 64)
     };
-    let trained = train_models(lab, &cfg, n_train, epochs, seed)?;
+    let bad_weight = o.risk.iter().any(|w| !(w.is_finite() && *w > 0.0));
+    if bad_weight || (!o.risk.is_empty() && o.ensemble < 2) {
+        crate::error::bail!("--risk needs finite weights > 0 and an --ensemble of at least 2");
+    }
+    let members = if o.risk.is_empty() { 1 } else { o.ensemble };
+    let trained = train_models(lab, &cfg, (n_train, epochs, members), seed)?;
     let explained = |k: usize| trained[k].report.explained;
-    let planners = planners(&trained)?;
-    let graph = cfg.graph();
-    let episodes = episodes(&cfg, &graph, n_targets, seed);
+    let planners = planners(&trained, o)?;
+    let mut world = cfg.clone();
+    if let Some(k) = o.held_out_stiffness {
+        if !(k.is_finite() && k > 0.0) {
+            crate::error::bail!("--held-out-stiffness must be positive, got {k}");
+        }
+        world.stiffness = k;
+    }
+    let (graph, world_graph) = (cfg.graph(), world.graph());
+    let episodes = episodes(&world, &world_graph, n_targets, seed);
     let setup = Setup {
-        cfg: &cfg,
-        graph: &graph,
+        cfg: &world,
+        graph: &world_graph,
+        trained_graph: &graph,
         timing: Timing::of_step(0.005, 20, 10),
         sampler: Sampler::Cem {
             candidates,
@@ -100,17 +158,18 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
     let mut report = MpcReport {
         planners: Default::default(),
         targets: episodes.iter().map(|e| e.1.clone()).collect(),
-        settings: setup.settings(candidates),
+        settings: setup.settings(candidates) + &variant(o, cfg.stiffness),
     };
     // The picture shows the episode whose target is farthest from the start.
     let shown = farthest(&episodes);
     let mut first: Vec<(String, EpisodeReport)> = vec![];
-    for (name, model, refine) in &planners {
-        let results = setup.episodes(&episodes, name, model.as_deref(), *refine)?;
+    for pl in &planners {
+        let name = pl.name.as_str();
+        let results = setup.episodes(&episodes, pl)?;
         if let Some(r) = results.get(shown) {
-            first.push(((*name).to_string(), r.clone()));
+            first.push((name.to_string(), r.clone()));
         }
-        let explained = match *name {
+        let explained = match name {
             "mcgnode" => explained(0),
             "gnode" => explained(1),
             _ => None,
@@ -122,7 +181,7 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
             res.final_distance,
             1e3 * res.seconds_per_step
         ));
-        report.planners.insert((*name).to_string(), res);
+        report.planners.insert(name.to_string(), res);
     }
     let json = lab.dir.join("mpc.json");
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)
@@ -131,17 +190,36 @@ pub fn run(lab: &Lab, quick: bool, seed: u64) -> Result<MpcReport> {
     Ok(report)
 }
 
+/// The variant's settings, in words ("" for today's experiment).
+fn variant(o: &MpcOptions, trained_stiffness: f64) -> String {
+    let mut out = String::new();
+    if o.held_out_stiffness.is_some() {
+        out += &format!(
+            "; held-out stiffness: the models were trained at k = {trained_stiffness} and plan \
+             as if the world had it (the true physics plans on the world's)"
+        );
+    }
+    if !o.risk.is_empty() {
+        out += &format!(
+            "; MCGNODE ensemble of {} members (mcgnode: the first alone), planning on its mean \
+             (mcgnode_ensemble) and with risk weight {:?} x the sum over the horizon of the free \
+             particles' mean spread (mcgnode_risk)",
+            o.ensemble, o.risk
+        );
+    }
+    out
+}
+
 /// One episode: the chain's start and the free end's target (x, y).
 type Target = (State, Vec<f64>);
 
 /// Simulates `n_train` trajectories of the held chain with random gripper
-/// motions and trains MCGNODE and GNODE on them, side by side, for `epochs`
-/// epochs each.
+/// motions and trains MCGNODE (an ensemble of `members` when above 1) and
+/// GNODE on them, side by side, for `epochs` epochs each.
 fn train_models(
     lab: &Lab,
     cfg: &SystemConfig,
-    n_train: usize,
-    epochs: usize,
+    (n_train, epochs, members): (usize, usize, usize),
     seed: u64,
 ) -> Result<Vec<Trained>> {
     let train = lab.bag("held-chain-train", cfg, n_train, seed, false)?;
@@ -160,6 +238,7 @@ fn train_models(
                 seed,
                 threads: (crate::engine::all_cores() / 2).max(1),
                 auto: Auto::GIVEN_EPOCHS,
+                ensemble: if v == Variant::Mcgnode { members } else { 1 },
                 ..TrainConfig::default()
             },
             // The default recipe's options (`mcgnode train`'s).
@@ -182,20 +261,60 @@ fn train_models(
 }
 
 /// The planners compared: the trained MCGNODE (with and without gradient
-/// steps) and GNODE, the true physics, and holding still.
-fn planners(trained: &[Trained]) -> Result<Vec<Planner<'static>>> {
+/// steps; with a held-out stiffness without them) and GNODE, the true
+/// physics, and holding still; with a risk weight, the MCGNODE ensemble's
+/// mean without and with the risk term, and `mcgnode` its first member.
+fn planners(trained: &[Trained], o: &MpcOptions) -> Result<Vec<Planner>> {
     let load = |p: &std::path::Path| -> Result<Arc<dyn Dynamics>> {
         Ok(load_any_model(&ModelRef::File(p.to_path_buf()))?.dynamics)
     };
-    let truth = crate::models::truth::truth(SystemKind::HeldChain);
-    let mcgnode = load(&trained[0].path)?;
-    Ok(vec![
-        ("mcgnode", Some(mcgnode.clone()), 0),
-        ("mcgnode_refined", Some(mcgnode), REFINE_STEPS),
-        ("gnode", Some(load(&trained[1].path)?), 0),
-        ("truth", Some(truth), 0),
-        ("none", None, 0),
-    ])
+    let plain = |name: &str, model: Option<Arc<dyn Dynamics>>| Planner {
+        name: name.to_string(),
+        model,
+        refine: 0,
+        risk: 0.0,
+        knows_world: false,
+    };
+    let file = load(&trained[0].path)?;
+    let mcgnode = if o.risk.is_empty() {
+        file.clone()
+    } else {
+        let f = crate::gnode::file::ModelFile::load(&trained[0].path)?;
+        let first = f.member_files().into_iter().next();
+        let first = first.ok_or_else(|| crate::error::err!("the ensemble has no member"))?;
+        Arc::new(crate::kernel::TrainedModel::from_file(first)?) as Arc<dyn Dynamics>
+    };
+    let mut out = vec![plain("mcgnode", Some(mcgnode.clone()))];
+    if o.held_out_stiffness.is_none() {
+        out.push(Planner {
+            refine: REFINE_STEPS,
+            ..plain("mcgnode_refined", Some(mcgnode))
+        });
+    }
+    if !o.risk.is_empty() {
+        out.push(plain("mcgnode_ensemble", Some(file.clone())));
+    }
+    for &w in &o.risk {
+        let name = match o.risk.len() {
+            1 => "mcgnode_risk".to_string(),
+            _ => format!("mcgnode_risk_{w}"),
+        };
+        out.push(Planner {
+            risk: w,
+            name,
+            ..plain("", Some(file.clone()))
+        });
+    }
+    out.push(plain("gnode", Some(load(&trained[1].path)?)));
+    out.push(Planner {
+        knows_world: true,
+        ..plain(
+            "truth",
+            Some(crate::models::truth::truth(SystemKind::HeldChain)),
+        )
+    });
+    out.push(plain("none", None));
+    Ok(out)
 }
 
 /// `n_targets` seeded episodes: a start of the chain and a target near its
@@ -228,8 +347,12 @@ fn farthest(episodes: &[Target]) -> usize {
 /// What every episode shares: the world, the planner's search and the
 /// episode length.
 struct Setup<'a> {
+    /// The world's system and its graph.
     cfg: &'a SystemConfig,
     graph: &'a Graph,
+    /// The system the models were trained on (the world's unless its
+    /// stiffness is held out).
+    trained_graph: &'a Graph,
     timing: Timing,
     sampler: Sampler,
     /// Control steps per episode.
@@ -255,15 +378,9 @@ impl Setup<'_> {
         )
     }
 
-    /// Runs every episode with the planner `name` (`model`; none: hold
-    /// still), `refine` gradient steps after each search.
-    fn episodes(
-        &self,
-        episodes: &[Target],
-        name: &str,
-        model: Option<&dyn Dynamics>,
-        refine: usize,
-    ) -> Result<Vec<EpisodeReport>> {
+    /// Runs every episode with the planner `pl`.
+    fn episodes(&self, episodes: &[Target], pl: &Planner) -> Result<Vec<EpisodeReport>> {
+        let (name, refine) = (pl.name.as_str(), pl.refine);
         let end = LINKS - 1;
         let mut results = vec![];
         for (i, (start, target)) in episodes.iter().enumerate() {
@@ -272,7 +389,8 @@ impl Setup<'_> {
                 field: &self.cfg.field,
                 world_dt: self.cfg.dt,
                 start: start.clone(),
-                planner: model,
+                planner: pl.model.as_deref(),
+                planner_graph: (!pl.knows_world).then_some(self.trained_graph),
                 sampler: self.sampler,
                 timing: self.timing,
                 steps: self.steps,
@@ -282,6 +400,7 @@ impl Setup<'_> {
                     targets: target.clone(),
                     effort: 1e-3,
                     speed: SPEED_WEIGHT,
+                    risk: pl.risk,
                 },
                 max_speed: MAX_SPEED,
                 seed: self.seed + 100 * i as u64,

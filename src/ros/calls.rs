@@ -51,6 +51,7 @@ pub(crate) fn plan_call_with(
         timing: p.timing(),
         max_steps: p.max_rollout_steps,
         max_particles: p.max_particles,
+        risk: p.plan_risk,
     };
     super::plan::plan_response_with(h.model.get().as_ref(), req, &settings, on_round)
 }

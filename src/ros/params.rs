@@ -423,6 +423,13 @@ node_params! {
     spread_retrain: bool = false, Kind::Bool, runtime,
         "on a spread alarm (spread_warn), retrain as on a drift alarm (accuracy_retrain_after, \
          accuracy_retrain_epochs; needs record_dir), before any error is observed";
+    /// Weight of the Plan service's and action's risk term: this × the sum
+    /// over control steps of the free particles' mean ensemble spread along
+    /// each candidate's rollout; a single model refuses a weight above 0.
+    plan_risk: f64 = 0.0, Kind::Double(false), runtime,
+        "Plan service and action: weight of the risk term, this x the sum over control steps \
+         of the free particles' mean spread along each candidate's rollout (needs an ensemble, \
+         train --ensemble K; 0 = none)";
     /// Retrain when the drift alarm is raised: warm-start the served model on
     /// what is recorded after the alarm, swapped in only if it beats the old
     /// one on the most recent (held-out) recording.

@@ -26,6 +26,8 @@ pub struct PlanSettings {
     pub max_steps: u32,
     /// `max_particles`.
     pub max_particles: u32,
+    /// `plan_risk`: the weight of the risk term ([`Cost::risk_of`]; 0: none).
+    pub risk: f64,
 }
 
 /// The flat rows of a drive as Points and Vector3s, step-major.
@@ -132,7 +134,7 @@ fn answer(
         graph: &graph,
         start: &start,
         timing: s.timing.with_horizon(horizon),
-        cost: cost(req, kind, d),
+        cost: cost(req, kind, d, s.risk),
         max_speed: if req.max_speed == 0.0 {
             2.0
         } else {
@@ -195,8 +197,10 @@ fn checked(
     Ok((graph, start, horizon, kind))
 }
 
-/// The cost a request asks for, its targets in `d` dimensions.
-fn cost(req: &PlanRequest, kind: CostKind, d: usize) -> Cost {
+/// The cost a request asks for, its targets in `d` dimensions, with the
+/// node's risk weight (`plan_risk`: the message has no field for it, so
+/// that clients built before it keep working).
+fn cost(req: &PlanRequest, kind: CostKind, d: usize, risk: f64) -> Cost {
     Cost {
         kind,
         particles: req.particles.iter().map(|&p| p as usize).collect(),
@@ -207,6 +211,7 @@ fn cost(req: &PlanRequest, kind: CostKind, d: usize) -> Cost {
             .collect(),
         effort: req.effort,
         speed: req.speed,
+        risk,
     }
 }
 
@@ -357,6 +362,7 @@ mod tests {
             timing: Timing::new(0.1, 10, 5),
             max_steps: 50,
             max_particles: 100,
+            risk: 0.0,
         };
         let good = PlanRequest {
             initial,
