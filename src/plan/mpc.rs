@@ -72,18 +72,26 @@ fn picked(cost: &Cost, s: &State, dim: usize) -> Vec<f64> {
         .collect()
 }
 
-/// Runs one episode.
-pub fn run(ep: &Episode) -> Result<EpisodeReport, PlanError> {
-    let (g, d) = (ep.graph, ep.graph.dim);
-    if let Some(pg) = ep.planner_graph {
-        if pg.n() != g.n() || pg.dim != d || pg.kinematic != g.kinematic {
-            return Err(PlanError::Problem(
+/// The planner's system, when it is not the world's, must have the world's
+/// particles, kinematic ones and dimension.
+fn check_planner_graph(ep: &Episode) -> Result<(), PlanError> {
+    let g = ep.graph;
+    match ep.planner_graph {
+        Some(pg) if pg.n() != g.n() || pg.dim != g.dim || pg.kinematic != g.kinematic => {
+            Err(PlanError::Problem(
                 "the planner's system must have the world's particles, kinematic ones and \
                  dimension"
                     .into(),
-            ));
+            ))
         }
+        _ => Ok(()),
     }
+}
+
+/// Runs one episode.
+pub fn run(ep: &Episode) -> Result<EpisodeReport, PlanError> {
+    let (g, d) = (ep.graph, ep.graph.dim);
+    check_planner_graph(ep)?;
     let driven: Vec<usize> = (0..g.n()).filter(|&i| g.is_kinematic(i)).collect();
     let width = driven.len() * d;
     let t_control = ep.timing.dt;
