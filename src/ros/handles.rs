@@ -8,8 +8,9 @@
 //! This module imports no other task module (node, training, action,
 //! service): they all import it, so the module graph has no cycle.
 
+use std::collections::BTreeSet;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError, RwLock};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -101,6 +102,9 @@ impl ModelHandle {
     }
 }
 
+/// The most streams whose spread alarms are remembered at once.
+const MAX_ALARMED_STREAMS: usize = 4096;
+
 /// Counters reported in `NodeDiagnostics`.
 #[derive(Debug, Default)]
 pub struct Stats {
@@ -130,17 +134,20 @@ pub struct Stats {
     /// An ensemble's latest prediction: its largest particle spread along
     /// the horizon; `None` for a single model or before a prediction.
     pub spread_max: Mutex<Option<f64>>,
-    /// Whether the spread alarm (`spread_warn`) is raised: its changes are
-    /// logged, and may start a retraining (`spread_retrain`).
-    pub spread_alarmed: AtomicBool,
+    /// The streams (trajectory ids) whose spread alarm (`spread_warn`) is
+    /// raised: each stream's changes are logged, and may start a retraining
+    /// (`spread_retrain`). One per stream, so one stream's agreement never
+    /// clears another's alarm.
+    pub spread_alarmed: Mutex<BTreeSet<u32>>,
 }
 
 impl Stats {
-    /// Notes the spread of the latest prediction (flat, empty for a single
-    /// model) against the alarm threshold `warn` (0 = off), and returns
-    /// the alarm's change, if it changed: raised (`true`) or cleared, with
-    /// why. A NaN spread raises it, as on `/diagnostics`.
-    pub fn note_spread(&self, spread: &[f64], warn: f64) -> Option<(bool, String)> {
+    /// Notes the spread of stream `stream`'s latest prediction (flat, empty
+    /// for a single model) against the alarm threshold `warn` (0 = off),
+    /// and returns that stream's alarm change, if it changed: raised
+    /// (`true`) or cleared, with why. A NaN spread raises it, as on
+    /// `/diagnostics`.
+    pub fn note_spread(&self, stream: u32, spread: &[f64], warn: f64) -> Option<(bool, String)> {
         let max = spread.iter().copied().reduce(f64::max);
         *self
             .spread_max
@@ -148,12 +155,25 @@ impl Stats {
             .unwrap_or_else(PoisonError::into_inner) = max;
         let max = max?;
         let raised = warn > 0.0 && (max.is_nan() || max > warn);
-        let was = self.spread_alarmed.swap(raised, Ordering::Relaxed);
-        (raised != was).then(|| {
+        let mut alarmed = self
+            .spread_alarmed
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        let changed = if raised {
+            // Bounded: ids are the publishers' choice; the oldest alarm of
+            // a stream long gone is forgotten rather than memory grown.
+            if alarmed.len() >= MAX_ALARMED_STREAMS && !alarmed.contains(&stream) {
+                alarmed.pop_first();
+            }
+            alarmed.insert(stream)
+        } else {
+            alarmed.remove(&stream)
+        };
+        changed.then(|| {
             let why = if raised {
-                format!("spread alarm: the ensemble disagrees, largest spread {max:.3e} above spread_warn = {warn}")
+                format!("spread alarm on stream {stream}: the ensemble disagrees, largest spread {max:.3e} above spread_warn = {warn}")
             } else {
-                format!("spread alarm cleared: largest spread {max:.3e}, spread_warn = {warn}")
+                format!("spread alarm cleared on stream {stream}: largest spread {max:.3e}, spread_warn = {warn}")
             };
             (raised, why)
         })
@@ -463,5 +483,24 @@ mod tests {
         assert_eq!(r.allow(t0 + Duration::from_secs(4)), None);
         assert_eq!(r.allow(t0 + Duration::from_secs(6)), Some(2));
         assert_eq!(r.allow(t0 + Duration::from_secs(7)), None);
+    }
+
+    /// Each stream raises and clears its own alarm; the threshold 0 is off.
+    #[test]
+    fn spread_alarms_are_per_stream() {
+        let stats = Stats::default();
+        let (high, low) = ([0.0, 0.5, 0.1], [0.01, 0.02]);
+        let raised = stats.note_spread(1, &high, 0.2).expect("raised on 1");
+        assert!(raised.0 && raised.1.contains("stream 1"), "{raised:?}");
+        assert_eq!(stats.note_spread(1, &high, 0.2), None, "no change");
+        // Another stream's agreement leaves stream 1's alarm raised.
+        assert_eq!(stats.note_spread(2, &low, 0.2), None);
+        assert!(stats.note_spread(2, &high, 0.2).is_some_and(|c| c.0));
+        let cleared = stats.note_spread(1, &low, 0.2).expect("cleared on 1");
+        assert!(!cleared.0 && cleared.1.contains("cleared on stream 1"));
+        assert_eq!(stats.spread_max(), Some(0.02));
+        assert_eq!(stats.note_spread(3, &[f64::NAN], 0.0), None, "0 is off");
+        assert!(stats.note_spread(3, &[f64::NAN], 0.2).is_some_and(|c| c.0));
+        assert_eq!(stats.note_spread(3, &[], 0.2), None, "single model");
     }
 }

@@ -84,7 +84,10 @@ fn handle_state(
         );
     }
     let p = predict::messages(&input.message, &input.graph, params.dt, &kept)?;
-    let spread_alarm = h.diag.stats.note_spread(&kept.spread, params.spread_warn);
+    let spread_alarm = h
+        .diag
+        .stats
+        .note_spread(id, &kept.spread, params.spread_warn);
     h.recorder
         .record(|r| r.prediction(h.clock.now_log_ns(), &p.trajectory, &p.forces));
     let scored = h.accuracy.update(&params, &input, &kept.states);
