@@ -293,6 +293,16 @@ impl ModelFile {
         }
         out
     }
+
+    /// How much of its validation targets the weakest member explains
+    /// (the model's own figure for a single model); unknown if any
+    /// member's is. An ensemble is judged by every member, not its first.
+    pub fn explained_by_all(&self) -> Option<f64> {
+        std::iter::once(&self.training)
+            .chain(self.members.iter().map(|m| &m.training))
+            .map(|t| t.explained)
+            .try_fold(f64::INFINITY, |least, e| e.map(|e| least.min(e)))
+    }
 }
 
 /// Adam's moments (named like the weights) and step count.
@@ -366,4 +376,31 @@ pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<(), Mod
     tmp.persist(path)
         .map_err(|e| at("renaming into place")(e.error))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::gnode::Variant;
+    use crate::physics::{SystemConfig, SystemKind};
+
+    /// The weakest member's figure, the single model's own, unknown if any
+    /// member's is.
+    #[test]
+    fn an_ensemble_explains_what_its_weakest_member_does() {
+        let g = SystemConfig::new(SystemKind::HeldChain, 3).graph();
+        let model = |seed| crate::testing::random_model(Variant::Mcgnode, &g, seed);
+        let mut file = model(1).expect("model").1.file;
+        assert_eq!(file.explained_by_all(), None);
+        file.training.explained = Some(0.99);
+        assert_eq!(file.explained_by_all(), Some(0.99));
+        let mut other = model(2).expect("model").1.file;
+        other.training.explained = Some(0.9);
+        file.members.push(super::Member {
+            training: other.training.clone(),
+            weights: other.weights.clone(),
+        });
+        assert_eq!(file.explained_by_all(), Some(0.9));
+        file.members[0].training.explained = None;
+        assert_eq!(file.explained_by_all(), None);
+    }
 }

@@ -56,16 +56,21 @@ fn retrain(trainer: &Arc<Trainer>, p: &NodeParams, why: &str) -> Result<String, 
         });
     };
     let variant = init.hyper.variant;
-    let explained_old = init.training.explained;
+    let explained_old = init.explained_by_all();
     let file = warm_start(init, p, train)?;
     let held = held_out.display().to_string();
     let (re_old, re_new) = held_out_re(trainer, p, &held, &file)?;
-    let explained_new = file.training.explained;
+    let explained_new = file.explained_by_all();
     let percent =
         |f: Option<f64>| f.map_or("unknown".to_string(), |f| format!("{:.2} %", 100.0 * f));
+    let weakest = if file.members.is_empty() {
+        ""
+    } else {
+        " (its weakest member)"
+    };
     let figures = format!(
         "held-out RE (mean over lead times, {held}) {re_new:.3e} for the retrained model \
-         against {re_old:.3e} for the served one; explains {} of its validation targets \
+         against {re_old:.3e} for the served one; explains{weakest} {} of its validation targets \
          against {} for the served one; trained on {} bag(s) for {} epochs",
         percent(explained_new),
         percent(explained_old),
