@@ -1,6 +1,7 @@
 //! The risk term: nothing changes at weight 0, it reorders candidates when
 //! the ensemble's spread differs between them, the lanes give the same risk
-//! as candidates run one by one, and a single model refuses a weight.
+//! as candidates run one by one, it equals the members' spread computed
+//! apart, and a single model refuses a weight.
 
 use super::*;
 use crate::dynamics::Forces;
@@ -190,4 +191,61 @@ fn a_single_model_refuses_a_risk_weight() {
         .check()
         .unwrap_err();
     assert!(e.to_string().contains("risk weights finite and ≥ 0"), "{e}");
+}
+
+/// The risk term against a computation that shares nothing with the
+/// ensemble's: each member rolled out alone under the same controls, and
+/// for two members the spread in closed form, |x₁ − x₂| / (2√d) per
+/// particle (the members' standard deviation, RMS over the axes). The cost
+/// at weight w exceeds the cost at 0 by w × Σₖ the free particles' mean of
+/// it, and the mean rollout is the members' average.
+#[test]
+fn the_risk_term_equals_the_members_spread_computed_apart() {
+    let (_, g, start) = chain();
+    let member = |seed| crate::testing::random_model(crate::gnode::Variant::Mcgnode, &g, seed);
+    let (a, b) = (member(4).unwrap().1, member(5).unwrap().1);
+    let ensemble = Ensemble {
+        members: vec![a.clone(), b.clone()],
+    };
+    let w = 2.5;
+    let (plain, risky) = (
+        problem(&ensemble, &g, &start, 0.0),
+        problem(&ensemble, &g, &start, w),
+    );
+    let free = plain.free();
+    assert!(!free.is_empty() && free.len() < g.n(), "{free:?}");
+    let d = g.dim as f64;
+    for vx in [-0.3, 0.0, 0.2, 0.5] {
+        let c = moving(&plain, vx);
+        let ra = problem(&a, &g, &start, 0.0).rollout(&c).unwrap();
+        let rb = problem(&b, &g, &start, 0.0).rollout(&c).unwrap();
+        let mean = plain.rollout(&c).unwrap();
+        let risk: f64 = (1..ra.len())
+            .map(|k| {
+                let spread = |i: usize| {
+                    let sq: f64 = (0..g.dim)
+                        .map(|c| (ra[k].q[i * g.dim + c] - rb[k].q[i * g.dim + c]).powi(2))
+                        .sum();
+                    sq.sqrt() / (2.0 * d.sqrt())
+                };
+                free.iter().map(|&i| spread(i)).sum::<f64>() / free.len() as f64
+            })
+            .sum();
+        for (k, m) in mean.iter().enumerate() {
+            for (j, q) in m.q.iter().enumerate() {
+                let avg = 0.5 * (ra[k].q[j] + rb[k].q[j]);
+                assert!(
+                    (q - avg).abs() <= 1e-12 * (1.0 + avg.abs()),
+                    "step {k}: {q} vs {avg}"
+                );
+            }
+        }
+        assert!(risk > 0.0, "random members agree exactly at vx {vx}");
+        let extra = risky.cost_of(&c).unwrap() - plain.cost_of(&c).unwrap();
+        assert!(
+            (extra - w * risk).abs() <= 1e-9 * w * risk,
+            "vx {vx}: cost grew by {extra}, independent w × risk {}",
+            w * risk
+        );
+    }
 }
