@@ -185,3 +185,164 @@ PY
         "{refined}"
     );
 }
+
+/// An ensemble's plan (`train --ensemble 3` on held-chain data) carries its
+/// members' spread along the best rollout: `steps × n` numbers, finite,
+/// growing from the start, and equal bit for bit to the spread the Rollout
+/// service reports for the plan's kinematic motion (the same mean rollout
+/// computed by another request path).
+#[test]
+fn an_ensembles_plan_carries_the_spread_the_rollout_reports() {
+    let env_sh = ros_env();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let bag = d.join("held.mcap");
+    let model = d.join("ensemble.json");
+    let run = |args: &[&str]| {
+        let o = Command::new(BIN)
+            .args(args)
+            .current_dir(common::ROOT)
+            .output()
+            .expect("running mcgnode");
+        assert!(o.status.success(), "{args:?}: {o:?}");
+    };
+    let (bag_s, model_s) = (bag.to_str().unwrap(), model.to_str().unwrap());
+    run(&[
+        "simulate",
+        "--system",
+        "held-chain",
+        "--particles",
+        "5",
+        "--trajectories",
+        "4",
+        "--states",
+        "31",
+        "--out",
+        bag_s,
+    ]);
+    run(&[
+        "train",
+        "--data",
+        bag_s,
+        "--model",
+        "mcgnode",
+        "--epochs",
+        "3",
+        "--ensemble",
+        "3",
+        "--quiet",
+        "--out",
+        model_s,
+    ]);
+    let cfg = SystemConfig::new(SystemKind::HeldChain, 5);
+    let g = cfg.graph();
+    let state = cfg.start_for(&g, 11, 0);
+    let sample = Sample {
+        t: 0.0,
+        state: state.clone(),
+        acc: None,
+    };
+    let req = PlanRequest {
+        initial: mcgnode::ParticleState::from_sample(0, 0, "held-chain", &g, &sample),
+        particles: vec![4],
+        targets: vec![Point {
+            x: state.q[8] + 0.2,
+            y: state.q[9],
+            z: 0.0,
+        }],
+        cost: "final".into(),
+        effort: 1e-3,
+        horizon: 10,
+        sampler: "cem".into(),
+        candidates: 32,
+        iterations: 2,
+        elites: 4,
+        max_speed: 1.0,
+        seed: 5,
+        ..PlanRequest::default()
+    };
+    fs::write(d.join("plan.json"), serde_json::to_string(&req).unwrap()).unwrap();
+    fs::write(
+        d.join("params.yaml"),
+        format!(
+            "mcgnode:\n  ros__parameters:\n    model: {:?}\n    dt: 0.1\n    substeps: 20\n    horizon: 10\n",
+            model.display()
+        ),
+    )
+    .unwrap();
+    let script = r#"
+        set -u
+        . "$ENV"
+        "$BIN" serve --params "$DIR/params.yaml" 2>"$DIR/node.log" &
+        node=$!
+        for _ in $(seq 200); do grep -q serving "$DIR/node.log" && break; sleep 0.05; done
+        grep -q serving "$DIR/node.log" || { echo "node did not start"; kill -KILL $node; exit 2; }
+        python3 scripts/ros/call.py /mcgnode/plan mcgnode_msgs/srv/Plan --file "$DIR/plan.json" \
+            --json --timeout 60 >"$DIR/plan.out" || rc=3
+        python3 - "$DIR" <<'PY' || rc=4
+import json, sys
+d = sys.argv[1]
+plan = json.load(open(f"{d}/plan.out"))
+req = json.load(open(f"{d}/plan.json"))
+json.dump({
+    "initial": req["initial"],
+    "steps": req["horizon"],
+    "dt": 0.0,
+    "kinematic_positions": plan["kinematic_positions"],
+    "kinematic_velocities": plan["kinematic_velocities"],
+}, open(f"{d}/rollout.json", "w"))
+PY
+        python3 scripts/ros/call.py /mcgnode/rollout mcgnode_msgs/srv/Rollout --file "$DIR/rollout.json" \
+            --json --timeout 60 >"$DIR/rollout.out" || rc=5
+        kill -INT $node
+        for _ in $(seq 100); do kill -0 $node 2>/dev/null || break; sleep 0.1; done
+        if kill -0 $node 2>/dev/null; then echo "node ignored SIGINT"; kill -KILL $node; exit 6; fi
+        wait $node
+        exit ${rc:-0}
+    "#;
+    let mut cmd = Command::new("bash");
+    cmd.arg("scripts/netns.sh")
+        .args(["bash", "-c", script])
+        .env("BIN", BIN)
+        .env("ENV", &env_sh)
+        .env("DIR", d)
+        .env_remove("ROS_DOMAIN_ID");
+    let o = run_bounded(&mut cmd, Duration::from_secs(150), d);
+    let read = |name: &str| fs::read_to_string(d.join(name)).unwrap_or_default();
+    let report = format!(
+        "status {}\n--- stdout\n{}\n--- stderr\n{}\n--- node log\n{}\n--- plan\n{}",
+        o.status,
+        o.stdout,
+        o.stderr,
+        read("node.log"),
+        read("plan.out").chars().take(2000).collect::<String>()
+    );
+    assert!(o.status.success(), "{report}");
+    let plan: serde_json::Value = serde_json::from_str(read("plan.out").trim()).expect("plan");
+    let roll: serde_json::Value =
+        serde_json::from_str(read("rollout.out").trim()).expect("rollout");
+    assert_eq!(plan["success"], true, "{plan}");
+    assert_eq!(roll["success"], true, "{roll}");
+    let spread: Vec<f64> = plan["trajectory"]["spread"]
+        .as_array()
+        .expect("a spread")
+        .iter()
+        .map(|x| x.as_f64().expect("a number"))
+        .collect();
+    let n = g.n();
+    assert_eq!(spread.len(), 10 * n, "steps × particles: {spread:?}");
+    assert!(
+        spread.iter().all(|s| s.is_finite() && *s >= 0.0),
+        "{spread:?}"
+    );
+    let sum = |k: usize| spread[k * n..(k + 1) * n].iter().sum::<f64>();
+    assert!(sum(9) > sum(0) && sum(9) > 0.0, "no growth: {spread:?}");
+    assert_eq!(
+        plan["trajectory"]["spread"], roll["trajectory"]["spread"],
+        "the plan's spread against the rollout's\n{report}"
+    );
+    assert_eq!(
+        plan["trajectory"]["positions"],
+        roll["trajectory"]["positions"]
+    );
+}
