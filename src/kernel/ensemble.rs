@@ -45,9 +45,11 @@ impl Ensemble {
         work: usize,
         f: impl Fn(&TrainedModel) -> Result<T, DynamicsError> + Sync,
     ) -> Result<Vec<T>, DynamicsError> {
-        let cores = std::thread::available_parallelism().map_or(1, usize::from);
-        let lanes = cores.min(self.members.len());
-        if lanes < 2 || work < PARALLEL_WORK {
+        if work < PARALLEL_WORK {
+            return self.each(f);
+        }
+        let lanes = crate::engine::all_cores().min(self.members.len());
+        if lanes < 2 {
             return self.each(f);
         }
         let per = self.members.len().div_ceil(lanes);
