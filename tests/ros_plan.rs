@@ -6,6 +6,8 @@
 //! predicted trajectory bit for bit, and the plan must beat holding still.
 //! The Plan action (`tests/ros/plan_drive.py`) must give the service's plan
 //! with a feedback per round, and stop a long goal on cancel.
+//! An ensemble's plan must carry the spread the Rollout service reports for
+//! its motion.
 //!
 //! Needs the rclpy venv (`scripts/setup_venv.sh`); the interface package is
 //! (re)built with `scripts/build_msgs.sh`.
@@ -27,13 +29,10 @@ mod common;
 
 use common::{ros_env, run_bounded, BIN};
 
-#[test]
-fn plan_then_rollout_replays_the_prediction_bit_for_bit() {
-    let env_sh = ros_env();
-    let dir = tempfile::tempdir().expect("tempdir");
-    let d = dir.path();
-    // A held chain of 5 links below its gripper; the target 0.4 to the side
-    // of its free end and 0.1 up, at the end of 3 s.
+/// A held chain of 5 links below its gripper (start seed 11), and a Plan
+/// request from it: the free end to (dx, dy) from where it starts, at the
+/// end of the horizon (CEM, 64 candidates × 3 rounds over 30 steps, seed 3).
+fn held_chain_request(dx: f64, dy: f64) -> (mcgnode::system::Graph, PlanRequest) {
     let cfg = SystemConfig::new(SystemKind::HeldChain, 5);
     let g = cfg.graph();
     let state = cfg.start_for(&g, 11, 0);
@@ -42,13 +41,12 @@ fn plan_then_rollout_replays_the_prediction_bit_for_bit() {
         state: state.clone(),
         acc: None,
     };
-    let initial = mcgnode::ParticleState::from_sample(0, 0, "held-chain", &g, &sample);
     let req = PlanRequest {
-        initial,
+        initial: mcgnode::ParticleState::from_sample(0, 0, "held-chain", &g, &sample),
         particles: vec![4],
         targets: vec![Point {
-            x: state.q[8] + 0.4,
-            y: state.q[9] + 0.1,
+            x: state.q[8] + dx,
+            y: state.q[9] + dy,
             z: 0.0,
         }],
         cost: "final".into(),
@@ -62,30 +60,16 @@ fn plan_then_rollout_replays_the_prediction_bit_for_bit() {
         seed: 3,
         ..PlanRequest::default()
     };
-    fs::write(d.join("plan.json"), serde_json::to_string(&req).unwrap()).unwrap();
-    // Refining needs a reverse pass, which the true physics has not.
-    let refine = PlanRequest {
-        refine: 5,
-        ..req.clone()
-    };
-    fs::write(
-        d.join("refine.json"),
-        serde_json::to_string(&refine).unwrap(),
-    )
-    .unwrap();
-    // dt 0.1 with 20 substeps: the plan's control step and integration step.
-    fs::write(
-        d.join("params.yaml"),
-        "mcgnode:\n  ros__parameters:\n    model: truth:held-chain\n    dt: 0.1\n    substeps: 20\n    horizon: 10\n",
-    )
-    .unwrap();
-    let script = r#"
-        set -u
-        . "$ENV"
-        "$BIN" serve --params "$DIR/params.yaml" 2>"$DIR/node.log" &
-        node=$!
-        for _ in $(seq 200); do grep -q serving "$DIR/node.log" && break; sleep 0.05; done
-        grep -q serving "$DIR/node.log" || { echo "node did not start"; kill -KILL $node; exit 2; }
+    (g, req)
+}
+
+/// Shell, beside the node (`common::beside_node`, its log in `$LOG`): waits
+/// until it serves, calls Plan with `$DIR/plan.json` (reply in `plan.out`),
+/// then Rollout with the plan's kinematic motion (`rollout.out`); `$rc` is
+/// set on a failure.
+const PLAN_THEN_ROLLOUT: &str = r#"
+        for _ in $(seq 200); do grep -q serving "$LOG" && break; sleep 0.05; done
+        grep -q serving "$LOG" || { echo "node did not start"; exit 2; }
         python3 scripts/ros/call.py /mcgnode/plan mcgnode_msgs/srv/Plan --file "$DIR/plan.json" \
             --json --timeout 60 >"$DIR/plan.out" || rc=3
         python3 - "$DIR" <<'PY' || rc=4
@@ -103,22 +87,15 @@ json.dump({
 PY
         python3 scripts/ros/call.py /mcgnode/rollout mcgnode_msgs/srv/Rollout --file "$DIR/rollout.json" \
             --json --timeout 60 >"$DIR/rollout.out" || rc=5
-        python3 tests/ros/plan_drive.py --goal "$DIR/plan.json" >"$DIR/action.out" 2>&1 || rc=7
-        python3 scripts/ros/call.py /mcgnode/plan mcgnode_msgs/srv/Plan --file "$DIR/refine.json" \
-            --json --timeout 60 >"$DIR/refine.out" || rc=8
-        kill -INT $node
-        for _ in $(seq 100); do kill -0 $node 2>/dev/null || break; sleep 0.1; done
-        if kill -0 $node 2>/dev/null; then echo "node ignored SIGINT"; kill -KILL $node; exit 6; fi
-        wait $node
-        exit ${rc:-0}
-    "#;
-    let mut cmd = Command::new("bash");
-    cmd.arg("scripts/netns.sh")
-        .args(["bash", "-c", script])
-        .env("BIN", BIN)
-        .env("ENV", &env_sh)
-        .env("DIR", d)
-        .env_remove("ROS_DOMAIN_ID");
+"#;
+
+/// Runs `driver` beside the node on `$DIR/params.yaml` in a private network
+/// namespace (bounded at 150 s), and returns it with a report of what it
+/// and the node printed and `plan.out`'s start.
+fn beside_node_in(d: &std::path::Path, driver: &str) -> (common::Outcome, String) {
+    let params = d.join("params.yaml");
+    let mut cmd = common::in_netns(&common::beside_node(driver), &params, &ros_env());
+    cmd.env("DIR", d).env("LOG", d.join("node.log"));
     let o = run_bounded(&mut cmd, Duration::from_secs(150), d);
     let read = |name: &str| fs::read_to_string(d.join(name)).unwrap_or_default();
     let report = format!(
@@ -128,7 +105,45 @@ PY
         o.stderr,
         read("node.log"),
         read("plan.out").chars().take(2000).collect::<String>()
-    ) + &format!("\n--- action\n{}", read("action.out"));
+    );
+    (o, report)
+}
+
+#[test]
+fn plan_then_rollout_replays_the_prediction_bit_for_bit() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    // The target 0.4 to the side of the chain's free end and 0.1 up, at the
+    // end of 3 s.
+    let (_, req) = held_chain_request(0.4, 0.1);
+    fs::write(d.join("plan.json"), serde_json::to_string(&req).unwrap()).unwrap();
+    // Refining needs a reverse pass, which the true physics has not.
+    let refine = PlanRequest {
+        refine: 5,
+        ..req.clone()
+    };
+    fs::write(
+        d.join("refine.json"),
+        serde_json::to_string(&refine).unwrap(),
+    )
+    .unwrap();
+    // dt 0.1 with 20 substeps: the plan's control step and integration step.
+    fs::write(
+        d.join("params.yaml"),
+        "mcgnode:\n  ros__parameters:\n    model: truth:held-chain\n    dt: 0.1\n    substeps: 20\n    horizon: 10\n",
+    )
+    .unwrap();
+    let driver = format!(
+        r#"{PLAN_THEN_ROLLOUT}
+        python3 tests/ros/plan_drive.py --goal "$DIR/plan.json" >"$DIR/action.out" 2>&1 || rc=7
+        python3 scripts/ros/call.py /mcgnode/plan mcgnode_msgs/srv/Plan --file "$DIR/refine.json" \
+            --json --timeout 60 >"$DIR/refine.out" || rc=8
+        [ "${{rc:-0}}" -eq 0 ]
+    "#
+    );
+    let (o, report) = beside_node_in(d, &driver);
+    let read = |name: &str| fs::read_to_string(d.join(name)).unwrap_or_default();
+    let report = report + &format!("\n--- action\n{}", read("action.out"));
     assert!(o.status.success(), "{report}");
     assert!(!read("node.log").contains("panicked"), "{report}");
     let plan: serde_json::Value = serde_json::from_str(read("plan.out").trim()).expect("plan");
@@ -193,7 +208,6 @@ PY
 /// computed by another request path).
 #[test]
 fn an_ensembles_plan_carries_the_spread_the_rollout_reports() {
-    let env_sh = ros_env();
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
     let bag = d.join("held.mcap");
@@ -234,32 +248,14 @@ fn an_ensembles_plan_carries_the_spread_the_rollout_reports() {
         "--out",
         model_s,
     ]);
-    let cfg = SystemConfig::new(SystemKind::HeldChain, 5);
-    let g = cfg.graph();
-    let state = cfg.start_for(&g, 11, 0);
-    let sample = Sample {
-        t: 0.0,
-        state: state.clone(),
-        acc: None,
-    };
+    let (g, base) = held_chain_request(0.2, 0.0);
     let req = PlanRequest {
-        initial: mcgnode::ParticleState::from_sample(0, 0, "held-chain", &g, &sample),
-        particles: vec![4],
-        targets: vec![Point {
-            x: state.q[8] + 0.2,
-            y: state.q[9],
-            z: 0.0,
-        }],
-        cost: "final".into(),
-        effort: 1e-3,
         horizon: 10,
-        sampler: "cem".into(),
         candidates: 32,
         iterations: 2,
         elites: 4,
-        max_speed: 1.0,
         seed: 5,
-        ..PlanRequest::default()
+        ..base
     };
     fs::write(d.join("plan.json"), serde_json::to_string(&req).unwrap()).unwrap();
     fs::write(
@@ -270,53 +266,9 @@ fn an_ensembles_plan_carries_the_spread_the_rollout_reports() {
         ),
     )
     .unwrap();
-    let script = r#"
-        set -u
-        . "$ENV"
-        "$BIN" serve --params "$DIR/params.yaml" 2>"$DIR/node.log" &
-        node=$!
-        for _ in $(seq 200); do grep -q serving "$DIR/node.log" && break; sleep 0.05; done
-        grep -q serving "$DIR/node.log" || { echo "node did not start"; kill -KILL $node; exit 2; }
-        python3 scripts/ros/call.py /mcgnode/plan mcgnode_msgs/srv/Plan --file "$DIR/plan.json" \
-            --json --timeout 60 >"$DIR/plan.out" || rc=3
-        python3 - "$DIR" <<'PY' || rc=4
-import json, sys
-d = sys.argv[1]
-plan = json.load(open(f"{d}/plan.out"))
-req = json.load(open(f"{d}/plan.json"))
-json.dump({
-    "initial": req["initial"],
-    "steps": req["horizon"],
-    "dt": 0.0,
-    "kinematic_positions": plan["kinematic_positions"],
-    "kinematic_velocities": plan["kinematic_velocities"],
-}, open(f"{d}/rollout.json", "w"))
-PY
-        python3 scripts/ros/call.py /mcgnode/rollout mcgnode_msgs/srv/Rollout --file "$DIR/rollout.json" \
-            --json --timeout 60 >"$DIR/rollout.out" || rc=5
-        kill -INT $node
-        for _ in $(seq 100); do kill -0 $node 2>/dev/null || break; sleep 0.1; done
-        if kill -0 $node 2>/dev/null; then echo "node ignored SIGINT"; kill -KILL $node; exit 6; fi
-        wait $node
-        exit ${rc:-0}
-    "#;
-    let mut cmd = Command::new("bash");
-    cmd.arg("scripts/netns.sh")
-        .args(["bash", "-c", script])
-        .env("BIN", BIN)
-        .env("ENV", &env_sh)
-        .env("DIR", d)
-        .env_remove("ROS_DOMAIN_ID");
-    let o = run_bounded(&mut cmd, Duration::from_secs(150), d);
+    let driver = format!("{PLAN_THEN_ROLLOUT}\n        [ \"${{rc:-0}}\" -eq 0 ]\n");
+    let (o, report) = beside_node_in(d, &driver);
     let read = |name: &str| fs::read_to_string(d.join(name)).unwrap_or_default();
-    let report = format!(
-        "status {}\n--- stdout\n{}\n--- stderr\n{}\n--- node log\n{}\n--- plan\n{}",
-        o.status,
-        o.stdout,
-        o.stderr,
-        read("node.log"),
-        read("plan.out").chars().take(2000).collect::<String>()
-    );
     assert!(o.status.success(), "{report}");
     let plan: serde_json::Value = serde_json::from_str(read("plan.out").trim()).expect("plan");
     let roll: serde_json::Value =
