@@ -45,10 +45,12 @@ impl Ensemble {
         work: usize,
         f: impl Fn(&TrainedModel) -> Result<T, DynamicsError> + Sync,
     ) -> Result<Vec<T>, DynamicsError> {
-        if work < PARALLEL_WORK {
-            return self.each(f);
-        }
-        let lanes = crate::engine::all_cores().min(self.members.len());
+        // Short jobs first: the core count is not even asked for them.
+        let lanes = if work < PARALLEL_WORK {
+            1
+        } else {
+            crate::engine::all_cores().min(self.members.len())
+        };
         if lanes < 2 {
             return self.each(f);
         }
