@@ -14,6 +14,7 @@
 mod bars;
 mod baseline;
 mod chunk;
+mod cores;
 mod crew;
 mod dense;
 mod fused;
@@ -29,6 +30,7 @@ mod samples;
 mod split;
 
 pub use baseline::BaselineExecutor;
+pub use cores::all_cores;
 pub use gns::{Gns, GnsSpec};
 pub use infer::Forward;
 pub use layout::{Layout, LayoutError};
@@ -210,14 +212,6 @@ fn crew(threads: usize) -> Result<Option<Crew>, EngineError> {
         threads,
         reason: e.to_string(),
     })
-}
-
-/// The number of cores, for `--threads` defaults and per-call choices.
-/// Asked once: on Linux the question reads the cgroup's CPU quota files,
-/// which costs more than a small model's whole rollout.
-pub fn all_cores() -> usize {
-    static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
-    *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, std::num::NonZero::get))
 }
 
 impl Engine {

@@ -20,7 +20,7 @@ const BLOCK: usize = 1024;
 
 /// Whether the machine has a second core for the helper.
 fn second_core() -> bool {
-    super::all_cores() > 1
+    super::cores::all_cores() > 1
 }
 
 /// A chunk's means of splitting: off unless enabled, the helper started on
