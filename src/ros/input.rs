@@ -142,12 +142,11 @@ impl Inputs {
                         )
                     })?;
                     let t0 = Instant::now();
-                    let step = p.timing().step();
                     let fitted = fit_newest(
                         &mut stream.fit,
                         model,
                         &graph,
-                        step,
+                        p.fit_options(),
                         &stream.history,
                         reset.is_some(),
                         poly,
@@ -282,6 +281,8 @@ mod tests {
         let p = NodeParams {
             velocity_smoother: "model".into(),
             smoother_window: 10,
+            // Bound by iterations, not by a loaded machine's clock.
+            smoother_budget: 10.0,
             dt: 0.01,
             substeps: 10,
             ..NodeParams::default()

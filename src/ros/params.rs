@@ -486,6 +486,10 @@ node_params! {
     /// Degree of a poly smoother's polynomial.
     smoother_order: u32 = 2, Kind::Int(1, 4), runtime,
         "poly smoother: degree of the polynomial";
+    /// Wall time one model-smoother fit may take (seconds).
+    smoother_budget: f64 = 0.004, Kind::Double(true), runtime,
+        "model smoother: seconds one fit may take (it starts no iteration that would pass it \
+         and keeps its best state; at most 8 iterations)";
     /// A gap longer than this (seconds) between two states of a stream
     /// starts its history over (0: never).
     input_max_gap: f64 = 0.5, Kind::Double(false), runtime,
@@ -527,6 +531,15 @@ impl NodeParams {
     /// integrated with `dt / substeps`.
     pub fn timing(&self) -> crate::dynamics::Timing {
         crate::dynamics::Timing::new(self.dt, self.substeps as usize, self.horizon as usize)
+    }
+
+    /// The model smoother's bounds on one fit: at most 8 iterations and
+    /// `smoother_budget`, integrated at the node's step.
+    pub fn fit_options(&self) -> crate::estimate::FitOptions {
+        crate::estimate::FitOptions {
+            budget: std::time::Duration::from_secs_f64(self.smoother_budget),
+            ..crate::estimate::FitOptions::with_dt(self.timing().step())
+        }
     }
 
     /// The parameters as a ROS 2 parameter file (what `serve --print-params` prints).

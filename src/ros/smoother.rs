@@ -18,7 +18,7 @@ use crate::system::{Graph, State};
 pub(super) struct StreamFit {
     generation: u64,
     graph: Graph,
-    step: f64,
+    opts: FitOptions,
     fit: ModelFit,
 }
 
@@ -26,14 +26,15 @@ impl std::fmt::Debug for StreamFit {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("StreamFit")
             .field("generation", &self.generation)
-            .field("step", &self.step)
+            .field("opts", &self.opts)
             .finish_non_exhaustive()
     }
 }
 
 /// The newest state of `history`'s window fitted through `model` (served as
-/// `generation`) with integration steps of `step` seconds; `slot` keeps the
-/// stream's fitter (made again when the model, graph or step changed, its
+/// `generation`) within `opts` (its step, iterations and time budget); `slot`
+/// keeps the stream's fitter (made again when the model, graph or `opts`
+/// changed, its
 /// warm start forgotten on `reset`). Where the rollout diverges from every
 /// start tried, `fallback` (the window's degree-2 fit) stands, as in
 /// `replay`. `Err`: the model or graph cannot be fitted through, with the
@@ -42,21 +43,21 @@ pub(super) fn fit_newest(
     slot: &mut Option<StreamFit>,
     (model, generation): (&dyn Dynamics, u64),
     graph: &Graph,
-    step: f64,
+    opts: FitOptions,
     history: &History,
     reset: bool,
     fallback: State,
 ) -> Result<State, DataError> {
     let stale = slot
         .as_ref()
-        .is_none_or(|s| s.generation != generation || s.graph != *graph || s.step != step);
+        .is_none_or(|s| s.generation != generation || s.graph != *graph || s.opts != opts);
     if stale {
-        let fit = ModelFit::new(model, graph, FitOptions::with_dt(step))
+        let fit = ModelFit::new(model, graph, opts)
             .map_err(|e| DataError::Invalid(format!("velocity_smoother model: {e}")))?;
         *slot = Some(StreamFit {
             generation,
             graph: graph.clone(),
-            step,
+            opts,
             fit,
         });
     }
